@@ -1,0 +1,1 @@
+"""Panel web app on top of :mod:`eha_core`."""

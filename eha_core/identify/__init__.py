@@ -1,0 +1,1 @@
+"""Identification: least squares (time domain) and transfer-function estimation."""
