@@ -1,0 +1,160 @@
+"""The nonlinear actuator dynamics (eqs. 1-4, 6-8), one implementation, with bounds.
+
+:func:`derivatives` is written as plain scalar Python on a packed parameter
+vector so that the *same source* runs interpreted (checks, the reference
+solver, the python-control peer in the benchmark) and compiled by numba
+(:mod:`eha_core._kernels`, used by every simulation).
+
+States xi = [x, v, p1, p2] (SI units), input u [V], load disturbance d [N].
+
+Physical bounds are part of the model (SPEC.md section 1):
+
+* the pressure drop under each square root is clipped at zero;
+* pr <= p1, p2 <= ps: at a bound a pressure does not move further outward;
+* end stops |x| <= 0.8 L0: at a stop the piston stays put until the net force
+  pulls it back. The impact itself (velocity set to zero) is applied by
+  :func:`project_state` after each integration step.
+
+Examples
+--------
+>>> from eha_core.params import ActuatorParams
+>>> from eha_core.model import rhs
+>>> p = ActuatorParams()
+>>> rhs(p.initial_state, 0.0, 0.0, p)       # the operating point is an equilibrium
+array([0., 0., 0., 0.])
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .params import ActuatorParams
+
+__all__ = ["pack_params", "derivatives", "project_state", "rhs", "PARAM_INDEX"]
+
+#: Layout of the packed parameter vector used by the compiled code.
+PARAM_INDEX = {
+    "M": 0, "B": 1, "Af": 2, "beta_e": 3, "A1": 4, "A2": 5, "L0": 6, "Kq1": 7,
+    "Kq2": 8, "ps": 9, "pr": 10, "k_f": 11, "x_max": 12, "d0": 13,
+}
+
+
+def pack_params(params: ActuatorParams) -> np.ndarray:
+    """Pack the parameters into the float vector :func:`derivatives` reads."""
+    return np.array([
+        params.M, params.B, params.Af, params.beta_e, params.A1, params.A2,
+        params.L0, params.Kq1, params.Kq2, params.ps, params.pr, params.k_f,
+        params.x_max, params.d0,
+    ], dtype=np.float64)
+
+
+def derivatives(x, v, p1, p2, u, d, prm):
+    """Time derivatives (dx, dv, dp1, dp2) of the nonlinear model.
+
+    Parameters
+    ----------
+    x, v, p1, p2 : float
+        Position [m], velocity [m/s], piston- and rod-chamber pressure [Pa].
+    u : float
+        Valve command [V].
+    d : float
+        Load disturbance [N]; the constant part ``d0`` of the parameters is added.
+    prm : ndarray
+        Packed parameters, see :func:`pack_params`.
+    """
+    M = prm[0]
+    B = prm[1]
+    Af = prm[2]
+    beta_e = prm[3]
+    A1 = prm[4]
+    A2 = prm[5]
+    L0 = prm[6]
+    Kq1 = prm[7]
+    Kq2 = prm[8]
+    ps = prm[9]
+    pr = prm[10]
+    k_f = prm[11]
+    x_max = prm[12]
+    d0 = prm[13]
+
+    # eq. 3: the orifices switch with the sign of the valve command
+    if u >= 0.0:
+        dp_1 = ps - p1
+        dp_2 = p2 - pr
+    else:
+        dp_1 = p1 - pr
+        dp_2 = ps - p2
+    # a pressure difference under a square root never goes negative
+    if dp_1 < 0.0:
+        dp_1 = 0.0
+    if dp_2 < 0.0:
+        dp_2 = 0.0
+    q1 = Kq1 * u * math.sqrt(dp_1)
+    q2 = Kq2 * u * math.sqrt(dp_2)
+
+    # eq. 1a with S(v) = (2/pi) atan(k_f v) (eq. 2)
+    friction = B * v + Af * (2.0 / math.pi) * math.atan(k_f * v)
+    acc = (A1 * p1 - A2 * p2 - friction - d - d0) / M
+    vel = v
+    # end stops: the piston does not pass them and stays until pulled back
+    if x >= x_max:
+        if vel > 0.0:
+            vel = 0.0
+        if v >= 0.0 and acc > 0.0:
+            acc = 0.0
+    elif x <= -x_max:
+        if vel < 0.0:
+            vel = 0.0
+        if v <= 0.0 and acc < 0.0:
+            acc = 0.0
+
+    # eqs. 1b-1c / 4b-4c: chamber volumes V1 = A1 (L0 + x), V2 = A2 (L0 - x);
+    # the volume changes with the piston's actual motion (zero at a stop)
+    dp1 = beta_e / (A1 * (L0 + x)) * (q1 - A1 * vel)
+    dp2 = beta_e / (A2 * (L0 - x)) * (A2 * vel - q2)
+    # pressures stay within [pr, ps]
+    if (p1 >= ps and dp1 > 0.0) or (p1 <= pr and dp1 < 0.0):
+        dp1 = 0.0
+    if (p2 >= ps and dp2 > 0.0) or (p2 <= pr and dp2 < 0.0):
+        dp2 = 0.0
+    return vel, acc, dp1, dp2
+
+
+def project_state(x, v, p1, p2, prm):
+    """Enforce the bounds on a state after an integration step.
+
+    Returns the state clipped to the end stops (an inelastic impact: the
+    velocity towards the stop becomes zero) and to the pressure range [pr, ps].
+    """
+    x_max = prm[12]
+    ps = prm[9]
+    pr = prm[10]
+    if x > x_max:
+        x = x_max
+        if v > 0.0:
+            v = 0.0
+    elif x < -x_max:
+        x = -x_max
+        if v < 0.0:
+            v = 0.0
+    if p1 > ps:
+        p1 = ps
+    elif p1 < pr:
+        p1 = pr
+    if p2 > ps:
+        p2 = ps
+    elif p2 < pr:
+        p2 = pr
+    return x, v, p1, p2
+
+
+def rhs(state, u: float, d: float, params: ActuatorParams | np.ndarray) -> np.ndarray:
+    """Vector form of :func:`derivatives` for analysis (interpreted, not for speed).
+
+    ``params`` is an :class:`~eha_core.params.ActuatorParams` or a packed vector.
+    """
+    prm = pack_params(params) if isinstance(params, ActuatorParams) else np.asarray(params, dtype=float)
+    x, v, p1, p2 = (float(s) for s in state)
+    return np.array(derivatives(x, v, p1, p2, float(u), float(d), prm))
