@@ -1,0 +1,377 @@
+"""Inputs and disturbances: sine, step, square, chirp, white noise, sampled data, sums.
+
+Every signal is a frozen dataclass, callable on an array of times (seconds) and
+returning an array of values; ``a + b`` builds a sum. They are hashable, so
+results computed from them can be cached.
+
+The command line writes signals as text (:func:`parse_signal`)::
+
+    sine:AMP:FREQ_HZ[:PHASE_RAD]     AMP sin(2 pi FREQ_HZ t + PHASE_RAD)
+    step:AMP[:T0]                    0 before T0, AMP after
+    square:AMP:FREQ_HZ               +AMP for the first half period, -AMP after
+    chirp:AMP:F0_HZ:F1_HZ[:T1]       linear sweep from F0 at t = 0 to F1 at t = T1
+    noise:SIGMA[:SEED[:HOLD_S]]      white Gaussian noise, held over each HOLD_S
+    const:VALUE  (or just VALUE)     a constant
+    none                             zero
+    A+B                              the sum of two signals
+
+Examples
+--------
+>>> import numpy as np
+>>> from eha_core.signals import Sine, Step, parse_signal
+>>> u = Sine(6.0, 2.0) + Step(1.0, t0=0.5)
+>>> np.round(u(np.array([0.0, 0.125, 1.0])), 6)
+array([0., 6., 1.])
+>>> parse_signal("sine:6:2+step:1:0.5") == u
+True
+>>> Sine(6.0, 2.0).label
+'6 sin(4πt)'
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = [
+    "Signal", "Constant", "Sine", "Step", "Square", "Chirp", "WhiteNoise",
+    "Sampled", "Sum", "ZERO", "parse_signal", "SignalSpecError", "SIGNAL_SYNTAX",
+]
+
+SIGNAL_SYNTAX = (
+    "sine:AMP:FREQ_HZ[:PHASE_RAD], step:AMP[:T0], square:AMP:FREQ_HZ, "
+    "chirp:AMP:F0_HZ:F1_HZ[:T1], noise:SIGMA[:SEED[:HOLD_S]], const:VALUE, none; "
+    "join with + for a sum"
+)
+
+
+class SignalSpecError(ValueError):
+    """A signal written as text that cannot be read."""
+
+
+def _g(x: float) -> str:
+    return f"{x:g}"
+
+
+class Signal:
+    """Base class: a function of time, vectorised over numpy arrays.
+
+    ``continuous`` tells the simulator whether the signal can jump; a signal
+    that can is also sampled just before each step's end, so that the
+    integrator sees the value held until then and not the next one.
+    """
+
+    continuous: bool = False
+
+    def __call__(self, t) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def __add__(self, other: "Signal") -> "Signal":
+        if not isinstance(other, Signal):
+            return NotImplemented
+        terms = (self.terms if isinstance(self, Sum) else (self,)) + (
+            other.terms if isinstance(other, Sum) else (other,))
+        terms = tuple(s for s in terms if s != ZERO) or (ZERO,)
+        return terms[0] if len(terms) == 1 else Sum(terms)
+
+    @property
+    def label(self) -> str:
+        return self.spec
+
+    @property
+    def spec(self) -> str:
+        """The text form :func:`parse_signal` reads back."""
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class Constant(Signal):
+    continuous = True
+
+    value: float = 0.0
+
+    def __call__(self, t):
+        return np.full(np.shape(t), float(self.value))
+
+    @property
+    def spec(self):
+        return "none" if self.value == 0 else f"const:{_g(self.value)}"
+
+    @property
+    def label(self):
+        return "0" if self.value == 0 else _g(self.value)
+
+
+ZERO = Constant(0.0)
+
+
+@dataclass(frozen=True)
+class Sine(Signal):
+    """``amplitude sin(2 pi freq_hz t + phase) + offset``."""
+
+    continuous = True
+
+    amplitude: float
+    freq_hz: float
+    phase: float = 0.0
+    offset: float = 0.0
+
+    def __call__(self, t):
+        t = np.asarray(t, dtype=float)
+        return self.amplitude * np.sin(2.0 * np.pi * self.freq_hz * t + self.phase) + self.offset
+
+    @property
+    def spec(self):
+        s = f"sine:{_g(self.amplitude)}:{_g(self.freq_hz)}"
+        if self.phase:
+            s += f":{_g(self.phase)}"
+        return s + (f"+const:{_g(self.offset)}" if self.offset else "")
+
+    @property
+    def label(self):
+        w = 2.0 * self.freq_hz
+        wtxt = "π" if w == 1 else f"{_g(w)}π"
+        s = f"{_g(self.amplitude)} sin({wtxt}t{' + ' + _g(self.phase) if self.phase else ''})"
+        return s + (f" + {_g(self.offset)}" if self.offset else "")
+
+
+@dataclass(frozen=True)
+class Step(Signal):
+    """0 (or ``initial``) before ``t0``, ``amplitude`` from ``t0`` on."""
+
+    amplitude: float
+    t0: float = 0.0
+    initial: float = 0.0
+
+    def __call__(self, t):
+        t = np.asarray(t, dtype=float)
+        return np.where(t >= self.t0, self.amplitude, self.initial).astype(float)
+
+    @property
+    def spec(self):
+        return f"step:{_g(self.amplitude)}" + (f":{_g(self.t0)}" if self.t0 else "")
+
+    @property
+    def label(self):
+        return f"{_g(self.amplitude)} step" + (f" at {_g(self.t0)} s" if self.t0 else "")
+
+
+@dataclass(frozen=True)
+class Square(Signal):
+    """+amplitude for the first half of each period, -amplitude for the second."""
+
+    amplitude: float
+    freq_hz: float
+    offset: float = 0.0
+
+    def __call__(self, t):
+        t = np.asarray(t, dtype=float)
+        phase = np.mod(t * self.freq_hz, 1.0)
+        return np.where(phase < 0.5, self.amplitude, -self.amplitude) + self.offset
+
+    @property
+    def spec(self):
+        return f"square:{_g(self.amplitude)}:{_g(self.freq_hz)}"
+
+    @property
+    def label(self):
+        return f"{_g(self.amplitude)} square {_g(self.freq_hz)} Hz"
+
+
+@dataclass(frozen=True)
+class Chirp(Signal):
+    """Linear sweep ``amplitude sin(2 pi (f0 t + (f1 - f0) t^2 / (2 t1)))``."""
+
+    continuous = True
+
+    amplitude: float
+    f0_hz: float
+    f1_hz: float
+    t1: float = 5.0
+
+    def __call__(self, t):
+        t = np.asarray(t, dtype=float)
+        k = (self.f1_hz - self.f0_hz) / self.t1
+        return self.amplitude * np.sin(2.0 * np.pi * (self.f0_hz * t + 0.5 * k * t * t))
+
+    @property
+    def spec(self):
+        return f"chirp:{_g(self.amplitude)}:{_g(self.f0_hz)}:{_g(self.f1_hz)}:{_g(self.t1)}"
+
+    @property
+    def label(self):
+        return f"{_g(self.amplitude)} chirp {_g(self.f0_hz)}-{_g(self.f1_hz)} Hz"
+
+
+@dataclass(frozen=True)
+class WhiteNoise(Signal):
+    """Zero-mean white Gaussian noise, standard deviation ``sigma``, held over
+    each interval of ``hold_s`` seconds (a new sample at every k hold_s).
+
+    The k-th sample is the k-th draw of ``numpy.random.default_rng(seed)``, so
+    the value at a time does not depend on the horizon asked for.
+    """
+
+    sigma: float
+    seed: int = 0
+    hold_s: float = 1e-3
+
+    def __call__(self, t):
+        t = np.asarray(t, dtype=float)
+        if t.size == 0:
+            return np.zeros(t.shape)
+        # the small offset keeps t = k hold_s on sample k despite rounding
+        k = np.floor(t / self.hold_s + 1e-9).astype(np.int64)
+        k = np.maximum(k, 0)
+        draws = np.random.default_rng(self.seed).standard_normal(int(k.max()) + 1)
+        return self.sigma * draws[k]
+
+    @property
+    def spec(self):
+        return f"noise:{_g(self.sigma)}:{self.seed}:{_g(self.hold_s)}"
+
+    @property
+    def label(self):
+        return f"white noise σ={_g(self.sigma)}"
+
+
+@dataclass(frozen=True, eq=False)
+class Sampled(Signal):
+    """A sampled signal: values at times ``t``, held (``'zoh'``) or interpolated
+    (``'linear'``) in between; the last value holds after the end."""
+
+    t: np.ndarray
+    values: np.ndarray
+    hold: str = "linear"
+    name: str = "data"
+
+    def __post_init__(self):
+        t = np.asarray(self.t, dtype=float).ravel()
+        v = np.asarray(self.values, dtype=float).ravel()
+        if t.size == 0 or t.size != v.size:
+            raise ValueError(f"Sampled: t and values must be non-empty and of equal length (got {t.size} and {v.size})")
+        if not np.all(np.isfinite(t)) or not np.all(np.isfinite(v)):
+            raise ValueError("Sampled: t and values must be finite numbers")
+        if t.size > 1 and np.any(np.diff(t) <= 0):
+            raise ValueError("Sampled: t must be strictly increasing")
+        if self.hold not in ("zoh", "linear"):
+            raise ValueError(f"Sampled: hold = {self.hold!r} is not allowed: use 'zoh' or 'linear'")
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "values", v)
+
+    @property
+    def continuous(self):
+        return self.hold == "linear"
+
+    def __call__(self, t):
+        t = np.asarray(t, dtype=float)
+        if self.hold == "linear":
+            return np.interp(t, self.t, self.values)
+        idx = np.searchsorted(self.t, t + 1e-12 * max(1.0, abs(self.t[-1])), side="right") - 1
+        return self.values[np.clip(idx, 0, self.t.size - 1)]
+
+    @property
+    def spec(self):
+        return f"<{self.name}: {self.t.size} samples>"
+
+
+@dataclass(frozen=True)
+class Sum(Signal):
+    terms: tuple[Signal, ...] = field(default_factory=tuple)
+
+    @property
+    def continuous(self):
+        return all(s.continuous for s in self.terms)
+
+    def __call__(self, t):
+        out = np.zeros(np.shape(t))
+        for s in self.terms:
+            out = out + s(t)
+        return out
+
+    @property
+    def spec(self):
+        return "+".join(s.spec for s in self.terms)
+
+    @property
+    def label(self):
+        return " + ".join(s.label for s in self.terms)
+
+
+# -- text form -----------------------------------------------------------------
+
+_KINDS = {
+    # kind: (constructor, names of the required fields, names of optional fields)
+    "sine": (Sine, ("amplitude", "freq_hz"), ("phase",)),
+    "step": (Step, ("amplitude",), ("t0",)),
+    "square": (Square, ("amplitude", "freq_hz"), ()),
+    "chirp": (Chirp, ("amplitude", "f0_hz", "f1_hz"), ("t1",)),
+    "noise": (WhiteNoise, ("sigma",), ("seed", "hold_s")),
+    "white": (WhiteNoise, ("sigma",), ("seed", "hold_s")),
+    "const": (Constant, ("value",), ()),
+}
+
+
+def parse_signal(text: str, name: str = "signal") -> Signal:
+    """Read a signal from its text form (see the module docstring).
+
+    ``name`` is used in error messages (e.g. ``"--u"``).
+
+    >>> parse_signal("noise:1000:3")
+    WhiteNoise(sigma=1000.0, seed=3, hold_s=0.001)
+    >>> parse_signal("sine:two:2", name="--u")
+    Traceback (most recent call last):
+    ...
+    eha_core.signals.SignalSpecError: --u = 'sine:two:2' is not allowed: amplitude 'two' is not a number
+    """
+    if not isinstance(text, str) or not text.strip():
+        raise SignalSpecError(f"{name} = {text!r} is not allowed: expected {SIGNAL_SYNTAX}")
+    # '+' joins terms, except inside a number's exponent (1e+3)
+    parts = [p.strip() for p in re.split(r"(?<![eE])\+", text.strip())]
+    total: Signal = ZERO
+    for part in parts:
+        total = total + _parse_term(part, text, name)
+    return total
+
+
+def _parse_term(part: str, whole: str, name: str) -> Signal:
+    def fail(why: str) -> SignalSpecError:
+        return SignalSpecError(f"{name} = {whole!r} is not allowed: {why}")
+
+    if part.lower() in ("none", "zero", "0"):
+        return ZERO
+    try:
+        return Constant(float(part))
+    except ValueError:
+        pass
+    kind, *args = [a.strip() for a in part.split(":")]
+    kind = kind.lower()
+    if kind not in _KINDS:
+        raise fail(f"unknown signal kind {kind!r}; use {SIGNAL_SYNTAX}")
+    ctor, required, optional = _KINDS[kind]
+    if not len(required) <= len(args) <= len(required) + len(optional):
+        usage = ":".join([kind] + [r.upper() for r in required] + [f"[{o.upper()}]" for o in optional])
+        raise fail(f"{kind} takes {usage}")
+    kwargs = {}
+    for fname, text in zip(required + optional, args):
+        try:
+            value = float(text)
+        except ValueError:
+            raise fail(f"{fname} {text!r} is not a number") from None
+        if not math.isfinite(value):
+            raise fail(f"{fname} {text!r} is not a finite number")
+        if fname == "seed":
+            if value != int(value) or value < 0:
+                raise fail(f"seed {text!r} must be a non-negative integer")
+            value = int(value)
+        kwargs[fname] = value
+    for fname in ("freq_hz", "t1", "hold_s"):
+        if fname in kwargs and kwargs[fname] <= 0:
+            raise fail(f"{fname} must be > 0")
+    for fname in ("sigma", "f0_hz", "f1_hz"):
+        if fname in kwargs and kwargs[fname] < 0:
+            raise fail(f"{fname} must be >= 0")
+    return ctor(**kwargs)

@@ -1,0 +1,409 @@
+"""Open- and closed-loop simulation of the nonlinear or linearised model.
+
+All runs go through one compiled fixed-step integrator (:mod:`eha_core._kernels`,
+numba). The step ``h`` divides the output interval ``dt`` (and the controller
+period ``ts``), is at most ``h_max`` (default 5e-4 s), and every input is sampled
+at the RK4 stage times. Linearised runs return absolute states: the operating
+point is added back (eq. 14), as the paper plots them. The nonlinear model
+enforces its physical bounds (pressures in [pr, ps], end stops); the linearised
+model has none, by construction.
+
+Examples
+--------
+>>> from eha_core.simulate import simulate
+>>> from eha_core.signals import Sine
+>>> res = simulate(u=Sine(6.0, 2.0), d=Sine(5e3, 1.0), t_end=5.0)
+>>> res.success, len(res.t), round(float(res.x.max()), 3)
+(True, 5001, 0.035)
+>>> list(res.to_pandas().columns)
+['t', 'x', 'v', 'p1', 'p2', 'u', 'd']
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from .linear import OperatingPoint, linearize, operating_point
+from .model import pack_params
+from .params import ActuatorParams
+from .signals import ZERO, Constant, Sampled, Signal
+
+__all__ = [
+    "SimulationResult", "simulate", "simulate_many", "simulate_closed_loop",
+    "DEFAULT_H_MAX", "MODELS", "BRANCHES", "CONTROLLERS",
+]
+
+#: Largest integration step [s]. RK4 at 5e-4 s keeps the error near 2e-7 of
+#: each state's range on the paper's cases, 50 times inside the 1e-5 target
+#: (benchmarks/bench_simulate.py); the fastest linearised pole (-385 rad/s)
+#: gives h lambda = 0.19, far inside RK4's stability region.
+DEFAULT_H_MAX = 5e-4
+MODELS = ("nonlinear", "linear")
+BRANCHES = ("switching", "positive", "negative")
+CONTROLLERS = ("zoh", "continuous")
+#: Guards so that one request cannot exhaust a shared server.
+MAX_STEPS = 20_000_000
+MAX_OUTPUT_SAMPLES = 2_000_000
+
+_STATE_NAMES = ("x", "v", "p1", "p2")
+
+
+@dataclass(frozen=True, eq=False)
+class SimulationResult:
+    """One simulated run, sampled at ``t``; SI units.
+
+    ``r`` is the reference of a closed-loop run (None in open loop).
+    ``success`` is False (with ``message``) when the state stopped being finite;
+    the arrays then hold NaN from that point on.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    p1: np.ndarray
+    p2: np.ndarray
+    u: np.ndarray
+    d: np.ndarray
+    success: bool = True
+    message: str = "ok"
+    model: str = "nonlinear"
+    label: str = ""
+    params: ActuatorParams = field(default_factory=ActuatorParams, repr=False)
+    r: np.ndarray | None = None
+    controller: str = "open-loop"
+    kp: float | None = None
+    h: float = float("nan")
+
+    @property
+    def states(self) -> np.ndarray:
+        """The states as an (N, 4) array [x, v, p1, p2]."""
+        return np.column_stack([self.x, self.v, self.p1, self.p2])
+
+    def to_pandas(self):
+        """A :class:`pandas.DataFrame` with columns t, x, v, p1, p2, u, d (and r)."""
+        import pandas as pd
+
+        cols = {"t": self.t, "x": self.x, "v": self.v, "p1": self.p1, "p2": self.p2, "u": self.u, "d": self.d}
+        if self.r is not None:
+            cols["r"] = self.r
+        return pd.DataFrame(cols)
+
+    def to_csv(self, path_or_buf=None, **kwargs):
+        """Write the CSV (header t,x,v,p1,p2,u,d[,r]); returns text when no path."""
+        kwargs.setdefault("float_format", "%.10g")
+        return self.to_pandas().to_csv(path_or_buf, index=False, **kwargs)
+
+
+# -- argument handling ------------------------------------------------------------
+
+def _positive(name: str, value, allowed: str = "must be a finite number > 0") -> float:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} = {value!r} is not allowed: {allowed}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise ValueError(f"{name} = {value!r} is not allowed: {allowed}")
+    return value
+
+
+@dataclass(frozen=True, eq=False)
+class _Callable(Signal):
+    """A user function of time wrapped as a signal (vectorised if it can be)."""
+
+    fn: Callable
+
+    def __call__(self, t):
+        t = np.asarray(t, dtype=float)
+        try:
+            out = np.asarray(self.fn(t), dtype=float)
+            if out.shape == t.shape:
+                return out
+            if out.ndim == 0:
+                return np.full(t.shape, float(out))
+        except Exception:
+            pass
+        return np.array([float(self.fn(float(s))) for s in t.ravel()]).reshape(t.shape)
+
+    @property
+    def spec(self):
+        return getattr(self.fn, "__name__", "function")
+
+
+def _as_signal(obj, name: str, t_out: np.ndarray, hold: str = "linear") -> Signal:
+    """Accept a Signal, a function of t, a number, or samples at ``t_out``."""
+    if obj is None:
+        return ZERO
+    if isinstance(obj, Signal):
+        return obj
+    if callable(obj):
+        return _Callable(obj)
+    if np.ndim(obj) == 0:
+        return Constant(float(obj))
+    arr = np.asarray(obj, dtype=float).ravel()
+    if arr.size != t_out.size:
+        raise ValueError(f"{name}: {arr.size} samples given, but the run has {t_out.size} output samples "
+                         f"(t = 0, dt, ..., t_end); give one value per output sample")
+    return Sampled(t_out, arr, hold=hold, name=name)
+
+
+def _sample(sig: Signal, name: str, t: np.ndarray) -> np.ndarray:
+    vals = np.asarray(sig(t), dtype=float)
+    if vals.shape != t.shape:
+        raise ValueError(f"{name}: the signal returned shape {vals.shape} for {t.shape} times")
+    if not np.all(np.isfinite(vals)):
+        bad = t[~np.isfinite(vals)][0]
+        raise ValueError(f"{name}: the signal is not finite at t = {bad:g} s")
+    return vals
+
+
+def _stage_samples(sig: Signal, name: str, h: float, n_steps: int) -> np.ndarray:
+    """Values at every step's RK4 stage times: start, middle and end.
+
+    For a signal that can jump, the end value is taken just before the step's
+    end, so that a value held from the next sample on is not seen early.
+    """
+    half = _sample(sig, name, np.arange(2 * n_steps + 3) * (0.5 * h))
+    out = np.empty((n_steps + 1, 3))
+    out[:, 0] = half[0:2 * n_steps + 1:2]
+    out[:, 1] = half[1:2 * n_steps + 2:2]
+    if sig.continuous:
+        out[:, 2] = half[2:2 * n_steps + 3:2]
+    else:
+        out[:, 2] = _sample(sig, name, np.arange(n_steps + 1) * h + h * (1.0 - 1e-6))
+    return out
+
+
+def _grid(t_end, dt, h_max, ts=None):
+    """Step h, steps per output sample, steps per controller sample, counts."""
+    t_end = _positive("t_end", t_end, "must be a finite number of seconds > 0")
+    dt = _positive("dt", dt, "must be a finite number of seconds > 0")
+    h_max = _positive("h_max", h_max, "must be a finite number of seconds > 0")
+    if dt > t_end:
+        raise ValueError(f"dt = {dt:g} is not allowed: must not exceed t_end = {t_end:g} s")
+    n_out = t_end / dt
+    if abs(n_out - round(n_out)) > 1e-6 * max(1.0, n_out):
+        raise ValueError(f"t_end = {t_end:g} is not allowed: must be a whole number of output intervals dt = {dt:g} s")
+    n_out = int(round(n_out))
+    base = dt
+    if ts is not None:
+        ratio = max(dt, ts) / min(dt, ts)
+        if abs(ratio - round(ratio)) > 1e-6 * ratio:
+            raise ValueError(f"ts = {ts:g} is not allowed: dt = {dt:g} and ts must be whole multiples of one another")
+        base = min(dt, ts)
+    per_base = max(1, math.ceil(base / h_max - 1e-9))
+    h = base / per_base
+    sub = int(round(dt / h))
+    ctrl_every = int(round(ts / h)) if ts is not None else 1
+    n_steps = n_out * sub
+    if n_steps > MAX_STEPS:
+        raise ValueError(f"t_end = {t_end:g} is not allowed with h_max = {h_max:g}: {n_steps} steps exceed the limit {MAX_STEPS}")
+    if n_out + 1 > MAX_OUTPUT_SAMPLES:
+        raise ValueError(f"dt = {dt:g} is not allowed for t_end = {t_end:g}: {n_out + 1} samples exceed the limit {MAX_OUTPUT_SAMPLES}")
+    return h, sub, ctrl_every, n_steps, n_out + 1
+
+
+def _mode(model: str, branch: str) -> int:
+    from . import _kernels as K
+
+    if model not in MODELS:
+        raise ValueError(f"model = {model!r} is not allowed: use one of {', '.join(MODELS)}")
+    if branch not in BRANCHES:
+        raise ValueError(f"branch = {branch!r} is not allowed: use one of {', '.join(BRANCHES)}")
+    if model == "nonlinear":
+        return K.NONLINEAR
+    return {"switching": K.LINEAR_SWITCHING, "positive": K.LINEAR_POSITIVE, "negative": K.LINEAR_NEGATIVE}[branch]
+
+
+def _lin_vector(params: ActuatorParams, op: OperatingPoint | None, needed: bool) -> np.ndarray:
+    if not needed:
+        return np.zeros(32)
+    lin = linearize(params, op)
+    return np.concatenate([lin.A.ravel(), lin.B_positive, lin.B_negative, lin.E, lin.op.state])
+
+
+def _initial(params: ActuatorParams, x0) -> np.ndarray:
+    if x0 is None:
+        return params.initial_state
+    y0 = np.asarray(x0, dtype=float).ravel()
+    if y0.size != 4 or not np.all(np.isfinite(y0)):
+        raise ValueError(f"x0 = {x0!r} is not allowed: give four finite numbers [x, v, p1, p2]")
+    return y0
+
+
+def _model_label(model: str, branch: str) -> str:
+    return model if model == "nonlinear" else ("linear" if branch == "switching" else f"linear-{branch}")
+
+
+def _finish(out, status, t, d_vals, params, model_label, label, r=None, controller="open-loop", kp=None, h=float("nan")):
+    success = status < 0
+    message = "ok"
+    if not success:
+        t_fail = status * h
+        message = f"the state stopped being finite at t = {t_fail:.6g} s"
+        # samples after the failure are meaningless
+        out[t > t_fail - 1e-12, :] = np.nan
+    return SimulationResult(
+        t=t, x=out[:, 0].copy(), v=out[:, 1].copy(), p1=out[:, 2].copy(), p2=out[:, 3].copy(),
+        u=out[:, 4].copy(), d=d_vals, success=success, message=message, model=model_label,
+        label=label, params=params, r=r, controller=controller, kp=kp, h=h,
+    )
+
+
+# -- public API --------------------------------------------------------------------
+
+def simulate(params: ActuatorParams | None = None, u=None, d=None, *, t_end: float = 5.0,
+             dt: float = 1e-3, model: str = "nonlinear", branch: str = "switching",
+             x0=None, op: OperatingPoint | None = None, h_max: float = DEFAULT_H_MAX,
+             label: str = "") -> SimulationResult:
+    """Open-loop run: valve command ``u(t)`` [V] and load disturbance ``d(t)`` [N].
+
+    Parameters
+    ----------
+    params : ActuatorParams, optional
+        Defaults to the paper's parameters.
+    u, d : Signal, callable, number or array, optional
+        A :mod:`eha_core.signals` signal, a function of t (vectorised or not),
+        a constant, or one sample per output time (interpolated linearly).
+    t_end, dt : float
+        Horizon and output interval [s]; the result has ``t_end/dt + 1`` samples.
+    model : {'nonlinear', 'linear'}
+    branch : {'switching', 'positive', 'negative'}
+        Linear model only: switch l5, l6 with the sign of u (default, as the
+        paper's Fig. 3), or keep one branch.
+    x0 : array of 4, optional
+        Initial state [x, v, p1, p2]; defaults to the parameters' initial conditions.
+    op : OperatingPoint, optional
+        Linearisation point (default :func:`eha_core.linear.operating_point`).
+    h_max : float
+        Largest integration step [s].
+    """
+    params = params if params is not None else ActuatorParams()
+    return simulate_many([params], [u], [d], t_end=t_end, dt=dt, model=model, branch=branch,
+                         x0s=None if x0 is None else [x0], op=op, h_max=h_max,
+                         labels=[label])[0]
+
+
+def simulate_many(params: ActuatorParams | Sequence[ActuatorParams] | None, us: Sequence, ds: Sequence | None = None,
+                  *, t_end: float = 5.0, dt: float = 1e-3, model: str = "nonlinear",
+                  branch: str = "switching", x0s: Sequence | None = None,
+                  op: OperatingPoint | None = None, h_max: float = DEFAULT_H_MAX,
+                  labels: Sequence[str] | None = None) -> list[SimulationResult]:
+    """Several open-loop runs on one time grid, integrated in parallel.
+
+    ``params`` is one parameter set for all runs or one per run; ``us``/``ds``
+    give each run's input and disturbance (see :func:`simulate`).
+    """
+    from . import _kernels as K
+
+    n = len(us)
+    if n == 0:
+        return []
+    ds = list(ds) if ds is not None else [None] * n
+    if len(ds) != n:
+        raise ValueError(f"ds: {len(ds)} disturbances given for {n} inputs")
+    if params is None or isinstance(params, ActuatorParams):
+        params_list = [params or ActuatorParams()] * n
+    else:
+        params_list = list(params)
+        if len(params_list) != n:
+            raise ValueError(f"params: {len(params_list)} parameter sets given for {n} runs")
+    labels = list(labels) if labels is not None else [""] * n
+    mode = _mode(model, branch)
+    h, sub, _, n_steps, n_out = _grid(t_end, dt, h_max)
+    t = np.arange(n_out) * dt
+
+    y0s = np.empty((n, 4))
+    prms = np.empty((n, 14))
+    lins = np.empty((n, 32))
+    u_sts = np.empty((n, n_steps + 1, 3))
+    d_sts = np.empty((n, n_steps + 1, 3))
+    d_out = []
+    for j in range(n):
+        p = params_list[j]
+        y0s[j] = _initial(p, x0s[j] if x0s is not None else None)
+        prms[j] = pack_params(p)
+        lins[j] = _lin_vector(p, op, mode != K.NONLINEAR)
+        u_sig = _as_signal(us[j], "u", t)
+        d_sig = _as_signal(ds[j], "d", t)
+        u_sts[j] = _stage_samples(u_sig, "u", h, n_steps)
+        d_sts[j] = _stage_samples(d_sig, "d", h, n_steps)
+        d_out.append(_sample(d_sig, "d", t))
+
+    outs = np.zeros((n, n_out, 5))
+    status = np.full(n, -1, dtype=np.int64)
+    dummy_r = np.zeros((1, 3))
+    if n == 1:
+        status[0] = K.integrate(y0s[0], h, n_steps, sub, prms[0], mode, lins[0], u_sts[0], d_sts[0],
+                                K.OPEN_LOOP, 0.0, dummy_r, 1, 0.0, outs[0])
+    else:
+        r_sts = np.zeros((n, 1, 3))
+        K.integrate_batch(y0s, h, n_steps, sub, prms, mode, lins, u_sts, d_sts,
+                          K.OPEN_LOOP, 0.0, r_sts, 1, 0.0, outs, status)
+    name = _model_label(model, branch)
+    return [_finish(outs[j], int(status[j]), t, d_out[j], params_list[j], name, labels[j], h=h)
+            for j in range(n)]
+
+
+def simulate_closed_loop(params: ActuatorParams | None = None, r=None, *, kp: float = 10.0,
+                         ts: float = 0.01, controller: str = "zoh", d=None,
+                         t_end: float | None = None, dt: float | None = None,
+                         model: str = "nonlinear", branch: str = "switching", x0=None,
+                         op: OperatingPoint | None = None, u_limit: float | None = None,
+                         h_max: float = DEFAULT_H_MAX, label: str = "") -> SimulationResult:
+    """Closed loop with the proportional controller u = Kp (r - x) (eq. 22).
+
+    Parameters
+    ----------
+    r : Signal, callable or array
+        Reference position [m]. An array is taken as samples at ``ts`` held
+        between samples (zero-order hold), as a digital reference would be;
+        ``t_end`` then defaults to the time of its last sample.
+    kp : float
+        Proportional gain [V/m].
+    ts : float
+        Controller sample time [s] (``controller='zoh'``): the controller reads
+        x at k ts and holds u until the next sample.
+    controller : {'zoh', 'continuous'}
+    dt : float, optional
+        Output interval, default ``ts``.
+    u_limit : float, optional
+        Saturate the valve command to +-u_limit [V] (no limit by default).
+    """
+    from . import _kernels as K
+
+    params = params if params is not None else ActuatorParams()
+    kp = _positive("kp", kp, "must be a finite gain > 0 V/m")
+    ts = _positive("ts", ts, "must be a finite sample time > 0 s")
+    if controller not in CONTROLLERS:
+        raise ValueError(f"controller = {controller!r} is not allowed: use one of {', '.join(CONTROLLERS)}")
+    if u_limit is not None:
+        u_limit = _positive("u_limit", u_limit, "must be a finite voltage > 0, or None for no limit")
+    if r is None:
+        raise ValueError("r: a reference signal is required")
+    if t_end is None:
+        if isinstance(r, Signal) or callable(r) or np.ndim(r) == 0:
+            raise ValueError("t_end: give the horizon when the reference is not an array of samples")
+        t_end = (np.asarray(r).size - 1) * ts
+    dt = ts if dt is None else dt
+    mode = _mode(model, branch)
+    h, sub, ctrl_every, n_steps, n_out = _grid(t_end, dt, h_max, ts=ts)
+    t = np.arange(n_out) * dt
+    if isinstance(r, Signal) or callable(r) or np.ndim(r) == 0:
+        r_sig = _as_signal(r, "r", t)
+    else:
+        r_arr = np.asarray(r, dtype=float).ravel()
+        r_sig = Sampled(np.arange(r_arr.size) * ts, r_arr, hold="zoh", name="r")
+    d_sig = _as_signal(d, "d", t)
+    r_st = _stage_samples(r_sig, "r", h, n_steps)
+    d_st = _stage_samples(d_sig, "d", h, n_steps)
+    out = np.zeros((n_out, 5))
+    status = K.integrate(_initial(params, x0), h, n_steps, sub, pack_params(params), mode,
+                         _lin_vector(params, op, mode != K.NONLINEAR), np.zeros((1, 3)), d_st,
+                         K.ZOH if controller == "zoh" else K.CONTINUOUS, kp, r_st, ctrl_every,
+                         0.0 if u_limit is None else u_limit, out)
+    return _finish(out, status, t, _sample(d_sig, "d", t), params, _model_label(model, branch), label,
+                   r=_sample(r_sig, "r", t), controller=controller, kp=kp, h=h)
