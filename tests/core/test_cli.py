@@ -1,0 +1,87 @@
+import io
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from eha_core.cli import main
+from eha_core.experiments import PAPER_CASES
+from eha_core.simulate import simulate
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_simulate_case_csv_matches_the_core(capsys):
+    code, out, err = run(capsys, "simulate", "--case", "3", "--t-end", "1")
+    assert code == 0 and err == ""
+    df = pd.read_csv(io.StringIO(out))
+    assert list(df.columns) == ["t", "x", "v", "p1", "p2", "u", "d"]
+    assert len(df) == 1001
+    ref = simulate(u=PAPER_CASES[3].u, d=PAPER_CASES[3].d, t_end=1.0)
+    np.testing.assert_allclose(df["x"], ref.x, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(df["p2"], ref.p2, rtol=1e-9)
+
+
+def test_simulate_linear_is_absolute_and_custom_inputs(capsys, tmp_path):
+    out_file = tmp_path / "run.csv"
+    code, out, _ = run(capsys, "simulate", "--model", "linear", "--u", "sine:6:2", "--d", "sine:5e3:1",
+                       "--t-end", "0.5", "--dt", "0.01", "--param", "M=5000", "--out", str(out_file))
+    assert code == 0 and out == ""
+    df = pd.read_csv(out_file)
+    assert len(df) == 51
+    assert df["p1"].iloc[0] == pytest.approx(12e6)           # absolute, operating point added back
+    np.testing.assert_allclose(df["d"], 5e3 * np.sin(2 * np.pi * df["t"]), atol=1e-6)
+
+
+def test_linearize_json(capsys):
+    code, out, _ = run(capsys, "linearize", "--json")
+    assert code == 0
+    data = json.loads(out)
+    assert set(data) >= {"operating_point", "lambdas", "A", "B", "tf", "closed_loop_tf"}
+    assert data["operating_point"] == pytest.approx({"x": 0, "v": 0, "p1": 12e6, "p2": 18.18947e6, "u": 0}, rel=1e-6)
+    assert len(data["lambdas"]) == 6
+    np.testing.assert_allclose(data["tf"]["num"], [243.7], rtol=2e-4)
+    np.testing.assert_allclose(data["tf"]["den"], [1, 430.1, 1.721e4, 0], rtol=3e-4)
+    np.testing.assert_allclose(data["closed_loop_tf"]["den"], [1, 430.1, 1.721e4, 2437], rtol=3e-4)
+    assert np.array(data["A"]).shape == (4, 4)
+    code, out, _ = run(capsys, "linearize", "--json", "--kp", "20", "--param", "beta_e=5e8")
+    np.testing.assert_allclose(json.loads(out)["closed_loop_tf"]["num"][0], 20 * json.loads(out)["tf"]["num"][0])
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["simulate", "--case", "7"], "--case = 7"),
+    (["simulate", "--case", "x"], "--case"),
+    (["simulate", "--case", "1", "--param", "M=-1"], "M = -1"),
+    (["simulate", "--case", "1", "--param", "mass=1"], "mass"),
+    (["simulate", "--case", "1", "--param", "M=abc"], "M = abc"),
+    (["simulate", "--case", "1", "--param", "dc=0.2"], "dc = 0.2"),
+    (["simulate", "--case", "1", "--model", "cubic"], "model = 'cubic'"),
+    (["simulate", "--case", "1", "--dt", "0.003"], "dt = 0.003"),
+    (["simulate", "--u", "sine:a:2"], "--u = 'sine:a:2'"),
+    (["simulate", "--d", "wobble:3"], "wobble"),
+    (["simulate"], "--case or --u"),
+    (["simulate", "--case", "1", "--t-end", "-3"], "t_end = -3"),
+    (["linearize", "--kp", "0"], "kp = 0"),
+    (["linearize", "--kp", "ten"], "--kp"),
+    (["frobnicate"], "frobnicate"),
+])
+def test_bad_input_one_line_exit_2(capsys, argv, words):
+    code, out, err = run(capsys, *argv)
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("eha: error: ")
+    assert words in err
+    assert "Traceback" not in err
+
+
+def test_installed_command_exit_code_and_stderr():
+    proc = subprocess.run([sys.executable, "-m", "eha_core.cli", "simulate", "--case", "5"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == "eha: error: --case = 5 is not allowed: use one of 1, 2, 3, 4"
