@@ -1,0 +1,774 @@
+"""Continuous-time transfer-function estimation from sampled data (like MATLAB ``tfest``).
+
+Model (SPEC section 5.3)::
+
+    G(s) = (b_0 s^nz + ... + b_nz) / (s^np + a_1 s^(np-1) + ... + a_np),  nz < np
+
+estimated from one input ``u`` and one output ``y`` sampled at ``ts``, the input
+being held constant between samples (zero-order hold, MATLAB's default).
+
+Two stages, as MATLAB does it:
+
+1. **SRIVC** (simplified refined instrumental variable method for
+   continuous-time models; Young & Jakeman 1980, Garnier & Young's CONTSID
+   toolbox). The model equation ``A(s) y = B(s) u`` is prefiltered by
+   ``1/A_hat(s)``, which turns the unknown time derivatives into the states of
+   a stable filter: ``y_f^(k) = s^k / A_hat(s) y``, ``k = 0..np``. The filtered
+   equation ``y_f^(np) = -a_1 y_f^(np-1) - ... + b_0 u_f^(nz) + ...`` is linear in
+   the coefficients and is solved with instruments built from the noise-free
+   output of the auxiliary model ``x_hat = B_hat/A_hat u``; ``A_hat`` is updated
+   and the whole repeated until the coefficients stop changing.
+
+   - ``u`` is filtered *exactly* (ZOH discretisation of the filter);
+   - ``y`` and ``x_hat`` are not piecewise constant: they are filtered with the
+     first-order-hold (triangle-hold) discretisation, i.e. assuming linear
+     interpolation between samples. At the fixed point (``A_hat = A``) the
+     filter cancels ``A``, so noiseless data give the exact model whatever the
+     interpolation; with noise the approximation costs a little accuracy,
+     which stage 2 recovers.
+   - An unstable ``A_hat`` (possible during the iterations) is stabilised for
+     the filter by reflecting its right-half-plane poles into the left half.
+   - With ``initial_condition="estimate"``, ``A(s) y = B(s) u + C(s)`` with an
+     unknown initial-condition polynomial ``C`` (degree < np): its filtered
+     form adds ``np`` exactly known regressors, the impulse responses of
+     ``s^k / A_hat(s)``, which are their own instruments.
+   - Start: the user's ``init`` model, or a least-squares state-variable-filter
+     (LSSVF) estimate with the filter ``(s + lambda)^np``; without
+     ``lambda_svf`` four cut-offs, log-spaced from ``pi / (2 ts)`` down to
+     ``max(4 * 2 pi / (N ts), pi / (200 ts))``, are tried and the iterate with
+     the smallest simulation error kept.
+
+2. **Output-error refinement**: minimise ``||y - y_hat(theta)||^2`` where
+   ``y_hat`` is the exact ZOH simulation of the continuous-time model
+   (:func:`eha_core.identify.validate.simulate_tf`'s machinery: matrix
+   exponential of the augmented state matrix, then ``scipy.signal.lfilter``),
+   with :func:`scipy.optimize.least_squares` (trust-region reflective,
+   ``x_scale='jac'``). Coefficients such as 1, 430.1, 1.721e4, 2437 are
+   optimised relative to their starting values (so every parameter is O(1));
+   near-zero coefficients (an integrator's ``a_np``) get a floor scale from the
+   model's frequency scale ``w0 = max_i |a_i|^(1/i)``. With
+   ``initial_condition="estimate"`` the initial state joins the parameters; it
+   enters the response linearly, so it is eliminated by linear least squares
+   inside every residual evaluation (variable projection): same minimiser,
+   better conditioning.
+
+The better of the two stages, by cost, is returned, and ``method`` says which.
+Only numpy and scipy are imported at module import; ``TFEstimate.tf`` imports
+python-control lazily.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.optimize
+import scipy.signal
+
+from eha_core.identify.validate import (
+    _as_signal,
+    _as_tf,
+    _as_ts,
+    _discretise,
+    _expm_balanced,
+    _readonly,
+    _state_numerators,
+    FrequencyResponseData,
+    fit_percent as _fit_percent,
+    frequency_response,
+    simulate_tf,
+)
+
+__all__ = ["TFEstimate", "oe_fit", "tfest"]
+
+_INITIAL_CONDITIONS = ("zero", "estimate")
+
+
+# ---------------------------------------------------------------------------
+# result
+# ---------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class TFEstimate:
+    """An estimated continuous-time transfer function and how it was obtained.
+
+    Like :class:`scipy.optimize.OptimizeResult`, a failed estimation is data:
+    ``success`` is False and ``message`` says why (coefficients may be NaN).
+
+    Attributes
+    ----------
+    num, den : numpy.ndarray
+        Coefficients in descending powers of s; ``den[0] == 1``.
+    ts : float
+        Sampling time of the estimation data, in seconds.
+    n_poles, n_zeros : int
+        Model orders.
+    fit_percent : float
+        MATLAB ``compare`` fit on the estimation data, with the same
+        initial-condition handling as the estimation.
+    cost : float
+        ``0.5 * sum((y - y_hat)^2)`` (scipy's convention).
+    mse : float
+        ``sum((y - y_hat)^2) / N`` (MATLAB's ``Report.Fit.MSE``).
+    noise_variance : float
+        ``sum((y - y_hat)^2) / (N - n_params - n_x0)``.
+    initial_condition : str
+        ``"zero"`` or ``"estimated"``.
+    x0 : numpy.ndarray or None
+        Estimated initial state (observability canonical form, see
+        :mod:`eha_core.identify.validate`; ``[y, y', y'']`` at t = 0 for an
+        all-pole model), or None for zero.
+    success : bool
+    message : str
+    method : str
+        ``"srivc+oe"``, ``"srivc"`` or ``"oe"``: the stage whose estimate is kept.
+    nit_srivc : int
+        SRIVC iterations (all starts; 0 for :func:`oe_fit`).
+    nfev_oe : int
+        Output-error residual evaluations (including finite differences).
+    param_std : numpy.ndarray
+        Standard errors of ``[den[1:], num]`` (same order as ``covariance``).
+    covariance : numpy.ndarray
+        ``noise_variance * (J^T J)^-1`` from the output-error Jacobian ``J``.
+    srivc_num, srivc_den : numpy.ndarray or None
+        Stage-1 (SRIVC) estimate.
+    srivc_cost : float
+        Cost of the SRIVC estimate (NaN if not run).
+    n_samples : int
+    """
+
+    num: np.ndarray
+    den: np.ndarray
+    ts: float
+    n_poles: int
+    n_zeros: int
+    fit_percent: float
+    cost: float
+    mse: float
+    noise_variance: float
+    initial_condition: str
+    x0: np.ndarray | None
+    success: bool
+    message: str
+    method: str
+    nit_srivc: int
+    nfev_oe: int
+    param_std: np.ndarray
+    covariance: np.ndarray
+    srivc_num: np.ndarray | None
+    srivc_den: np.ndarray | None
+    srivc_cost: float
+    n_samples: int
+
+    @property
+    def tf(self):
+        """The estimate as a ``control.TransferFunction`` (imports python-control)."""
+        import control  # lazy: importing python-control costs about 1.4 s
+
+        return control.TransferFunction(list(self.num), list(self.den))
+
+    def poles(self) -> np.ndarray:
+        """Roots of ``den`` (rad/s)."""
+        return np.roots(self.den)
+
+    def zeros(self) -> np.ndarray:
+        """Roots of ``num`` (rad/s)."""
+        return np.roots(self.num) if self.num.size > 1 else np.zeros(0)
+
+    def simulate(self, u, ts=None, x0=None) -> np.ndarray:
+        """Exact ZOH response to ``u`` sampled at ``ts`` (default: ``self.ts``).
+
+        ``x0`` is an initial state (e.g. ``self.x0``); default zero.
+        """
+        return simulate_tf(self.num, self.den, u, self.ts if ts is None else ts, x0=x0)
+
+    def frequency_response(self, w) -> FrequencyResponseData:
+        """Bode data of the estimate at ``w`` rad/s."""
+        return frequency_response(self.num, self.den, w)
+
+
+# ---------------------------------------------------------------------------
+# argument checking
+# ---------------------------------------------------------------------------
+def _check_orders(n_poles, n_zeros) -> tuple[int, int]:
+    if isinstance(n_poles, bool) or not isinstance(n_poles, (int, np.integer)) or n_poles < 1:
+        raise ValueError(f"n_poles must be an integer >= 1, got {n_poles!r}")
+    if isinstance(n_zeros, bool) or not isinstance(n_zeros, (int, np.integer)) or not (
+        0 <= n_zeros <= n_poles - 1
+    ):
+        raise ValueError(
+            f"n_zeros must be an integer in [0, n_poles - 1] = [0, {n_poles - 1}] "
+            f"(the model must be strictly proper), got {n_zeros!r}"
+        )
+    return int(n_poles), int(n_zeros)
+
+
+def _check_data(u, y, ts, n_params: int, n_x0: int):
+    u_arr = _as_signal(u, "u")
+    y_arr = _as_signal(y, "y")
+    if u_arr.shape != y_arr.shape:
+        raise ValueError(f"y must have the same length as u ({u_arr.size}), got {y_arr.size}")
+    needed = n_params + n_x0 + 2
+    if u_arr.size < needed:
+        raise ValueError(
+            f"u has {u_arr.size} samples; this model needs at least {needed} "
+            f"({n_params} coefficients, {n_x0} initial states, 2 spare)"
+        )
+    return u_arr, y_arr, _as_ts(ts)
+
+
+def _check_initial_condition(initial_condition) -> bool:
+    if not isinstance(initial_condition, str) or initial_condition not in _INITIAL_CONDITIONS:
+        raise ValueError(
+            f"initial_condition must be 'zero' or 'estimate', got {initial_condition!r}"
+        )
+    return initial_condition == "estimate"
+
+
+def _check_positive(value, name: str, *, integer: bool = False):
+    if integer:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        return int(value)
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
+    if not np.isfinite(out) or out <= 0:
+        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+    return out
+
+
+def _model_coefficients(model, n: int, m: int, name: str) -> np.ndarray:
+    """``theta = [a_1..a_n, b_0..b_m]`` from ``(num, den)`` or an object with them."""
+    if hasattr(model, "num") and hasattr(model, "den"):
+        num, den = model.num, model.den
+        if isinstance(num, list):  # control.TransferFunction: nested lists
+            num, den = num[0][0], den[0][0]
+    else:
+        try:
+            num, den = model
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"{name} must be a (num, den) pair or a transfer function, got {model!r}"
+            ) from None
+    try:
+        num_n, den_n = _as_tf(num, den)
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None
+    if den_n.size - 1 != n or num_n.size - 1 > m:
+        raise ValueError(
+            f"{name} must have {n} poles and at most {m} zeros (n_poles={n}, n_zeros={m}), "
+            f"got num degree {num_n.size - 1} and den degree {den_n.size - 1}"
+        )
+    b = np.zeros(m + 1)
+    b[m + 1 - num_n.size:] = num_n
+    return np.concatenate([den_n[1:], b])
+
+
+def _split(theta: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(num, den)`` from ``theta = [a_1..a_n, b_0..b_m]``."""
+    return theta[n:].copy(), np.concatenate([[1.0], theta[:n]])
+
+
+# ---------------------------------------------------------------------------
+# output-error criterion (shared by SRIVC's bookkeeping and the OE stage)
+# ---------------------------------------------------------------------------
+class _OutputError:
+    """Residual ``y - y_hat(theta)`` of the exact ZOH simulation.
+
+    With ``estimate_x0`` the initial state is eliminated by linear least
+    squares in every evaluation (variable projection).
+    """
+
+    def __init__(self, u: np.ndarray, y: np.ndarray, ts: float, n: int, estimate_x0: bool):
+        self.u, self.y, self.ts, self.n = u, y, ts, n
+        self.estimate_x0 = estimate_x0
+        self.nfev = 0
+
+    def evaluate(self, theta: np.ndarray):
+        """``(residual, x0)``; residual is None if the simulation is not finite."""
+        self.nfev += 1
+        num, den = _split(theta, self.n)
+        if not np.all(np.isfinite(theta)):
+            return None, None
+        try:
+            with np.errstate(all="ignore"):
+                model = _discretise(num, den, self.ts)
+                residual = self.y - model.forced(self.u)
+                x0 = None
+                if self.estimate_x0 and np.all(np.isfinite(residual)):
+                    basis = model.free_basis(self.u.size)
+                    if not np.all(np.isfinite(basis)):
+                        return None, None
+                    x0, *_ = np.linalg.lstsq(basis, residual, rcond=None)
+                    residual = residual - basis @ x0
+        except (np.linalg.LinAlgError, ValueError):  # e.g. eigenvalues of an overflowed matrix
+            return None, None
+        with np.errstate(over="ignore"):
+            finite = np.isfinite(residual @ residual)  # also catches overflow of the sum
+        if not finite:
+            return None, None
+        return residual, x0
+
+    def cost(self, theta: np.ndarray) -> float:
+        residual, _ = self.evaluate(theta)
+        return np.inf if residual is None else 0.5 * float(residual @ residual)
+
+
+# ---------------------------------------------------------------------------
+# stage 1: SRIVC
+# ---------------------------------------------------------------------------
+def _stabilise(den: np.ndarray) -> np.ndarray:
+    """Reflect right-half-plane roots of a monic polynomial into the left half."""
+    roots = np.roots(den)
+    if np.all(roots.real < 0):
+        return den
+    roots = np.where(roots.real > 0, -roots.real + 1j * roots.imag, roots)
+    return np.real(np.poly(roots))
+
+
+class _StateVariableFilter:
+    """``s^k / A_f(s)``, ``k = 0..n``, discretised for ZOH and FOH inputs.
+
+    ``1/A_f`` is realised in controllable canonical form with states
+    ``[w, w', ..., w^(n-1)]``; then ``w^(n) = input - a_1 w^(n-1) - ... - a_n w``.
+    One exponential of the block matrix ``[[A ts, B ts, 0], [0, 0, 1], [0, 0, 0]]``
+    gives the ZOH input matrix ``G1`` and the ramp matrix ``G2`` of the FOH
+    (triangle-hold) discretisation, as in ``scipy.signal.cont2discrete``.
+    """
+
+    def __init__(self, den_f: np.ndarray, ts: float):
+        n = den_f.size - 1
+        self.den_f = den_f
+        a_mat = np.eye(n, k=1)
+        a_mat[-1, :] = -den_f[:0:-1]
+        block = np.zeros((n + 2, n + 2))
+        block[:n, :n] = a_mat * ts
+        block[n - 1, n] = ts
+        block[n, n + 1] = 1.0
+        e = _expm_balanced(block)
+        ad, g1, g2 = e[:n, :n], e[:n, n], e[:n, n + 1]
+        self.den_z = np.real(np.poly(np.linalg.eigvals(ad)))
+        ident = np.eye(n)
+        self.num_zoh = _state_numerators(ad, g1, self.den_z, ident, np.zeros(n))
+        self.num_foh = _state_numerators(ad, g1 - g2 + ad @ g2, self.den_z, ident, g2)
+        # exact samples of the impulse responses of s^k / A_f, k < n: the
+        # states' free response from x(0) = e_n (the input vector)
+        self.num_impulse = _state_numerators(ad, ad[:, -1], self.den_z, ident, ident[:, -1])
+
+    def impulse_responses(self, n_samples: int) -> np.ndarray:
+        """Sampled impulse responses of ``s^k / A_f``, ``k = 0..n-1``, shape ``(N, n)``.
+
+        A system's initial conditions add ``C(s) / A(s)`` (``deg C < n``) to its
+        output; after the prefilter they add a combination of these signals,
+        which therefore serve as the initial-condition regressors.
+        """
+        impulse = np.zeros(n_samples)
+        impulse[0] = 1.0
+        return np.column_stack([scipy.signal.lfilter(num, self.den_z, impulse)
+                                for num in self.num_impulse])
+
+    def apply(self, signals: np.ndarray, hold: str) -> np.ndarray:
+        """Filtered derivatives, shape ``(N, n_signals, n + 1)``: ``[..., k] = s^k/A_f x``."""
+        nums = self.num_zoh if hold == "zoh" else self.num_foh
+        n = nums.shape[0]
+        out = np.empty(signals.shape + (n + 1,))
+        for k in range(n):
+            out[..., k] = scipy.signal.lfilter(nums[k], self.den_z, signals, axis=0)
+        out[..., n] = signals - out[..., :n] @ self.den_f[:0:-1]
+        return out
+
+
+def _iv_solve(phi: np.ndarray, zeta: np.ndarray, target: np.ndarray):
+    """Instrumental-variable solution ``(Z^T Phi)^-1 Z^T t`` with column scaling."""
+    scale = np.linalg.norm(phi, axis=0)
+    scale[scale == 0] = 1.0
+    gram = (zeta / scale).T @ (phi / scale)
+    rhs = (zeta / scale).T @ target
+    theta_scaled = np.linalg.solve(gram, rhs)
+    return theta_scaled / scale, scale
+
+
+def _regressors(yf: np.ndarray, uf: np.ndarray, n: int, m: int) -> np.ndarray:
+    """``[-y_f^(n-1), ..., -y_f, u_f^(m), ..., u_f]`` (matches ``theta``)."""
+    return np.hstack([-yf[:, n - 1::-1], uf[:, m::-1]])
+
+
+def _srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
+    """SRIVC iterations from ``start`` = ("lambda", value) or ("model", theta).
+
+    With ``criterion.estimate_x0`` the ``n`` initial-condition regressors of
+    :meth:`_StateVariableFilter.impulse_responses` join the regression (they
+    are noise-free, so they are their own instruments) and the auxiliary model
+    includes the estimated initial-condition response.
+
+    Returns ``(best_theta, best_cost, iterations, converged)``; the best
+    iterate by output-error cost is kept (SRIVC may oscillate on poor data).
+    """
+    kind, value = start
+    n_theta = n + m + 1
+    ic = criterion.estimate_x0
+    if kind == "lambda":
+        # LSSVF: least squares with the fixed filter (s + lambda)^n.
+        den_f = np.real(np.poly(np.full(n, -value)))
+        svf = _StateVariableFilter(den_f, ts)
+        uf = svf.apply(u, "zoh")
+        yf = svf.apply(y, "foh")
+        phi = _regressors(yf, uf, n, m)
+        if ic:
+            phi = np.hstack([phi, svf.impulse_responses(u.size)])
+        theta, _ = _iv_solve(phi, phi, yf[:, n])
+        theta = theta[:n_theta]
+        ic_coeffs = np.zeros(n)
+    else:
+        theta = value.copy()
+        ic_coeffs = np.zeros(n)
+    best_theta, best_cost = theta, criterion.cost(theta)
+    converged = False
+    iterations = 0
+    for iterations in range(1, max_iter + 1):
+        num, den = _split(theta, n)
+        den_f = _stabilise(den)
+        svf = _StateVariableFilter(den_f, ts)
+        uf = svf.apply(u, "zoh")
+        x_hat = uf[:, m::-1] @ num  # auxiliary model B/A_f u, exact under ZOH
+        if ic:
+            impulses = svf.impulse_responses(u.size)
+            x_hat = x_hat + impulses @ ic_coeffs
+        yxf = svf.apply(np.column_stack([y, x_hat]), "foh")
+        phi = _regressors(yxf[:, 0], uf, n, m)
+        zeta = _regressors(yxf[:, 1], uf, n, m)
+        if ic:
+            phi = np.hstack([phi, impulses])
+            zeta = np.hstack([zeta, impulses])
+        theta_new, scale = _iv_solve(phi, zeta, yxf[:, 0, n])
+        if not np.all(np.isfinite(theta_new)):
+            break
+        # The extra coefficients are those of C(s) in A(s) y = B(s) u + C(s)
+        # (initial conditions). The auxiliary model's initial-condition response
+        # C/A is formed with the filter's A_f, which equals A at convergence.
+        ic_coeffs = theta_new[n_theta:]
+        theta_new, scale = theta_new[:n_theta], scale[:n_theta]
+        change = np.linalg.norm((theta_new - theta) * scale) / max(
+            np.linalg.norm(theta_new * scale), np.finfo(float).tiny
+        )
+        theta = theta_new
+        cost = criterion.cost(theta)
+        if cost < best_cost:
+            best_theta, best_cost = theta, cost
+        if change < tol:
+            converged = True
+            break
+    return best_theta, best_cost, iterations, converged
+
+
+def _default_lambdas(n_samples: int, ts: float) -> np.ndarray:
+    """Filter cut-offs spread log-uniformly between the record and Nyquist."""
+    w_low = 2.0 * np.pi / (n_samples * ts)
+    w_nyq = np.pi / ts
+    return np.geomspace(w_nyq / 2.0, max(4.0 * w_low, w_nyq / 200.0), 4)
+
+
+# ---------------------------------------------------------------------------
+# stage 2: output error
+# ---------------------------------------------------------------------------
+def _parameter_scale(theta: np.ndarray, n: int, m: int) -> np.ndarray:
+    """Scale so that ``theta / scale`` is O(1); floors for near-zero entries."""
+    a, b = theta[:n], theta[n:]
+    powers = np.arange(1, n + 1)
+    w0 = np.max(np.abs(a) ** (1.0 / powers))
+    if not np.isfinite(w0) or w0 <= 0:
+        w0 = 1.0
+    floor_a = 1e-6 * w0**powers
+    j = np.arange(m + 1)
+    b_ref = np.abs(b) * w0 ** (-j)
+    floor_b = 1e-6 * np.max(b_ref) * w0**j if np.max(b_ref) > 0 else np.ones(m + 1)
+    scale = np.maximum(np.abs(theta), np.concatenate([floor_a, floor_b]))
+    scale[~np.isfinite(scale) | (scale == 0)] = 1.0
+    return scale
+
+
+def _covariance(criterion: _OutputError, theta: np.ndarray, scale: np.ndarray,
+                residual: np.ndarray, n_x0: int):
+    """``sigma^2 (J^T J)^-1`` with a central-difference Jacobian in scaled coordinates."""
+    p = theta / scale
+    jac = np.empty((residual.size, p.size))
+    for i in range(p.size):
+        h = 1e-6 * max(1.0, abs(p[i]))
+        step = np.zeros_like(p)
+        step[i] = h
+        r_plus, _ = criterion.evaluate((p + step) * scale)
+        r_minus, _ = criterion.evaluate((p - step) * scale)
+        if r_plus is None or r_minus is None:
+            nan = np.full((p.size, p.size), np.nan)
+            return nan, np.nan
+        # residual = y - y_hat, so d(y_hat)/dp = -d(residual)/dp
+        jac[:, i] = -(r_plus - r_minus) / (2.0 * h)
+    dof = residual.size - p.size - n_x0
+    variance = float(residual @ residual) / dof
+    _, sing, vt = np.linalg.svd(jac, full_matrices=False)
+    keep = sing > sing[0] * 1e-13 if sing[0] > 0 else np.zeros_like(sing, dtype=bool)
+    inv = (vt[keep].T / sing[keep] ** 2) @ vt[keep]
+    if not np.all(keep):
+        inv = np.full_like(inv, np.nan)
+    cov_p = variance * inv
+    return cov_p * scale[:, None] * scale[None, :], variance
+
+
+def _oe_refine(criterion: _OutputError, theta0: np.ndarray, n: int, m: int,
+               max_nfev: int, tol: float):
+    """``least_squares`` on the exact ZOH output error, from ``theta0``."""
+    scale = _parameter_scale(theta0, n, m)
+
+    def residual(p):
+        r, _ = criterion.evaluate(p * scale)
+        return np.full(criterion.y.size, np.inf) if r is None else r
+
+    try:
+        res = scipy.optimize.least_squares(
+            residual, theta0 / scale, method="trf", x_scale="jac", jac="2-point",
+            xtol=tol, ftol=tol, gtol=tol, max_nfev=max_nfev,
+        )
+    except ValueError as exc:  # e.g. non-finite residuals at the start point
+        return theta0, np.inf, False, f"output-error refinement not possible: {exc}"
+    return res.x * scale, float(res.cost), bool(res.success), res.message
+
+
+def _nan_estimate(n, m, ts, n_samples, estimate_x0, message, nit, nfev):
+    p = n + m + 1
+    return TFEstimate(
+        num=_readonly(np.full(m + 1, np.nan)), den=_readonly(np.r_[1.0, np.full(n, np.nan)]),
+        ts=ts, n_poles=n, n_zeros=m, fit_percent=np.nan, cost=np.nan, mse=np.nan,
+        noise_variance=np.nan, initial_condition="estimated" if estimate_x0 else "zero",
+        x0=None, success=False, message=message, method="none", nit_srivc=nit,
+        nfev_oe=nfev, param_std=_readonly(np.full(p, np.nan)),
+        covariance=_readonly(np.full((p, p), np.nan)),
+        srivc_num=None, srivc_den=None, srivc_cost=np.nan, n_samples=n_samples,
+    )
+
+
+def _finish(criterion, theta, n, m, ts, success, message, method, nit, srivc_theta,
+            srivc_cost) -> TFEstimate:
+    """Assemble the result: fit, covariance, x0 at the final estimate."""
+    nfev = criterion.nfev
+    residual, x0 = criterion.evaluate(theta)
+    if residual is None:
+        return _nan_estimate(n, m, ts, criterion.y.size, criterion.estimate_x0,
+                             message + "; the final model cannot be simulated", nit, nfev)
+    n_x0 = n if criterion.estimate_x0 else 0
+    covariance, variance = _covariance(criterion, theta, _parameter_scale(theta, n, m),
+                                       residual, n_x0)
+    num, den = _split(theta, n)
+    poles = np.roots(den)
+    if np.any(poles.real > 1e-9 * max(1.0, np.max(np.abs(poles)))):
+        message += (f"; note: the estimate is unstable (largest pole real part "
+                    f"{np.max(poles.real):.4g} rad/s)")
+    y_hat = criterion.y - residual
+    sse = float(residual @ residual)
+    srivc_num = srivc_den = None
+    if srivc_theta is not None:
+        srivc_num, srivc_den = _split(srivc_theta, n)
+    return TFEstimate(
+        num=_readonly(num), den=_readonly(den), ts=ts, n_poles=n, n_zeros=m,
+        fit_percent=_fit_percent(criterion.y, y_hat), cost=0.5 * sse,
+        mse=sse / residual.size, noise_variance=variance,
+        initial_condition="estimated" if criterion.estimate_x0 else "zero",
+        x0=None if x0 is None else _readonly(x0), success=bool(success), message=message,
+        method=method, nit_srivc=nit, nfev_oe=nfev,
+        param_std=_readonly(np.sqrt(np.abs(np.diag(covariance)))),
+        covariance=_readonly(covariance),
+        srivc_num=None if srivc_num is None else _readonly(srivc_num),
+        srivc_den=None if srivc_den is None else _readonly(srivc_den),
+        srivc_cost=float(srivc_cost), n_samples=residual.size,
+    )
+
+
+# ---------------------------------------------------------------------------
+# public API
+# ---------------------------------------------------------------------------
+def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", init=None,
+          lambda_svf=None, refine=True, max_iter=50, max_nfev=None, tol=1e-10) -> TFEstimate:
+    """Estimate a continuous-time transfer function from sampled data (MATLAB ``tfest``).
+
+    SRIVC (refined instrumental variables with state-variable filters) gives
+    a consistent start; an output-error fit on the exact ZOH simulation
+    refines it. See the module docstring for the algorithm.
+
+    Parameters
+    ----------
+    u, y : array_like, shape (N,)
+        Input (held constant between samples) and output samples.
+    ts : float
+        Sampling time in seconds.
+    n_poles : int
+        Number of poles ``np >= 1`` (default 3, as in the paper).
+    n_zeros : int
+        Number of zeros, ``0 <= nz <= np - 1`` (strictly proper model).
+    initial_condition : {"zero", "estimate"}
+        ``"zero"``: the system starts at rest. ``"estimate"``: the initial
+        state is estimated together with the coefficients (reported in
+        ``x0``) and used for ``fit_percent``.
+    init : (num, den) or transfer function, optional
+        Initial model for SRIVC (``n_poles`` poles, at most ``n_zeros`` zeros).
+    lambda_svf : float, optional
+        Cut-off (rad/s) of the initial filter ``(s + lambda)^np``. Default: a
+        few values between the record's lowest frequency and ``pi/ts/2`` are
+        tried and the best kept. Ignored when ``init`` is given.
+    refine : bool
+        Run the output-error stage (default True).
+    max_iter : int
+        Maximum SRIVC iterations per start.
+    max_nfev : int, optional
+        Maximum output-error residual evaluations (default ``100 * n_params``).
+    tol : float
+        Relative tolerance: SRIVC stops when the coefficients change by less;
+        ``xtol``, ``ftol`` and ``gtol`` of ``least_squares``.
+
+    Returns
+    -------
+    TFEstimate
+        Estimate, fit, statistics, diagnostics. ``success`` is False (with a
+        ``message``) when the estimation fails; no exception is raised then.
+
+    Raises
+    ------
+    ValueError
+        For invalid arguments (the message names the argument).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ts = 0.01
+    >>> u = np.sign(np.sin(2 * np.pi * 0.5 * ts * np.arange(800)))  # square wave
+    >>> y = simulate_tf([20.0], [1.0, 6.0, 20.0], u, ts)
+    >>> est = tfest(u, y, ts, n_poles=2)
+    >>> est.success, est.method
+    (True, 'srivc+oe')
+    >>> np.round(est.den, 6), np.round(est.num, 6)
+    (array([ 1.,  6., 20.]), array([20.]))
+    >>> round(est.fit_percent, 4)
+    100.0
+    """
+    n, m = _check_orders(n_poles, n_zeros)
+    estimate_x0 = _check_initial_condition(initial_condition)
+    u_arr, y_arr, ts_f = _check_data(u, y, ts, n + m + 1, n if estimate_x0 else 0)
+    max_iter = _check_positive(max_iter, "max_iter", integer=True)
+    tol = _check_positive(tol, "tol")
+    max_nfev = 100 * (n + m + 1) if max_nfev is None else _check_positive(
+        max_nfev, "max_nfev", integer=True)
+    if not isinstance(refine, (bool, np.bool_)):
+        raise ValueError(f"refine must be True or False, got {refine!r}")
+    if init is not None:
+        starts = [("model", _model_coefficients(init, n, m, "init"))]
+        start_names = ["init"]
+    else:
+        if lambda_svf is not None:
+            lambdas = np.array([_check_positive(lambda_svf, "lambda_svf")])
+        else:
+            lambdas = _default_lambdas(u_arr.size, ts_f)
+        starts = [("lambda", lam) for lam in lambdas]
+        start_names = [f"lambda = {lam:.4g} rad/s" for lam in lambdas]
+    criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_x0)
+    best = None
+    nit_total = 0
+    for name, start in zip(start_names, starts):
+        try:
+            theta, cost, nit, converged = _srivc(u_arr, y_arr, ts_f, n, m, start,
+                                                 max_iter, tol, criterion)
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+            continue
+        nit_total += nit
+        if np.isfinite(cost) and (best is None or cost < best[1]):
+            best = (theta, cost, converged, name, nit)
+    if best is None:
+        return _nan_estimate(
+            n, m, ts_f, u_arr.size, estimate_x0,
+            "SRIVC failed from every start (singular instrument matrix or unstable "
+            "simulation): is the input exciting enough?", nit_total, 0,
+        )
+    srivc_theta, srivc_cost, srivc_converged, start_name, srivc_nit = best
+    srivc_msg = (f"SRIVC {'converged' if srivc_converged else 'did not converge'} in "
+                 f"{srivc_nit} iterations from {start_name}")
+    if not refine:
+        criterion.nfev = 0
+        return _finish(criterion, srivc_theta, n, m, ts_f, srivc_converged,
+                       srivc_msg + "; output-error refinement skipped", "srivc",
+                       nit_total, srivc_theta, srivc_cost)
+    criterion.nfev = 0
+    theta_oe, cost_oe, oe_success, oe_msg = _oe_refine(criterion, srivc_theta, n, m,
+                                                       max_nfev, tol)
+    if np.isfinite(cost_oe) and cost_oe <= srivc_cost:
+        return _finish(criterion, theta_oe, n, m, ts_f, oe_success,
+                       f"{srivc_msg}; output error: {oe_msg}; kept the output-error estimate "
+                       f"(cost {cost_oe:.4g} <= SRIVC {srivc_cost:.4g})",
+                       "srivc+oe", nit_total, srivc_theta, srivc_cost)
+    return _finish(criterion, srivc_theta, n, m, ts_f, srivc_converged,
+                   f"{srivc_msg}; output error: {oe_msg}; kept the SRIVC estimate "
+                   f"(cost {srivc_cost:.4g} < output error {cost_oe:.4g})",
+                   "srivc", nit_total, srivc_theta, srivc_cost)
+
+
+def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", max_nfev=None,
+           tol=1e-10) -> TFEstimate:
+    """Plain output-error fit of a continuous-time transfer function from a start model.
+
+    The same criterion, parameterisation and optimiser as the second stage of
+    :func:`tfest` (so the two are comparable), without SRIVC. The orders are
+    those of ``den0`` (poles) and ``num0`` (zeros, ``< n_poles``).
+
+    Parameters
+    ----------
+    u, y : array_like, shape (N,)
+        Input (ZOH) and output samples.
+    ts : float
+        Sampling time in seconds.
+    num0, den0 : array_like
+        Start model, descending powers of s.
+    initial_condition : {"zero", "estimate"}
+    max_nfev : int, optional
+        Maximum residual evaluations (default ``100 * n_params``).
+    tol : float
+        ``xtol``, ``ftol`` and ``gtol`` of ``least_squares``.
+
+    Returns
+    -------
+    TFEstimate
+        With ``method == "oe"``, ``nit_srivc == 0`` and no SRIVC estimate.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ts = 0.05
+    >>> u = np.sign(np.sin(0.7 * np.arange(400) * ts))
+    >>> y = simulate_tf([3.0], [1.0, 1.5], u, ts)
+    >>> est = oe_fit(u, y, ts, [1.0], [1.0, 1.0])
+    >>> np.round(est.num, 6), np.round(est.den, 6), est.method
+    (array([3.]), array([1. , 1.5]), 'oe')
+    """
+    num_n, den_n = _as_tf(num0, den0)
+    n = den_n.size - 1
+    m = max(num_n.size - 1, 0)
+    try:
+        n, m = _check_orders(n, m)
+    except ValueError as exc:
+        raise ValueError(
+            f"den0/num0: the start model must have >= 1 pole and fewer zeros than poles, "
+            f"got {num_n.size - 1} zeros and {den_n.size - 1} poles ({exc})"
+        ) from None
+    estimate_x0 = _check_initial_condition(initial_condition)
+    u_arr, y_arr, ts_f = _check_data(u, y, ts, n + m + 1, n if estimate_x0 else 0)
+    tol = _check_positive(tol, "tol")
+    max_nfev = 100 * (n + m + 1) if max_nfev is None else _check_positive(
+        max_nfev, "max_nfev", integer=True)
+    theta0 = _model_coefficients((num_n, den_n), n, m, "num0/den0")
+    criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_x0)
+    cost0 = criterion.cost(theta0)
+    if not np.isfinite(cost0):
+        return _nan_estimate(n, m, ts_f, u_arr.size, estimate_x0,
+                             "the start model cannot be simulated on this record", 0,
+                             criterion.nfev)
+    theta, cost, success, msg = _oe_refine(criterion, theta0, n, m, max_nfev, tol)
+    if not np.isfinite(cost):
+        theta = theta0
+    return _finish(criterion, theta, n, m, ts_f, success, f"output error: {msg}", "oe", 0,
+                   None, np.nan)

@@ -1,0 +1,251 @@
+"""Tests of eha_core.identify.tfest on known continuous-time systems."""
+
+import dataclasses
+import time
+
+import numpy as np
+import pytest
+
+from eha_core.identify.tfest import TFEstimate, oe_fit, tfest
+from eha_core.identify.validate import fit_percent, simulate_tf
+
+TS = 0.01
+# H(s) of the paper's linearised closed loop: poles -0.142, -44.5, -385.5 rad/s;
+# the last one is faster than the Nyquist frequency pi/TS = 314 rad/s.
+H_NUM = np.array([2437.0])
+H_DEN = np.array([1.0, 430.1, 1.721e4, 2437.0])
+# Open-loop plant with an integrator (a_3 = 0).
+P_NUM = np.array([243.7])
+P_DEN = np.array([1.0, 430.1, 1.721e4, 0.0])
+# A lightly damped second-order system with a zero.
+Z_NUM = np.array([3.0, 5.0])
+Z_DEN = np.array([1.0, 0.8, 4.0])
+
+
+def _binary_input(n, hold=5, seed=0):
+    """Random binary signal held for ``hold`` samples (ZOH)."""
+    rng = np.random.default_rng(seed)
+    return np.repeat(rng.choice([-1.0, 1.0], n // hold + 1), hold)[:n]
+
+
+def _multisine(n, n_sines=40, seed=0):
+    rng = np.random.default_rng(seed)
+    k = np.arange(n)
+    bins = np.linspace(1, n // 2 - 1, n_sines).round()
+    u = sum(np.cos(2 * np.pi * b * k / n + rng.uniform(0, 2 * np.pi)) for b in bins)
+    return u / np.abs(u).max()
+
+
+def _theta(num, den):
+    return np.concatenate([np.asarray(den)[1:], num])
+
+
+# --- noiseless recovery ---------------------------------------------------------
+@pytest.mark.parametrize("make_input", [_binary_input, _multisine], ids=["rbs", "multisine"])
+def test_recovers_third_order_with_pole_beyond_nyquist(make_input):
+    u = make_input(1000)
+    y = simulate_tf(H_NUM, H_DEN, u, TS)
+    est = tfest(u, y, TS, n_poles=3, n_zeros=0)
+    assert est.success, est.message
+    assert est.den[0] == 1.0
+    np.testing.assert_allclose(est.den, H_DEN, rtol=1e-4)
+    np.testing.assert_allclose(est.num, H_NUM, rtol=1e-4)
+    assert est.fit_percent == pytest.approx(100.0, abs=1e-4)
+    assert est.method in ("srivc+oe", "srivc")
+    assert est.nit_srivc > 0 and est.nfev_oe > 0
+    assert est.initial_condition == "zero" and est.x0 is None
+    assert np.min(est.poles().real) == pytest.approx(-385.47, rel=1e-4)
+
+
+def test_recovers_second_order_with_zero():
+    u = _binary_input(800, hold=10, seed=1)
+    y = simulate_tf(Z_NUM, Z_DEN, u, TS)
+    est = tfest(u, y, TS, n_poles=2, n_zeros=1)
+    assert est.success, est.message
+    np.testing.assert_allclose(_theta(est.num, est.den), _theta(Z_NUM, Z_DEN), rtol=1e-4)
+    np.testing.assert_allclose(est.zeros(), [-5.0 / 3.0], rtol=1e-4)
+
+
+def test_recovers_open_loop_integrator():
+    u = _binary_input(1000, seed=2)
+    y = simulate_tf(P_NUM, P_DEN, u, TS)
+    est = tfest(u, y, TS, n_poles=3)
+    assert est.success, est.message
+    np.testing.assert_allclose(est.den[:3], P_DEN[:3], rtol=1e-4)
+    np.testing.assert_allclose(est.num, P_NUM, rtol=1e-4)
+    # a_3 ~ 0: an integrator pole within 1e-6 rad/s of the origin
+    assert abs(est.den[3]) < 1e-6 * est.den[2]
+    assert np.min(np.abs(est.poles())) < 1e-6
+
+
+def test_srivc_alone_and_result_fields():
+    u = _binary_input(1000)
+    y = simulate_tf(H_NUM, H_DEN, u, TS)
+    est = tfest(u, y, TS, refine=False)
+    assert est.method == "srivc" and est.nfev_oe == 0
+    np.testing.assert_allclose(est.den, H_DEN, rtol=1e-4)
+    np.testing.assert_allclose(est.srivc_den, est.den)
+    assert est.param_std.shape == (4,) and est.covariance.shape == (4, 4)
+    assert est.n_poles == 3 and est.n_zeros == 0 and est.n_samples == 1000
+    assert isinstance(est, TFEstimate)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        est.num = np.ones(1)
+    np.testing.assert_allclose(est.simulate(u), y, atol=1e-6 * np.abs(y).max())
+    # a continuous-time model can be simulated at another sampling time
+    u_fine = np.repeat(u[:200], 2)
+    np.testing.assert_allclose(est.simulate(u_fine, ts=TS / 2)[::2],
+                               simulate_tf(H_NUM, H_DEN, u_fine, TS / 2)[::2],
+                               atol=1e-6 * np.abs(y).max())
+
+
+def test_tf_property_returns_control_transfer_function():
+    control = pytest.importorskip("control")
+    u = _binary_input(300, hold=10)
+    est = tfest(u, simulate_tf([20.0], [1.0, 6.0, 20.0], u, TS), TS, n_poles=2)
+    sys = est.tf
+    assert isinstance(sys, control.TransferFunction)
+    np.testing.assert_allclose(np.ravel(sys.den[0][0]), [1.0, 6.0, 20.0], rtol=1e-6)
+
+
+# --- initial conditions -------------------------------------------------------------
+def test_estimated_initial_condition_recovers_state():
+    u = _binary_input(1000, seed=4)
+    x0 = np.array([0.3, -2.0, 10.0])  # y(0), y'(0), y''(0)
+    y = simulate_tf(H_NUM, H_DEN, u, TS, x0=x0)
+    est = tfest(u, y, TS, initial_condition="estimate")
+    assert est.success, est.message
+    assert est.initial_condition == "estimated"
+    np.testing.assert_allclose(est.den, H_DEN, rtol=1e-4)
+    np.testing.assert_allclose(est.num, H_NUM, rtol=1e-4)
+    np.testing.assert_allclose(est.x0, x0, rtol=1e-4)
+    assert est.fit_percent == pytest.approx(100.0, abs=1e-4)
+    # ignoring the initial state cannot explain these data as well
+    zero = tfest(u, y, TS, initial_condition="zero")
+    assert zero.fit_percent < est.fit_percent - 0.01
+
+
+# --- noise: consistency and statistics ------------------------------------------------
+def _noisy_estimate(n_samples, seed, noise=0.1):
+    rng = np.random.default_rng(seed)
+    u = _binary_input(n_samples, hold=20, seed=seed)
+    y = simulate_tf(Z_NUM, Z_DEN, u, TS) + noise * rng.standard_normal(n_samples)
+    return tfest(u, y, TS, n_poles=2, n_zeros=1)
+
+
+def test_error_shrinks_with_record_length_and_std_is_consistent():
+    true = _theta(Z_NUM, Z_DEN)
+    median_error = []
+    for n_samples in (1000, 4000, 16000):
+        errors = []
+        for seed in range(3):
+            est = _noisy_estimate(n_samples, seed)
+            assert est.success, est.message
+            theta = _theta(est.num, est.den)
+            errors.append(np.linalg.norm((theta - true) / true))
+            # the true value lies within 3.5 reported standard errors
+            assert np.all(np.abs(theta - true) < 3.5 * est.param_std), (theta, est.param_std)
+        median_error.append(np.median(errors))
+    assert median_error[0] > median_error[1] > median_error[2]
+    # the error falls roughly like 1/sqrt(N): 16x the data, about 4x less error
+    assert median_error[2] < median_error[0] / 2
+
+
+def test_reported_standard_errors_match_the_spread():
+    true = _theta(Z_NUM, Z_DEN)
+    estimates = np.array([_theta(e.num, e.den) for e in
+                          (_noisy_estimate(1000, seed) for seed in range(12))])
+    std = _noisy_estimate(1000, 100).param_std
+    ratio = estimates.std(axis=0) / std
+    assert np.all((ratio > 0.5) & (ratio < 2.0)), ratio
+    assert np.all(np.abs(estimates.mean(axis=0) - true) < 3 * std / np.sqrt(12) + 1e-12)
+
+
+# --- plain output error ---------------------------------------------------------------
+def test_oe_fit_from_perturbed_start_matches_tfest():
+    u = _binary_input(1000, seed=5)
+    rng = np.random.default_rng(5)
+    y = simulate_tf(H_NUM, H_DEN, u, TS) + 1e-4 * rng.standard_normal(1000)
+    full = tfest(u, y, TS)
+    plain = oe_fit(u, y, TS, H_NUM * 1.3, H_DEN * [1.0, 0.8, 1.2, 1.3])
+    assert plain.method == "oe" and plain.nit_srivc == 0 and plain.srivc_den is None
+    assert plain.success, plain.message
+    # same criterion: both reach the same minimum
+    assert plain.cost == pytest.approx(full.cost, rel=1e-6)
+    np.testing.assert_allclose(plain.den, full.den, rtol=1e-5)
+    assert plain.fit_percent == pytest.approx(
+        fit_percent(y, simulate_tf(plain.num, plain.den, u, TS)), abs=1e-9)
+
+
+def test_oe_fit_estimates_initial_state():
+    u = _binary_input(600, seed=6)
+    x0 = np.array([1.0, -0.5])
+    y = simulate_tf(Z_NUM, Z_DEN, u, TS, x0=x0)
+    est = oe_fit(u, y, TS, [2.0, 4.0], [1.0, 1.0, 3.0], initial_condition="estimate")
+    np.testing.assert_allclose(_theta(est.num, est.den), _theta(Z_NUM, Z_DEN), rtol=1e-4)
+    np.testing.assert_allclose(est.x0, x0, rtol=1e-4, atol=1e-8)
+
+
+# --- failures are data, bad arguments are errors -------------------------------------
+def test_unexciting_input_is_reported_not_raised():
+    est = tfest(np.zeros(500), np.ones(500), TS, n_poles=2)
+    assert not est.success
+    assert "SRIVC failed" in est.message
+    assert np.all(np.isnan(est.num))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "name"),
+    [
+        ({"n_poles": 0}, "n_poles"),
+        ({"n_poles": 2, "n_zeros": 2}, "n_zeros"),
+        ({"n_zeros": -1}, "n_zeros"),
+        ({"ts": 0.0}, "ts"),
+        ({"initial_condition": "random"}, "initial_condition"),
+        ({"init": ([1.0], [1.0, 2.0])}, "init"),
+        ({"max_iter": 0}, "max_iter"),
+        ({"tol": -1.0}, "tol"),
+        ({"lambda_svf": -3.0}, "lambda_svf"),
+    ],
+)
+def test_bad_arguments_raise_value_error_naming_them(kwargs, name):
+    u = _binary_input(100)
+    args = {"u": u, "y": u, "ts": TS, **kwargs}
+    with pytest.raises(ValueError, match=name):
+        tfest(**args)
+
+
+def test_bad_data_raise_value_error():
+    u = _binary_input(100)
+    with pytest.raises(ValueError, match="y"):
+        tfest(u, u[:-1], TS)
+    with pytest.raises(ValueError, match="u"):
+        tfest(u[:5], u[:5], TS)
+    with pytest.raises(ValueError, match="den0"):
+        oe_fit(u, u, TS, [1.0, 1.0], [1.0, 1.0])
+
+
+def test_tfest_is_fast():
+    u = _binary_input(1000)
+    y = simulate_tf(H_NUM, H_DEN, u, TS)
+    tfest(u, y, TS)  # warm-up
+    elapsed = min(_timed(tfest, u, y, TS) for _ in range(3))
+    assert elapsed < 0.5, f"tfest took {elapsed:.3f} s for 1000 samples"
+
+
+def _timed(func, *args):
+    start = time.perf_counter()
+    func(*args)
+    return time.perf_counter() - start
+
+
+def test_import_is_light():
+    # numpy/scipy only at import time: python-control (1.4 s) is imported lazily
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, eha_core.identify.tfest, eha_core.identify.validate\n"
+        "heavy = {'control', 'panel', 'holoviews', 'bokeh'} & set(sys.modules)\n"
+        "assert not heavy, heavy\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
