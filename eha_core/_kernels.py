@@ -1,5 +1,8 @@
 """Compiled integrators (numba). Imported lazily by :mod:`eha_core.simulate`.
 
+The kernels release the GIL (``nogil``), so a web server can run one
+session's simulation in a worker thread while it keeps serving the others.
+
 A fixed-step classical Runge-Kutta (RK4) with the bounds enforced after every
 step (:func:`eha_core.model.project_state`). Fixed steps suit this model: the
 right-hand side has kinks (valve switching at u = 0, clipping, end stops) and
@@ -21,8 +24,8 @@ from numba import njit, prange
 from . import model
 
 # the one implementation of the dynamics, compiled
-derivatives = njit(cache=True, inline="always")(model.derivatives)
-project_state = njit(cache=True, inline="always")(model.project_state)
+derivatives = njit(cache=True, nogil=True, inline="always")(model.derivatives)
+project_state = njit(cache=True, nogil=True, inline="always")(model.project_state)
 
 # mode codes
 NONLINEAR = 0
@@ -35,7 +38,7 @@ ZOH = 1
 CONTINUOUS = 2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _f(mode, x, v, p1, p2, u, d, prm, lin):
     if mode == NONLINEAR:
         return derivatives(x, v, p1, p2, u, d, prm)
@@ -56,7 +59,7 @@ def _f(mode, x, v, p1, p2, u, d, prm, lin):
     return r0, r1, r2, r3
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def integrate(y0, h, n_steps, sub, prm, mode, lin, u_st, d_st,
               ctrl, kp, r_st, ctrl_every, u_limit, out):
     """Integrate one run; fill ``out`` (n_out x 5: x, v, p1, p2, u).
@@ -139,7 +142,7 @@ def integrate(y0, h, n_steps, sub, prm, mode, lin, u_st, d_st,
     return -1
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def integrate_batch(y0s, h, n_steps, sub, prms, mode, lin, u_sts, d_sts,
                     ctrl, kp, r_sts, ctrl_every, u_limit, outs, status):
     """:func:`integrate` over a batch of runs, in parallel over the cores."""
