@@ -1,0 +1,68 @@
+"""Numbers and transfer functions written for people (HTML, no JavaScript math)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["num_html", "poly_html", "tf_html", "poles_html", "table_html"]
+
+
+def num_html(x: float, digits: int = 4) -> str:
+    """4 significant digits, powers of ten as 1.721·10⁴."""
+    if x == 0 or not math.isfinite(x):
+        return f"{x:g}"
+    exp = int(math.floor(math.log10(abs(x))))
+    if -3 <= exp < digits:
+        return f"{x:.{digits}g}"
+    mant = x / 10**exp
+    return f"{mant:.{digits - 1}f}".rstrip("0").rstrip(".") + f"·10<sup>{exp}</sup>"
+
+
+def poly_html(coeffs, var: str = "s") -> str:
+    """c0 s^n + ... + cn, dropping zero terms; unit leading coefficient shown as s^n."""
+    coeffs = list(np.atleast_1d(coeffs))
+    n = len(coeffs) - 1
+    terms = []
+    for i, c in enumerate(coeffs):
+        p = n - i
+        if c == 0 and len(coeffs) > 1:
+            continue
+        power = "" if p == 0 else (var if p == 1 else f"{var}<sup>{p}</sup>")
+        mag = abs(c)
+        coef = "" if (mag == 1 and p > 0) else num_html(mag)
+        sign = "−" if c < 0 else "+"
+        body = f"{coef}&#8239;{power}" if coef and power else (coef or power)
+        terms.append((sign, body))
+    if not terms:
+        return "0"
+    first_sign, first = terms[0]
+    text = ("−" if first_sign == "−" else "") + first
+    for sign, body in terms[1:]:
+        text += f" {sign} {body}"
+    return text
+
+
+def tf_html(name: str, num, den, note: str = "") -> str:
+    """A transfer function as an HTML fraction."""
+    return (f'<div class="eha-tf"><span class="eha-tf-name">{name} =</span>'
+            f'<span class="eha-frac"><span class="eha-num">{poly_html(num)}</span>'
+            f'<span class="eha-den">{poly_html(den)}</span></span>'
+            + (f'<span class="eha-tf-note">{note}</span>' if note else "") + "</div>")
+
+
+def poles_html(poles) -> str:
+    parts = []
+    for p in sorted(np.atleast_1d(poles), key=lambda z: (-z.real, z.imag)):
+        if abs(p.imag) < 1e-9 * max(1.0, abs(p)):
+            parts.append(num_html(p.real))
+        elif p.imag > 0:
+            parts.append(f"{num_html(p.real)} ± {num_html(p.imag)}j")
+    return ", ".join(parts)
+
+
+def table_html(header, rows, cls: str = "eha-table") -> str:
+    h = "".join(f"<th>{c}</th>" for c in header)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
+    return f'<table class="{cls}"><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>'
