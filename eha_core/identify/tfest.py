@@ -32,6 +32,14 @@ Two stages, as MATLAB does it:
      unknown initial-condition polynomial ``C`` (degree < np): its filtered
      form adds ``np`` exactly known regressors, the impulse responses of
      ``s^k / A_hat(s)``, which are their own instruments.
+   - With ``input_offset="estimate"`` the model is ``y = G(s) (u + c)`` with a
+     constant input offset ``c``: ``A(s) y = B(s) u + b_nz c 1(t)`` (the
+     derivatives of a constant vanish; the impulses at ``t = 0`` fall into the
+     initial-condition regressors, or are kept through ``B_hat`` when the
+     initial state is zero). One more regressor, ``1/A_hat(s)`` applied to a
+     unit step, exact (a step is piecewise constant) and its own instrument.
+   - The IV equations are solved through a QR factorisation of the
+     instruments, which avoids squaring the conditioning.
    - Start: the user's ``init`` model, or a least-squares state-variable-filter
      (LSSVF) estimate with the filter ``(s + lambda)^np``; without
      ``lambda_svf`` four cut-offs, log-spaced from ``pi / (2 ts)`` down to
@@ -50,11 +58,16 @@ Two stages, as MATLAB does it:
    ``initial_condition="estimate"`` the initial state joins the parameters; it
    enters the response linearly, so it is eliminated by linear least squares
    inside every residual evaluation (variable projection): same minimiser,
-   better conditioning.
+   better conditioning. An input offset ``c`` enters linearly too (its
+   response is ``c`` times the step response) and is eliminated the same
+   way, jointly with the initial state.
 
-The better of the two stages, by cost, is returned, and ``method`` says which.
-Only numpy and scipy are imported at module import; ``TFEstimate.tf`` imports
-python-control lazily.
+Several SRIVC starts can converge to different models (the output-error
+criterion may have several minima); the best ``n_refine`` distinct ones are
+refined. The better of the two stages, by cost, is returned, and ``method``
+says which. The reported ``x0`` and ``input_offset`` are the least-squares
+ones for the returned coefficients. Only numpy and scipy are imported at
+module import; ``TFEstimate.tf`` imports python-control lazily.
 """
 
 from __future__ import annotations
@@ -71,6 +84,8 @@ from eha_core.identify.validate import (
     _as_ts,
     _discretise,
     _expm_balanced,
+    _fit_linear_terms,
+    _linear_columns,
     _readonly,
     _state_numerators,
     FrequencyResponseData,
@@ -82,6 +97,7 @@ from eha_core.identify.validate import (
 __all__ = ["TFEstimate", "oe_fit", "tfest"]
 
 _INITIAL_CONDITIONS = ("zero", "estimate")
+_INPUT_OFFSETS = ("zero", "estimate")
 
 
 # ---------------------------------------------------------------------------
@@ -117,6 +133,11 @@ class TFEstimate:
         Estimated initial state (observability canonical form, see
         :mod:`eha_core.identify.validate`; ``[y, y', y'']`` at t = 0 for an
         all-pole model), or None for zero.
+    input_offset : float or None
+        Estimated constant input offset ``c``, in input units: the model is
+        ``y = G(s) (u + c)``. None when the offset was not estimated (zero).
+    input_offset_std : float or None
+        Standard error of ``input_offset`` (None when not estimated).
     success : bool
     message : str
     method : str
@@ -128,7 +149,9 @@ class TFEstimate:
     param_std : numpy.ndarray
         Standard errors of ``[den[1:], num]`` (same order as ``covariance``).
     covariance : numpy.ndarray
-        ``noise_variance * (J^T J)^-1`` from the output-error Jacobian ``J``.
+        ``noise_variance * (J^T J)^-1`` of the transfer-function coefficients,
+        from the output-error Jacobian ``J`` with the linear terms (initial
+        state, input offset) projected out.
     srivc_num, srivc_den : numpy.ndarray or None
         Stage-1 (SRIVC) estimate.
     srivc_cost : float
@@ -147,6 +170,8 @@ class TFEstimate:
     noise_variance: float
     initial_condition: str
     x0: np.ndarray | None
+    input_offset: float | None
+    input_offset_std: float | None
     success: bool
     message: str
     method: str
@@ -174,11 +199,24 @@ class TFEstimate:
         """Roots of ``num`` (rad/s)."""
         return np.roots(self.num) if self.num.size > 1 else np.zeros(0)
 
-    def simulate(self, u, ts=None, x0=None) -> np.ndarray:
+    def simulate(self, u, ts=None, x0=None, input_offset=None) -> np.ndarray:
         """Exact ZOH response to ``u`` sampled at ``ts`` (default: ``self.ts``).
 
         ``x0`` is an initial state (e.g. ``self.x0``); default zero.
+        ``input_offset`` is a constant added to ``u`` (input units, e.g.
+        ``self.input_offset``); default none. The offset estimated on one
+        record usually does not carry over to a new data set, which needs its
+        own: see :func:`eha_core.identify.validate.compare`.
         """
+        if input_offset is not None:
+            try:
+                offset = float(input_offset)
+            except (TypeError, ValueError):
+                offset = np.nan
+            if not np.isfinite(offset):
+                raise ValueError(
+                    f"input_offset must be None or a finite number, got {input_offset!r}")
+            u = np.asarray(u, dtype=float) + offset
         return simulate_tf(self.num, self.den, u, self.ts if ts is None else ts, x0=x0)
 
     def frequency_response(self, w) -> FrequencyResponseData:
@@ -202,16 +240,17 @@ def _check_orders(n_poles, n_zeros) -> tuple[int, int]:
     return int(n_poles), int(n_zeros)
 
 
-def _check_data(u, y, ts, n_params: int, n_x0: int):
+def _check_data(u, y, ts, n_params: int, n_x0: int, n_offset: int = 0):
     u_arr = _as_signal(u, "u")
     y_arr = _as_signal(y, "y")
     if u_arr.shape != y_arr.shape:
         raise ValueError(f"y must have the same length as u ({u_arr.size}), got {y_arr.size}")
-    needed = n_params + n_x0 + 2
+    needed = n_params + n_x0 + n_offset + 2
     if u_arr.size < needed:
+        offset = f", {n_offset} input offset" if n_offset else ""
         raise ValueError(
             f"u has {u_arr.size} samples; this model needs at least {needed} "
-            f"({n_params} coefficients, {n_x0} initial states, 2 spare)"
+            f"({n_params} coefficients, {n_x0} initial states{offset}, 2 spare)"
         )
     return u_arr, y_arr, _as_ts(ts)
 
@@ -222,6 +261,12 @@ def _check_initial_condition(initial_condition) -> bool:
             f"initial_condition must be 'zero' or 'estimate', got {initial_condition!r}"
         )
     return initial_condition == "estimate"
+
+
+def _check_input_offset(input_offset) -> bool:
+    if not isinstance(input_offset, str) or input_offset not in _INPUT_OFFSETS:
+        raise ValueError(f"input_offset must be 'zero' or 'estimate', got {input_offset!r}")
+    return input_offset == "estimate"
 
 
 def _check_positive(value, name: str, *, integer: bool = False):
@@ -276,17 +321,44 @@ def _split(theta: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 class _OutputError:
     """Residual ``y - y_hat(theta)`` of the exact ZOH simulation.
 
-    With ``estimate_x0`` the initial state is eliminated by linear least
-    squares in every evaluation (variable projection).
+    The terms that enter ``y_hat`` linearly, the response ``c G(s) 1(t)`` to a
+    constant input offset (with ``estimate_offset``) and the free response to
+    the initial state (with ``estimate_x0``), are eliminated by linear least
+    squares in every evaluation (variable projection). Their coefficients,
+    ``[c, x0...]`` in that order, are the ``linear`` vector.
     """
 
-    def __init__(self, u: np.ndarray, y: np.ndarray, ts: float, n: int, estimate_x0: bool):
+    def __init__(self, u: np.ndarray, y: np.ndarray, ts: float, n: int, estimate_x0: bool,
+                 estimate_offset: bool = False):
         self.u, self.y, self.ts, self.n = u, y, ts, n
         self.estimate_x0 = estimate_x0
+        self.estimate_offset = estimate_offset
         self.nfev = 0
 
-    def evaluate(self, theta: np.ndarray):
-        """``(residual, x0)``; residual is None if the simulation is not finite."""
+    @property
+    def n_linear(self) -> int:
+        return int(self.estimate_offset) + (self.n if self.estimate_x0 else 0)
+
+    def split_linear(self, linear):
+        """``(x0, offset)`` from the ``linear`` coefficients (None when not estimated)."""
+        if linear is None:
+            return None, None
+        offset = float(linear[0]) if self.estimate_offset else None
+        x0 = linear[int(self.estimate_offset):] if self.estimate_x0 else None
+        return x0, offset
+
+    def columns(self, theta: np.ndarray) -> np.ndarray:
+        """The responses of the linear terms at ``theta``, shape ``(N, n_linear)``."""
+        num, den = _split(theta, self.n)
+        return _linear_columns(_discretise(num, den, self.ts), self.u.size,
+                               offset=self.estimate_offset, x0=self.estimate_x0)
+
+    def evaluate(self, theta: np.ndarray, linear: np.ndarray | None = None):
+        """``(residual, linear)``; residual is None if the simulation is not finite.
+
+        With ``linear`` given, those coefficients are used instead of the
+        least-squares ones (for the Jacobian at fixed linear terms).
+        """
         self.nfev += 1
         num, den = _split(theta, self.n)
         if not np.all(np.isfinite(theta)):
@@ -295,20 +367,21 @@ class _OutputError:
             with np.errstate(all="ignore"):
                 model = _discretise(num, den, self.ts)
                 residual = self.y - model.forced(self.u)
-                x0 = None
-                if self.estimate_x0 and np.all(np.isfinite(residual)):
-                    basis = model.free_basis(self.u.size)
-                    if not np.all(np.isfinite(basis)):
+                coef = None
+                if self.n_linear and np.all(np.isfinite(residual)):
+                    columns = _linear_columns(model, self.u.size, offset=self.estimate_offset,
+                                              x0=self.estimate_x0)
+                    if not np.all(np.isfinite(columns)):
                         return None, None
-                    x0, *_ = np.linalg.lstsq(basis, residual, rcond=None)
-                    residual = residual - basis @ x0
+                    coef = _fit_linear_terms(columns, residual) if linear is None else linear
+                    residual = residual - columns @ coef
         except (np.linalg.LinAlgError, ValueError):  # e.g. eigenvalues of an overflowed matrix
             return None, None
-        with np.errstate(over="ignore"):
+        with np.errstate(over="ignore", invalid="ignore"):
             finite = np.isfinite(residual @ residual)  # also catches overflow of the sum
         if not finite:
             return None, None
-        return residual, x0
+        return residual, coef
 
     def cost(self, theta: np.ndarray) -> float:
         residual, _ = self.evaluate(theta)
@@ -380,11 +453,18 @@ class _StateVariableFilter:
 
 
 def _iv_solve(phi: np.ndarray, zeta: np.ndarray, target: np.ndarray):
-    """Instrumental-variable solution ``(Z^T Phi)^-1 Z^T t`` with column scaling."""
+    """Instrumental-variable solution ``(Z^T Phi)^-1 Z^T t`` with column scaling.
+
+    Solved as ``(Q^T Phi)^-1 Q^T t`` with ``Z = Q R`` (the same solution, as
+    ``R`` is invertible): forming ``Z^T Phi`` would square the conditioning,
+    which matters when regressors are nearly collinear (an input offset's
+    step regressor against the filtered output of a slow system).
+    """
     scale = np.linalg.norm(phi, axis=0)
     scale[scale == 0] = 1.0
-    gram = (zeta / scale).T @ (phi / scale)
-    rhs = (zeta / scale).T @ target
+    q, _ = np.linalg.qr(zeta / scale)
+    gram = q.T @ (phi / scale)
+    rhs = q.T @ target
     theta_scaled = np.linalg.solve(gram, rhs)
     return theta_scaled / scale, scale
 
@@ -392,6 +472,26 @@ def _iv_solve(phi: np.ndarray, zeta: np.ndarray, target: np.ndarray):
 def _regressors(yf: np.ndarray, uf: np.ndarray, n: int, m: int) -> np.ndarray:
     """``[-y_f^(n-1), ..., -y_f, u_f^(m), ..., u_f]`` (matches ``theta``)."""
     return np.hstack([-yf[:, n - 1::-1], uf[:, m::-1]])
+
+
+def _offset_regressor(sf: np.ndarray, num: np.ndarray | None, m: int, ic: bool) -> np.ndarray:
+    """Filtered regressor of ``d = b_nz c`` (``c`` a constant input offset).
+
+    ``sf[:, k] = s^k / A_f`` applied to a unit step (ZOH-exact). For ``t > 0``
+    ``B(s) (c 1(t)) = b_nz c 1(t)`` plus impulses at ``t = 0``, which are
+    ``c sum_{j>=1} b_j s^(j-1) delta`` (``b_j`` the coefficient of ``s^j``).
+    With estimated initial conditions those impulses lie in the span of the
+    initial-condition regressors, so the regressor is ``1/A_f`` applied to the
+    step. With a zero initial state they are kept, with the current numerator
+    ``B_hat``: ``(B_hat / b_nz_hat) / A_f`` applied to the step (exact at the
+    fixed point ``B_hat = B``); that needs ``b_nz_hat`` clear of zero.
+    """
+    if ic or m == 0 or num is None:
+        return sf[:, 0]
+    b_nz = num[-1]
+    if not abs(b_nz) > 1e-8 * np.max(np.abs(num)):
+        return sf[:, 0]
+    return (sf[:, m::-1] @ num) / b_nz
 
 
 def _srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
@@ -402,27 +502,48 @@ def _srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
     are noise-free, so they are their own instruments) and the auxiliary model
     includes the estimated initial-condition response.
 
+    With ``criterion.estimate_offset`` the model is ``A(s) y = B(s) (u + c)``:
+    for a constant ``c`` the derivatives vanish, leaving ``b_nz c`` times a
+    step, which is linear in ``d = b_nz c``. Its filtered regressor (see
+    :func:`_offset_regressor`) is exact (a step is piecewise constant, so the
+    ZOH discretisation of the filter is exact) and noise-free, so it is its own
+    instrument; the auxiliary model includes ``d`` times it. ``c = d / b_nz``
+    itself is not needed here: the output-error criterion that ranks the
+    iterates eliminates it by least squares.
+
     Returns ``(best_theta, best_cost, iterations, converged)``; the best
     iterate by output-error cost is kept (SRIVC may oscillate on poor data).
     """
     kind, value = start
     n_theta = n + m + 1
     ic = criterion.estimate_x0
+    oc = criterion.estimate_offset
+    n_extra = int(oc) + (n if ic else 0)
+    # u, plus a unit step when the offset is estimated: both piecewise constant
+    inputs = np.column_stack([u, np.ones_like(u)]) if oc else u[:, None]
+
+    def extra_regressors(svf, uf_all, num):
+        cols = []
+        if oc:
+            cols.append(_offset_regressor(uf_all[:, 1], num, m, ic)[:, None])
+        if ic:
+            cols.append(svf.impulse_responses(u.size))
+        return np.hstack(cols) if cols else np.zeros((u.size, 0))
+
     if kind == "lambda":
         # LSSVF: least squares with the fixed filter (s + lambda)^n.
         den_f = np.real(np.poly(np.full(n, -value)))
         svf = _StateVariableFilter(den_f, ts)
-        uf = svf.apply(u, "zoh")
+        uf_all = svf.apply(inputs, "zoh")
         yf = svf.apply(y, "foh")
-        phi = _regressors(yf, uf, n, m)
-        if ic:
-            phi = np.hstack([phi, svf.impulse_responses(u.size)])
+        phi = np.hstack([_regressors(yf, uf_all[:, 0], n, m),
+                         extra_regressors(svf, uf_all, None)])
         theta, _ = _iv_solve(phi, phi, yf[:, n])
         theta = theta[:n_theta]
-        ic_coeffs = np.zeros(n)
     else:
         theta = value.copy()
-        ic_coeffs = np.zeros(n)
+    # coefficients of the extra regressors ([d, C(s)...]) in the auxiliary model
+    extra_coeffs = np.zeros(n_extra)
     best_theta, best_cost = theta, criterion.cost(theta)
     converged = False
     iterations = 0
@@ -430,24 +551,23 @@ def _srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
         num, den = _split(theta, n)
         den_f = _stabilise(den)
         svf = _StateVariableFilter(den_f, ts)
-        uf = svf.apply(u, "zoh")
-        x_hat = uf[:, m::-1] @ num  # auxiliary model B/A_f u, exact under ZOH
-        if ic:
-            impulses = svf.impulse_responses(u.size)
-            x_hat = x_hat + impulses @ ic_coeffs
+        uf_all = svf.apply(inputs, "zoh")
+        uf = uf_all[:, 0]
+        extra = extra_regressors(svf, uf_all, num)
+        # auxiliary model B/A_f u (+ offset and initial-condition responses),
+        # exact under ZOH
+        x_hat = uf[:, m::-1] @ num + extra @ extra_coeffs
         yxf = svf.apply(np.column_stack([y, x_hat]), "foh")
-        phi = _regressors(yxf[:, 0], uf, n, m)
-        zeta = _regressors(yxf[:, 1], uf, n, m)
-        if ic:
-            phi = np.hstack([phi, impulses])
-            zeta = np.hstack([zeta, impulses])
+        phi = np.hstack([_regressors(yxf[:, 0], uf, n, m), extra])
+        zeta = np.hstack([_regressors(yxf[:, 1], uf, n, m), extra])
         theta_new, scale = _iv_solve(phi, zeta, yxf[:, 0, n])
         if not np.all(np.isfinite(theta_new)):
             break
-        # The extra coefficients are those of C(s) in A(s) y = B(s) u + C(s)
-        # (initial conditions). The auxiliary model's initial-condition response
-        # C/A is formed with the filter's A_f, which equals A at convergence.
-        ic_coeffs = theta_new[n_theta:]
+        # The extra coefficients are d = b_nz c and those of C(s) in
+        # A(s) y = B(s) u + d 1(t) + C(s) (initial conditions). The auxiliary
+        # model's responses to them are formed with the filter's A_f, which
+        # equals A at convergence.
+        extra_coeffs = theta_new[n_theta:]
         theta_new, scale = theta_new[:n_theta], scale[:n_theta]
         change = np.linalg.norm((theta_new - theta) * scale) / max(
             np.linalg.norm(theta_new * scale), np.finfo(float).tiny
@@ -489,30 +609,58 @@ def _parameter_scale(theta: np.ndarray, n: int, m: int) -> np.ndarray:
 
 
 def _covariance(criterion: _OutputError, theta: np.ndarray, scale: np.ndarray,
-                residual: np.ndarray, n_x0: int):
-    """``sigma^2 (J^T J)^-1`` with a central-difference Jacobian in scaled coordinates."""
+                residual: np.ndarray, linear: np.ndarray | None):
+    """Gauss-Newton covariances of the coefficients and of the linear terms.
+
+    ``J`` is the central-difference Jacobian of ``y_hat`` with respect to the
+    scaled coefficients at fixed linear terms ``linear`` (input offset,
+    initial state), ``L`` the linear terms' columns. The coefficients'
+    covariance is ``sigma^2 (J^T P J)^-1`` with ``P`` the projector orthogonal
+    to ``L`` (the coefficient block of the joint covariance), and the linear
+    terms' is ``sigma^2 (L^+ L^+T + L^+ J (J^T P J)^-1 J^T L^+T)``.
+
+    Returns ``(covariance, variance, linear_covariance)``.
+    """
     p = theta / scale
+    n_lin = 0 if linear is None else linear.size
+    nan = np.full((p.size, p.size), np.nan), np.nan, np.full((n_lin, n_lin), np.nan)
     jac = np.empty((residual.size, p.size))
     for i in range(p.size):
         h = 1e-6 * max(1.0, abs(p[i]))
         step = np.zeros_like(p)
         step[i] = h
-        r_plus, _ = criterion.evaluate((p + step) * scale)
-        r_minus, _ = criterion.evaluate((p - step) * scale)
+        r_plus, _ = criterion.evaluate((p + step) * scale, linear)
+        r_minus, _ = criterion.evaluate((p - step) * scale, linear)
         if r_plus is None or r_minus is None:
-            nan = np.full((p.size, p.size), np.nan)
-            return nan, np.nan
+            return nan
         # residual = y - y_hat, so d(y_hat)/dp = -d(residual)/dp
         jac[:, i] = -(r_plus - r_minus) / (2.0 * h)
-    dof = residual.size - p.size - n_x0
+    dof = residual.size - p.size - n_lin
     variance = float(residual @ residual) / dof
-    _, sing, vt = np.linalg.svd(jac, full_matrices=False)
+    jac_projected = jac
+    if n_lin:
+        columns = criterion.columns(theta)
+        norms = np.linalg.norm(columns, axis=0)
+        norms[norms == 0] = 1.0
+        u_l, s_l, vt_l = np.linalg.svd(columns / norms, full_matrices=False)
+        keep_l = s_l > s_l[0] * max(columns.shape) * np.finfo(float).eps
+        jac_projected = jac - u_l[:, keep_l] @ (u_l[:, keep_l].T @ jac)
+    _, sing, vt = np.linalg.svd(jac_projected, full_matrices=False)
     keep = sing > sing[0] * 1e-13 if sing[0] > 0 else np.zeros_like(sing, dtype=bool)
     inv = (vt[keep].T / sing[keep] ** 2) @ vt[keep]
     if not np.all(keep):
         inv = np.full_like(inv, np.nan)
+    cov_lin = np.zeros((0, 0))
+    if n_lin:
+        # L^+ of the unnormalised columns; NaN if the linear terms are not
+        # all identifiable (e.g. an offset with a zero at s = 0)
+        pinv_cols = ((vt_l[keep_l].T / s_l[keep_l]) @ u_l[:, keep_l].T) / norms[:, None]
+        if not np.all(keep_l):
+            pinv_cols = np.full_like(pinv_cols, np.nan)
+        pj = pinv_cols @ jac
+        cov_lin = variance * (pinv_cols @ pinv_cols.T + pj @ inv @ pj.T)
     cov_p = variance * inv
-    return cov_p * scale[:, None] * scale[None, :], variance
+    return cov_p * scale[:, None] * scale[None, :], variance, cov_lin
 
 
 def _oe_refine(criterion: _OutputError, theta0: np.ndarray, n: int, m: int,
@@ -525,39 +673,47 @@ def _oe_refine(criterion: _OutputError, theta0: np.ndarray, n: int, m: int,
         return np.full(criterion.y.size, np.inf) if r is None else r
 
     try:
-        res = scipy.optimize.least_squares(
-            residual, theta0 / scale, method="trf", x_scale="jac", jac="2-point",
-            xtol=tol, ftol=tol, gtol=tol, max_nfev=max_nfev,
-        )
+        # a trial step to an unstable model can overflow scipy's reduction ratio
+        with np.errstate(over="ignore"):
+            res = scipy.optimize.least_squares(
+                residual, theta0 / scale, method="trf", x_scale="jac", jac="2-point",
+                xtol=tol, ftol=tol, gtol=tol, max_nfev=max_nfev,
+            )
     except ValueError as exc:  # e.g. non-finite residuals at the start point
         return theta0, np.inf, False, f"output-error refinement not possible: {exc}"
     return res.x * scale, float(res.cost), bool(res.success), res.message
 
 
-def _nan_estimate(n, m, ts, n_samples, estimate_x0, message, nit, nfev):
+def _nan_estimate(n, m, ts, n_samples, estimate_x0, estimate_offset, message, nit, nfev):
     p = n + m + 1
     return TFEstimate(
         num=_readonly(np.full(m + 1, np.nan)), den=_readonly(np.r_[1.0, np.full(n, np.nan)]),
         ts=ts, n_poles=n, n_zeros=m, fit_percent=np.nan, cost=np.nan, mse=np.nan,
         noise_variance=np.nan, initial_condition="estimated" if estimate_x0 else "zero",
-        x0=None, success=False, message=message, method="none", nit_srivc=nit,
-        nfev_oe=nfev, param_std=_readonly(np.full(p, np.nan)),
-        covariance=_readonly(np.full((p, p), np.nan)),
+        x0=None, input_offset=np.nan if estimate_offset else None,
+        input_offset_std=np.nan if estimate_offset else None, success=False,
+        message=message, method="none", nit_srivc=nit, nfev_oe=nfev,
+        param_std=_readonly(np.full(p, np.nan)), covariance=_readonly(np.full((p, p), np.nan)),
         srivc_num=None, srivc_den=None, srivc_cost=np.nan, n_samples=n_samples,
     )
 
 
 def _finish(criterion, theta, n, m, ts, success, message, method, nit, srivc_theta,
             srivc_cost) -> TFEstimate:
-    """Assemble the result: fit, covariance, x0 at the final estimate."""
+    """Assemble the result: fit, covariance, x0 and input offset at the final estimate."""
     nfev = criterion.nfev
-    residual, x0 = criterion.evaluate(theta)
+    residual, linear = criterion.evaluate(theta)
     if residual is None:
         return _nan_estimate(n, m, ts, criterion.y.size, criterion.estimate_x0,
+                             criterion.estimate_offset,
                              message + "; the final model cannot be simulated", nit, nfev)
-    n_x0 = n if criterion.estimate_x0 else 0
-    covariance, variance = _covariance(criterion, theta, _parameter_scale(theta, n, m),
-                                       residual, n_x0)
+    covariance, variance, cov_linear = _covariance(
+        criterion, theta, _parameter_scale(theta, n, m), residual, linear)
+    x0, offset = criterion.split_linear(linear)
+    offset_std = None
+    if criterion.estimate_offset:
+        offset_std = float(np.sqrt(abs(cov_linear[0, 0])))
+        message += f"; input offset estimated: {offset:.6g} (input units)"
     num, den = _split(theta, n)
     poles = np.roots(den)
     if np.any(poles.real > 1e-9 * max(1.0, np.max(np.abs(poles)))):
@@ -573,7 +729,8 @@ def _finish(criterion, theta, n, m, ts, success, message, method, nit, srivc_the
         fit_percent=_fit_percent(criterion.y, y_hat), cost=0.5 * sse,
         mse=sse / residual.size, noise_variance=variance,
         initial_condition="estimated" if criterion.estimate_x0 else "zero",
-        x0=None if x0 is None else _readonly(x0), success=bool(success), message=message,
+        x0=None if x0 is None else _readonly(x0), input_offset=offset,
+        input_offset_std=offset_std, success=bool(success), message=message,
         method=method, nit_srivc=nit, nfev_oe=nfev,
         param_std=_readonly(np.sqrt(np.abs(np.diag(covariance)))),
         covariance=_readonly(covariance),
@@ -586,8 +743,9 @@ def _finish(criterion, theta, n, m, ts, success, message, method, nit, srivc_the
 # ---------------------------------------------------------------------------
 # public API
 # ---------------------------------------------------------------------------
-def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", init=None,
-          lambda_svf=None, refine=True, max_iter=50, max_nfev=None, tol=1e-10) -> TFEstimate:
+def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_offset="zero",
+          init=None, lambda_svf=None, refine=True, n_refine=2, max_iter=50, max_nfev=None,
+          tol=1e-10) -> TFEstimate:
     """Estimate a continuous-time transfer function from sampled data (MATLAB ``tfest``).
 
     SRIVC (refined instrumental variables with state-variable filters) gives
@@ -608,14 +766,25 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", init=None
         ``"zero"``: the system starts at rest. ``"estimate"``: the initial
         state is estimated together with the coefficients (reported in
         ``x0``) and used for ``fit_percent``.
+    input_offset : {"zero", "estimate"}
+        ``"estimate"``: the model is ``y = G(s) (u + c)`` with a constant input
+        offset ``c`` (input units, from the first sample on), estimated in both
+        stages and reported in ``input_offset`` (MATLAB's ``InputOffset``). A
+        constant bias at a closed loop's plant input (e.g. a valve whose flow
+        gains differ with the sign of the command) is such an offset on the
+        reference. ``"zero"`` (default): no offset.
     init : (num, den) or transfer function, optional
-        Initial model for SRIVC (``n_poles`` poles, at most ``n_zeros`` zeros).
+        A model to start SRIVC from (``n_poles`` poles, at most ``n_zeros``
+        zeros), e.g. the linearised physics; tried besides the default starts.
     lambda_svf : float, optional
         Cut-off (rad/s) of the initial filter ``(s + lambda)^np``. Default: a
         few values between the record's lowest frequency and ``pi/ts/2`` are
-        tried and the best kept. Ignored when ``init`` is given.
+        tried and the best kept.
     refine : bool
         Run the output-error stage (default True).
+    n_refine : int
+        How many of the best distinct SRIVC results the output-error stage
+        refines (default 2); the lowest final cost is kept.
     max_iter : int
         Maximum SRIVC iterations per start.
     max_nfev : int, optional
@@ -651,25 +820,28 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", init=None
     """
     n, m = _check_orders(n_poles, n_zeros)
     estimate_x0 = _check_initial_condition(initial_condition)
-    u_arr, y_arr, ts_f = _check_data(u, y, ts, n + m + 1, n if estimate_x0 else 0)
+    estimate_offset = _check_input_offset(input_offset)
+    u_arr, y_arr, ts_f = _check_data(u, y, ts, n + m + 1,
+                                     n if estimate_x0 else 0, int(estimate_offset))
     max_iter = _check_positive(max_iter, "max_iter", integer=True)
     tol = _check_positive(tol, "tol")
     max_nfev = 100 * (n + m + 1) if max_nfev is None else _check_positive(
         max_nfev, "max_nfev", integer=True)
     if not isinstance(refine, (bool, np.bool_)):
         raise ValueError(f"refine must be True or False, got {refine!r}")
+    n_refine = _check_positive(n_refine, "n_refine", integer=True)
+    starts, start_names = [], []
     if init is not None:
-        starts = [("model", _model_coefficients(init, n, m, "init"))]
-        start_names = ["init"]
+        starts.append(("model", _model_coefficients(init, n, m, "init")))
+        start_names.append("init")
+    if lambda_svf is not None:
+        lambdas = np.array([_check_positive(lambda_svf, "lambda_svf")])
     else:
-        if lambda_svf is not None:
-            lambdas = np.array([_check_positive(lambda_svf, "lambda_svf")])
-        else:
-            lambdas = _default_lambdas(u_arr.size, ts_f)
-        starts = [("lambda", lam) for lam in lambdas]
-        start_names = [f"lambda = {lam:.4g} rad/s" for lam in lambdas]
-    criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_x0)
-    best = None
+        lambdas = _default_lambdas(u_arr.size, ts_f)
+    starts += [("lambda", lam) for lam in lambdas]
+    start_names += [f"lambda = {lam:.4g} rad/s" for lam in lambdas]
+    criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_x0, estimate_offset)
+    candidates = []
     nit_total = 0
     for name, start in zip(start_names, starts):
         try:
@@ -678,14 +850,16 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", init=None
         except (np.linalg.LinAlgError, ValueError, FloatingPointError):
             continue
         nit_total += nit
-        if np.isfinite(cost) and (best is None or cost < best[1]):
-            best = (theta, cost, converged, name, nit)
-    if best is None:
+        if np.isfinite(cost):
+            candidates.append((theta, cost, converged, name, nit))
+    if not candidates:
         return _nan_estimate(
-            n, m, ts_f, u_arr.size, estimate_x0,
+            n, m, ts_f, u_arr.size, estimate_x0, estimate_offset,
             "SRIVC failed from every start (singular instrument matrix or unstable "
             "simulation): is the input exciting enough?", nit_total, 0,
         )
+    candidates.sort(key=lambda c: c[1])
+    best = candidates[0]
     srivc_theta, srivc_cost, srivc_converged, start_name, srivc_nit = best
     srivc_msg = (f"SRIVC {'converged' if srivc_converged else 'did not converge'} in "
                  f"{srivc_nit} iterations from {start_name}")
@@ -694,22 +868,52 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", init=None
         return _finish(criterion, srivc_theta, n, m, ts_f, srivc_converged,
                        srivc_msg + "; output-error refinement skipped", "srivc",
                        nit_total, srivc_theta, srivc_cost)
+    # The output-error criterion can have several minima (e.g. a slow drift of a
+    # nonlinear plant mimicked by a slow pole, versus the plant's resonance):
+    # refine the best distinct SRIVC candidates and keep the lowest cost.
     criterion.nfev = 0
-    theta_oe, cost_oe, oe_success, oe_msg = _oe_refine(criterion, srivc_theta, n, m,
-                                                       max_nfev, tol)
-    if np.isfinite(cost_oe) and cost_oe <= srivc_cost:
-        return _finish(criterion, theta_oe, n, m, ts_f, oe_success,
-                       f"{srivc_msg}; output error: {oe_msg}; kept the output-error estimate "
-                       f"(cost {cost_oe:.4g} <= SRIVC {srivc_cost:.4g})",
-                       "srivc+oe", nit_total, srivc_theta, srivc_cost)
+    refined = []
+    for cand in _distinct(candidates, n_refine, n, m):
+        theta_oe, cost_oe, oe_success, oe_msg = _oe_refine(criterion, cand[0], n, m, max_nfev, tol)
+        refined.append((cost_oe, theta_oe, oe_success, oe_msg, cand))
+    refined = [r for r in refined if np.isfinite(r[0])]
+    if refined:
+        cost_oe, theta_oe, oe_success, oe_msg, cand = min(refined, key=lambda r: r[0])
+        if cost_oe <= srivc_cost:
+            if cand is not best:
+                srivc_msg += f"; the output error was lowest from the SRIVC start {cand[3]}"
+            return _finish(criterion, theta_oe, n, m, ts_f, oe_success,
+                           f"{srivc_msg}; output error: {oe_msg}; kept the output-error estimate "
+                           f"(cost {cost_oe:.4g} <= SRIVC {srivc_cost:.4g})",
+                           "srivc+oe", nit_total, srivc_theta, srivc_cost)
+        oe_msg_last = oe_msg
+    else:
+        cost_oe, oe_msg_last = float("nan"), "no finite output-error cost"
     return _finish(criterion, srivc_theta, n, m, ts_f, srivc_converged,
-                   f"{srivc_msg}; output error: {oe_msg}; kept the SRIVC estimate "
+                   f"{srivc_msg}; output error: {oe_msg_last}; kept the SRIVC estimate "
                    f"(cost {srivc_cost:.4g} < output error {cost_oe:.4g})",
                    "srivc", nit_total, srivc_theta, srivc_cost)
 
 
-def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", max_nfev=None,
-           tol=1e-10) -> TFEstimate:
+def _distinct(candidates, k: int, n: int, m: int):
+    """Up to ``k`` candidates (sorted by cost) whose coefficients differ by > 1 %.
+
+    Relative to :func:`_parameter_scale`, whose floors keep a near-zero
+    coefficient (an integrator's ``a_n``) from making two copies of the same
+    model look distinct.
+    """
+    chosen = []
+    for cand in candidates:
+        if all(np.max(np.abs(cand[0] - c[0]) / _parameter_scale(c[0], n, m)) > 0.01
+               for c in chosen):
+            chosen.append(cand)
+        if len(chosen) == k:
+            break
+    return chosen
+
+
+def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", input_offset="zero",
+           max_nfev=None, tol=1e-10) -> TFEstimate:
     """Plain output-error fit of a continuous-time transfer function from a start model.
 
     The same criterion, parameterisation and optimiser as the second stage of
@@ -725,6 +929,9 @@ def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", max_nfev=None,
     num0, den0 : array_like
         Start model, descending powers of s.
     initial_condition : {"zero", "estimate"}
+    input_offset : {"zero", "estimate"}
+        Estimate a constant input offset ``c`` (``y = G(s) (u + c)``), see
+        :func:`tfest`.
     max_nfev : int, optional
         Maximum residual evaluations (default ``100 * n_params``).
     tol : float
@@ -756,15 +963,17 @@ def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", max_nfev=None,
             f"got {num_n.size - 1} zeros and {den_n.size - 1} poles ({exc})"
         ) from None
     estimate_x0 = _check_initial_condition(initial_condition)
-    u_arr, y_arr, ts_f = _check_data(u, y, ts, n + m + 1, n if estimate_x0 else 0)
+    estimate_offset = _check_input_offset(input_offset)
+    u_arr, y_arr, ts_f = _check_data(u, y, ts, n + m + 1,
+                                     n if estimate_x0 else 0, int(estimate_offset))
     tol = _check_positive(tol, "tol")
     max_nfev = 100 * (n + m + 1) if max_nfev is None else _check_positive(
         max_nfev, "max_nfev", integer=True)
     theta0 = _model_coefficients((num_n, den_n), n, m, "num0/den0")
-    criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_x0)
+    criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_x0, estimate_offset)
     cost0 = criterion.cost(theta0)
     if not np.isfinite(cost0):
-        return _nan_estimate(n, m, ts_f, u_arr.size, estimate_x0,
+        return _nan_estimate(n, m, ts_f, u_arr.size, estimate_x0, estimate_offset,
                              "the start model cannot be simulated on this record", 0,
                              criterion.nfev)
     theta, cost, success, msg = _oe_refine(criterion, theta0, n, m, max_nfev, tol)

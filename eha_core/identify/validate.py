@@ -15,6 +15,14 @@ expansion ``G(s) = sum_k h_k s^-k``. For a strictly proper model
 ``[y, y', ..., y^(n-1)]`` at ``t = 0`` (position, velocity, acceleration for
 the actuator's third-order model).
 
+Input offset
+------------
+A model may carry a constant input offset ``c`` (in input units, like MATLAB's
+``InputOffset``): ``y = G(s) (u + c)``, the offset applied from ``t = 0`` on.
+Its response ``c G(s) 1(t)`` is linear in ``c``, as the free response is in
+``x0``, so both are estimated together by linear least squares
+(:func:`_fit_linear_terms`, shared with :mod:`eha_core.identify.tfest`).
+
 Only numpy and scipy are imported here.
 """
 
@@ -257,6 +265,38 @@ def _discretise(num: np.ndarray, den: np.ndarray, ts: float) -> _DiscreteModel:
     return _DiscreteModel(ad, bd, c_vec, d, num_z, den_z)
 
 
+def _linear_columns(model: _DiscreteModel, n_samples: int, *, offset: bool,
+                    x0: bool) -> np.ndarray:
+    """Responses that enter the output linearly: ``[step, free basis]``.
+
+    Column 0 (with ``offset``) is the ZOH-exact unit-step response, the
+    response to a unit input offset; then (with ``x0``) the ``n`` columns of
+    :meth:`_DiscreteModel.free_basis`. Shape ``(n_samples, k)``.
+    """
+    cols = []
+    if offset:
+        cols.append(model.forced(np.ones(n_samples))[:, None])
+    if x0 and model.order:
+        cols.append(model.free_basis(n_samples))
+    return np.hstack(cols) if cols else np.zeros((n_samples, 0))
+
+
+def _fit_linear_terms(columns: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """Least-squares coefficients of ``columns`` for ``residual``.
+
+    The columns are normalised first: the step response of an integrating or
+    slow model can be orders of magnitude larger than the free responses, and
+    the rank cut-off of :func:`numpy.linalg.lstsq` is relative to the largest
+    singular value.
+    """
+    if columns.shape[1] == 0:
+        return np.zeros(0)
+    norms = np.linalg.norm(columns, axis=0)
+    norms[(norms == 0) | ~np.isfinite(norms)] = 1.0
+    coef, *_ = np.linalg.lstsq(columns / norms, residual, rcond=None)
+    return coef / norms
+
+
 def simulate_tf(num, den, u, ts, x0=None) -> np.ndarray:
     """Exact zero-order-hold response of a continuous-time transfer function.
 
@@ -363,22 +403,39 @@ class CompareResult:
         ``"zero"``, ``"estimated"`` (least squares) or ``"given"``.
     x0 : numpy.ndarray or None
         Initial state used (observability canonical form); None when zero.
+    input_offset : float or None
+        Constant input offset ``c`` used, in input units (``y_hat`` is the
+        response to ``u + c``); None when no offset was applied.
     """
 
     y_hat: np.ndarray
     fit_percent: float
     initial_condition: str
     x0: np.ndarray | None
+    input_offset: float | None = None
 
 
-def _estimate_x0(model: _DiscreteModel, residual: np.ndarray) -> np.ndarray:
-    """Least-squares initial state: the response is linear in ``x0``."""
-    basis = model.free_basis(residual.size)
-    x0, *_ = np.linalg.lstsq(basis, residual, rcond=None)
-    return x0
+def _check_compare_offset(input_offset):
+    """``(estimate, value)`` from ``"zero"``, ``"estimate"``, None or a number."""
+    if input_offset is None:
+        return False, None
+    if isinstance(input_offset, str):
+        if input_offset in ("zero", "estimate"):
+            return input_offset == "estimate", None
+    elif not isinstance(input_offset, (bool, np.bool_)):
+        try:
+            value = float(input_offset)
+        except (TypeError, ValueError):
+            value = np.nan
+        if np.isfinite(value):
+            return False, value
+    raise ValueError(
+        f"input_offset must be 'zero', 'estimate', None or a finite number (input units), "
+        f"got {input_offset!r}"
+    )
 
 
-def compare(num, den, u, y, ts, initial_condition="zero") -> CompareResult:
+def compare(num, den, u, y, ts, initial_condition="zero", input_offset="zero") -> CompareResult:
     """Simulate a transfer function on data and report MATLAB's fit.
 
     Parameters
@@ -392,6 +449,14 @@ def compare(num, den, u, y, ts, initial_condition="zero") -> CompareResult:
     initial_condition : {"zero", "estimate"} or array_like
         ``"zero"``: start at rest. ``"estimate"``: the least-squares initial
         state (the response is linear in it). An array: that initial state.
+    input_offset : {"zero", "estimate"}, float or None
+        Constant offset ``c`` added to ``u`` from the first sample on (input
+        units). ``"zero"`` or None: none. ``"estimate"``: least squares
+        (jointly with the initial state when that is estimated too). A number:
+        that offset (e.g. a ``TFEstimate.input_offset``).
+        An offset estimated on one record rarely holds on another (it stands
+        for effects such as a valve's asymmetry that depend on the
+        excitation), so validation data usually need their own.
 
     Returns
     -------
@@ -407,21 +472,24 @@ def compare(num, den, u, y, ts, initial_condition="zero") -> CompareResult:
     >>> res = compare([1.0], [1.0, 1.0], u, y, 0.1, initial_condition="estimate")
     >>> round(res.fit_percent, 6), np.round(res.x0, 6)
     (100.0, array([0.5]))
+    >>> y = simulate_tf([1.0], [1.0, 1.0], u - 0.2, 0.1)  # an offset of -0.2 on u
+    >>> res = compare([1.0], [1.0, 1.0], u, y, 0.1, input_offset="estimate")
+    >>> round(res.fit_percent, 6), round(res.input_offset, 6)
+    (100.0, -0.2)
     """
     num_n, den_n = _as_tf(num, den)
     u_arr = _as_signal(u, "u")
     y_arr = _as_signal(y, "y")
     if u_arr.shape != y_arr.shape:
         raise ValueError(f"y must have the same length as u ({u_arr.size}), got {y_arr.size}")
+    estimate_offset, offset = _check_compare_offset(input_offset)
     model = _discretise(num_n, den_n, _as_ts(ts))
-    y_hat = model.forced(u_arr)
     x0 = None
+    estimate_x0 = False
     if isinstance(initial_condition, str):
         if initial_condition == "estimate":
             label = "estimated"
-            if model.order:
-                x0 = _estimate_x0(model, y_arr - y_hat)
-                y_hat = y_hat + model.free_basis(u_arr.size) @ x0
+            estimate_x0 = model.order > 0
         elif initial_condition == "zero":
             label = "zero"
         else:
@@ -437,12 +505,25 @@ def compare(num, den, u, y, ts, initial_condition="zero") -> CompareResult:
                 f"{model.order} initial states, got shape {x0.shape}"
             )
         label = "given"
+    y_hat = model.forced(u_arr if offset is None else u_arr + offset)
+    if x0 is not None:
         y_hat = y_hat + model.free_basis(u_arr.size) @ x0
+    if estimate_offset or estimate_x0:
+        # the offset's and the initial state's responses are linear: one
+        # least-squares problem for both
+        columns = _linear_columns(model, u_arr.size, offset=estimate_offset, x0=estimate_x0)
+        coef = _fit_linear_terms(columns, y_arr - y_hat)
+        y_hat = y_hat + columns @ coef
+        if estimate_offset:
+            offset = float(coef[0])
+        if estimate_x0:
+            x0 = coef[int(estimate_offset):]
     return CompareResult(
         y_hat=_readonly(y_hat),
         fit_percent=fit_percent(y_arr, y_hat),
         initial_condition=label,
         x0=None if x0 is None else _readonly(x0),
+        input_offset=offset,
     )
 
 

@@ -249,3 +249,121 @@ def test_import_is_light():
         "assert not heavy, heavy\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+# --- input offset: y = G(s) (u + c) -------------------------------------------------
+# (num, den, n_poles, n_zeros, input, offset c, initial state for the "estimate" case)
+_OFFSET_CASES = {
+    "closed-loop-H": (H_NUM, H_DEN, 3, 0, _binary_input(1000, seed=4), 0.3,
+                      np.array([0.3, -2.0, 10.0])),
+    "second-order-with-zero": (Z_NUM, Z_DEN, 2, 1, _binary_input(800, hold=10, seed=1), -0.4,
+                               np.array([1.0, -0.5])),
+}
+
+
+def _offset_data(case, initial_condition):
+    num, den, n, m, u, c, x0 = _OFFSET_CASES[case]
+    x0 = x0 if initial_condition == "estimate" else None
+    return num, den, n, m, u, c, x0, simulate_tf(num, den, u + c, TS, x0=x0)
+
+
+@pytest.mark.parametrize("initial_condition", ["zero", "estimate"])
+@pytest.mark.parametrize("case", list(_OFFSET_CASES))
+def test_estimated_input_offset_recovers_noiseless_model(case, initial_condition):
+    num, den, n, m, u, c, x0, y = _offset_data(case, initial_condition)
+    est = tfest(u, y, TS, n, m, initial_condition=initial_condition, input_offset="estimate")
+    assert est.success, est.message
+    np.testing.assert_allclose(_theta(est.num, est.den), _theta(num, den), rtol=1e-8)
+    assert est.input_offset == pytest.approx(c, rel=1e-8)
+    assert est.fit_percent == pytest.approx(100.0, abs=1e-6)
+    if x0 is not None:
+        np.testing.assert_allclose(est.x0, x0, rtol=1e-6)
+    assert "input offset estimated" in est.message
+    assert np.isfinite(est.input_offset_std) and est.input_offset_std >= 0.0
+    # the offset is part of the model: simulating with it reproduces the data
+    np.testing.assert_allclose(est.simulate(u, x0=est.x0, input_offset=est.input_offset), y,
+                               atol=1e-7 * np.abs(y).max())
+    # a model without the offset cannot explain the same data as well
+    plain = tfest(u, y, TS, n, m, initial_condition=initial_condition)
+    assert plain.input_offset is None and plain.input_offset_std is None
+    assert plain.fit_percent < 99.0
+
+
+@pytest.mark.parametrize("initial_condition", ["zero", "estimate"])
+@pytest.mark.parametrize("case", list(_OFFSET_CASES))
+def test_srivc_alone_with_input_offset_recovers_noiseless_model(case, initial_condition):
+    # no output-error stage: this checks the offset regressor of SRIVC itself
+    # (with a zero initial state and a zero, the B_hat-weighted step regressor)
+    num, den, n, m, u, c, x0, y = _offset_data(case, initial_condition)
+    est = tfest(u, y, TS, n, m, initial_condition=initial_condition, input_offset="estimate",
+                refine=False)
+    assert est.method == "srivc" and est.nfev_oe == 0
+    assert est.success, est.message
+    np.testing.assert_allclose(_theta(est.srivc_num, est.srivc_den), _theta(num, den), rtol=1e-8)
+    assert est.input_offset == pytest.approx(c, rel=1e-8)
+
+
+def test_oe_fit_estimates_input_offset_and_state():
+    u = _binary_input(600, seed=6)
+    x0 = np.array([1.0, -0.5])
+    y = simulate_tf(Z_NUM, Z_DEN, u - 0.25, TS, x0=x0)
+    est = oe_fit(u, y, TS, [2.0, 4.0], [1.0, 1.0, 3.0], initial_condition="estimate",
+                 input_offset="estimate")
+    assert est.method == "oe" and est.success, est.message
+    np.testing.assert_allclose(_theta(est.num, est.den), _theta(Z_NUM, Z_DEN), rtol=1e-8)
+    assert est.input_offset == pytest.approx(-0.25, rel=1e-8)
+    np.testing.assert_allclose(est.x0, x0, rtol=1e-6)
+
+
+def test_input_offset_of_an_integrating_model():
+    # the offset's response is a ramp: large next to the free response
+    u = _binary_input(1000, seed=2)
+    y = simulate_tf(P_NUM, P_DEN, u + 0.05, TS, x0=[0.1, 0.2, -3.0])
+    est = tfest(u, y, TS, initial_condition="estimate", input_offset="estimate")
+    assert est.success, est.message
+    np.testing.assert_allclose(est.den[:3], P_DEN[:3], rtol=1e-8)
+    np.testing.assert_allclose(est.num, P_NUM, rtol=1e-8)
+    assert abs(est.den[3]) < 1e-8 * est.den[2]
+    assert est.input_offset == pytest.approx(0.05, rel=1e-8)
+
+
+def test_input_offset_standard_error_matches_the_spread():
+    offsets, stds = [], []
+    for seed in range(12):
+        rng = np.random.default_rng(seed)
+        u = _binary_input(1000, hold=20, seed=seed)
+        y = simulate_tf(Z_NUM, Z_DEN, u + 0.5, TS) + 0.1 * rng.standard_normal(1000)
+        est = tfest(u, y, TS, n_poles=2, n_zeros=1, input_offset="estimate")
+        assert est.success, est.message
+        offsets.append(est.input_offset)
+        stds.append(est.input_offset_std)
+    ratio = np.std(offsets) / np.mean(stds)
+    assert 0.5 < ratio < 2.0, ratio
+    assert abs(np.mean(offsets) - 0.5) < 3 * np.mean(stds) / np.sqrt(12)
+
+
+def test_input_offset_is_fast():
+    u = _binary_input(1000)
+    y = simulate_tf(H_NUM, H_DEN, u + 0.2, TS)
+    kwargs = {"initial_condition": "estimate", "input_offset": "estimate"}
+    tfest(u, y, TS, **kwargs)  # warm-up
+    elapsed = min(_timed(lambda: tfest(u, y, TS, **kwargs)) for _ in range(3))
+    assert elapsed < 0.5, f"tfest with input offset took {elapsed:.3f} s for 1000 samples"
+
+
+@pytest.mark.parametrize("value", ["random", 0.5, None, True])
+def test_bad_input_offset_raises_value_error_naming_it(value):
+    u = _binary_input(100)
+    with pytest.raises(ValueError, match="input_offset"):
+        tfest(u, u, TS, input_offset=value)
+    with pytest.raises(ValueError, match="input_offset"):
+        oe_fit(u, u, TS, [1.0], [1.0, 1.0], input_offset=value)
+
+
+def test_simulate_rejects_bad_input_offset():
+    u = _binary_input(300, hold=10)
+    est = tfest(u, simulate_tf([20.0], [1.0, 6.0, 20.0], u, TS), TS, n_poles=2)
+    assert est.input_offset is None
+    np.testing.assert_allclose(est.simulate(u, input_offset=0.0), est.simulate(u))
+    with pytest.raises(ValueError, match="input_offset"):
+        est.simulate(u, input_offset="big")

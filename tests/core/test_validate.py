@@ -220,3 +220,47 @@ def test_residual_analysis_rejects_bad_arguments():
         residual_analysis(e, e, max_lag=10)
     with pytest.raises(ValueError, match="u"):
         residual_analysis(e, e[:5])
+
+
+# --- compare with an input offset ---------------------------------------------------
+@pytest.mark.parametrize("initial_condition", ["zero", "estimate"])
+def test_compare_estimates_input_offset(initial_condition):
+    u = _binary_input(600, seed=2)
+    x0 = np.array([0.2, 1.5, -30.0]) if initial_condition == "estimate" else None
+    y = simulate_tf(H_NUM, H_DEN, u - 0.35, TS, x0=x0)
+    res = compare(H_NUM, H_DEN, u, y, TS, initial_condition=initial_condition,
+                  input_offset="estimate")
+    assert res.input_offset == pytest.approx(-0.35, rel=1e-8)
+    assert res.fit_percent == pytest.approx(100.0, abs=1e-8)
+    if x0 is not None:  # estimated jointly with the offset
+        np.testing.assert_allclose(res.x0, x0, rtol=1e-6)
+    # without the offset the same model fits these data much worse
+    plain = compare(H_NUM, H_DEN, u, y, TS, initial_condition=initial_condition)
+    assert plain.input_offset is None
+    assert plain.fit_percent < 90.0
+
+
+def test_compare_with_given_input_offset():
+    u = _binary_input(400, seed=5)
+    y = simulate_tf([20.0], [1.0, 6.0, 20.0], u + 0.1, TS)
+    res = compare([20.0], [1.0, 6.0, 20.0], u, y, TS, input_offset=0.1)
+    assert res.input_offset == 0.1
+    np.testing.assert_allclose(res.y_hat, y, atol=1e-12)
+    # None means no offset, like "zero" (so an estimate's None can be passed on)
+    none = compare([20.0], [1.0, 6.0, 20.0], u, y, TS, input_offset=None)
+    zero = compare([20.0], [1.0, 6.0, 20.0], u, y, TS)
+    assert none.input_offset is None and none.fit_percent == zero.fit_percent < 99.0
+    # a given initial state and an estimated offset
+    x0 = np.array([0.3, -1.0])
+    y = simulate_tf([20.0], [1.0, 6.0, 20.0], u + 0.1, TS, x0=x0)
+    res = compare([20.0], [1.0, 6.0, 20.0], u, y, TS, initial_condition=x0,
+                  input_offset="estimate")
+    assert res.initial_condition == "given"
+    assert res.input_offset == pytest.approx(0.1, rel=1e-9)
+
+
+@pytest.mark.parametrize("value", ["guess", float("nan"), float("inf"), True, [0.1, 0.2]])
+def test_compare_rejects_bad_input_offset(value):
+    u = _binary_input(50)
+    with pytest.raises(ValueError, match="input_offset"):
+        compare([1.0], [1.0, 1.0], u, u, TS, input_offset=value)
