@@ -68,6 +68,59 @@ def build_parser() -> argparse.ArgumentParser:
     lz.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help=PARAM_HELP)
     lz.add_argument("--json", action="store_true", help="print JSON (default: a readable summary)")
     lz.set_defaults(handler=_cmd_linearize)
+
+    ii = sub.add_parser("idinput", help="excitation signal compatible with MATLAB's idinput",
+                        description="Excitation compatible with MATLAB's idinput: conventions in eha_core.excitation.")
+    ii.add_argument("--type", default="rgs", help="rgs (default), rbs, prbs or sine")
+    ii.add_argument("--n", type=int, required=True, help="number of samples (one period)")
+    ii.add_argument("--band", type=float, nargs=2, default=(0.0, 1.0), metavar=("LO", "HI"),
+                    help="pass band in fractions of the Nyquist frequency (default 0 1); prbs: [0 B], clock period 1/B")
+    ii.add_argument("--range", type=float, nargs=2, default=(-1.0, 1.0), metavar=("MIN", "MAX"),
+                    help="levels (rbs, prbs), mean -/+ one std (rgs), or the span (sine); default -1 1")
+    ii.add_argument("--sinedata", type=int, nargs=3, default=(10, 10, 1), metavar=("NS", "NT", "GS"),
+                    help="sine: number of sinusoids, trials, grid skip (default 10 10 1)")
+    ii.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    ii.add_argument("--out", help="write the CSV (columns k,u) to this file")
+    ii.add_argument("--json", action="store_true", help='print {"u": [...], "freqs": [...]} (freqs in rad/sample)')
+    ii.set_defaults(handler=_cmd_idinput)
+
+    idf = sub.add_parser("identify", help="identification: least squares (lse) or transfer function (tf)")
+    idsub = idf.add_subparsers(dest="method", metavar="METHOD", parser_class=_Parser)
+    idf.set_defaults(handler=_missing_method)
+    le = idsub.add_parser("lse", help="least squares for M, B, Af, d0, beta_e (eqs. 15-18)",
+                          description="Least-squares identification (SPEC section 4). Without --data the "
+                                      "nonlinear model is simulated with u = 6 sin(4 pi t) for 5 s at 1 kHz.")
+    le.add_argument("--disturbance", default="none",
+                    help="none (default), sine:AMP[:FREQ_HZ] (1 Hz default) or white:SIGMA (N, seeded)")
+    le.add_argument("--disturbance-model", default="constant",
+                    help="constant (the paper's d0) or harmonic[:FREQ_HZ] (d0 + a sinusoid; frequency estimated if not given)")
+    le.add_argument("--seed", type=int, default=0, help="seed of the white-noise disturbance (default 0)")
+    le.add_argument("--u", help="excitation as signal text (see eha simulate --help); default sine:6:2")
+    le.add_argument("--t-end", type=float, default=5.0, help="record length [s] (default 5)")
+    le.add_argument("--tau-f", type=float, default=0.01, help="prefilter time constant [s] (default 0.01, eq. 17)")
+    le.add_argument("--data", help="identify from a CSV with columns t,x,v,p1,p2,u (SI units) instead of simulating")
+    le.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                    help="known/nominal parameters (Dc, dc, L0, Kq1, Kq2, ps, pr, k_f are taken as measured); " + PARAM_HELP)
+    le.add_argument("--json", action="store_true", help="print JSON (default: a table)")
+    le.set_defaults(handler=_cmd_identify_lse)
+
+    tf = idsub.add_parser("tf", help="continuous-time transfer function (like MATLAB tfest)",
+                          description="Transfer-function estimation. Without --data: the paper's closed-loop "
+                                      "experiment (idinput sine reference, Kp = 10 at Ts = 0.01 s, nonlinear plant).")
+    tf.add_argument("--data", help="CSV with columns t,u,y (uniformly sampled; u held between samples)")
+    tf.add_argument("--ts", type=float, help="sample time [s]; default from t in --data, or 0.01")
+    tf.add_argument("--np", dest="n_poles", type=int, default=3, help="number of poles (default 3)")
+    tf.add_argument("--nz", dest="n_zeros", type=int, default=0, help="number of zeros (default 0)")
+    tf.add_argument("--seed", type=int, default=0, help="seed of the idinput excitation (default 0)")
+    tf.add_argument("--kp", type=float, default=10.0, help="paper experiment: proportional gain (default 10)")
+    tf.add_argument("--plant", default="nonlinear", help="paper experiment: nonlinear (default) or linear plant")
+    tf.add_argument("--initial-condition", default=None,
+                    help="zero or estimate (default: estimate for the paper experiment, zero for --data)")
+    tf.add_argument("--input-offset", default=None,
+                    help="zero or estimate a constant input offset (default: estimate for the paper experiment, zero for --data)")
+    tf.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help=PARAM_HELP)
+    tf.add_argument("--json", action="store_true", help="print JSON (default: a summary)")
+    tf.set_defaults(handler=_cmd_identify_tf)
     return parser
 
 
@@ -146,6 +199,151 @@ def _cmd_linearize(args) -> int:
     print(f"P(s) = {num[-1]:.5g} / (s^3 + {den[1]:.5g} s^2 + {den[2]:.5g} s)          (eq. 23, u >= 0)")
     print(f"H(s) = {cnum[-1]:.5g} / (s^3 + {cden[1]:.5g} s^2 + {cden[2]:.5g} s + {cden[3]:.5g})   (eq. 24, Kp = {args.kp:g})")
     return 0
+
+
+def _missing_method(args) -> int:
+    raise UsageError("identify needs a METHOD: lse or tf (eha identify --help tells more)")
+
+
+def _cmd_idinput(args) -> int:
+    from .excitation import idinput
+
+    ex = idinput(args.n, args.type, tuple(args.band), tuple(args.range), tuple(args.sinedata), seed=args.seed)
+    if args.json:
+        print(json.dumps({"u": ex.u.tolist(), "freqs": ex.freqs.ravel().tolist()}))
+        return 0
+    table = ex.to_pandas()
+    if args.out:
+        try:
+            table.to_csv(args.out, index=False, float_format="%.10g")
+        except OSError as exc:
+            raise UsageError(f"--out = {args.out!r} is not allowed: {exc.strerror}") from None
+    else:
+        table.to_csv(sys.stdout, index=False, float_format="%.10g")
+    return 0
+
+
+def _cmd_identify_lse(args) -> int:
+    from .experiments import LSE_INPUT, lse_data
+    from .identify.lse import MeasuredData, identify_lse
+    from .signals import parse_signal
+
+    params = _params(args.param)
+    model, _, freq_text = args.disturbance_model.partition(":")
+    freq = None
+    if freq_text:
+        try:
+            freq = float(freq_text)
+        except ValueError:
+            raise UsageError(f"--disturbance-model = {args.disturbance_model!r} is not allowed: "
+                             "use constant or harmonic[:FREQ_HZ] with a number") from None
+    if model not in ("constant", "harmonic") or (model == "constant" and freq_text):
+        raise UsageError(f"--disturbance-model = {args.disturbance_model!r} is not allowed: use constant or harmonic[:FREQ_HZ]")
+    if args.data:
+        data = MeasuredData.from_csv(args.data)
+        source = args.data
+    else:
+        u = parse_signal(args.u, name="--u") if args.u else LSE_INPUT
+        data = lse_data(params, args.disturbance, u=u, t_end=args.t_end, seed=args.seed)
+        source = f"simulation: u = {u.label}, d = {args.disturbance}, seed {args.seed}"
+    res = identify_lse(data, params, tau_f=args.tau_f, disturbance_model=model, disturbance_freq_hz=freq)
+    out = res.to_dict()
+    out["source"] = source
+    if args.json:
+        print(json.dumps(out, indent=2))
+        return 0 if res.success else 1
+    print(f"least squares ({source}), disturbance model: {res.disturbance_model}"
+          + (f" at {res.disturbance_freq_hz:.6g} Hz{' (estimated)' if res.freq_estimated else ''}" if res.disturbance_freq_hz else ""))
+    print(f"{'':8s}{'nominal':>14s}{'estimate':>14s}{'rel. error':>12s}   95 % interval")
+    for k, v in res.estimates.items():
+        nom = res.nominal.get(k)
+        rel = res.rel_error.get(k)
+        lo, hi = res.ci95[k]
+        print(f"{k:8s}{'' if nom is None else f'{nom:.6g}':>14s}{v:14.6g}{'' if rel is None else f'{100 * rel:+.3f} %':>12s}   [{lo:.6g}, {hi:.6g}]")
+    if not res.success:
+        print(f"warning: {res.message}", file=sys.stderr)
+    return 0 if res.success else 1
+
+
+def _cmd_identify_tf(args) -> int:
+    from .experiments import FrequencyExperiment, run_frequency_identification
+    from .identify.tfest import tfest
+
+    if args.data:
+        import numpy as np
+        import pandas as pd
+
+        try:
+            table = pd.read_csv(args.data)
+        except (OSError, ValueError) as exc:
+            raise UsageError(f"--data = {args.data!r} is not allowed: cannot read it as CSV ({exc})") from None
+        missing = [c for c in ("t", "u", "y") if c not in table]
+        if missing:
+            raise UsageError(f"--data = {args.data!r} is not allowed: missing column(s) {', '.join(missing)}; need t,u,y")
+        t = table["t"].to_numpy(float)
+        ts = args.ts if args.ts is not None else float(np.median(np.diff(t))) if t.size > 1 else float("nan")
+        est = tfest(table["u"].to_numpy(float), table["y"].to_numpy(float), ts, args.n_poles, args.n_zeros,
+                    initial_condition=args.initial_condition or "zero", input_offset=args.input_offset or "zero")
+        out = {"num": est.num.tolist(), "den": est.den.tolist(), "fit_percent": est.fit_percent,
+               "initial_condition": est.initial_condition, "input_offset": est.input_offset,
+               "param_std": None if est.param_std is None else est.param_std.tolist(),
+               "success": est.success, "message": est.message, "ts": ts}
+        ok = est.success
+    else:
+        params = _params(args.param)
+        cfg = FrequencyExperiment(seed=args.seed, kp=args.kp, plant=args.plant, n_poles=args.n_poles,
+                                  n_zeros=args.n_zeros, ts=args.ts or 0.01,
+                                  initial_condition=args.initial_condition or "estimate",
+                                  input_offset=args.input_offset or "estimate")
+        if args.plant not in ("nonlinear", "linear"):
+            raise UsageError(f"--plant = {args.plant!r} is not allowed: use nonlinear or linear")
+        fi = run_frequency_identification(params, cfg)
+        out = fi.to_dict()
+        ok = fi.success
+    if args.json:
+        print(json.dumps(out, indent=2, default=_json_default))
+        return 0 if ok else 1
+    print(_tf_text(out["num"], out["den"], "H_hat(s)" if not args.data else "G(s)"))
+    print(f"fit {out['fit_percent']:.2f} % (initial condition {out['initial_condition']})")
+    if "open_loop" in out:
+        print(_tf_text(out["open_loop"]["num"], out["open_loop"]["den"], "P_hat(s)"))
+        b = out["backout"]
+        print(f"B + 2 k_f Af / pi = {b['damping_B_plus_2kfAf_over_pi']:.4g} N s/m (linearised: {b['damping_nominal']:.4g})")
+        print(f"beta_e from the gain = {b['beta_e_from_gain']:.4g} Pa, from the s coefficient = "
+              f"{b['beta_e_from_stiffness']:.4g} Pa (nominal {b['beta_e_nominal']:.4g})")
+        if out.get("validation_fit_percent") is not None:
+            print(f"validation fit on a fresh excitation (seed {out['validation_seed']}): {out['validation_fit_percent']:.2f} %")
+    if not ok:
+        print(f"warning: {out['message']}", file=sys.stderr)
+    return 0 if ok else 1
+
+
+def _poly_text(coeffs) -> str:
+    n = len(coeffs) - 1
+    text = ""
+    for i, c in enumerate(coeffs):
+        p = n - i
+        power = "" if p == 0 else (" s" if p == 1 else f" s^{p}")
+        mag = f"{abs(c):.4g}"
+        if not text:
+            text = ("-" if c < 0 else "") + (power.strip() if mag == "1" and p else mag + power)
+        else:
+            text += (" - " if c < 0 else " + ") + (power.strip() if mag == "1" and p else mag + power)
+    return text
+
+
+def _tf_text(num, den, name):
+    return f"{name} = ({_poly_text(num)}) / ({_poly_text(den)})"
+
+
+def _json_default(obj):
+    import numpy as np
+
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.floating, np.integer)):
+        return obj.item()
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
 def _complex_list(values):

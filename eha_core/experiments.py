@@ -14,6 +14,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import math
+import time
+from dataclasses import field
+
+import numpy as np
 
 from .params import ActuatorParams
 from .signals import ZERO, Signal, Sine, WhiteNoise
@@ -22,7 +26,9 @@ from .simulate import SimulationResult, simulate, simulate_many
 __all__ = [
     "Case", "PAPER_CASES", "run_paper_cases",
     "LSE_INPUT", "LSE_INPUT_RICH", "LSE_INPUT_RICH_T_END", "LSE_SCENARIOS", "PAPER_TABLE4", "PAPER_TABLE3_BETA_E", "parse_disturbance",
-    "lse_simulation", "lse_data", "run_lse",
+    "lse_simulation", "lse_data", "run_lse", "lse_resimulation", "run_lse_table",
+    "FrequencyExperiment", "FrequencyIdentification", "run_frequency_identification",
+    "PAPER_EQ25", "PAPER_EQ26", "PAPER_FIT_PERCENT", "PAPER_BETA_E_HAT",
 ]
 
 
@@ -38,6 +44,10 @@ class Case:
     @property
     def name(self) -> str:
         return f"case_{self.number}"
+
+    @property
+    def label(self) -> str:
+        return f"Case {self.number}"
 
     @property
     def title(self) -> str:
@@ -64,7 +74,7 @@ def run_paper_cases(params: ActuatorParams | None = None, model: str = "nonlinea
         chosen.append(PAPER_CASES[c])
     t_end = chosen[0].t_end if chosen else 5.0
     return simulate_many(params, [c.u for c in chosen], [c.d for c in chosen], t_end=t_end, dt=dt,
-                         model=model, branch=branch, labels=[c.name for c in chosen], **kwargs)
+                         model=model, branch=branch, labels=[c.label for c in chosen], **kwargs)
 
 
 # -- time-domain identification (section III-A, Tables 3-4) --------------------------
@@ -170,3 +180,218 @@ def run_lse(params: ActuatorParams | None = None, disturbance: str | Signal = "n
     data = lse_data(params, disturbance, u=u, t_end=t_end, dt=dt, seed=seed, measurement_noise=measurement_noise)
     return identify_lse(data, params, tau_f=tau_f, disturbance_model=disturbance_model,
                         disturbance_freq_hz=disturbance_freq_hz)
+
+
+def lse_resimulation(result, params: ActuatorParams, measured, *, u: Signal = LSE_INPUT) -> SimulationResult:
+    """The nonlinear model re-simulated with the estimates, from the measured initial state.
+
+    The disturbance is what the model estimated: d0, plus the sinusoid for the
+    harmonic model. Raises ParameterError when an estimate is not physical
+    (e.g. a negative B under heavy noise): the message says which.
+    """
+    est = result.estimated_params(params)
+    d: Signal = ZERO
+    if result.disturbance_model == "harmonic" and result.disturbance_freq_hz:
+        f = result.disturbance_freq_hz
+        d = Sine(result.estimates["d_sin"], f) + Sine(result.estimates["d_cos"], f, phase=math.pi / 2)
+    t_end = float(measured.t[-1] - measured.t[0])
+    x0 = [measured.x[0], measured.v[0], measured.p1[0], measured.p2[0]]
+    return simulate(est, u=u, d=d, t_end=t_end, dt=measured.ts, x0=x0, label="re-simulated")
+
+
+def run_lse_table(params: ActuatorParams | None = None, *, disturbance_model: str = "constant",
+                  seed: int = 0, u: Signal = LSE_INPUT, t_end: float = 5.0) -> dict:
+    """Table 4: the four disturbance scenarios, identified with one disturbance model."""
+    return {name: run_lse(params, spec, disturbance_model=disturbance_model, seed=seed, u=u, t_end=t_end)
+            for name, spec in LSE_SCENARIOS.items()}
+
+
+# -- frequency-domain identification (section III-B, eqs. 19-27, Figs. 8-13) ----------
+
+#: The paper's estimates: H_hat (eq. 25), its fit, P_hat (eq. 26), beta_e.
+PAPER_EQ25 = ((2.932e3,), (1.0, 11.12, 1.716e4, 3.539e-6))
+PAPER_FIT_PERCENT = 84.81
+PAPER_EQ26 = ((236.4,), (1.0, 9.073, 1.711e4, 8.598e-7))
+PAPER_BETA_E_HAT = 1.1793e9
+
+
+@dataclass(frozen=True)
+class FrequencyExperiment:
+    """The closed-loop identification experiment (SPEC.md section 5).
+
+    Defaults are the paper's: r = idinput([1000 1 1], 'sine', [0 1], [-1 1],
+    [100 50 1]) at Ts = 0.01 s, u = Kp (r - x) with Kp = 10 sampled at Ts, the
+    nonlinear plant, a model with 3 poles and no zero. Our additions: the
+    initial state and a constant offset of the reference are estimated with the
+    model (``initial_condition``, ``input_offset``): the valve's flows differ
+    with the sign of u, which in the loop acts exactly as a constant offset of
+    r, and a model without it must mimic the resulting drift with a spurious
+    slow pole. ``validation_seed`` (default seed + 1) draws the fresh
+    excitation of Fig. 13.
+    """
+
+    n_samples: int = 1000
+    ts: float = 0.01
+    signal_type: str = "sine"
+    band: tuple[float, float] = (0.0, 1.0)
+    range: tuple[float, float] = (-1.0, 1.0)
+    sinedata: tuple[int, int, int] = (100, 50, 1)
+    seed: int = 0
+    validation_seed: int | None = None
+    kp: float = 10.0
+    plant: str = "nonlinear"
+    controller: str = "zoh"
+    n_poles: int = 3
+    n_zeros: int = 0
+    initial_condition: str = "estimate"
+    input_offset: str = "estimate"
+
+    def __post_init__(self):
+        def bad(name, allowed):
+            return ValueError(f"{name} = {getattr(self, name)!r} is not allowed: {allowed}")
+
+        for name in ("n_samples", "n_poles"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise bad(name, "must be a whole number >= 1")
+        if self.n_samples < 20:
+            raise bad("n_samples", "must be at least 20")
+        if not isinstance(self.n_zeros, (int, np.integer)) or not 0 <= self.n_zeros < self.n_poles:
+            raise bad("n_zeros", f"must be a whole number in [0, n_poles - 1] = [0, {self.n_poles - 1}]")
+        for name in ("ts", "kp"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise bad(name, "must be a finite number > 0")
+        if self.plant not in ("nonlinear", "linear"):
+            raise bad("plant", "use nonlinear or linear")
+        if self.controller not in ("zoh", "continuous"):
+            raise bad("controller", "use zoh or continuous")
+        for name in ("initial_condition", "input_offset"):
+            if getattr(self, name) not in ("zero", "estimate"):
+                raise bad(name, "use zero or estimate")
+
+    def excitation(self, seed: int | None = None):
+        """The reference signal (an :class:`~eha_core.excitation.Excitation`)."""
+        from .excitation import idinput
+
+        return idinput([self.n_samples, 1, 1], self.signal_type, self.band, self.range,
+                       self.sinedata, seed=self.seed if seed is None else seed)
+
+    def closed_loop(self, params: ActuatorParams, excitation) -> SimulationResult:
+        """Run the loop on ``excitation.u`` and record r, u, x at Ts."""
+        from .simulate import simulate_closed_loop
+
+        model = "nonlinear" if self.plant == "nonlinear" else "linear"
+        return simulate_closed_loop(params, excitation.u, kp=self.kp, ts=self.ts,
+                                    controller=self.controller, model=model,
+                                    label=f"closed loop, seed {excitation.seed}")
+
+
+@dataclass(frozen=True, eq=False)
+class FrequencyIdentification:
+    """Everything the frequency-domain step produces (Figs. 8-13, eqs. 24-27).
+
+    ``estimate`` is H_hat (r -> x); ``theoretical`` the linearised H(s) of
+    eq. 24; ``open_loop`` P_hat (eq. 26) and ``backout`` the physical
+    parameters (eq. 27) when the model has 3 poles and no zero; ``etfe`` the
+    empirical transfer function at the excited frequencies; ``validation`` the
+    comparison on a fresh excitation. When the estimation fails (``success``
+    False, ``message`` says why), ``validation`` and ``residuals`` are None.
+    """
+
+    config: FrequencyExperiment
+    params: ActuatorParams
+    excitation: object
+    data: SimulationResult
+    estimate: object
+    theoretical: tuple[np.ndarray, np.ndarray]
+    open_loop: tuple[np.ndarray, np.ndarray] | None
+    backout: object | None
+    etfe: object
+    residuals: object | None
+    validation_excitation: object
+    validation_data: SimulationResult
+    validation: object | None
+    success: bool
+    message: str
+    timings: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        e = self.estimate
+        out = {
+            "num": list(map(float, e.num)), "den": list(map(float, e.den)),
+            "fit_percent": float(e.fit_percent), "initial_condition": e.initial_condition,
+            "input_offset": getattr(e, "input_offset", None),
+            "success": bool(self.success), "message": self.message, "method": e.method,
+            "param_std": None if e.param_std is None else list(map(float, e.param_std)),
+            "theoretical": {"num": list(map(float, self.theoretical[0])), "den": list(map(float, self.theoretical[1]))},
+            "validation_fit_percent": None if self.validation is None else float(self.validation.fit_percent),
+            "paper": {"num": list(PAPER_EQ25[0]), "den": list(PAPER_EQ25[1]), "fit_percent": PAPER_FIT_PERCENT},
+            "seed": self.config.seed, "validation_seed": self.validation_excitation.seed,
+            "timings_s": self.timings,
+        }
+        if self.open_loop is not None:
+            out["open_loop"] = {"num": list(map(float, self.open_loop[0])), "den": list(map(float, self.open_loop[1]))}
+        if self.backout is not None:
+            out["backout"] = self.backout.to_dict()
+        return out
+
+
+def run_frequency_identification(params: ActuatorParams | None = None,
+                                 config: FrequencyExperiment | None = None) -> FrequencyIdentification:
+    """Run the paper's closed-loop experiment and everything that follows from it.
+
+    1. excitation (Fig. 8) and closed-loop data (Fig. 9);
+    2. H_hat by :func:`~eha_core.identify.tfest.tfest`, started also from the
+       linearised H(s) (Fig. 11 shows its fit);
+    3. Bode data: H_hat, the theoretical H(s), the ETFE (Fig. 12);
+    4. validation on a fresh excitation (Fig. 13) and residual analysis;
+    5. P_hat (eq. 26) and the back-out of B + 2 k_f Af / pi and beta_e (eq. 27).
+
+    Why H_hat's s^2 coefficient lies far below the linearised 430.1: see
+    :mod:`eha_core.identify.backout` (the friction saturates at the
+    experiment's velocities; l1 holds its slope at v = 0).
+    """
+    from .identify.backout import backout, open_loop_from_closed
+    from .identify.tfest import tfest
+    from .identify.validate import compare, etfe_periodic, residual_analysis
+    from .linear import linearize
+
+    params = params if params is not None else ActuatorParams()
+    config = config if config is not None else FrequencyExperiment()
+    timings = {}
+    t0 = time.perf_counter()
+    excitation = config.excitation()
+    data = config.closed_loop(params, excitation)
+    timings["experiment"] = time.perf_counter() - t0
+    if not data.success:
+        raise RuntimeError(f"the closed-loop simulation failed: {data.message}")
+
+    lin = linearize(params)
+    theoretical = lin.closed_loop_coeffs(config.kp)
+    init = theoretical if (config.n_poles, config.n_zeros) == (3, 0) else None
+    t0 = time.perf_counter()
+    est = tfest(data.r, data.x, config.ts, config.n_poles, config.n_zeros,
+                initial_condition=config.initial_condition, input_offset=config.input_offset, init=init)
+    timings["tfest"] = time.perf_counter() - t0
+
+    freqs = excitation.freqs if excitation.freqs.size else None
+    etfe = etfe_periodic(data.r, data.x, config.n_samples, config.ts, freqs=freqs)
+
+    validation_excitation = config.excitation(config.validation_seed if config.validation_seed is not None
+                                              else excitation.seed + 1)
+    validation_data = config.closed_loop(params, validation_excitation)
+    open_loop = back = validation = residuals = None
+    if est.success and np.all(np.isfinite(est.den)):
+        validation = compare(est.num, est.den, validation_data.r, validation_data.x, config.ts,
+                             initial_condition=config.initial_condition, input_offset=config.input_offset)
+        residuals = residual_analysis(data.x - est.simulate(data.r, x0=est.x0, input_offset=est.input_offset), data.r)
+        if (config.n_poles, config.n_zeros) == (3, 0):
+            open_loop = open_loop_from_closed(est.num, est.den, config.kp)
+            back = backout(*open_loop, params, lin.op, std_h=est.param_std, kp=config.kp)
+    return FrequencyIdentification(
+        config=config, params=params, excitation=excitation, data=data, estimate=est,
+        theoretical=theoretical, open_loop=open_loop, backout=back, etfe=etfe, residuals=residuals,
+        validation_excitation=validation_excitation, validation_data=validation_data,
+        validation=validation, success=bool(est.success), message=est.message, timings=timings,
+    )

@@ -85,3 +85,84 @@ def test_installed_command_exit_code_and_stderr():
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert proc.stderr.strip() == "eha: error: --case = 5 is not allowed: use one of 1, 2, 3, 4"
+
+
+def test_idinput_csv_and_json_match_the_core(capsys):
+    from eha_core.excitation import idinput
+
+    code, out, _ = run(capsys, "idinput", "--type", "sine", "--n", "1000", "--band", "0", "1",
+                       "--range", "-1", "1", "--sinedata", "100", "50", "1", "--seed", "3")
+    assert code == 0
+    df = pd.read_csv(io.StringIO(out))
+    ex = idinput(1000, "sine", (0, 1), (-1, 1), (100, 50, 1), seed=3)
+    assert list(df.columns) == ["k", "u"]
+    np.testing.assert_allclose(df["u"], ex.u, rtol=1e-9, atol=1e-12)
+    code, out, _ = run(capsys, "idinput", "--type", "sine", "--n", "1000", "--sinedata", "100", "50", "1",
+                       "--seed", "3", "--json")
+    data = json.loads(out)
+    assert len(data["u"]) == 1000 and len(data["freqs"]) == 100
+    np.testing.assert_allclose(data["freqs"], ex.freqs)
+
+
+def test_identify_lse_json(capsys):
+    code, out, _ = run(capsys, "identify", "lse", "--disturbance", "sine:5000", "--disturbance-model", "harmonic", "--json")
+    assert code == 0
+    data = json.loads(out)
+    assert set(data) >= {"estimates", "std_errors", "ci95"}
+    assert set(data["estimates"]) >= {"M", "B", "Af", "d0", "beta_e"}
+    assert data["estimates"]["B"] == pytest.approx(1500, rel=0.02)
+    lo, hi = data["ci95"]["M"]
+    assert lo <= data["estimates"]["M"] <= hi
+
+
+def test_identify_lse_from_a_csv(capsys, tmp_path):
+    from eha_core.experiments import lse_simulation
+
+    path = tmp_path / "meas.csv"
+    lse_simulation(disturbance="none").to_csv(path)
+    code, out, _ = run(capsys, "identify", "lse", "--data", str(path), "--json")
+    assert code == 0
+    assert json.loads(out)["estimates"]["M"] == pytest.approx(4000, rel=1e-3)
+
+
+def test_identify_tf_on_data_recovers_a_known_system(capsys, tmp_path):
+    from eha_core.identify.validate import simulate_tf
+
+    ts = 0.01
+    u = np.sign(np.sin(2 * np.pi * 0.4 * ts * np.arange(1500)))
+    y = simulate_tf([2437.0], [1.0, 430.1, 1.721e4, 2437.0], u, ts)
+    path = tmp_path / "io.csv"
+    pd.DataFrame({"t": ts * np.arange(u.size), "u": u, "y": y}).to_csv(path, index=False, float_format="%.17g")
+    code, out, _ = run(capsys, "identify", "tf", "--data", str(path), "--json")
+    assert code == 0
+    data = json.loads(out)
+    np.testing.assert_allclose(data["den"], [1.0, 430.1, 1.721e4, 2437.0], rtol=1e-6)
+    assert data["fit_percent"] == pytest.approx(100.0, abs=1e-4)
+    assert data["initial_condition"] == "zero"
+
+
+def test_identify_tf_paper_experiment_json(capsys):
+    code, out, _ = run(capsys, "identify", "tf", "--json")
+    assert code == 0
+    data = json.loads(out)
+    assert set(data) >= {"num", "den", "fit_percent", "initial_condition", "open_loop", "backout"}
+    assert data["den"][0] == 1.0 and len(data["den"]) == 4
+    assert data["den"][1] < 50
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["idinput", "--type", "pink", "--n", "10"], "pink"),
+    (["idinput", "--n", "0"], "n"),
+    (["idinput", "--n", "100", "--band", "0.6", "0.2"], "band"),
+    (["identify"], "METHOD"),
+    (["identify", "lse", "--disturbance", "gust"], "--disturbance = 'gust'"),
+    (["identify", "lse", "--disturbance-model", "cubic"], "--disturbance-model"),
+    (["identify", "lse", "--disturbance-model", "harmonic:x"], "--disturbance-model"),
+    (["identify", "lse", "--data", "/nonexistent.csv"], "nonexistent"),
+    (["identify", "tf", "--np", "0"], "n_poles"),
+    (["identify", "tf", "--plant", "soft"], "plant"),
+    (["identify", "tf", "--data", "/nonexistent.csv"], "nonexistent"),
+])
+def test_identification_bad_input(capsys, argv, words):
+    code, out, err = run(capsys, *argv)
+    assert code == 2 and err.count("\n") == 1 and words in err

@@ -1,0 +1,182 @@
+"""From an estimated closed loop back to the plant and its physical parameters (eqs. 26-27).
+
+With a proportional controller Kp, H = Kp P / (1 + Kp P), so
+
+    P_hat = H_hat / (Kp (1 - H_hat)) = N / (Kp (D - N))                 (eq. 26)
+
+for H_hat = N / D. Identifying P_hat = b / (s^3 + a1 s^2 + a2 s + a3) with
+eq. 21 and taking M, A1, A2, L0, Kq1, Kq2 and the operating pressures as
+measured (eq. 27):
+
+* a1 = l1 = (B + 2 k_f Af / pi) / M, so the total linearised damping is a1 M;
+* b = l5 l2 + l6 l3 = beta_e (Kq1 sqrt(D3) + Kq2 sqrt(D4)) / (M L0), so
+  beta_e = M L0 b / (Kq1 sqrt(D3) + Kq2 sqrt(D4));
+* a2 = (l2 + l3) l4 = (A1 + A2) beta_e / (M L0), so, independently,
+  beta_e = a2 M L0 / (A1 + A2);
+* a3 should be 0 (the plant integrates velocity into position).
+
+The map from H_hat's coefficients to these numbers is linear, so standard
+errors carry over exactly from the estimate's covariance.
+
+Why a1 comes out far below the linearised 430.1: l1 holds the slope of the
+friction at v = 0, 2 k_f Af / pi = 1.72e6 N s/m, but in the experiment the
+velocity swings through |v| >> 1/k_f = 1.1 mm/s, where S(v) = (2/pi) atan(k_f v)
+is saturated: the friction then acts as a nearly constant force +-Af, which
+adds almost no damping to the oscillation. What the data see is roughly B plus
+the friction's average slope over the velocities reached, an order of magnitude
+or two below the slope at zero (SPEC.md section 5; the paper: 11.12).
+
+Examples
+--------
+>>> from eha_core.identify.backout import open_loop_from_closed, backout
+>>> from eha_core.linear import linearize
+>>> from eha_core.params import ActuatorParams
+>>> p = ActuatorParams()
+>>> num_p, den_p = open_loop_from_closed(*linearize(p).closed_loop_coeffs(10.0), kp=10.0)
+>>> b = backout(num_p, den_p, p)
+>>> round(b.damping / p.M, 1), round(b.beta_e_from_gain / 1e9, 4), round(b.beta_e_from_stiffness / 1e9, 4)
+(430.1, 1.1, 1.1)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..linear import OperatingPoint, operating_point
+from ..params import ActuatorParams
+
+__all__ = ["BackoutResult", "open_loop_from_closed", "backout"]
+
+_Z95 = 1.959963984540054
+
+
+def open_loop_from_closed(num_h, den_h, kp: float) -> tuple[np.ndarray, np.ndarray]:
+    """P = N / (Kp (D - N)) for H = N / D (eq. 26), monic denominator."""
+    num_h = np.atleast_1d(np.asarray(num_h, dtype=float))
+    den_h = np.atleast_1d(np.asarray(den_h, dtype=float))
+    if not (math.isfinite(kp) and kp > 0):
+        raise ValueError(f"kp = {kp!r} is not allowed: must be a finite gain > 0")
+    if num_h.size > den_h.size:
+        raise ValueError("num_h: the closed loop must be proper (deg num <= deg den)")
+    pad = np.zeros(den_h.size)
+    pad[den_h.size - num_h.size:] = num_h
+    den_p = den_h - pad
+    lead = den_p[0]
+    if lead == 0:
+        raise ValueError("H_hat has a feedthrough of 1: P = H / (Kp (1 - H)) is not proper")
+    return num_h / (kp * lead), den_p / lead
+
+
+@dataclass(frozen=True)
+class BackoutResult:
+    """Physical parameters implied by an estimated plant P_hat (eq. 27).
+
+    ``damping`` is B + 2 k_f Af / pi [N s/m]; ``damping_nominal`` its value at
+    the nominal parameters (1.72e6 for the defaults). ``*_std`` are standard
+    errors when the estimate's covariance was given, else NaN.
+    """
+
+    num_p: tuple[float, ...]
+    den_p: tuple[float, ...]
+    damping: float
+    damping_nominal: float
+    beta_e_from_gain: float
+    beta_e_from_stiffness: float
+    beta_e_nominal: float
+    integrator_coefficient: float
+    damping_std: float = float("nan")
+    beta_e_from_gain_std: float = float("nan")
+    beta_e_from_stiffness_std: float = float("nan")
+    known: dict = field(default_factory=dict)
+
+    @property
+    def l1(self) -> float:
+        return self.den_p[1] if len(self.den_p) > 1 else float("nan")
+
+    def rel_errors(self) -> dict[str, float]:
+        return {
+            "damping": self.damping / self.damping_nominal - 1.0,
+            "beta_e_from_gain": self.beta_e_from_gain / self.beta_e_nominal - 1.0,
+            "beta_e_from_stiffness": self.beta_e_from_stiffness / self.beta_e_nominal - 1.0,
+        }
+
+    def ci95(self) -> dict[str, tuple[float, float]]:
+        out = {}
+        for name in ("damping", "beta_e_from_gain", "beta_e_from_stiffness"):
+            v, s = getattr(self, name), getattr(self, name + "_std")
+            out[name] = (v - _Z95 * s, v + _Z95 * s)
+        return out
+
+    def to_dict(self) -> dict:
+        return {
+            "open_loop": {"num": list(self.num_p), "den": list(self.den_p)},
+            "l1": self.l1,
+            "damping_B_plus_2kfAf_over_pi": self.damping,
+            "damping_nominal": self.damping_nominal,
+            "damping_std": self.damping_std,
+            "beta_e_from_gain": self.beta_e_from_gain,
+            "beta_e_from_gain_std": self.beta_e_from_gain_std,
+            "beta_e_from_stiffness": self.beta_e_from_stiffness,
+            "beta_e_from_stiffness_std": self.beta_e_from_stiffness_std,
+            "beta_e_nominal": self.beta_e_nominal,
+            "integrator_coefficient": self.integrator_coefficient,
+            "rel_errors": self.rel_errors(),
+            "known": self.known,
+        }
+
+
+def backout(num_p, den_p, params: ActuatorParams | None = None, op: OperatingPoint | None = None,
+            *, std_h: np.ndarray | None = None, kp: float | None = None) -> BackoutResult:
+    """Physical parameters from a third-order plant estimate ``P_hat = num_p / den_p``.
+
+    Parameters
+    ----------
+    num_p, den_p : array_like
+        P_hat with a monic cubic denominator (eq. 26's result).
+    params : ActuatorParams
+        The quantities taken as measured: M, A1, A2, L0, Kq1, Kq2, ps, pr, and
+        the nominal values to compare with.
+    op : OperatingPoint, optional
+        Operating pressures for D3, D4 (eq. 13, u >= 0 branch).
+    std_h, kp : optional
+        Standard errors of the closed-loop estimate's coefficients, ordered
+        [den[1:], num] (as :class:`~eha_core.identify.tfest.TFEstimate` gives
+        them), and the gain Kp: then the results get standard errors too.
+    """
+    p = params if params is not None else ActuatorParams()
+    op = op if op is not None else operating_point(p)
+    num_p = np.atleast_1d(np.asarray(num_p, dtype=float))
+    den_p = np.atleast_1d(np.asarray(den_p, dtype=float))
+    if den_p.size != 4 or num_p.size != 1:
+        raise ValueError(f"P_hat must be b / (s^3 + a1 s^2 + a2 s + a3) (3 poles, no zeros) to back out "
+                         f"the parameters; got {num_p.size - 1} zeros and {den_p.size - 1} poles")
+    den_p = den_p / den_p[0]
+    a1, a2, a3 = den_p[1:]
+    b = num_p[-1] / 1.0
+    d3 = max(p.ps - op.p1, 0.0)
+    d4 = max(op.p2 - p.pr, 0.0)
+    flow = p.Kq1 * math.sqrt(d3) + p.Kq2 * math.sqrt(d4)
+    gain_factor = p.M * p.L0 / flow
+    stiff_factor = p.M * p.L0 / (p.A1 + p.A2)
+    damping_std = bg_std = bs_std = float("nan")
+    if std_h is not None and kp is not None:
+        std_h = np.asarray(std_h, dtype=float)
+        # H = n / (s^3 + c1 s^2 + c2 s + c3): P's a1 = c1, a2 = c2, b = n / Kp
+        damping_std = float(std_h[0] * p.M)
+        bs_std = float(std_h[1] * stiff_factor)
+        bg_std = float(std_h[3] / kp * gain_factor)
+    return BackoutResult(
+        num_p=tuple(float(v) for v in num_p), den_p=tuple(float(v) for v in den_p),
+        damping=float(a1 * p.M),
+        damping_nominal=float(p.B + 2.0 * p.k_f * p.Af / math.pi),
+        beta_e_from_gain=float(b * gain_factor),
+        beta_e_from_stiffness=float(a2 * stiff_factor),
+        beta_e_nominal=float(p.beta_e),
+        integrator_coefficient=float(a3),
+        damping_std=damping_std, beta_e_from_gain_std=bg_std, beta_e_from_stiffness_std=bs_std,
+        known={"M": p.M, "A1": p.A1, "A2": p.A2, "L0": p.L0, "Kq1": p.Kq1, "Kq2": p.Kq2,
+               "D3": d3, "D4": d4},
+    )
