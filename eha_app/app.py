@@ -6,6 +6,7 @@ import panel as pn
 
 from .state import AppState
 from .tabs.parameters import ParametersTab
+from .tabs.identification import IdentificationTab
 from .tabs.simulation import SimulationTab
 
 __all__ = ["create_app", "CSS"]
@@ -25,6 +26,8 @@ CSS = """
 .eha-stale { color: #b00020; font-style: italic; }
 .eha-invalid input { border-color: #b00020 !important; background: #fff4f4 !important; }
 h4 { margin: 12px 0 4px 0; }
+.eha-note { color: #555; font-size: 12px; }
+.eha-table4 td { vertical-align: top; }
 """
 
 
@@ -43,6 +46,7 @@ def create_app(state: AppState | None = None):
     tabs = pn.Tabs(
         ("1. Parameters", ParametersTab(state)),
         ("2. Simulation", SimulationTab(state)),
+        ("3. Identification", IdentificationTab(state)),
         dynamic=False, sizing_mode="stretch_width",
     )
     header = pn.pane.HTML(

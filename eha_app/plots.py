@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 import holoviews as hv
+import holoviews.plotting.bokeh  # noqa: F401 - registers the Bokeh renderer for to_bokeh()
 
 __all__ = [
-    "TimeSeriesGrid", "STATE_PANELS", "CASE_COLORS", "style_for", "state_panel", "time_series_grid",
+    "to_bokeh", "bokeh_rows", "TimeSeriesGrid", "STATE_PANELS", "CASE_COLORS", "style_for", "legend_html", "FIGURE_WIDTH",
     "excitation_plot", "closed_loop_plot", "fit_plot", "validation_plot", "bode_plots",
     "residual_plots", "lse_fit_plot", "decimate",
 ]
@@ -27,6 +28,33 @@ _MODEL_DASH = {"nonlinear": "solid", "linear": "dashed", "linear-positive": "dot
 #: Points drawn per curve at most: a 5 s run at 1 kHz is shown every 2 ms, plenty for
 #: the paper's 2 Hz inputs and it halves what the browser receives.
 MAX_POINTS = 2500
+
+
+def bokeh_rows(obj) -> list[list]:
+    """Render a HoloViews object to rows of Bokeh figures (a Layout: panel by panel).
+
+    Shared x axes are linked by giving the figures one range model. The app puts
+    each figure in its own Panel pane (a GridPlot swapped into a Panel pane
+    collapses to zero width); :func:`to_bokeh` joins them for standalone pages.
+    """
+    if not isinstance(obj, hv.Layout):
+        return [[hv.render(obj, backend="bokeh")]]
+    figures = [hv.render(item, backend="bokeh") for item in obj]
+    if hv.Store.lookup_options("bokeh", obj, "plot").kwargs.get("shared_axes", True):
+        for fig in figures[1:]:
+            fig.x_range = figures[0].x_range
+    ncols = obj._max_cols or len(figures)
+    return [figures[i:i + ncols] for i in range(0, len(figures), ncols)]
+
+
+def to_bokeh(obj):
+    """One Bokeh model for a HoloViews object (for standalone HTML, e.g. the report)."""
+    rows = bokeh_rows(obj)
+    if len(rows) == 1 and len(rows[0]) == 1:
+        return rows[0][0]
+    from bokeh.layouts import gridplot
+
+    return gridplot(rows, merge_tools=True, toolbar_location="right")
 
 
 def decimate(t: np.ndarray, *ys: np.ndarray, max_points: int = MAX_POINTS):
@@ -46,35 +74,6 @@ def style_for(index: int, model: str) -> dict:
 def _legend_label(res) -> str:
     label = res.label or "run"
     return f"{label} ({res.model})"
-
-
-def state_panel(results, field: str, ylabel: str, scale: float, *, color_keys=None, height: int = 260):
-    """One state against t, all runs overlaid (a quarter of Figs. 2-7)."""
-    curves = []
-    color_keys = color_keys or {}
-    for i, res in enumerate(results):
-        t, y = decimate(res.t, getattr(res, field))
-        idx = color_keys.get(res.label, i)
-        curves.append(hv.Curve((t, y * scale), "t", field, label=_legend_label(res))
-                      .opts(line_width=1.6, **style_for(idx, res.model)))
-    if not curves:
-        curves = [hv.Curve(([], []), "t", field)]
-    return hv.Overlay(curves).opts(
-        hv.opts.Curve(xlabel="t [s]", ylabel=ylabel, tools=["hover"], show_grid=True),
-        hv.opts.Overlay(responsive=True, height=height, legend_position="top_left",
-                        legend_opts={"background_fill_alpha": 0.6, "label_text_font_size": "8pt"},
-                        show_legend=field == "x"),
-    )
-
-
-def time_series_grid(results, *, height: int = 260, title: str = "") -> hv.Layout:
-    """x, v, p1, p2 against t in a 2 x 2 grid with linked time axes (Figs. 2-7)."""
-    keys = {}
-    for res in results:
-        keys.setdefault(res.label, len(keys))
-    panels = [state_panel(results, f, lab, sc, color_keys=keys, height=height) for f, lab, sc in STATE_PANELS]
-    layout = hv.Layout(panels).cols(2).opts(shared_axes=True)
-    return layout.opts(title=title) if title else layout
 
 
 class TimeSeriesGrid:
@@ -196,29 +195,35 @@ def _escape(text: str) -> str:
 
 # -- frequency-domain identification (Figs. 8-13) ------------------------------------
 
-def excitation_plot(excitation, ts: float, *, height: int = 240):
+#: Width in pixels of the identification figures: fits the app's main column at
+#: 1366 px and a report page. (Responsive HoloViews layouts collapse to zero width
+#: when filled while hidden, so sizes are explicit.)
+FIGURE_WIDTH = 1000
+
+
+def excitation_plot(excitation, ts: float, *, height: int = 240, width: int = FIGURE_WIDTH):
     """The idinput reference signal against t (Fig. 8)."""
     t = np.arange(excitation.u.size) * ts
     return hv.Curve((t, excitation.u), "t", "r").opts(
-        xlabel="t [s]", ylabel="r", color=CASE_COLORS[0], responsive=True, height=height,
+        xlabel="t [s]", ylabel="r", color=CASE_COLORS[0], width=width, height=height,
         title=f"Excitation: idinput {excitation.type}, {excitation.u.size} samples, seed {excitation.seed}",
         show_grid=True, tools=["hover"], interpolation="steps-post")
 
 
-def closed_loop_plot(data, *, height: int = 240):
+def closed_loop_plot(data, *, height: int = 260, width: int = FIGURE_WIDTH):
     """Reference r, valve command u and position x of the closed-loop run (Fig. 9)."""
     r = hv.Curve((data.t, data.r), "t", "r", label="reference r").opts(color="#999999", interpolation="steps-post")
     x = hv.Curve((data.t, data.x * 1e3), "t", "x", label="position x [mm]").opts(color=CASE_COLORS[0])
     u = hv.Curve((data.t, data.u), "t", "u", label="command u [V]").opts(color=CASE_COLORS[1], alpha=0.6,
                                                                          interpolation="steps-post")
-    left = (r * x).opts(responsive=True, height=height, xlabel="t [s]", ylabel="r [-], x [mm]",
+    left = (r * x).opts(width=width // 2, height=height, xlabel="t [s]", ylabel="r [-], x [mm]",
                         title="Closed-loop data: r and x", show_grid=True, legend_position="top_left")
-    right = u.opts(responsive=True, height=height, xlabel="t [s]", ylabel="u [V]",
+    right = u.opts(width=width // 2, height=height, xlabel="t [s]", ylabel="u [V]",
                    title="Closed-loop data: u = Kp (r - x)", show_grid=True)
     return hv.Layout([left, right]).cols(2).opts(shared_axes=False)
 
 
-def fit_plot(fi, *, height: int = 260):
+def fit_plot(fi, *, height: int = 300, width: int = FIGURE_WIDTH):
     """Measured x against the estimated model's output on the estimation data (Fig. 11)."""
     e = fi.estimate
     d = fi.data
@@ -232,23 +237,23 @@ def fit_plot(fi, *, height: int = 260):
                 color=CASE_COLORS[1], line_dash="dashed")
             * hv.Curve((d.t, theo.y_hat * 1e3), "t", "x", label=f"linearised H(s), eq. 24: fit {theo.fit_percent:.1f} %").opts(
                 color=CASE_COLORS[2], line_dash="dotted")
-            ).opts(responsive=True, height=height, xlabel="t [s]", ylabel="x [mm]", show_grid=True,
+            ).opts(width=width, height=height, xlabel="t [s]", ylabel="x [mm]", show_grid=True,
                    legend_position="top_left", title="Measured and simulated output (estimation data)")
 
 
-def validation_plot(fi, *, height: int = 260):
+def validation_plot(fi, *, height: int = 300, width: int = FIGURE_WIDTH):
     """The model on a fresh excitation (Fig. 13)."""
     d = fi.validation_data
     v = fi.validation
     return (hv.Curve((d.t, d.x * 1e3), "t", "x", label="measured (fresh excitation)").opts(color="#333333", line_width=2)
             * hv.Curve((d.t, v.y_hat * 1e3), "t", "x", label=f"estimated H(s): fit {v.fit_percent:.1f} %").opts(
                 color=CASE_COLORS[1], line_dash="dashed")
-            ).opts(responsive=True, height=height, xlabel="t [s]", ylabel="x [mm]", show_grid=True,
+            ).opts(width=width, height=height, xlabel="t [s]", ylabel="x [mm]", show_grid=True,
                    legend_position="top_left",
                    title=f"Validation on a new excitation (seed {fi.validation_excitation.seed})")
 
 
-def bode_plots(fi, *, height: int = 260):
+def bode_plots(fi, *, height: int = 240, width: int = FIGURE_WIDTH):
     """Bode diagram: estimate, theoretical H(s) of eq. 24, ETFE points (Fig. 12)."""
     from eha_core.identify.validate import frequency_response
 
@@ -257,20 +262,24 @@ def bode_plots(fi, *, height: int = 260):
     est = fi.estimate.frequency_response(w)
     theo = frequency_response(*fi.theoretical, w)
     et = fi.etfe
+    # the ETFE's phase is known modulo 360 deg: draw each point on the branch
+    # nearest the estimate's phase there, not on an unwrapped path through noise
+    model_phase = fi.estimate.frequency_response(et.w).phase_deg
+    etfe_phase = model_phase + (np.asarray(et.phase_deg) - model_phase + 180.0) % 360.0 - 180.0
     mag = (hv.Curve((w, est.magnitude_db), "w", "dB", label="estimated H(s)").opts(color=CASE_COLORS[1], line_width=2)
            * hv.Curve((w, theo.magnitude_db), "w", "dB", label="linearised H(s), eq. 24").opts(color=CASE_COLORS[2], line_dash="dashed")
            * hv.Scatter((et.w, et.magnitude_db), "w", "dB", label="ETFE of the data (ZOH)").opts(color="#333333", size=4))
     phase = (hv.Curve((w, est.phase_deg), "w", "deg").opts(color=CASE_COLORS[1], line_width=2)
              * hv.Curve((w, theo.phase_deg), "w", "deg").opts(color=CASE_COLORS[2], line_dash="dashed")
-             * hv.Scatter((et.w, et.phase_deg), "w", "deg").opts(color="#333333", size=4))
-    common = dict(logx=True, responsive=True, height=height, show_grid=True, xlabel="ω [rad/s]")
+             * hv.Scatter((et.w, etfe_phase), "w", "deg").opts(color="#333333", size=4))
+    common = dict(logx=True, width=width, height=height, show_grid=True, xlabel="ω [rad/s]")
     return hv.Layout([
         mag.opts(ylabel="magnitude [dB]", title="Bode diagram", legend_position="bottom_left", **common),
         phase.opts(ylabel="phase [deg]", show_legend=False, **common),
     ]).cols(1).opts(shared_axes=True)
 
 
-def residual_plots(fi, *, height: int = 220):
+def residual_plots(fi, *, height: int = 260, width: int = FIGURE_WIDTH):
     """Residual autocorrelation and input cross-correlation with 99 % bands."""
     ra = fi.residuals
     band = ra.confidence_bound
@@ -279,7 +288,7 @@ def residual_plots(fi, *, height: int = 220):
         spikes = hv.Spikes((lags, values), "lag", "corr").opts(color=color, line_width=2)
         pts = hv.Scatter((lags, values), "lag", "corr").opts(color=color, size=4)
         bounds = hv.HSpan(-band, band).opts(color="#cccccc", alpha=0.35)
-        return (bounds * spikes * pts).opts(responsive=True, height=height, title=title, show_grid=True,
+        return (bounds * spikes * pts).opts(width=width // 2, height=height, title=title, show_grid=True,
                                             xlabel="lag [samples]", ylabel="correlation", ylim=(-1.05, 1.05))
 
     ok_w = "inside" if ra.whiteness_ok else "outside"
@@ -292,17 +301,17 @@ def residual_plots(fi, *, height: int = 220):
 
 # -- time-domain identification -------------------------------------------------------
 
-def lse_fit_plot(measured, resimulated, *, height: int = 260):
+def lse_fit_plot(measured, resimulated, *, height: int = 280, width: int = FIGURE_WIDTH):
     """Measured response against the model re-simulated with the estimates (x and p1)."""
     t, xm, p1m = decimate(measured.t, measured.x, measured.p1)
     tr, xr, p1r = decimate(resimulated.t, resimulated.x, resimulated.p1)
     left = (hv.Curve((t, xm * 1e3), "t", "x", label="measured").opts(color="#333333", line_width=2)
             * hv.Curve((tr, xr * 1e3), "t", "x", label="re-simulated with the estimates").opts(
                 color=CASE_COLORS[1], line_dash="dashed")
-            ).opts(responsive=True, height=height, xlabel="t [s]", ylabel="x [mm]", show_grid=True,
+            ).opts(width=width // 2, height=height, xlabel="t [s]", ylabel="x [mm]", show_grid=True,
                    legend_position="top_left", title="Position")
     right = (hv.Curve((t, p1m * 1e-6), "t", "p1").opts(color="#333333", line_width=2)
              * hv.Curve((tr, p1r * 1e-6), "t", "p1").opts(color=CASE_COLORS[1], line_dash="dashed")
-             ).opts(responsive=True, height=height, xlabel="t [s]", ylabel="p₁ [MPa]", show_grid=True,
+             ).opts(width=width // 2, height=height, xlabel="t [s]", ylabel="p₁ [MPa]", show_grid=True,
                     title="Piston-chamber pressure")
     return hv.Layout([left, right]).cols(2).opts(shared_axes=True)

@@ -1,4 +1,4 @@
-"""File-based entry point: `panel serve eha_app/main.py` (or `eha serve`).
+"""File-based entry point: `panel serve eha_app/eha.py` (or `eha serve`).
 
 Bokeh runs this file once per browser session, so every student gets a fresh
 app and state.
