@@ -81,7 +81,9 @@ class TimeSeriesGrid:
 
     Built once and updated in place (:meth:`update`), which takes a few
     milliseconds where re-rendering HoloViews overlays of eight curves takes
-    about a second. Bokeh stops auto-ranging an axis once the user zooms, so a
+    about a second. All lines read one ColumnDataSource (columns t, x_0..x_7,
+    v_0..v_7, ...), so an update is a single change for the browser to apply
+    rather than 32. Bokeh stops auto-ranging an axis once the user zooms, so a
     zoom survives new data; a different set of curves or horizon resets the view.
     """
 
@@ -92,27 +94,32 @@ class TimeSeriesGrid:
         self.max_lines = max_lines
         self._signature = None
         self.legend = Div(text="", sizing_mode="stretch_width", styles={"font-size": "12px"})
+        self.source = ColumnDataSource(data=self._empty_columns())
         self.x_range = DataRange1d(range_padding=0.01)
-        self.figures, self.sources, self.renderers = [], [], []
-        for k, (field, ylabel, _) in enumerate(STATE_PANELS):
+        self.figures, self.renderers = [], []
+        for field, ylabel, _ in STATE_PANELS:
             fig = figure(height=height, sizing_mode="stretch_width", x_range=self.x_range,
                          y_range=DataRange1d(), tools="pan,box_zoom,wheel_zoom,reset,save",
                          active_scroll=None, x_axis_label="t [s]", y_axis_label=ylabel,
                          output_backend="canvas")
             fig.toolbar.logo = None
-            fig.add_tools(HoverTool(tooltips=[("run", "$name"), ("t", "@t{0.000} s"), (ylabel, "@y{0.000}")]))
-            srcs, rends = [], []
+            fig.add_tools(HoverTool(tooltips=[("run", "$name"), ("t", "@t{0.000} s"), (ylabel, "$y{0.000}")]))
+            rends = []
             for i in range(max_lines):
-                src = ColumnDataSource(data={"t": [], "y": []})
-                r = fig.line("t", "y", source=src, line_width=1.6, color=CASE_COLORS[i % len(CASE_COLORS)],
-                             visible=False, name=f"slot {i}")
-                srcs.append(src)
+                r = fig.line("t", f"{field}_{i}", source=self.source, line_width=1.6,
+                             color=CASE_COLORS[i % len(CASE_COLORS)], visible=False, name=f"slot {i}")
                 rends.append(r)
             self.figures.append(fig)
-            self.sources.append(srcs)
             self.renderers.append(rends)
         if len(results):
             self.update(results)
+
+    def _empty_columns(self, n: int = 0) -> dict:
+        cols = {"t": np.zeros(n)}
+        for field, _, _ in STATE_PANELS:
+            for i in range(self.max_lines):
+                cols[f"{field}_{i}"] = np.full(n, np.nan)
+        return cols
 
     @property
     def grid(self):
@@ -130,7 +137,7 @@ class TimeSeriesGrid:
         return column(self.legend, self.grid, sizing_mode="stretch_width")
 
     def update(self, results) -> None:
-        """Show ``results`` (at most ``max_lines``), colour per label, dash per model."""
+        """Show ``results`` (at most ``max_lines``, on one time grid), colour per label, dash per model."""
         from bokeh.models import DataRange1d
 
         results = list(results)[: self.max_lines]
@@ -145,21 +152,26 @@ class TimeSeriesGrid:
                 fig.x_range = self.x_range
                 fig.y_range = DataRange1d()
         self._signature = signature
-        for k, (field, _, scale) in enumerate(STATE_PANELS):
-            for i in range(self.max_lines):
-                r = self.renderers[k][i]
+        if results:
+            t = decimate(results[0].t)[0]
+            cols = self._empty_columns(t.size)
+            cols["t"] = t
+            for i, res in enumerate(results):
+                if res.t.size != results[0].t.size:
+                    raise ValueError("TimeSeriesGrid: all runs shown together must share one time grid")
+                for field, _, scale in STATE_PANELS:
+                    cols[f"{field}_{i}"] = decimate(res.t, getattr(res, field))[1] * scale
+        else:
+            cols = self._empty_columns()
+        self.source.data = cols
+        for k in range(len(STATE_PANELS)):
+            for i, r in enumerate(self.renderers[k]):
                 if i < len(results):
-                    res = results[i]
-                    t, y = decimate(res.t, getattr(res, field))
-                    self.sources[k][i].data = {"t": t, "y": y * scale}
-                    style = style_for(keys[res.label], res.model)
+                    style = style_for(keys[results[i].label], results[i].model)
                     r.glyph.line_color = style["color"]
                     r.glyph.line_dash = style["line_dash"]
-                    r.name = _legend_label(res)
-                    r.visible = True
-                else:
-                    self.sources[k][i].data = {"t": [], "y": []}
-                    r.visible = False
+                    r.name = _legend_label(results[i])
+                r.visible = i < len(results)
         self.legend.text = legend_html(results)
 
 

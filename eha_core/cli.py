@@ -121,6 +121,21 @@ def build_parser() -> argparse.ArgumentParser:
     tf.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help=PARAM_HELP)
     tf.add_argument("--json", action="store_true", help="print JSON (default: a summary)")
     tf.set_defaults(handler=_cmd_identify_tf)
+
+    sv = sub.add_parser("serve", help="serve the classroom web app (one app and state per browser session)",
+                        description="Serve the app with Panel from its file entry point eha_app/eha.py "
+                                    "(equivalently: panel serve eha_app/eha.py). Each browser session gets its "
+                                    "own app and state. For a classroom, use --address 0.0.0.0 and give the "
+                                    "students the printed network URL.")
+    sv.add_argument("--port", type=int, default=5006, help="port (default 5006)")
+    sv.add_argument("--address", default="127.0.0.1",
+                    help="address to listen on (default 127.0.0.1; 0.0.0.0 for every network interface)")
+    sv.add_argument("--num-procs", type=int, default=1,
+                    help="worker processes (default 1; more serve a large class on a multi-core machine)")
+    sv.add_argument("--allow-websocket-origin", action="append", default=None, metavar="HOST[:PORT]",
+                    help="hosts allowed to connect (default: this machine's names; '*' when listening on 0.0.0.0)")
+    sv.add_argument("--show", action="store_true", help="open the app in a browser")
+    sv.set_defaults(handler=_cmd_serve)
     return parser
 
 
@@ -198,6 +213,57 @@ def _cmd_linearize(args) -> int:
         print(f"l{i} = {lp:.6g}{extra}")
     print(f"P(s) = {num[-1]:.5g} / (s^3 + {den[1]:.5g} s^2 + {den[2]:.5g} s)          (eq. 23, u >= 0)")
     print(f"H(s) = {cnum[-1]:.5g} / (s^3 + {cden[1]:.5g} s^2 + {cden[2]:.5g} s + {cden[3]:.5g})   (eq. 24, Kp = {args.kp:g})")
+    return 0
+
+
+def _lan_address() -> str | None:
+    """This machine's address on the local network (no packet is sent)."""
+    import socket
+
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            sock.connect(("10.255.255.255", 1))
+            return sock.getsockname()[0]
+    except OSError:
+        return None
+
+
+def serve_argv(args) -> list[str]:
+    """The `panel serve` command line for `eha serve` (validated)."""
+    from pathlib import Path
+
+    if not 1 <= args.port <= 65535:
+        raise UsageError(f"--port = {args.port} is not allowed: use 1-65535")
+    if args.num_procs < 1:
+        raise UsageError(f"--num-procs = {args.num_procs} is not allowed: use 1 or more")
+    entry = Path(__file__).resolve().parent.parent / "eha_app" / "eha.py"
+    if not entry.exists():
+        raise UsageError(f"the app entry point {entry} is missing: reinstall the package")
+    argv = ["panel", "serve", str(entry), "--port", str(args.port), "--address", args.address,
+            "--num-procs", str(args.num_procs)]
+    origins = args.allow_websocket_origin
+    if origins is None and args.address in ("0.0.0.0", "::"):
+        origins = ["*"]
+    for origin in origins or ():
+        argv += ["--allow-websocket-origin", origin]
+    if args.show:
+        argv.append("--show")
+    return argv
+
+
+def _cmd_serve(args) -> int:
+    argv = serve_argv(args)
+    host = "localhost" if args.address in ("127.0.0.1", "localhost", "0.0.0.0", "::") else args.address
+    print(f"EHA app: http://{host}:{args.port}/eha", flush=True)
+    if args.address in ("0.0.0.0", "::"):
+        lan = _lan_address()
+        if lan:
+            print(f"for the class (same network): http://{lan}:{args.port}/eha", flush=True)
+    print("Ctrl+C stops the server.", flush=True)
+    from panel.command import main as panel_main
+
+    sys.argv = argv
+    panel_main()
     return 0
 
 

@@ -274,16 +274,16 @@ class IdentificationTab(pn.viewable.Viewer):
         self.lse_errors = {k: pn.pane.HTML("", visible=False, styles={"color": "#b00020", "font-size": "12px"},
                                            css_classes=["eha-error", f"eha-error-{k}"], width=260)
                            for k in ("custom", "freq_text")}
-        self.lse_button = pn.widgets.Button(name="Run least squares", button_type="primary", width=260,
+        self.lse_button = pn.widgets.Button(label="Run least squares", color="primary", width=260,
                                             css_classes=["eha-run-lse"])
-        self.lse_all_button = pn.widgets.Button(name="Run all four scenarios (Table 4)", button_type="success",
+        self.lse_all_button = pn.widgets.Button(label="Run all four scenarios (Table 4)", color="success",
                                                 width=260, css_classes=["eha-run-table4"])
         self.lse_button.on_click(self._run_lse)
         self.lse_all_button.on_click(self._run_lse_all)
         # frequency domain
         self.freq_error = pn.pane.HTML("", visible=False, styles={"color": "#b00020", "font-size": "12px"},
                                        css_classes=["eha-error", "eha-error-freq"], width=260)
-        self.freq_button = pn.widgets.Button(name="Run experiment and estimate", button_type="primary", width=260,
+        self.freq_button = pn.widgets.Button(label="Run experiment and estimate", color="primary", width=260,
                                              css_classes=["eha-run-freq"])
         self.freq_button.on_click(self._run_freq)
         self.freq_summary = pn.pane.HTML("<p>Configure the excitation (Fig. 8) and run the closed-loop experiment.</p>",

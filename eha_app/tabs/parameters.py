@@ -39,7 +39,7 @@ class NumberField(pn.viewable.Viewer):
             label = f"{_PLAIN.get(name, name)} [{info.display_unit}]"
             tip = info.description
             text = state.texts[name]
-        self.input = pn.widgets.TextInput(name=label, value=text, description=tip, width=190,
+        self.input = pn.widgets.TextInput(label=label, value=text, description=tip, width=190,
                                           placeholder="force balance" if name == "p2_0" else "",
                                           css_classes=[f"eha-field-{name}"])
         self.error = pn.pane.HTML("", visible=False, css_classes=["eha-error", f"eha-error-{name}"],
@@ -72,7 +72,7 @@ class ParametersTab(pn.viewable.Viewer):
         super().__init__(**kwargs)
         self.state = state
         self.fields = {n: NumberField(state, n) for n in PARAM_NAMES + ("kp",)}
-        self.reset_button = pn.widgets.Button(name="Reset to paper defaults", button_type="default")
+        self.reset_button = pn.widgets.Button(label="Reset to paper defaults", color="default")
         self.reset_button.on_click(self._reset)
         self.derived = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-derived"])
         self.status = pn.pane.HTML("", sizing_mode="stretch_width")

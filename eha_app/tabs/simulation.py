@@ -105,6 +105,7 @@ class SimulationTab(pn.viewable.Viewer):
         self.results: list = []
         self.last_model = "nonlinear"
         self.last_elapsed_s = float("nan")
+        self.run_count = 0
         self.grid = TimeSeriesGrid()
         self.plot_pane = pn.pane.Bokeh(self.grid.layout, sizing_mode="stretch_width", min_height=560)
         # the loading indicator goes on a Panel layout: setting it on the Bokeh pane
@@ -118,23 +119,23 @@ class SimulationTab(pn.viewable.Viewer):
 
         self.preset_buttons = []
         for k in (1, 2, 3, 4):
-            b = pn.widgets.Button(name=f"Case {k}", width=68, margin=(2, 2), description=PAPER_CASES[k].title)
+            b = pn.widgets.Button(label=f"Case {k}", width=68, margin=(2, 2), description=PAPER_CASES[k].title)
             b.on_click(self._preset_handler(k))
             self.preset_buttons.append(b)
-        b = pn.widgets.Button(name="All four cases", width=140, margin=(2, 2),
+        b = pn.widgets.Button(label="All four cases", width=140, margin=(2, 2),
                               description="the four cases of Figs. 2 and 3, overlaid")
         b.on_click(self._preset_handler("all"))
         self.preset_buttons.append(b)
 
         self.run_buttons = {
-            "nonlinear": pn.widgets.Button(name="Run nonlinear", button_type="primary", width=130, css_classes=["eha-run-nonlinear"]),
-            "linear": pn.widgets.Button(name="Run linearised", button_type="primary", width=130, css_classes=["eha-run-linear"]),
-            "both": pn.widgets.Button(name="Compare both", button_type="success", width=130, css_classes=["eha-run-both"]),
+            "nonlinear": pn.widgets.Button(label="Run nonlinear", color="primary", width=130, css_classes=["eha-run-nonlinear"]),
+            "linear": pn.widgets.Button(label="Run linearised", color="primary", width=130, css_classes=["eha-run-linear"]),
+            "both": pn.widgets.Button(label="Compare both", color="success", width=130, css_classes=["eha-run-both"]),
         }
         for model, button in self.run_buttons.items():
             button.on_click(self._run_handler(model))
         self.download = pn.widgets.FileDownload(callback=self._csv, filename="eha_simulation.csv",
-                                                button_type="default", label="Download CSV", disabled=True, width=270)
+                                                color="default", label="Download CSV", disabled=True, width=270)
         self.t_end_input = pn.widgets.TextInput.from_param(self.request.param.t_end_text, width=120)
         self.t_end_input.param.watch(lambda e: setattr(self.request, "t_end_text", e.new), "value_input")
         self.request.param.watch(self._on_request_change, [p for p in self.request.param if p not in ("name", "preset")])
@@ -143,7 +144,7 @@ class SimulationTab(pn.viewable.Viewer):
         self._update_enabled()
         # open on the paper's Fig. 2 (four cases, nonlinear) rather than on empty axes
         self.request.preset = "all"
-        self._show(self.compute("nonlinear"), float("nan"))
+        self._show(self.compute("nonlinear"), float("nan"), update_grid=True)
 
     # -- events ------------------------------------------------------------------
     def _preset_handler(self, preset):
@@ -213,17 +214,22 @@ class SimulationTab(pn.viewable.Viewer):
             self.alert.object = f"The simulation failed: {message}"
             self.alert.visible = True
 
-        await run_task(lambda: self.compute(model), self._show, fail, busy=[self.plot_area])
+        await run_task(lambda: self.compute(model), self._show, fail, busy=[self.plot_area],
+                       apply_bokeh=self.grid.update)
 
-    def _show(self, results, elapsed: float) -> None:
+    def _show(self, results, elapsed: float, update_grid: bool = False) -> None:
+        """Panel side of showing a run (the grid's Bokeh models are updated separately)."""
+        self.run_count += 1
         self.results = results
         self.last_elapsed_s = elapsed
-        self.grid.update(results)
+        if update_grid:
+            self.grid.update(results)
         failed = [r for r in results if not r.success]
         what = ", ".join(dict.fromkeys(r.label for r in results))
         models = " and ".join(dict.fromkeys(r.model for r in results))
         timing = "" if math.isnan(elapsed) else f", computed in {elapsed * 1e3:.0f} ms"
-        self.info.object = f"<b>{what}</b> — {models} model, {results[0].t[-1]:g} s{timing}."
+        self.info.object = (f"<b>{what}</b> — {models} model, {results[0].t[-1]:g} s{timing}. "
+                            f"<span class='eha-run-count' style='color:#999'>run {self.run_count}</span>")
         if failed:
             self.alert.object = "; ".join(f"{r.label} ({r.model}): {r.message}" for r in failed)
             self.alert.visible = True
@@ -256,7 +262,10 @@ class SimulationTab(pn.viewable.Viewer):
 
     def __panel__(self):
         presets = pn.Column("**Paper cases** (one click runs)", pn.FlexBox(*self.preset_buttons), width=280)
-        custom = pn.Card(*self._input_widgets(), pn.Column(self.t_end_input, self.t_end_error),
+        note = pn.pane.HTML("<span class='eha-note'>The plots show the paper's four cases; changing an input "
+                            "below makes a custom run.</span>", width=250,
+                            visible=self.request.param.preset.rx() == "all")
+        custom = pn.Card(note, *self._input_widgets(), pn.Column(self.t_end_input, self.t_end_error),
                          title="Input and disturbance", collapsed=False, width=280)
         runs = pn.Column(*self.run_buttons.values(), self.download, width=280)
         side = pn.Column(presets, runs, custom, width=290)

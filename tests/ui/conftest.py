@@ -1,0 +1,161 @@
+"""Real-browser tests: the app served by `panel serve`, driven in headless Chromium.
+
+Chromium comes from Debian (`apt-get install chromium`, done by .ci/run);
+Playwright drives it through ``executable_path`` (its own browser download does
+not work here). Set EHA_CHROMIUM to use another binary. Tests wait on
+conditions, never on fixed sleeps.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--no-first-run", "--disable-sync"]
+# Chromium's own chatter, not the page's
+IGNORED_CONSOLE = ("GL Driver Message", "GPU stall")
+
+
+def pytest_collection_modifyitems(items):
+    for item in items:
+        if "tests/ui" in str(item.fspath):
+            item.add_marker(pytest.mark.ui)
+
+
+def _chromium() -> str:
+    path = os.environ.get("EHA_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
+    if not Path(path).exists():
+        pytest.fail("headless Chromium not found: install Debian's chromium (apt-get install -y chromium) "
+                    "or set EHA_CHROMIUM; .ci/run installs it")
+    return path
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_until(condition, timeout: float = 30.0, interval: float = 0.05, message: str = "condition"):
+    """Poll ``condition`` until it is truthy (returns it) or fail after ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = condition()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout} s waiting for {message}")
+        time.sleep(interval)
+
+
+@pytest.fixture(scope="session")
+def server():
+    port = _free_port()
+    cmd = [sys.executable, "-m", "panel", "serve", str(ROOT / "eha_app" / "eha.py"), "--port", str(port),
+           "--address", "127.0.0.1", "--allow-websocket-origin", f"127.0.0.1:{port}"]
+    log = open(ROOT / ".pytest_cache" / "ui_server.log", "w") if (ROOT / ".pytest_cache").exists() else subprocess.DEVNULL
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
+    url = f"http://127.0.0.1:{port}/eha"
+
+    def up():
+        if proc.poll() is not None:
+            pytest.fail(f"the app server exited with code {proc.returncode}")
+        try:
+            with urllib.request.urlopen(url, timeout=2) as r:
+                return r.status == 200
+        except OSError:
+            return False
+
+    wait_until(up, timeout=90, interval=0.2, message="the app server")
+    yield url
+    proc.terminate()
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+
+
+@pytest.fixture(scope="session")
+def browser():
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=_chromium(), args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+JS_TEXT = """el => {
+  const root = el.shadowRoot || el;
+  return Array.from(root.children).filter(c => !['STYLE', 'LINK'].includes(c.tagName))
+              .map(c => c.innerText).join('\\n');
+}"""
+
+
+def text_of(page, selector: str) -> str:
+    """Rendered text of a Panel component (its content lives in a shadow root)."""
+    loc = page.locator(selector)
+    return loc.first.evaluate(JS_TEXT) if loc.count() else ""
+
+
+class Session:
+    """One student's browser session, with the console messages it produced."""
+
+    def __init__(self, browser, url):
+        self.context = browser.new_context(viewport={"width": 1366, "height": 768})
+        self.page = self.context.new_page()
+        self.console: list[str] = []
+        self.page.on("console", self._console)
+        self.page.on("pageerror", lambda e: self.console.append(f"pageerror: {e}"))
+        self.page.on("requestfailed", lambda r: self.console.append(f"request failed: {r.url}"))
+        self.page.goto(url)
+        self.page.wait_for_selector("text=Reset to paper defaults", timeout=60_000)
+
+    def _console(self, msg):
+        if msg.type in ("error", "warning") and not any(s in msg.text for s in IGNORED_CONSOLE):
+            self.console.append(f"{msg.type}: {msg.text}")
+
+    def tab(self, name: str):
+        # Bokeh's tab headers carry no ARIA role: find them by their text
+        self.tab_header(name).click()
+
+    def tab_header(self, name: str):
+        return self.page.locator(".bk-header .bk-tab", has_text=name).first
+
+    def close(self):
+        self.context.close()
+
+
+@pytest.fixture
+def session(browser, server):
+    s = Session(browser, server)
+    yield s
+    problems = list(s.console)
+    s.close()
+    assert not problems, f"browser console: {problems}"
+
+
+@pytest.fixture
+def new_session(browser, server):
+    made = []
+
+    def make():
+        s = Session(browser, server)
+        made.append(s)
+        return s
+
+    yield make
+    problems = [m for s in made for m in s.console]
+    for s in made:
+        s.close()
+    assert not problems, f"browser console: {problems}"
