@@ -176,7 +176,8 @@ def table4_html(by_model: dict) -> str:
                 rel = res.rel_error.get(k)
                 lo, hi = res.ci95[k]
                 mark = "✓" if lo <= nom <= hi else "✗"
-                lines.append(f"<span class='eha-t4-{m}'>{m[:5]}.: <b>{_fmt(v)}</b>"
+                short = {"constant": "const.", "harmonic": "harm."}[m]
+                lines.append(f"<span class='eha-t4-{m}'>{short}: <b>{_fmt(v)}</b>"
                              + (f" ({100 * rel:+.2f} %)" if rel is not None else "")
                              + f"<br><small>[{_fmt(lo)}, {_fmt(hi)}] {mark}</small></span>")
             p = PAPER_TABLE4[scen][k]

@@ -1,0 +1,88 @@
+"""Screenshots of each tab after a run, as a student sees them (1366 x 768).
+
+Serves the app, drives Debian's headless Chromium with Playwright and writes
+PNGs to assets/screenshots/. Run:  python tools/screenshots.py [--out DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+from playwright.sync_api import sync_playwright
+
+ROOT = Path(__file__).resolve().parents[1]
+ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
+        "--no-first-run"]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--out", default=str(ROOT / "assets" / "screenshots"))
+    ap.add_argument("--chromium", default="/usr/bin/chromium")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    port = free_port()
+    server = subprocess.Popen([sys.executable, "-m", "panel", "serve", str(ROOT / "eha_app" / "eha.py"),
+                               "--port", str(port), "--address", "127.0.0.1"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    url = f"http://127.0.0.1:{port}/eha"
+    try:
+        for _ in range(300):
+            try:
+                urllib.request.urlopen(url, timeout=2)
+                break
+            except OSError:
+                time.sleep(0.2)
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=args.chromium, args=ARGS)
+            page = browser.new_page(viewport={"width": 1366, "height": 768})
+            page.goto(url)
+            page.wait_for_selector("text=Reset to paper defaults", timeout=60_000)
+
+            def tab(name):
+                page.locator(".bk-header .bk-tab", has_text=name).first.click()
+
+            page.screenshot(path=out / "1_parameters.png")
+            tab("2. Simulation")
+            page.get_by_role("button", name="All four cases").click()
+            page.wait_for_selector(".eha-run-count >> text=run 2")
+            page.get_by_role("button", name="Compare both").click()
+            page.wait_for_selector(".eha-run-count >> text=run 3")
+            page.screenshot(path=out / "2_simulation_compare.png")
+            tab("3. Identification")
+            page.get_by_role("button", name="Run least squares").click()
+            page.locator(".eha-lse-table table").wait_for(timeout=60_000)
+            page.screenshot(path=out / "3a_least_squares.png")
+            page.get_by_role("button", name="Run all four scenarios (Table 4)").click()
+            page.wait_for_selector("text=Table 4: four scenarios", timeout=60_000)
+            page.locator(".eha-table4-pane").scroll_into_view_if_needed()
+            page.screenshot(path=out / "3b_table4.png")
+            page.locator(".bk-header .bk-tab", has_text="Frequency domain").first.click()
+            page.get_by_role("button", name="Run experiment and estimate").click()
+            page.wait_for_selector("text=Backed-out parameters", timeout=120_000)
+            page.locator(".bk-header .bk-tab", has_text="Fig. 12 Bode").first.click()
+            page.wait_for_timeout(500)  # let the newly shown figure lay out before the picture
+            page.screenshot(path=out / "3c_frequency_bode.png")
+            page.locator(".eha-backout").scroll_into_view_if_needed()
+            page.screenshot(path=out / "3d_backout.png")
+            browser.close()
+    finally:
+        server.terminate()
+    print("\n".join(str(p) for p in sorted(out.glob("*.png"))))
+
+
+if __name__ == "__main__":
+    main()
