@@ -27,7 +27,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .linear import OperatingPoint, linearize, operating_point
+from .linear import OperatingPoint, linearize
 from .model import pack_params
 from .params import ActuatorParams
 from .signals import ZERO, Constant, Sampled, Signal

@@ -4,34 +4,26 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import panel as pn
 import param
 
 from eha_core.experiments import (
-    LSE_INPUT, LSE_INPUT_RICH, LSE_INPUT_RICH_T_END, LSE_SCENARIOS, PAPER_EQ25, PAPER_EQ26,
-    PAPER_FIT_PERCENT, PAPER_TABLE3_BETA_E, PAPER_TABLE4, FrequencyExperiment, lse_data,
+    LSE_INPUT, LSE_INPUT_RICH, LSE_INPUT_RICH_T_END, LSE_SCENARIOS, FrequencyExperiment, lse_data,
     lse_resimulation, parse_disturbance, run_frequency_identification, run_lse_table,
 )
 from eha_core.identify.lse import identify_lse
-from eha_core.linear import linearize
 from eha_core.params import ParameterError
 from eha_core.signals import SignalSpecError, parse_signal
 
 from .. import plots
-from ..formatting import num_html, table_html, tf_html
 from ..state import AppState
+from ..tables import SCENARIOS, backout_html, freq_summary_html, lse_table_html, table4_html
 from ..tasks import run_task
 
-__all__ = ["IdentificationTab", "LseRequest", "FreqRequest", "lse_table_html", "table4_html"]
+__all__ = ["IdentificationTab", "LseRequest", "FreqRequest"]
 
-SCENARIOS = {"none": "d = 0", "200 sin": "d = 200 sin(2πt)", "5000 sin": "d = 5000 sin(2πt)",
-             "white noise": "white noise, σ = 1000 N", "custom": "custom"}
 EXCITATIONS = {"paper": "u = 6 sin(4πt), 5 s (default)",
                "rich": "u = 8 sin(4πt) + 4 sin(10πt), 20 s (narrows B)"}
-_UNITS = {"M": "kg", "B": "N s/m", "Af": "N", "d0": "N", "d_sin": "N", "d_cos": "N", "beta_e": "Pa"}
-_NAMES = {"M": "M", "B": "B", "Af": "A<sub>f</sub>", "d0": "d<sub>0</sub>", "d_sin": "d<sub>sin</sub>",
-          "d_cos": "d<sub>cos</sub>", "beta_e": "β<sub>e</sub>"}
 
 
 class LseRequest(param.Parameterized):
@@ -115,137 +107,6 @@ class FreqRequest(param.Parameterized):
         except (ValueError, TypeError) as exc:
             return " ".join(str(exc).split())
         return ""
-
-
-# -- tables --------------------------------------------------------------------------
-
-def _fmt(v: float) -> str:
-    return num_html(v, 5) if v != 0 else "0"
-
-
-def lse_table_html(res, scenario: str | None) -> str:
-    """Estimates against nominal values, with 95 % intervals and the paper's number."""
-    paper = PAPER_TABLE4.get(scenario, {}) if scenario else {}
-    if scenario == "none":
-        paper = {**paper, "beta_e": PAPER_TABLE3_BETA_E}
-    rows = []
-    for k, v in res.estimates.items():
-        nom = res.nominal.get(k)
-        rel = res.rel_error.get(k)
-        lo, hi = res.ci95[k]
-        covers = "" if nom is None else ("✓" if lo <= nom <= hi else "✗")
-        p = paper.get(k)
-        p_txt = "" if p is None else _fmt(p)
-        if p is not None and nom:
-            p_txt += f" ({100 * (p / nom - 1):+.2f} %)"
-        rows.append([f"{_NAMES.get(k, k)} [{_UNITS.get(k, '')}]", "" if nom is None else _fmt(nom), _fmt(v),
-                     "" if rel is None else f"{100 * rel:+.3f} %",
-                     f"[{_fmt(lo)}, {_fmt(hi)}] {covers}", p_txt])
-    header = ["parameter", "nominal", "estimate", "rel. error", "95 % interval (covers nominal?)",
-              "paper (Table 3/4)" if paper else "paper"]
-    noiseless = scenario in ("none", "200 sin", "5000 sin")
-    note = (f"<p class='eha-note'>Disturbance model: {res.disturbance_model}"
-            + (f", frequency {res.disturbance_freq_hz:.6g} Hz ({'estimated' if res.freq_estimated else 'given'})"
-               if res.disturbance_freq_hz else "")
-            + f". Intervals: Newey-West over {res.hac_lags} lags (the prefilter colours the residual; "
-              f"textbook intervals are up to {max(res.std_errors[k] / res.std_errors_textbook[k] for k in res.std_errors if res.std_errors_textbook[k] > 0):.1f}× narrower)."
-            + (" Without noise the intervals shrink to the regressors' numerical error (~0.003 %), so ✗ may mark "
-               "a miss by that much." if noiseless else "") + "</p>")
-    return table_html(header, rows) + note
-
-
-def table4_html(by_model: dict) -> str:
-    """Table 4: for every scenario, our estimates with both disturbance models and the paper's.
-
-    ``by_model`` maps 'constant' / 'harmonic' to {scenario: LSEResult}.
-    """
-    names = ["M", "B", "Af", "d0", "beta_e"]
-    models = list(by_model)
-    scenarios = list(next(iter(by_model.values())))
-    first = by_model[models[0]][scenarios[0]]
-    header = ["parameter", "nominal"] + [SCENARIOS[s] for s in scenarios]
-    rows = []
-    for k in names:
-        nom = first.nominal[k]
-        row = [f"{_NAMES[k]} [{_UNITS[k]}]", _fmt(nom)]
-        for scen in scenarios:
-            lines = []
-            for m in models:
-                res = by_model[m][scen]
-                v = res.estimates[k]
-                rel = res.rel_error.get(k)
-                lo, hi = res.ci95[k]
-                mark = "✓" if lo <= nom <= hi else "✗"
-                short = {"constant": "const.", "harmonic": "harm."}[m]
-                lines.append(f"<span class='eha-t4-{m}'>{short}: <b>{_fmt(v)}</b>"
-                             + (f" ({100 * rel:+.2f} %)" if rel is not None else "")
-                             + f"<br><small>[{_fmt(lo)}, {_fmt(hi)}] {mark}</small></span>")
-            p = PAPER_TABLE4[scen][k]
-            prel = f" ({100 * (p / nom - 1):+.2f} %)" if nom else ""
-            lines.append(f"<span class='eha-t4-paper'>paper: {_fmt(p)}{prel}</span>")
-            row.append("<br>".join(lines))
-        rows.append(row)
-    note = ("<p class='eha-note'>const. = the paper's constant d<sub>0</sub>; harm. = d<sub>0</sub> plus a sinusoid "
-            "whose frequency is estimated from the data. [95 % interval] ✓ when it covers the nominal value. "
-            "Without noise (d = 0, sinusoids) the intervals shrink to the regressors' numerical error (~0.003 %) and "
-            "may miss the nominal value by that much.</p>")
-    return table_html(header, rows, cls="eha-table eha-table4") + note
-
-
-def freq_summary_html(fi) -> str:
-    e = fi.estimate
-    if not e.success or not np.all(np.isfinite(e.den)):
-        return f"<div class='eha-warn'>The estimation failed: {e.message}</div>"
-    theo_num, theo_den = fi.theoretical
-    parts = [tf_html("Ĥ(s)", e.num, e.den, f"estimated; fit {e.fit_percent:.2f} % "
-                     f"(initial condition {e.initial_condition}"
-                     + (f", input offset {e.input_offset:.4g}" if e.input_offset is not None else "") + ")"),
-             tf_html("H(s)", theo_num, theo_den, f"linearised at v = 0, eq. 24, K<sub>p</sub> = {fi.config.kp:g}"),
-             tf_html("Ĥ<sub>paper</sub>(s)", PAPER_EQ25[0], PAPER_EQ25[1], f"eq. 25, fit {PAPER_FIT_PERCENT} %")]
-    if fi.validation is not None:
-        parts.append(f"<p>Validation on a fresh excitation (seed {fi.validation_excitation.seed}): "
-                     f"fit <b>{fi.validation.fit_percent:.2f} %</b>.</p>")
-    if fi.open_loop is not None:
-        parts.append(tf_html("P̂(s)", *fi.open_loop, "eq. 26: Ĥ / (K<sub>p</sub>(1 − Ĥ))"))
-        parts.append(tf_html("P̂<sub>paper</sub>(s)", PAPER_EQ26[0], PAPER_EQ26[1], "eq. 26 of the paper"))
-    parts.append(f"<p class='eha-note'>{e.message}</p>")
-    return "".join(parts)
-
-
-def backout_html(fi) -> str:
-    b = fi.backout
-    if b is None:
-        return "<p>The back-out needs a model with 3 poles and no zero.</p>"
-    ci = b.ci95()
-    rel = b.rel_errors()
-
-    def row(name, key, unit):
-        v, nom = getattr(b, key), (b.damping_nominal if key == "damping" else b.beta_e_nominal)
-        lo, hi = ci[key]
-        interval = "" if math.isnan(lo) else f"[{_fmt(lo)}, {_fmt(hi)}]"
-        return [name, _fmt(nom), _fmt(v), f"{100 * rel[key]:+.2f} %", interval, unit]
-
-    rows = [row("B + 2k<sub>f</sub>A<sub>f</sub>/π = λ̂<sub>1</sub> M (eq. 27a)", "damping", "N s/m"),
-            row("β<sub>e</sub> from the gain (eq. 27e-f)", "beta_e_from_gain", "Pa"),
-            row("β<sub>e</sub> from the s coefficient (eq. 27b-d)", "beta_e_from_stiffness", "Pa")]
-    table = table_html(["quantity", "nominal / linearised", "backed out", "difference", "95 % interval", "unit"], rows)
-    explain = (
-        f"<p class='eha-note'>The estimated s² coefficient λ̂<sub>1</sub> = {b.l1:.4g} lies far below the linearised "
-        f"{b.damping_nominal / fi.params.M:.4g}: λ<sub>1</sub> holds the friction's slope at v = 0, "
-        f"2k<sub>f</sub>A<sub>f</sub>/π = {2 * fi.params.k_f * fi.params.Af / math.pi:.4g} N s/m, but during the "
-        f"experiment the piston moves at up to {np.abs(fi.data.v).max() * 1e3:.0f} mm/s, far beyond "
-        f"1/k<sub>f</sub> = {1e3 / fi.params.k_f:.2f} mm/s where S(v) = (2/π) atan(k<sub>f</sub>v) saturates: the "
-        f"friction acts as a nearly constant force ±A<sub>f</sub>, which adds almost no damping to the oscillation. "
-        f"The paper found 11.12.</p>")
-    lin = linearize(fi.params)
-    g_pos = lin.tf_coeffs("positive")[0][-1]
-    g_neg = lin.tf_coeffs("negative")[0][-1]
-    explain += (
-        f"<p class='eha-note'>β<sub>e</sub> from the s coefficient depends on the chamber stiffness only. "
-        f"β<sub>e</sub> from the gain uses the u ≥ 0 valve branch of eq. 13 (gain {g_pos:.4g}), but u = K<sub>p</sub>(r − x) "
-        f"changes sign all the time and the u &lt; 0 branch has gain {g_neg:.4g} ({100 * (g_neg / g_pos - 1):+.0f} %): the "
-        f"data see a blend, so this route comes out low. The paper reported 1.1793·10<sup>9</sup>.</p>")
-    return table + explain
 
 
 def _show_figure(area: pn.Column, rows) -> None:

@@ -4,13 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import panel as pn
-import param
 
 from eha_core.params import FIELD_INFO, PARAM_NAMES
 
-from ..formatting import num_html, poles_html, table_html, tf_html
+from ..tables import derived_html
 from ..state import AppState
 
 __all__ = ["ParametersTab", "SCHEMATIC_PATH"]
@@ -97,42 +95,7 @@ class ParametersTab(pn.viewable.Viewer):
         else:
             first = next(iter(s.errors.values()))
             self.status.object = (f'<div class="eha-warn">Fix the highlighted input to enable the runs: {first}</div>')
-        self.derived.object = self._derived_html()
-
-    def _derived_html(self) -> str:
-        s = self.state
-        p = s.params
-        lin = s.linear_model
-        op = lin.op
-        num, den = lin.tf_coeffs()
-        cnum, cden = lin.closed_loop_coeffs(s.kp)
-        stale = "" if s.valid else '<p class="eha-stale">Showing the last valid parameters.</p>'
-        geometry = table_html(["quantity", "value"], [
-            ["A<sub>1</sub> = π D<sub>c</sub><sup>2</sup>/4", f"{p.A1 * 1e4:.4g} cm<sup>2</sup>"],
-            ["A<sub>2</sub> = π (D<sub>c</sub><sup>2</sup> − d<sub>c</sub><sup>2</sup>)/4", f"{p.A2 * 1e4:.4g} cm<sup>2</sup>"],
-            ["end stops ±0.8 L<sub>0</sub>", f"±{p.x_max * 1e3:.4g} mm"],
-            ["operating point (eq. 10)", f"x = {op.x * 1e3:.3g} mm, v = 0, p<sub>1</sub> = {op.p1 / 1e6:.4g} MPa, "
-                                          f"p<sub>2</sub> = {op.p2 / 1e6:.5g} MPa, u = 0"],
-        ])
-        lam_rows = []
-        formulas = ["(B + 2k<sub>f</sub>A<sub>f</sub>/π)/M", "A<sub>1</sub>/M", "A<sub>2</sub>/M", "β<sub>e</sub>/L<sub>0</sub>",
-                    "β<sub>e</sub>K<sub>q1</sub>√D<sub>3</sub>/(A<sub>1</sub>L<sub>0</sub>)",
-                    "β<sub>e</sub>K<sub>q2</sub>√D<sub>4</sub>/(A<sub>2</sub>L<sub>0</sub>)"]
-        for i, (lp, ln, f) in enumerate(zip(lin.lambdas, lin.lambdas_negative, formulas), start=1):
-            lam_rows.append([f"λ<sub>{i}</sub>", f, num_html(lp), num_html(ln) if ln != lp else "same"])
-        lambdas = table_html(["", "formula (Table 2)", "u ≥ 0", "u < 0"], lam_rows)
-        a = p.a
-        a_rows = [[f"a<sub>{k[1:]}</sub>", num_html(v)] for k, v in a.items()]
-        half = (len(a_rows) + 1) // 2
-        a_table = table_html(["", "Table 1"], a_rows[:half]) + table_html(["", "Table 1"], a_rows[half:])
-        P = tf_html("P(s) = X(s)/U(s)", num, den, "eq. 21/23, u ≥ 0")
-        H = tf_html(f"H(s), K<sub>p</sub> = {s.kp:g}", cnum, cden, "eq. 22/24")
-        poles = (f"<p>Poles of P(s): {poles_html(lin.poles())} rad/s<br>"
-                 f"Poles of H(s): {poles_html(lin.closed_loop_poles(s.kp))} rad/s</p>")
-        return (f'{stale}<h4>Geometry and operating point</h4>{geometry}'
-                f'<h4>Transfer functions</h4>{P}{H}{poles}'
-                f'<h4>Linearised model parameters λ<sub>1</sub>…λ<sub>6</sub> (eq. 12)</h4>{lambdas}'
-                f'<h4>Compact model a<sub>1</sub>…a<sub>10</sub> (eqs. 6-8)</h4><div class="eha-two">{a_table}</div>')
+        self.derived.object = derived_html(self.state.params, self.state.kp, stale=not self.state.valid)
 
     def __panel__(self):
         main = pn.Card(*self._group("main"), title="Load, friction, cylinder", collapsible=False,

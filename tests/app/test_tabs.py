@@ -5,7 +5,7 @@ import io
 
 from eha_app.app import create_app
 from eha_app.state import AppState
-from eha_app.tabs.identification import IdentificationTab, backout_html, lse_table_html, table4_html
+from eha_app.tabs.identification import IdentificationTab
 from eha_app.tabs.parameters import ParametersTab
 from eha_app.tabs.simulation import SimulationTab, parse_t_end
 

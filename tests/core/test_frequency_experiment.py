@@ -7,7 +7,6 @@ import pytest
 
 from eha_core.experiments import FrequencyExperiment, run_frequency_identification
 from eha_core.identify.tfest import oe_fit
-from eha_core.params import ActuatorParams
 
 
 @pytest.fixture(scope="module")
