@@ -5,30 +5,14 @@ from __future__ import annotations
 import panel as pn
 
 from .state import AppState
+from .tables import CSS
 from .tabs.parameters import ParametersTab
 from .tabs.identification import IdentificationTab
 from .tabs.simulation import SimulationTab
 
 __all__ = ["create_app", "CSS"]
 
-CSS = """
-.eha-tf { display: flex; align-items: center; gap: 8px; margin: 4px 0; font-size: 15px; }
-.eha-frac { display: inline-flex; flex-direction: column; text-align: center; }
-.eha-frac .eha-num { border-bottom: 1px solid #333; padding: 0 6px; }
-.eha-frac .eha-den { padding: 0 6px; }
-.eha-tf-note { color: #666; font-size: 12px; margin-left: 8px; }
-.eha-table { border-collapse: collapse; font-size: 13px; margin: 4px 12px 8px 0; }
-.eha-table th, .eha-table td { border-bottom: 1px solid #ddd; padding: 3px 8px; text-align: left; }
-.eha-table th { background: #f3f5f8; }
-.eha-two { display: flex; flex-wrap: wrap; }
-.eha-ok { color: #1b5e20; }
-.eha-warn { color: #b00020; font-weight: 600; }
-.eha-stale { color: #b00020; font-style: italic; }
-.eha-invalid input { border-color: #b00020 !important; background: #fff4f4 !important; }
-h4 { margin: 12px 0 4px 0; }
-.eha-note { color: #555; font-size: 12px; }
-.eha-table4 td { vertical-align: top; }
-"""
+
 
 
 def warm_up() -> None:

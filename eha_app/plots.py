@@ -217,22 +217,25 @@ def excitation_plot(excitation, ts: float, *, height: int = 240, width: int = FI
     """The idinput reference signal against t (Fig. 8)."""
     t = np.arange(excitation.u.size) * ts
     return hv.Curve((t, excitation.u), "t", "r").opts(
-        xlabel="t [s]", ylabel="r", color=CASE_COLORS[0], width=width, height=height,
+        xlabel="t [s]", ylabel="r [m]", color=CASE_COLORS[0], width=width, height=height,
         title=f"Excitation: idinput {excitation.type}, {excitation.u.size} samples, seed {excitation.seed}",
         show_grid=True, tools=["hover"], interpolation="steps-post")
 
 
-def closed_loop_plot(data, *, height: int = 260, width: int = FIGURE_WIDTH):
-    """Reference r, valve command u and position x of the closed-loop run (Fig. 9)."""
-    r = hv.Curve((data.t, data.r), "t", "r", label="reference r").opts(color="#999999", interpolation="steps-post")
-    x = hv.Curve((data.t, data.x * 1e3), "t", "x", label="position x [mm]").opts(color=CASE_COLORS[0])
-    u = hv.Curve((data.t, data.u), "t", "u", label="command u [V]").opts(color=CASE_COLORS[1], alpha=0.6,
-                                                                         interpolation="steps-post")
-    left = (r * x).opts(width=width // 2, height=height, xlabel="t [s]", ylabel="r [-], x [mm]",
-                        title="Closed-loop data: r and x", show_grid=True, legend_position="top_left")
-    right = u.opts(width=width // 2, height=height, xlabel="t [s]", ylabel="u [V]",
-                   title="Closed-loop data: u = Kp (r - x)", show_grid=True)
-    return hv.Layout([left, right]).cols(2).opts(shared_axes=False)
+def closed_loop_plot(data, *, height: int = 240, width: int = FIGURE_WIDTH):
+    """Reference r [m], position x [mm] and valve command u [V] of the closed-loop run (Fig. 9).
+
+    Three panels: r swings over +-1 m while x moves by centimetres (the slow
+    closed loop filters most of the excitation), so one axis would hide x.
+    """
+    common = dict(width=width // 3, height=height, xlabel="t [s]", show_grid=True)
+    r = hv.Curve((data.t, data.r), "t", "r").opts(color="#777777", interpolation="steps-post",
+                                                   ylabel="r [m]", title="Reference r", **common)
+    x = hv.Curve((data.t, data.x * 1e3), "t", "x").opts(color=CASE_COLORS[0], ylabel="x [mm]",
+                                                         title="Position x", **common)
+    u = hv.Curve((data.t, data.u), "t", "u").opts(color=CASE_COLORS[1], alpha=0.7, interpolation="steps-post",
+                                                  ylabel="u [V]", title="Command u = Kp (r − x)", **common)
+    return hv.Layout([r, x, u]).cols(3).opts(shared_axes=True)
 
 
 def fit_plot(fi, *, height: int = 300, width: int = FIGURE_WIDTH):

@@ -12,7 +12,27 @@ from eha_core.params import ActuatorParams
 
 from .formatting import num_html, poles_html, table_html, tf_html
 
-__all__ = ["SCENARIOS", "derived_html", "lse_table_html", "table4_html", "freq_summary_html", "backout_html"]
+__all__ = ["CSS", "SCENARIOS", "derived_html", "lse_table_html", "table4_html", "freq_summary_html", "backout_html"]
+
+#: Styles of the formulas and tables (the app's page and the report).
+CSS = """
+.eha-tf { display: flex; align-items: center; gap: 8px; margin: 4px 0; font-size: 15px; }
+.eha-frac { display: inline-flex; flex-direction: column; text-align: center; }
+.eha-frac .eha-num { border-bottom: 1px solid #333; padding: 0 6px; }
+.eha-frac .eha-den { padding: 0 6px; }
+.eha-tf-note { color: #666; font-size: 12px; margin-left: 8px; }
+.eha-table { border-collapse: collapse; font-size: 13px; margin: 4px 12px 8px 0; }
+.eha-table th, .eha-table td { border-bottom: 1px solid #ddd; padding: 3px 8px; text-align: left; }
+.eha-table th { background: #f3f5f8; }
+.eha-two { display: flex; flex-wrap: wrap; }
+.eha-ok { color: #1b5e20; }
+.eha-warn { color: #b00020; font-weight: 600; }
+.eha-stale { color: #b00020; font-style: italic; }
+.eha-invalid input { border-color: #b00020 !important; background: #fff4f4 !important; }
+h4 { margin: 12px 0 4px 0; }
+.eha-note { color: #555; font-size: 12px; }
+.eha-table4 td { vertical-align: top; }
+"""
 
 SCENARIOS = {"none": "d = 0", "200 sin": "d = 200 sin(2πt)", "5000 sin": "d = 5000 sin(2πt)",
              "white noise": "white noise, σ = 1000 N", "custom": "custom"}

@@ -122,6 +122,14 @@ def build_parser() -> argparse.ArgumentParser:
     tf.add_argument("--json", action="store_true", help="print JSON (default: a summary)")
     tf.set_defaults(handler=_cmd_identify_tf)
 
+    rp = sub.add_parser("reproduce", help="regenerate every figure and table of the paper in one report",
+                        description="Write OUT/report.html (self-contained: opens offline, plots interactive) and "
+                                    "the data behind it in OUT/data/ (CSV, and results.json with every number).")
+    rp.add_argument("--out", default="eha-report", help="output folder (default ./eha-report)")
+    rp.add_argument("--seed", type=int, default=0, help="seed of every random signal (default 0)")
+    rp.add_argument("--quick", action="store_true", help="shorter runs (a few seconds; for checking the setup)")
+    rp.set_defaults(handler=_cmd_reproduce)
+
     sv = sub.add_parser("serve", help="serve the classroom web app (one app and state per browser session)",
                         description="Serve the app with Panel from its file entry point eha_app/eha.py "
                                     "(equivalently: panel serve eha_app/eha.py). Each browser session gets its "
@@ -264,6 +272,25 @@ def _cmd_serve(args) -> int:
 
     sys.argv = argv
     panel_main()
+    return 0
+
+
+def _cmd_reproduce(args) -> int:
+    from pathlib import Path
+
+    if args.seed < 0:
+        raise UsageError(f"--seed = {args.seed} is not allowed: use a whole number >= 0")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out = {args.out!r} is not allowed: it exists and is not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"--out = {args.out!r} is not allowed: {exc.strerror}") from None
+    from eha_app.report import build_report
+
+    result = build_report(out, seed=args.seed, reduced=args.quick)
+    print(result.path)
     return 0
 
 

@@ -1,0 +1,95 @@
+"""`eha reproduce` on the reduced setting: every section, numbers equal to the core's."""
+
+import io
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from eha_app.formatting import num_html
+from eha_app.report import SECTIONS, ReportSettings, build_report
+from eha_core.cli import main
+from eha_core.experiments import FrequencyExperiment, run_frequency_identification, run_lse_table, run_paper_cases
+from eha_core.params import ActuatorParams
+
+SETTINGS = ReportSettings(seed=3, reduced=True)
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("report")
+    stream = io.StringIO()
+    result = build_report(out, seed=SETTINGS.seed, reduced=True, stream=stream)
+    return out, result, stream.getvalue()
+
+
+def test_every_section_is_present(report):
+    out, result, progress = report
+    page = (out / "report.html").read_text(encoding="utf-8")
+    for sid in SECTIONS:
+        assert f'<section id="{sid}">' in page
+    assert page.count('class="fig"') >= 12                      # Figs. 2, 3, 4-7, 8, 9, 11, 12, 13, residuals
+    # self-contained: no script or stylesheet loaded from anywhere else
+    assert "<script src=" not in page and "<link " not in page
+    assert "[7/7] done" in progress and "report written in" in progress
+    for name in ("numpy", "scipy", "control", "numba", "bokeh", "holoviews"):
+        assert f"<td>{name}</td>" in page
+    assert "Seed 3" in page
+
+
+def test_table_numbers_equal_the_core_functions(report):
+    out, result, _ = report
+    numbers = json.loads((out / "data" / "results.json").read_text())
+    page = (out / "report.html").read_text(encoding="utf-8")
+    p = ActuatorParams()
+    for model in ("constant", "harmonic"):
+        table = run_lse_table(p, disturbance_model=model, seed=SETTINGS.seed, t_end=SETTINGS.lse_t_end)
+        rows = [r for r in numbers["least_squares"] if r["model"] == model]
+        assert len(rows) == sum(len(res.estimates) for res in table.values())
+        for r in rows:
+            res = table[r["scenario"]]
+            assert r["estimate"] == res.estimates[r["parameter"]]
+            assert [r["ci95_lo"], r["ci95_hi"]] == list(res.ci95[r["parameter"]])
+        for res in table.values():
+            assert num_html(res.estimates["M"], 5) in page
+    fi = run_frequency_identification(p, FrequencyExperiment(seed=SETTINGS.seed, n_samples=SETTINGS.freq_samples))
+    assert numbers["hhat_den"] == list(fi.estimate.den)
+    assert numbers["hhat_num"] == list(fi.estimate.num)
+    assert numbers["fit_percent"] == fi.estimate.fit_percent
+    assert f"{fi.estimate.fit_percent:.2f} %" in page
+    assert numbers["beta_e_stiffness"] == fi.backout.beta_e_from_stiffness
+
+
+def test_data_files_match_the_simulations(report):
+    out, _, _ = report
+    df = pd.read_csv(out / "data" / "fig2_nonlinear.csv")
+    runs = run_paper_cases(ActuatorParams(), "nonlinear", t_end=SETTINGS.case_t_end)
+    case3 = df[df["case"] == "Case 3"]
+    np.testing.assert_allclose(case3["x"], runs[2].x, rtol=1e-9, atol=1e-15)
+    diffs = pd.read_csv(out / "data" / "figs4-7_differences.csv")
+    linear = run_paper_cases(ActuatorParams(), "linear", t_end=SETTINGS.case_t_end)
+    d = (runs[0].p1 - linear[0].p1) * 1e-6
+    row = diffs[(diffs["case"] == "Case 1") & (diffs["state"] == "p1")].iloc[0]
+    assert row["max"] == pytest.approx(np.abs(d).max(), rel=1e-9)
+    for name in ("parameters.csv", "fig8_excitation.csv", "fig9_closed_loop.csv", "fig12_bode.csv",
+                 "fig13_validation.csv", "tables3-4_least_squares.csv"):
+        assert (out / "data" / name).stat().st_size > 0
+
+
+def test_the_differences_are_filled_from_numbers(report):
+    out, _, _ = report
+    numbers = json.loads((out / "data" / "results.json").read_text())
+    items = numbers["differences_from_paper"]
+    assert len(items) >= 6
+    joined = " ".join(items)
+    assert f"{numbers['fit_percent']:.2f} %" in joined
+    assert f"{numbers['hhat_den'][1]:.4g}" in joined
+
+
+def test_reproduce_command_line_errors(capsys, tmp_path):
+    afile = tmp_path / "file.txt"
+    afile.write_text("x")
+    assert main(["reproduce", "--out", str(afile)]) == 2
+    assert "is not a folder" in capsys.readouterr().err
+    assert main(["reproduce", "--seed", "-1", "--out", str(tmp_path / "r")]) == 2
