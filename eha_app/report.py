@@ -33,6 +33,7 @@ from eha_core.identify.lse import identify_lse
 from eha_core.identify.tfest import tfest
 from eha_core.linear import linearize
 from eha_core.params import FIELD_INFO, ActuatorParams
+from eha_core.simulate import runs_to_pandas
 
 from . import plots
 from .formatting import num_html, table_html
@@ -396,15 +397,7 @@ def _write_csv(path: Path, rows: list[dict]) -> None:
 
 
 def _write_runs(path: Path, runs) -> None:
-    import pandas as pd
-
-    frames = []
-    for r in runs:
-        df = r.to_pandas()
-        df.insert(0, "case", r.label)
-        df.insert(1, "model", r.model)
-        frames.append(df)
-    pd.concat(frames, ignore_index=True).to_csv(path, index=False, float_format="%.10g")
+    runs_to_pandas(runs).to_csv(path, index=False, float_format="%.10g")
 
 
 def _write_freq_data(data_dir: Path, fi) -> None:

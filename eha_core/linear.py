@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._checks import positive_number
 from .params import ActuatorParams, ParameterError
 
 __all__ = ["OperatingPoint", "LinearModel", "operating_point", "linearize", "BRANCHES"]
@@ -105,7 +106,7 @@ class LinearModel:
 
     def closed_loop_coeffs(self, kp: float, branch: str = "positive") -> tuple[np.ndarray, np.ndarray]:
         """H(s) = Kp P / (1 + Kp P) (eq. 22) as (num, den)."""
-        kp = _check_kp(kp)
+        kp = positive_number("kp", kp, "must be a finite gain > 0 V/m")
         num, den = self.tf_coeffs(branch)
         den = den.copy()
         den[-1] += kp * num[-1]
@@ -191,13 +192,3 @@ def linearize(params: ActuatorParams, op: OperatingPoint | None = None) -> Linea
 def _check_branch(branch: str) -> None:
     if branch not in BRANCHES:
         raise ValueError(f"branch = {branch!r} is not allowed: use one of {', '.join(BRANCHES)}")
-
-
-def _check_kp(kp) -> float:
-    try:
-        kp = float(kp)
-    except (TypeError, ValueError):
-        raise ValueError(f"kp = {kp!r} is not allowed: must be a number") from None
-    if not math.isfinite(kp) or kp <= 0:
-        raise ValueError(f"kp = {kp!r} is not allowed: must be a finite number > 0")
-    return kp

@@ -27,13 +27,14 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ._checks import positive_number
 from .linear import OperatingPoint, linearize
 from .model import pack_params
 from .params import ActuatorParams
 from .signals import ZERO, Constant, Sampled, Signal
 
 __all__ = [
-    "SimulationResult", "simulate", "simulate_many", "simulate_closed_loop",
+    "SimulationResult", "simulate", "simulate_many", "simulate_closed_loop", "runs_to_pandas",
     "DEFAULT_H_MAX", "MODELS", "BRANCHES", "CONTROLLERS",
 ]
 
@@ -98,17 +99,22 @@ class SimulationResult:
         return self.to_pandas().to_csv(path_or_buf, index=False, **kwargs)
 
 
+def runs_to_pandas(results):
+    """Several runs as one long table: run, model, t, x, v, p1, p2, u, d (and r)."""
+    import pandas as pd
+
+    frames = []
+    for r in results:
+        df = r.to_pandas()
+        df.insert(0, "model", r.model)
+        df.insert(0, "run", r.label)
+        frames.append(df)
+    if not frames:
+        return pd.DataFrame(columns=["run", "model", "t", "x", "v", "p1", "p2", "u", "d"])
+    return pd.concat(frames, ignore_index=True)
+
+
 # -- argument handling ------------------------------------------------------------
-
-def _positive(name: str, value, allowed: str = "must be a finite number > 0") -> float:
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} = {value!r} is not allowed: {allowed}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise ValueError(f"{name} = {value!r} is not allowed: {allowed}")
-    return value
-
 
 @dataclass(frozen=True, eq=False)
 class _Callable(Signal):
@@ -179,9 +185,9 @@ def _stage_samples(sig: Signal, name: str, h: float, n_steps: int) -> np.ndarray
 
 def _grid(t_end, dt, h_max, ts=None):
     """Step h, steps per output sample, steps per controller sample, counts."""
-    t_end = _positive("t_end", t_end, "must be a finite number of seconds > 0")
-    dt = _positive("dt", dt, "must be a finite number of seconds > 0")
-    h_max = _positive("h_max", h_max, "must be a finite number of seconds > 0")
+    t_end = positive_number("t_end", t_end, "must be a finite number of seconds > 0")
+    dt = positive_number("dt", dt, "must be a finite number of seconds > 0")
+    h_max = positive_number("h_max", h_max, "must be a finite number of seconds > 0")
     if dt > t_end:
         raise ValueError(f"dt = {dt:g} is not allowed: must not exceed t_end = {t_end:g} s")
     n_out = t_end / dt
@@ -376,12 +382,12 @@ def simulate_closed_loop(params: ActuatorParams | None = None, r=None, *, kp: fl
     from . import _kernels as K
 
     params = params if params is not None else ActuatorParams()
-    kp = _positive("kp", kp, "must be a finite gain > 0 V/m")
-    ts = _positive("ts", ts, "must be a finite sample time > 0 s")
+    kp = positive_number("kp", kp, "must be a finite gain > 0 V/m")
+    ts = positive_number("ts", ts, "must be a finite sample time > 0 s")
     if controller not in CONTROLLERS:
         raise ValueError(f"controller = {controller!r} is not allowed: use one of {', '.join(CONTROLLERS)}")
     if u_limit is not None:
-        u_limit = _positive("u_limit", u_limit, "must be a finite voltage > 0, or None for no limit")
+        u_limit = positive_number("u_limit", u_limit, "must be a finite voltage > 0, or None for no limit")
     if r is None:
         raise ValueError("r: a reference signal is required")
     if t_end is None:

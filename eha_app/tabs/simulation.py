@@ -10,7 +10,7 @@ import param
 
 from eha_core.experiments import PAPER_CASES
 from eha_core.signals import ZERO, Chirp, Sine, Square, Step, WhiteNoise
-from eha_core.simulate import simulate_many
+from eha_core.simulate import runs_to_pandas, simulate_many
 
 from ..plots import TimeSeriesGrid
 from ..state import AppState
@@ -81,18 +81,7 @@ def build_inputs(req: SimulationRequest):
 
 def results_csv(results) -> str:
     """All runs in one table: run, model, t, x, v, p1, p2, u, d (SI units)."""
-    import pandas as pd
-
-    frames = []
-    for r in results:
-        df = r.to_pandas()
-        df.insert(0, "model", r.model)
-        df.insert(0, "run", r.label)
-        frames.append(df)
-    buf = io.StringIO()
-    if frames:
-        pd.concat(frames, ignore_index=True).to_csv(buf, index=False, float_format="%.10g")
-    return buf.getvalue()
+    return runs_to_pandas(results).to_csv(index=False, float_format="%.10g")
 
 
 class SimulationTab(pn.viewable.Viewer):

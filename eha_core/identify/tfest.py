@@ -75,6 +75,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from .._checks import positive_integer, positive_number
 import scipy.optimize
 import scipy.signal
 
@@ -267,20 +269,6 @@ def _check_input_offset(input_offset) -> bool:
     if not isinstance(input_offset, str) or input_offset not in _INPUT_OFFSETS:
         raise ValueError(f"input_offset must be 'zero' or 'estimate', got {input_offset!r}")
     return input_offset == "estimate"
-
-
-def _check_positive(value, name: str, *, integer: bool = False):
-    if integer:
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-            raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        return int(value)
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
-    if not np.isfinite(out) or out <= 0:
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-    return out
 
 
 def _model_coefficients(model, n: int, m: int, name: str) -> np.ndarray:
@@ -823,19 +811,18 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
     estimate_offset = _check_input_offset(input_offset)
     u_arr, y_arr, ts_f = _check_data(u, y, ts, n + m + 1,
                                      n if estimate_x0 else 0, int(estimate_offset))
-    max_iter = _check_positive(max_iter, "max_iter", integer=True)
-    tol = _check_positive(tol, "tol")
-    max_nfev = 100 * (n + m + 1) if max_nfev is None else _check_positive(
-        max_nfev, "max_nfev", integer=True)
+    max_iter = positive_integer("max_iter", max_iter)
+    tol = positive_number("tol", tol)
+    max_nfev = 100 * (n + m + 1) if max_nfev is None else positive_integer("max_nfev", max_nfev)
     if not isinstance(refine, (bool, np.bool_)):
         raise ValueError(f"refine must be True or False, got {refine!r}")
-    n_refine = _check_positive(n_refine, "n_refine", integer=True)
+    n_refine = positive_integer("n_refine", n_refine)
     starts, start_names = [], []
     if init is not None:
         starts.append(("model", _model_coefficients(init, n, m, "init")))
         start_names.append("init")
     if lambda_svf is not None:
-        lambdas = np.array([_check_positive(lambda_svf, "lambda_svf")])
+        lambdas = np.array([positive_number("lambda_svf", lambda_svf)])
     else:
         lambdas = _default_lambdas(u_arr.size, ts_f)
     starts += [("lambda", lam) for lam in lambdas]
@@ -966,9 +953,8 @@ def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", input_offset="zero
     estimate_offset = _check_input_offset(input_offset)
     u_arr, y_arr, ts_f = _check_data(u, y, ts, n + m + 1,
                                      n if estimate_x0 else 0, int(estimate_offset))
-    tol = _check_positive(tol, "tol")
-    max_nfev = 100 * (n + m + 1) if max_nfev is None else _check_positive(
-        max_nfev, "max_nfev", integer=True)
+    tol = positive_number("tol", tol)
+    max_nfev = 100 * (n + m + 1) if max_nfev is None else positive_integer("max_nfev", max_nfev)
     theta0 = _model_coefficients((num_n, den_n), n, m, "num0/den0")
     criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_x0, estimate_offset)
     cost0 = criterion.cost(theta0)

@@ -31,6 +31,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from .._checks import positive_number
 import scipy.linalg
 import scipy.signal
 
@@ -73,13 +75,7 @@ def _as_signal(values, name: str, *, allow_2d: bool = False) -> np.ndarray:
 
 
 def _as_ts(ts) -> float:
-    try:
-        value = float(ts)
-    except (TypeError, ValueError):
-        raise ValueError(f"ts must be a positive number of seconds, got {ts!r}") from None
-    if not np.isfinite(value) or value <= 0.0:
-        raise ValueError(f"ts must be a positive finite number of seconds, got {ts!r}")
-    return value
+    return positive_number("ts", ts, "must be a finite sample time > 0 s")
 
 
 def _as_tf(num, den) -> tuple[np.ndarray, np.ndarray]:

@@ -65,7 +65,7 @@ def test_data_files_match_the_simulations(report):
     out, _, _ = report
     df = pd.read_csv(out / "data" / "fig2_nonlinear.csv")
     runs = run_paper_cases(ActuatorParams(), "nonlinear", t_end=SETTINGS.case_t_end)
-    case3 = df[df["case"] == "Case 3"]
+    case3 = df[df["run"] == "Case 3"]
     np.testing.assert_allclose(case3["x"], runs[2].x, rtol=1e-9, atol=1e-15)
     diffs = pd.read_csv(out / "data" / "figs4-7_differences.csv")
     linear = run_paper_cases(ActuatorParams(), "linear", t_end=SETTINGS.case_t_end)
