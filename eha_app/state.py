@@ -23,7 +23,6 @@ import math
 
 import param
 
-from eha_core.linear import LinearModel, linearize
 from eha_core.params import FIELD_INFO, PARAM_NAMES, ActuatorParams, ParameterError
 
 __all__ = ["AppState", "display_text", "parse_display"]
@@ -119,9 +118,3 @@ class AppState(param.Parameterized):
             if new_params is not None and new_params != self.params:
                 self.params = new_params
                 self.revision += 1
-
-    # -- derived -----------------------------------------------------------------
-    @property
-    def linear_model(self) -> LinearModel:
-        """Linearisation of the current valid parameters."""
-        return linearize(self.params)

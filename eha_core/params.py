@@ -22,7 +22,6 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Mapping
 
 import numpy as np
 
@@ -258,8 +257,3 @@ def parse_param_assignments(items, base: ActuatorParams | None = None) -> Actuat
         except ValueError:
             raise ParameterError(name, text, f"must be a number in {FIELD_INFO[name].unit}") from None
     return base.replace(**changes)
-
-
-def params_from_mapping(values: Mapping[str, float | None]) -> ActuatorParams:
-    """Build parameters from a mapping, ignoring nothing: unknown keys are errors."""
-    return ActuatorParams().replace(**dict(values))
