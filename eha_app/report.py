@@ -317,6 +317,7 @@ def build_report(out_dir: str | Path, *, seed: int = 0, reduced: bool = False,
                   init=fi.theoretical)
     lin_fi = run_frequency_identification(p, dataclasses.replace(cfg, plant="linear"))
     e = fi.estimate
+    lin = linearize(p)
     numbers.update({
         "hhat_num": list(map(float, e.num)), "hhat_den": list(map(float, e.den)),
         "hhat_param_std": None if e.param_std is None else list(map(float, e.param_std)),
@@ -329,8 +330,8 @@ def build_report(out_dir: str | Path, *, seed: int = 0, reduced: bool = False,
         "vmax_mm_s": float(np.abs(fi.data.v).max() * 1e3),
         "inv_kf_mm_s": 1e3 / p.k_f,
         "ps_mpa": p.ps / 1e6,
-        "gain_positive": float(linearize(p).tf_coeffs("positive")[0][-1]),
-        "gain_negative": float(linearize(p).tf_coeffs("negative")[0][-1]),
+        "gain_positive": float(lin.tf_coeffs("positive")[0][-1]),
+        "gain_negative": float(lin.tf_coeffs("negative")[0][-1]),
         "paper_eq26_from_eq25": [list(map(float, a)) for a in open_loop_from_closed(*PAPER_EQ25, kp=cfg.kp)],
         "paper_eq25": {"num": list(PAPER_EQ25[0]), "den": list(PAPER_EQ25[1]), "fit_percent": PAPER_FIT_PERCENT},
         "paper_eq26": {"num": list(PAPER_EQ26[0]), "den": list(PAPER_EQ26[1])},

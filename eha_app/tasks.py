@@ -45,10 +45,10 @@ def apply_locked(fn: Callable[[], None], doc=None) -> None:
 
 async def run_task(compute: Callable[[], object], apply: Callable[[object, float], None],
                    fail: Callable[[str], None], busy: list,
-                   apply_bokeh: Callable[[object], None] | None = None) -> None:
+                   apply_bokeh: Callable[[object, float], None] | None = None) -> None:
     """Compute in a thread, then show the result.
 
-    ``apply_bokeh(result)`` changes raw Bokeh models and runs under the
+    ``apply_bokeh(result, seconds)`` changes raw Bokeh models and runs under the
     session document's lock; ``apply(result, seconds)`` changes Panel
     components and runs right here in the coroutine, where Panel schedules
     the updates itself. (Panel updates made inside a bare Bokeh next-tick
@@ -69,7 +69,7 @@ async def run_task(compute: Callable[[], object], apply: Callable[[object, float
         result = await future
         elapsed = time.perf_counter() - t0
         if apply_bokeh is not None:
-            apply_locked(lambda: apply_bokeh(result), doc)
+            apply_locked(lambda: apply_bokeh(result, elapsed), doc)
         apply(result, elapsed)
     except Exception as exc:  # noqa: BLE001 - any failure becomes a message in the page
         log.warning("computation failed: %s\n%s", exc, traceback.format_exc())

@@ -7,6 +7,8 @@ import math
 
 import panel as pn
 import param
+from bokeh.layouts import column as bokeh_column
+from bokeh.models import Div
 
 from eha_core.experiments import PAPER_CASES
 from eha_core.signals import ZERO, Chirp, Sine, Square, Step, WhiteNoise
@@ -96,12 +98,16 @@ class SimulationTab(pn.viewable.Viewer):
         self.last_elapsed_s = float("nan")
         self.run_count = 0
         self.grid = TimeSeriesGrid()
-        self.plot_pane = pn.pane.Bokeh(self.grid.layout, sizing_mode="stretch_width", min_height=560)
+        # the status line is a Bokeh Div in the grid's layout, changed after the data
+        # in the same locked callback: the browser never shows a status ahead of its plots
+        self.info = Div(text="Choose a case or an input, then run a model.", sizing_mode="stretch_width",
+                        css_classes=["eha-sim-info"])
+        self.plot_pane = pn.pane.Bokeh(bokeh_column(self.info, self.grid.layout, sizing_mode="stretch_width"),
+                                       sizing_mode="stretch_width", min_height=580)
         # the loading indicator goes on a Panel layout: setting it on the Bokeh pane
         # would touch the raw Bokeh model outside the document lock
         self.plot_area = pn.Column(self.plot_pane, sizing_mode="stretch_width", css_classes=["eha-sim-plots"])
-        self.info = pn.pane.HTML("Choose a case or an input, then run a model.", sizing_mode="stretch_width",
-                                 css_classes=["eha-sim-info"])
+        self.notice = pn.pane.HTML("", visible=False, sizing_mode="stretch_width")
         self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width")
         self.t_end_error = pn.pane.HTML("", visible=False, styles={"color": "#b00020", "font-size": "12px"},
                                         css_classes=["eha-error", "eha-error-t_end"])
@@ -133,7 +139,9 @@ class SimulationTab(pn.viewable.Viewer):
         self._update_enabled()
         # open on the paper's Fig. 2 (four cases, nonlinear) rather than on empty axes
         self.request.preset = "all"
-        self._show(self.compute("nonlinear"), float("nan"), update_grid=True)
+        first = self.compute("nonlinear")
+        self._draw(first, float("nan"))
+        self._show(first, float("nan"))
 
     # -- events ------------------------------------------------------------------
     def _preset_handler(self, preset):
@@ -179,9 +187,9 @@ class SimulationTab(pn.viewable.Viewer):
         ok = self.state.valid and not message
         for b in list(self.run_buttons.values()) + self.preset_buttons:
             b.disabled = not ok
-        if not self.state.valid:
-            self.info.object = ('<span class="eha-warn">A parameter on the first tab is not valid: '
-                                'fix it to run the models.</span>')
+        self.notice.object = ('<span class="eha-warn">A parameter on the first tab is not valid: '
+                              'fix it to run the models.</span>')
+        self.notice.visible = not self.state.valid
 
     # -- running -------------------------------------------------------------------
     def compute(self, model: str):
@@ -204,21 +212,23 @@ class SimulationTab(pn.viewable.Viewer):
             self.alert.visible = True
 
         await run_task(lambda: self.compute(model), self._show, fail, busy=[self.plot_area],
-                       apply_bokeh=self.grid.update)
+                       apply_bokeh=self._draw)
 
-    def _show(self, results, elapsed: float, update_grid: bool = False) -> None:
-        """Panel side of showing a run (the grid's Bokeh models are updated separately)."""
+    def _draw(self, results, elapsed: float) -> None:
+        """Bokeh side of showing a run: the plots' data, then the status line."""
         self.run_count += 1
-        self.results = results
-        self.last_elapsed_s = elapsed
-        if update_grid:
-            self.grid.update(results)
-        failed = [r for r in results if not r.success]
+        self.grid.update(results)
         what = ", ".join(dict.fromkeys(r.label for r in results))
         models = " and ".join(dict.fromkeys(r.model for r in results))
         timing = "" if math.isnan(elapsed) else f", computed in {elapsed * 1e3:.0f} ms"
-        self.info.object = (f"<b>{what}</b> — {models} model, {results[0].t[-1]:g} s{timing}. "
-                            f"<span class='eha-run-count' style='color:#999'>run {self.run_count}</span>")
+        self.info.text = (f"<b>{what}</b> — {models} model, {results[0].t[-1]:g} s{timing}. "
+                          f"<span class='eha-run-count' style='color:#999'>run {self.run_count}</span>")
+
+    def _show(self, results, elapsed: float) -> None:
+        """Panel side of showing a run: results for the download, failures."""
+        self.results = results
+        self.last_elapsed_s = elapsed
+        failed = [r for r in results if not r.success]
         if failed:
             self.alert.object = "; ".join(f"{r.label} ({r.model}): {r.message}" for r in failed)
             self.alert.visible = True
@@ -258,5 +268,5 @@ class SimulationTab(pn.viewable.Viewer):
                          title="Input and disturbance", collapsed=False, width=280)
         runs = pn.Column(*self.run_buttons.values(), self.download, width=280)
         side = pn.Column(presets, runs, custom, width=290)
-        main = pn.Column(self.info, self.alert, self.plot_area, sizing_mode="stretch_width")
+        main = pn.Column(self.notice, self.alert, self.plot_area, sizing_mode="stretch_width")
         return pn.Row(side, main, sizing_mode="stretch_width")

@@ -39,7 +39,7 @@ def test_simulation_runs_four_case_comparison(run_async):
     np.testing.assert_allclose(src["x_2"][-1], tab.results[2].x[-1] * 1e3)
     np.testing.assert_allclose(src["p2_7"][-1], tab.results[7].p2[-1] * 1e-6)
     assert sum(r.visible for r in tab.grid.renderers[0]) == 8
-    assert "computed in" in tab.info.object
+    assert "computed in" in tab.info.text
     df = pd.read_csv(io.StringIO(tab._csv().read().decode()))
     assert list(df.columns) == ["run", "model", "t", "x", "v", "p1", "p2", "u", "d"]
     assert len(df) == 8 * 5001

@@ -5,7 +5,7 @@ from __future__ import annotations
 import statistics
 import time
 
-from conftest import text_of, wait_until
+from tests.ui.browser_helpers import text_of, wait_until
 
 STATE_LABELS = ["x [mm]", "v [mm/s]", "p₁ [MPa]", "p₂ [MPa]"]
 

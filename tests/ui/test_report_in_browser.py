@@ -2,7 +2,7 @@
 
 import pytest
 
-from conftest import IGNORED_CONSOLE
+from tests.ui.browser_helpers import IGNORED_CONSOLE
 
 from eha_app.report import build_report
 
