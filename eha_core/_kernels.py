@@ -61,11 +61,14 @@ def _f(mode, x, v, p1, p2, u, d, prm, lin):
 
 @njit(cache=True, nogil=True)
 def integrate(y0, h, n_steps, sub, prm, mode, lin, u_st, d_st,
-              ctrl, kp, r_st, ctrl_every, u_limit, out):
-    """Integrate one run; fill ``out`` (n_out x 5: x, v, p1, p2, u).
+              ctrl, kp, r_st, ctrl_every, u_limit, out, y_end):
+    """Integrate one run; fill ``out`` (n_out x 5: x, v, p1, p2, u) and the final state ``y_end``.
 
     Returns the number of the step at which the state stopped being finite,
-    or -1 when the run completed.
+    or -1 when the run completed. A long run is integrated in chunks (see
+    :mod:`eha_core.simulate`): a chunk starts at an output sample and a
+    controller instant, and gets an ``out`` with one row per output sample it
+    starts (plus the last one, at t_end, for the last chunk only).
     """
     x, v, p1, p2 = y0[0], y0[1], y0[2], y0[3]
     bounded = mode == NONLINEAR
@@ -120,6 +123,10 @@ def integrate(y0, h, n_steps, sub, prm, mode, lin, u_st, d_st,
             x, v, p1, p2 = project_state(x, v, p1, p2, prm)
         if not (np.isfinite(x) and np.isfinite(v) and np.isfinite(p1) and np.isfinite(p2)):
             return i
+    y_end[0] = x
+    y_end[1] = v
+    y_end[2] = p1
+    y_end[3] = p2
     # the last sample, at t_end
     if k_out < out.shape[0]:
         if ctrl == ZOH:
@@ -144,8 +151,8 @@ def integrate(y0, h, n_steps, sub, prm, mode, lin, u_st, d_st,
 
 @njit(cache=True, nogil=True, parallel=True)
 def integrate_batch(y0s, h, n_steps, sub, prms, mode, lin, u_sts, d_sts,
-                    ctrl, kp, r_sts, ctrl_every, u_limit, outs, status):
+                    ctrl, kp, r_sts, ctrl_every, u_limit, outs, status, y_ends):
     """:func:`integrate` over a batch of runs, in parallel over the cores."""
     for j in prange(y0s.shape[0]):
         status[j] = integrate(y0s[j], h, n_steps, sub, prms[j], mode, lin[j], u_sts[j], d_sts[j],
-                              ctrl, kp, r_sts[j], ctrl_every, u_limit, outs[j])
+                              ctrl, kp, r_sts[j], ctrl_every, u_limit, outs[j], y_ends[j])

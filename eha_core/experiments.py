@@ -19,6 +19,7 @@ from dataclasses import field
 
 import numpy as np
 
+from .cancel import check
 from .params import ActuatorParams
 from .signals import ZERO, Signal, Sine, WhiteNoise
 from .simulate import SimulationResult, simulate, simulate_many
@@ -26,7 +27,7 @@ from .simulate import SimulationResult, simulate, simulate_many
 __all__ = [
     "Case", "PAPER_CASES", "run_paper_cases",
     "LSE_INPUT", "LSE_INPUT_RICH", "LSE_INPUT_RICH_T_END", "LSE_SCENARIOS", "PAPER_TABLE4", "PAPER_TABLE3_BETA_E", "parse_disturbance",
-    "lse_simulation", "lse_data", "run_lse", "lse_resimulation", "run_lse_table",
+    "lse_simulation", "lse_data", "run_lse", "lse_resimulation", "run_lse_table", "lse_cost",
     "FrequencyExperiment", "FrequencyIdentification", "run_frequency_identification",
     "PAPER_EQ25", "PAPER_EQ26", "PAPER_FIT_PERCENT", "PAPER_BETA_E_HAT",
 ]
@@ -65,7 +66,7 @@ PAPER_CASES: dict[int, Case] = {
 
 def run_paper_cases(params: ActuatorParams | None = None, model: str = "nonlinear",
                     cases=(1, 2, 3, 4), *, dt: float = 1e-3, branch: str = "switching",
-                    t_end: float | None = None, **kwargs) -> list[SimulationResult]:
+                    t_end: float | None = None, cancel=None, **kwargs) -> list[SimulationResult]:
     """Simulate the chosen paper cases as one batch (Fig. 2: nonlinear, Fig. 3: linear).
 
     ``t_end`` shortens (or lengthens) the paper's 5 s horizon.
@@ -78,7 +79,7 @@ def run_paper_cases(params: ActuatorParams | None = None, model: str = "nonlinea
     if t_end is None:
         t_end = chosen[0].t_end if chosen else 5.0
     return simulate_many(params, [c.u for c in chosen], [c.d for c in chosen], t_end=t_end, dt=dt,
-                         model=model, branch=branch, labels=[c.label for c in chosen], **kwargs)
+                         model=model, branch=branch, labels=[c.label for c in chosen], cancel=cancel, **kwargs)
 
 
 # -- time-domain identification (section III-A, Tables 3-4) --------------------------
@@ -152,19 +153,20 @@ def parse_disturbance(spec: str | Signal, *, seed: int = 0, dt: float = 1e-3, na
 
 
 def lse_simulation(params: ActuatorParams | None = None, disturbance: str | Signal = "none", *,
-                   u: Signal = LSE_INPUT, t_end: float = 5.0, dt: float = 1e-3, seed: int = 0) -> SimulationResult:
+                   u: Signal = LSE_INPUT, t_end: float = 5.0, dt: float = 1e-3, seed: int = 0,
+                   cancel=None) -> SimulationResult:
     """Simulate the nonlinear plant for the least-squares experiment (sampled at dt)."""
     d = parse_disturbance(disturbance, seed=seed, dt=dt)
-    return simulate(params, u=u, d=d, t_end=t_end, dt=dt, label=f"d = {d.label}")
+    return simulate(params, u=u, d=d, t_end=t_end, dt=dt, label=f"d = {d.label}", cancel=cancel)
 
 
 def lse_data(params: ActuatorParams | None = None, disturbance: str | Signal = "none", *,
              u: Signal = LSE_INPUT, t_end: float = 5.0, dt: float = 1e-3, seed: int = 0,
-             measurement_noise: dict[str, float] | None = None):
+             measurement_noise: dict[str, float] | None = None, cancel=None):
     """Measurements for the least squares: the simulated sensors, optionally noisy."""
     from .identify.lse import MeasuredData
 
-    res = lse_simulation(params, disturbance, u=u, t_end=t_end, dt=dt, seed=seed)
+    res = lse_simulation(params, disturbance, u=u, t_end=t_end, dt=dt, seed=seed, cancel=cancel)
     if not res.success:
         raise RuntimeError(f"the simulation failed: {res.message}")
     data = MeasuredData.from_simulation(res, source=res.label)
@@ -176,17 +178,19 @@ def lse_data(params: ActuatorParams | None = None, disturbance: str | Signal = "
 def run_lse(params: ActuatorParams | None = None, disturbance: str | Signal = "none", *,
             disturbance_model: str = "constant", disturbance_freq_hz: float | None = None,
             u: Signal = LSE_INPUT, t_end: float = 5.0, dt: float = 1e-3, seed: int = 0,
-            measurement_noise: dict[str, float] | None = None, tau_f: float = 0.01):
+            measurement_noise: dict[str, float] | None = None, tau_f: float = 0.01, cancel=None):
     """Simulate a scenario and identify it: the time-domain experiment in one call."""
     from .identify.lse import identify_lse
 
     params = params if params is not None else ActuatorParams()
-    data = lse_data(params, disturbance, u=u, t_end=t_end, dt=dt, seed=seed, measurement_noise=measurement_noise)
+    data = lse_data(params, disturbance, u=u, t_end=t_end, dt=dt, seed=seed, measurement_noise=measurement_noise,
+                    cancel=cancel)
     return identify_lse(data, params, tau_f=tau_f, disturbance_model=disturbance_model,
                         disturbance_freq_hz=disturbance_freq_hz)
 
 
-def lse_resimulation(result, params: ActuatorParams, measured, *, u: Signal = LSE_INPUT) -> SimulationResult:
+def lse_resimulation(result, params: ActuatorParams, measured, *, u: Signal = LSE_INPUT,
+                     cancel=None) -> SimulationResult:
     """The nonlinear model re-simulated with the estimates, from the measured initial state.
 
     The disturbance is what the model estimated: d0, plus the sinusoid for the
@@ -200,17 +204,40 @@ def lse_resimulation(result, params: ActuatorParams, measured, *, u: Signal = LS
         d = Sine(result.estimates["d_sin"], f) + Sine(result.estimates["d_cos"], f, phase=math.pi / 2)
     t_end = float(measured.t[-1] - measured.t[0])
     x0 = [measured.x[0], measured.v[0], measured.p1[0], measured.p2[0]]
-    return simulate(est, u=u, d=d, t_end=t_end, dt=measured.ts, x0=x0, label="re-simulated")
+    return simulate(est, u=u, d=d, t_end=t_end, dt=measured.ts, x0=x0, label="re-simulated", cancel=cancel)
 
 
 def run_lse_table(params: ActuatorParams | None = None, *, disturbance_model: str = "constant",
-                  seed: int = 0, u: Signal = LSE_INPUT, t_end: float = 5.0) -> dict:
+                  seed: int = 0, u: Signal = LSE_INPUT, t_end: float = 5.0, cancel=None) -> dict:
     """Table 4: the four disturbance scenarios, identified with one disturbance model."""
-    return {name: run_lse(params, spec, disturbance_model=disturbance_model, seed=seed, u=u, t_end=t_end)
+    return {name: run_lse(params, spec, disturbance_model=disturbance_model, seed=seed, u=u, t_end=t_end,
+                          cancel=cancel)
             for name, spec in LSE_SCENARIOS.items()}
 
 
+#: Peak memory of identify_lse per measured sample [bytes]: regressors and
+#: filters on the 16-times finer spline grid (tracemalloc: 2.06 kB per sample
+#: for 5 s and 20 s records).
+LSE_BYTES_PER_SAMPLE = 2100
+
+
+def lse_cost(t_end: float = 5.0, dt: float = 1e-3):
+    """Estimated cost of the least-squares experiment (its simulation and estimation)."""
+    from .simulate import SimulationCost, simulation_cost
+
+    sim = simulation_cost(t_end, dt)
+    n = int(round(t_end / dt)) + 1
+    return SimulationCost(steps=sim.steps, output_samples=sim.output_samples,
+                          peak_bytes=max(sim.peak_bytes, n * LSE_BYTES_PER_SAMPLE), h=sim.h)
+
+
 # -- frequency-domain identification (section III-B, eqs. 19-27, Figs. 8-13) ----------
+
+#: Peak memory of run_frequency_identification per sample beyond the
+#: simulations' chunk buffers [bytes]: tfest's filtered regressors,
+#: instruments and Jacobian, the ETFE, the validation (tracemalloc: 3.1-3.2 kB
+#: per sample at N = 1000, 4000 and 20000).
+FREQUENCY_BYTES_PER_SAMPLE = 3200
 
 #: The paper's estimates: H_hat (eq. 25), its fit, P_hat (eq. 26), beta_e.
 PAPER_EQ25 = ((2.932e3,), (1.0, 11.12, 1.716e4, 3.539e-6))
@@ -281,14 +308,23 @@ class FrequencyExperiment:
         return idinput([self.n_samples, 1, 1], self.signal_type, self.band, self.range,
                        self.sinedata, seed=self.seed if seed is None else seed)
 
-    def closed_loop(self, params: ActuatorParams, excitation) -> SimulationResult:
+    def closed_loop(self, params: ActuatorParams, excitation, cancel=None) -> SimulationResult:
         """Run the loop on ``excitation.u`` and record r, u, x at Ts."""
         from .simulate import simulate_closed_loop
 
         model = "nonlinear" if self.plant == "nonlinear" else "linear"
         return simulate_closed_loop(params, excitation.u, kp=self.kp, ts=self.ts,
                                     controller=self.controller, model=model,
-                                    label=f"closed loop, seed {excitation.seed}")
+                                    label=f"closed loop, seed {excitation.seed}", cancel=cancel)
+
+    def cost(self):
+        """Estimated cost of :func:`run_frequency_identification`: two closed-loop
+        runs (estimation and validation) and the estimation."""
+        from .simulate import SimulationCost, simulation_cost
+
+        one = simulation_cost((self.n_samples - 1) * self.ts, self.ts, ts=self.ts)
+        return SimulationCost(steps=2 * one.steps, output_samples=2 * one.output_samples,
+                              peak_bytes=one.peak_bytes + self.n_samples * FREQUENCY_BYTES_PER_SAMPLE, h=one.h)
 
 
 @dataclass(frozen=True, eq=False)
@@ -342,7 +378,8 @@ class FrequencyIdentification:
 
 
 def run_frequency_identification(params: ActuatorParams | None = None,
-                                 config: FrequencyExperiment | None = None) -> FrequencyIdentification:
+                                 config: FrequencyExperiment | None = None, *,
+                                 cancel=None) -> FrequencyIdentification:
     """Run the paper's closed-loop experiment and everything that follows from it.
 
     1. excitation (Fig. 8) and closed-loop data (Fig. 9);
@@ -365,8 +402,9 @@ def run_frequency_identification(params: ActuatorParams | None = None,
     config = config if config is not None else FrequencyExperiment()
     timings = {}
     t0 = time.perf_counter()
+    check(cancel)
     excitation = config.excitation()
-    data = config.closed_loop(params, excitation)
+    data = config.closed_loop(params, excitation, cancel)
     timings["experiment"] = time.perf_counter() - t0
     if not data.success:
         raise RuntimeError(f"the closed-loop simulation failed: {data.message}")
@@ -376,7 +414,8 @@ def run_frequency_identification(params: ActuatorParams | None = None,
     init = theoretical if (config.n_poles, config.n_zeros) == (3, 0) else None
     t0 = time.perf_counter()
     est = tfest(data.r, data.x, config.ts, config.n_poles, config.n_zeros,
-                initial_condition=config.initial_condition, input_offset=config.input_offset, init=init)
+                initial_condition=config.initial_condition, input_offset=config.input_offset, init=init,
+                cancel=cancel)
     timings["tfest"] = time.perf_counter() - t0
 
     freqs = excitation.freqs if excitation.freqs.size else None
@@ -384,7 +423,8 @@ def run_frequency_identification(params: ActuatorParams | None = None,
 
     validation_excitation = config.excitation(config.validation_seed if config.validation_seed is not None
                                               else excitation.seed + 1)
-    validation_data = config.closed_loop(params, validation_excitation)
+    validation_data = config.closed_loop(params, validation_excitation, cancel)
+    check(cancel)
     open_loop = back = validation = residuals = None
     if est.success and np.all(np.isfinite(est.den)):
         validation = compare(est.num, est.den, validation_data.r, validation_data.x, config.ts,

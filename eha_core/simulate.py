@@ -35,7 +35,7 @@ from .signals import ZERO, Constant, Sampled, Signal
 
 __all__ = [
     "SimulationResult", "simulate", "simulate_many", "simulate_closed_loop", "runs_to_pandas",
-    "DEFAULT_H_MAX", "MODELS", "BRANCHES", "CONTROLLERS",
+    "simulation_cost", "SimulationCost", "DEFAULT_H_MAX", "MODELS", "BRANCHES", "CONTROLLERS", "CHUNK_STEPS",
 ]
 
 #: Largest integration step [s]. RK4 at 5e-4 s keeps the error near 2e-7 of
@@ -51,6 +51,11 @@ MAX_STEPS = 20_000_000
 MAX_OUTPUT_SAMPLES = 2_000_000
 
 _STATE_NAMES = ("x", "v", "p1", "p2")
+#: Integration steps per chunk. Inputs are sampled at the RK4 stage times one
+#: chunk at a time, so memory follows the output, not the step count (a
+#: 20 M-step closed loop needed 1.3 GB of stage samples at once), and a
+#: computation can be cancelled between chunks (about 5 ms of work each).
+CHUNK_STEPS = 50_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -166,20 +171,22 @@ def _sample(sig: Signal, name: str, t: np.ndarray) -> np.ndarray:
     return vals
 
 
-def _stage_samples(sig: Signal, name: str, h: float, n_steps: int) -> np.ndarray:
-    """Values at every step's RK4 stage times: start, middle and end.
+def _stage_samples(sig: Signal, name: str, h: float, n_steps: int, start: int = 0) -> np.ndarray:
+    """Values at the RK4 stage times (start, middle, end) of steps ``start .. start + n_steps``.
 
     For a signal that can jump, the end value is taken just before the step's
     end, so that a value held from the next sample on is not seen early.
+    Times are integer multiples of h/2 counted from t = 0, so a chunk's
+    samples equal those of the whole run bit for bit.
     """
-    half = _sample(sig, name, np.arange(2 * n_steps + 3) * (0.5 * h))
+    half = _sample(sig, name, (2 * start + np.arange(2 * n_steps + 3)) * (0.5 * h))
     out = np.empty((n_steps + 1, 3))
     out[:, 0] = half[0:2 * n_steps + 1:2]
     out[:, 1] = half[1:2 * n_steps + 2:2]
     if sig.continuous:
         out[:, 2] = half[2:2 * n_steps + 3:2]
     else:
-        out[:, 2] = _sample(sig, name, np.arange(n_steps + 1) * h + h * (1.0 - 1e-6))
+        out[:, 2] = _sample(sig, name, (start + np.arange(n_steps + 1)) * h + h * (1.0 - 1e-6))
     return out
 
 
@@ -259,12 +266,114 @@ def _finish(out, status, t, d_vals, params, model_label, label, r=None, controll
     )
 
 
+def _chunk_length(n_steps: int, *aligns: int) -> int:
+    """Steps per chunk: a multiple of every alignment (output interval, controller
+    period), so each chunk starts at an output sample and a controller instant."""
+    period = 1
+    for a in aligns:
+        period = period * a // math.gcd(period, a)
+    return max(period, (CHUNK_STEPS // period) * period)
+
+
+def _integrate_chunked(n_runs, y0s, h, n_steps, sub, prms, mode, lins, stage_sources, ctrl, kp, ctrl_every,
+                       u_limit, n_out, cancel, parallel):
+    """Integrate ``n_runs`` runs chunk by chunk; returns (outs, status).
+
+    ``stage_sources(j, start, count)`` gives run j's (u, d, r) stage samples
+    for steps ``start .. start + count``. The result is bitwise the same as one
+    kernel call over all steps (tests/core/test_simulate.py checks it).
+    """
+    from . import _kernels as K
+
+    chunk = _chunk_length(n_steps, sub, ctrl_every)
+    outs = np.zeros((n_runs, n_out, 5))
+    status = np.full(n_runs, -1, dtype=np.int64)
+    y = np.array(y0s, dtype=float).reshape(n_runs, 4)
+    start = 0
+    while start < n_steps:
+        if cancel is not None:
+            cancel.check()
+        count = min(chunk, n_steps - start)
+        last = start + count == n_steps
+        k0 = start // sub
+        rows = count // sub + (1 if last else 0)
+        stages = [stage_sources(j, start, count) for j in range(n_runs)]
+        y_end = np.empty((n_runs, 4))
+        if n_runs == 1 or not parallel:
+            for j in range(n_runs):
+                if status[j] >= 0:
+                    continue
+                u_st, d_st, r_st = stages[j]
+                st = K.integrate(y[j], h, count, sub, prms[j], mode, lins[j], u_st, d_st, ctrl, kp, r_st,
+                                 ctrl_every, u_limit, outs[j, k0:k0 + rows], y_end[j])
+                if st >= 0:
+                    status[j] = start + st
+        else:
+            buf = np.zeros((n_runs, rows, 5))
+            st = np.full(n_runs, -1, dtype=np.int64)
+            K.integrate_batch(y, h, count, sub, prms, mode, lins, np.stack([g[0] for g in stages]),
+                              np.stack([g[1] for g in stages]), ctrl, kp, np.stack([g[2] for g in stages]),
+                              ctrl_every, u_limit, buf, st, y_end)
+            for j in range(n_runs):
+                if status[j] >= 0:
+                    continue
+                outs[j, k0:k0 + rows] = buf[j]
+                if st[j] >= 0:
+                    status[j] = start + st[j]
+        y = y_end
+        start += count
+        if np.all(status >= 0):
+            break
+    return outs, status
+
+
+def simulation_cost(t_end: float, dt: float, *, ts: float | None = None, h_max: float = DEFAULT_H_MAX,
+                    n_runs: int = 1) -> "SimulationCost":
+    """What a simulation will cost, without running it: steps, samples, peak memory, seconds.
+
+    >>> c = simulation_cost(5.0, 1e-3, n_runs=4)
+    >>> c.steps, c.output_samples
+    (40000, 20004)
+    """
+    h, sub, ctrl_every, n_steps, n_out = _grid(t_end, dt, h_max, ts)
+    chunk = min(n_steps, _chunk_length(n_steps, sub, ctrl_every))
+    # outputs (n_out x 5), the result's copies of them, d, t and r; per chunk the
+    # stage samples of two signals (u and d, or d and r: chunk x 3 each) and,
+    # while one is sampled, its half-step times and values
+    per_run_out = n_out * (5 + 5 + 3) * 8
+    per_run_chunk = (chunk + 1) * 3 * 8 * 2 + (2 * chunk + 3) * 8 * 2
+    return SimulationCost(steps=n_runs * n_steps, output_samples=n_runs * n_out,
+                          peak_bytes=n_runs * (per_run_out + per_run_chunk), h=h)
+
+
+@dataclass(frozen=True)
+class SimulationCost:
+    """Estimated cost of a computation: integration steps, samples, peak memory [bytes]."""
+
+    steps: int
+    output_samples: int
+    peak_bytes: int
+    h: float = float("nan")
+
+    #: RK4 steps per second of one core with the compiled kernel (measured with
+    #: benchmarks/bench_simulate.py on a 2-core machine; a rough guide).
+    STEPS_PER_SECOND = 1.0e7
+
+    @property
+    def seconds_estimate(self) -> float:
+        return self.steps / self.STEPS_PER_SECOND
+
+    def __add__(self, other: "SimulationCost") -> "SimulationCost":
+        return SimulationCost(self.steps + other.steps, self.output_samples + other.output_samples,
+                              max(self.peak_bytes, other.peak_bytes), self.h)
+
+
 # -- public API --------------------------------------------------------------------
 
 def simulate(params: ActuatorParams | None = None, u=None, d=None, *, t_end: float = 5.0,
              dt: float = 1e-3, model: str = "nonlinear", branch: str = "switching",
              x0=None, op: OperatingPoint | None = None, h_max: float = DEFAULT_H_MAX,
-             label: str = "") -> SimulationResult:
+             label: str = "", cancel=None) -> SimulationResult:
     """Open-loop run: valve command ``u(t)`` [V] and load disturbance ``d(t)`` [N].
 
     Parameters
@@ -286,25 +395,28 @@ def simulate(params: ActuatorParams | None = None, u=None, d=None, *, t_end: flo
         Linearisation point (default :func:`eha_core.linear.operating_point`).
     h_max : float
         Largest integration step [s].
+    cancel : eha_core.cancel.CancelToken, optional
+        Checked between integration chunks; raises Cancelled when set.
     """
     params = params if params is not None else ActuatorParams()
     return simulate_many([params], [u], [d], t_end=t_end, dt=dt, model=model, branch=branch,
                          x0s=None if x0 is None else [x0], op=op, h_max=h_max,
-                         labels=[label])[0]
+                         labels=[label], cancel=cancel)[0]
 
 
 def simulate_many(params: ActuatorParams | Sequence[ActuatorParams] | None, us: Sequence, ds: Sequence | None = None,
                   *, t_end: float = 5.0, dt: float = 1e-3, model: str = "nonlinear",
                   branch: str = "switching", x0s: Sequence | None = None,
                   op: OperatingPoint | None = None, h_max: float = DEFAULT_H_MAX,
-                  labels: Sequence[str] | None = None) -> list[SimulationResult]:
+                  labels: Sequence[str] | None = None, cancel=None, parallel: bool = True) -> list[SimulationResult]:
     """Several open-loop runs on one time grid, integrated in parallel.
 
     ``params`` is one parameter set for all runs or one per run; ``us``/``ds``
-    give each run's input and disturbance (see :func:`simulate`).
+    give each run's input and disturbance (see :func:`simulate`). ``cancel``
+    (a :class:`~eha_core.cancel.CancelToken`) is checked between chunks;
+    ``parallel=False`` integrates the runs one after another on the calling
+    thread's core (a server that runs several users' jobs at once wants that).
     """
-    from . import _kernels as K
-
     n = len(us)
     if n == 0:
         return []
@@ -319,36 +431,31 @@ def simulate_many(params: ActuatorParams | Sequence[ActuatorParams] | None, us: 
             raise ValueError(f"params: {len(params_list)} parameter sets given for {n} runs")
     labels = list(labels) if labels is not None else [""] * n
     mode = _mode(model, branch)
+    from . import _kernels as K
+
     h, sub, _, n_steps, n_out = _grid(t_end, dt, h_max)
     t = np.arange(n_out) * dt
 
     y0s = np.empty((n, 4))
     prms = np.empty((n, 14))
     lins = np.empty((n, 32))
-    u_sts = np.empty((n, n_steps + 1, 3))
-    d_sts = np.empty((n, n_steps + 1, 3))
-    d_out = []
+    u_sigs, d_sigs, d_out = [], [], []
     for j in range(n):
         p = params_list[j]
         y0s[j] = _initial(p, x0s[j] if x0s is not None else None)
         prms[j] = pack_params(p)
         lins[j] = _lin_vector(p, op, mode != K.NONLINEAR)
-        u_sig = _as_signal(us[j], "u", t)
-        d_sig = _as_signal(ds[j], "d", t)
-        u_sts[j] = _stage_samples(u_sig, "u", h, n_steps)
-        d_sts[j] = _stage_samples(d_sig, "d", h, n_steps)
-        d_out.append(_sample(d_sig, "d", t))
+        u_sigs.append(_as_signal(us[j], "u", t))
+        d_sigs.append(_as_signal(ds[j], "d", t))
+        d_out.append(_sample(d_sigs[j], "d", t))
+    no_r = np.zeros((1, 3))
 
-    outs = np.zeros((n, n_out, 5))
-    status = np.full(n, -1, dtype=np.int64)
-    dummy_r = np.zeros((1, 3))
-    if n == 1:
-        status[0] = K.integrate(y0s[0], h, n_steps, sub, prms[0], mode, lins[0], u_sts[0], d_sts[0],
-                                K.OPEN_LOOP, 0.0, dummy_r, 1, 0.0, outs[0])
-    else:
-        r_sts = np.zeros((n, 1, 3))
-        K.integrate_batch(y0s, h, n_steps, sub, prms, mode, lins, u_sts, d_sts,
-                          K.OPEN_LOOP, 0.0, r_sts, 1, 0.0, outs, status)
+    def stages(j, start, count):
+        return (_stage_samples(u_sigs[j], "u", h, count, start), _stage_samples(d_sigs[j], "d", h, count, start),
+                no_r)
+
+    outs, status = _integrate_chunked(n, y0s, h, n_steps, sub, prms, mode, lins, stages, K.OPEN_LOOP, 0.0, 1,
+                                      0.0, n_out, cancel, parallel)
     name = _model_label(model, branch)
     return [_finish(outs[j], int(status[j]), t, d_out[j], params_list[j], name, labels[j], h=h)
             for j in range(n)]
@@ -359,7 +466,7 @@ def simulate_closed_loop(params: ActuatorParams | None = None, r=None, *, kp: fl
                          t_end: float | None = None, dt: float | None = None,
                          model: str = "nonlinear", branch: str = "switching", x0=None,
                          op: OperatingPoint | None = None, u_limit: float | None = None,
-                         h_max: float = DEFAULT_H_MAX, label: str = "") -> SimulationResult:
+                         h_max: float = DEFAULT_H_MAX, label: str = "", cancel=None) -> SimulationResult:
     """Closed loop with the proportional controller u = Kp (r - x) (eq. 22).
 
     Parameters
@@ -378,6 +485,8 @@ def simulate_closed_loop(params: ActuatorParams | None = None, r=None, *, kp: fl
         Output interval, default ``ts``.
     u_limit : float, optional
         Saturate the valve command to +-u_limit [V] (no limit by default).
+    cancel : eha_core.cancel.CancelToken, optional
+        Checked between integration chunks; raises Cancelled when set.
     """
     from . import _kernels as K
 
@@ -404,12 +513,14 @@ def simulate_closed_loop(params: ActuatorParams | None = None, r=None, *, kp: fl
         r_arr = np.asarray(r, dtype=float).ravel()
         r_sig = Sampled(np.arange(r_arr.size) * ts, r_arr, hold="zoh", name="r")
     d_sig = _as_signal(d, "d", t)
-    r_st = _stage_samples(r_sig, "r", h, n_steps)
-    d_st = _stage_samples(d_sig, "d", h, n_steps)
-    out = np.zeros((n_out, 5))
-    status = K.integrate(_initial(params, x0), h, n_steps, sub, pack_params(params), mode,
-                         _lin_vector(params, op, mode != K.NONLINEAR), np.zeros((1, 3)), d_st,
-                         K.ZOH if controller == "zoh" else K.CONTINUOUS, kp, r_st, ctrl_every,
-                         0.0 if u_limit is None else u_limit, out)
-    return _finish(out, status, t, _sample(d_sig, "d", t), params, _model_label(model, branch), label,
+    no_u = np.zeros((1, 3))
+
+    def stages(_j, start, count):
+        return no_u, _stage_samples(d_sig, "d", h, count, start), _stage_samples(r_sig, "r", h, count, start)
+
+    outs, status = _integrate_chunked(1, _initial(params, x0)[None, :], h, n_steps, sub, pack_params(params)[None, :],
+                                      mode, _lin_vector(params, op, mode != K.NONLINEAR)[None, :], stages,
+                                      K.ZOH if controller == "zoh" else K.CONTINUOUS, kp, ctrl_every,
+                                      0.0 if u_limit is None else u_limit, n_out, cancel, False)
+    return _finish(outs[0], int(status[0]), t, _sample(d_sig, "d", t), params, _model_label(model, branch), label,
                    r=_sample(r_sig, "r", t), controller=controller, kp=kp, h=h)

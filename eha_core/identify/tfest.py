@@ -317,11 +317,14 @@ class _OutputError:
     """
 
     def __init__(self, u: np.ndarray, y: np.ndarray, ts: float, n: int, estimate_x0: bool,
-                 estimate_offset: bool = False):
+                 estimate_offset: bool = False, cancel=None):
         self.u, self.y, self.ts, self.n = u, y, ts, n
         self.estimate_x0 = estimate_x0
         self.estimate_offset = estimate_offset
         self.nfev = 0
+        # every SRIVC iteration and output-error evaluation passes here: a
+        # cancelled computation stops within one simulation of the model
+        self.cancel = cancel
 
     @property
     def n_linear(self) -> int:
@@ -347,6 +350,8 @@ class _OutputError:
         With ``linear`` given, those coefficients are used instead of the
         least-squares ones (for the Jacobian at fixed linear terms).
         """
+        if self.cancel is not None:
+            self.cancel.check()
         self.nfev += 1
         num, den = _split(theta, self.n)
         if not np.all(np.isfinite(theta)):
@@ -733,7 +738,7 @@ def _finish(criterion, theta, n, m, ts, success, message, method, nit, srivc_the
 # ---------------------------------------------------------------------------
 def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_offset="zero",
           init=None, lambda_svf=None, refine=True, n_refine=2, max_iter=50, max_nfev=None,
-          tol=1e-10) -> TFEstimate:
+          tol=1e-10, cancel=None) -> TFEstimate:
     """Estimate a continuous-time transfer function from sampled data (MATLAB ``tfest``).
 
     SRIVC (refined instrumental variables with state-variable filters) gives
@@ -780,6 +785,9 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
     tol : float
         Relative tolerance: SRIVC stops when the coefficients change by less;
         ``xtol``, ``ftol`` and ``gtol`` of ``least_squares``.
+    cancel : eha_core.cancel.CancelToken, optional
+        Checked at every simulation of a candidate model; raises
+        :class:`~eha_core.cancel.Cancelled` when set.
 
     Returns
     -------
@@ -827,7 +835,7 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
         lambdas = _default_lambdas(u_arr.size, ts_f)
     starts += [("lambda", lam) for lam in lambdas]
     start_names += [f"lambda = {lam:.4g} rad/s" for lam in lambdas]
-    criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_x0, estimate_offset)
+    criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_x0, estimate_offset, cancel)
     candidates = []
     nit_total = 0
     for name, start in zip(start_names, starts):
@@ -900,7 +908,7 @@ def _distinct(candidates, k: int, n: int, m: int):
 
 
 def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", input_offset="zero",
-           max_nfev=None, tol=1e-10) -> TFEstimate:
+           max_nfev=None, tol=1e-10, cancel=None) -> TFEstimate:
     """Plain output-error fit of a continuous-time transfer function from a start model.
 
     The same criterion, parameterisation and optimiser as the second stage of
@@ -923,6 +931,8 @@ def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", input_offset="zero
         Maximum residual evaluations (default ``100 * n_params``).
     tol : float
         ``xtol``, ``ftol`` and ``gtol`` of ``least_squares``.
+    cancel : eha_core.cancel.CancelToken, optional
+        Checked at every simulation of the model.
 
     Returns
     -------
@@ -956,7 +966,7 @@ def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", input_offset="zero
     tol = positive_number("tol", tol)
     max_nfev = 100 * (n + m + 1) if max_nfev is None else positive_integer("max_nfev", max_nfev)
     theta0 = _model_coefficients((num_n, den_n), n, m, "num0/den0")
-    criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_x0, estimate_offset)
+    criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_x0, estimate_offset, cancel)
     cost0 = criterion.cost(theta0)
     if not np.isfinite(cost0):
         return _nan_estimate(n, m, ts_f, u_arr.size, estimate_x0, estimate_offset,
