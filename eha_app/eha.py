@@ -1,11 +1,17 @@
 """File-based entry point: `panel serve eha_app/eha.py` (or `eha serve`).
 
 Bokeh runs this file once per browser session, so every student gets a fresh
-app and state.
+app and state. The page's address carries what the student typed (see
+:mod:`eha_app.connection`): a reload or a shared link restores it.
 """
 
+import panel as pn
+
 from eha_app.app import create_app, warm_up
+from eha_app.serving import use_local_resources
 
 warm_up()
+use_local_resources(pn.state.curdoc)
 
-create_app().servable(title="EHA: modeling and identification")
+query = {k: v[-1].decode("utf-8", "replace") for k, v in (pn.state.session_args or {}).items() if v}
+create_app(query=query).servable(title="EHA: modeling and identification")

@@ -1,19 +1,37 @@
-"""HoloViews figures built from :mod:`eha_core` result objects.
+"""The app's and the report's figures: Bokeh models built once, data replaced in place.
 
-One builder per figure of the paper; the app and ``eha reproduce`` both use
-them. Display units: mm, mm/s, MPa, kN; the data stay SI in the core.
+Each figure class builds its Bokeh models when constructed (on the session's
+document, under its lock, in the app) and shows new data with ``update()``,
+which only replaces the contents of its ColumnDataSources and a few labels.
+Nothing here renders HoloViews: building figures in worker threads was what
+broke concurrent sessions (the renderer switches Bokeh's process-wide property
+validation off while it works, and two overlapping renders could leave it off
+for every student), and re-rendering a figure per result cost the event loop
+0.1-1 s where replacing its data costs a few milliseconds.
+
+The data a figure draws are computed beforehand, in a worker thread, by
+:func:`frequency_view` and :func:`lse_view` from the core's results; the
+figures only draw. Display units: mm, mm/s, MPa, kN; the core stays in SI.
+Curves are sent as float32 (7 digits are plenty on a screen, and it halves
+what each student's browser receives) and decimated to at most
+``MAX_POINTS`` points.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
-import holoviews as hv
-import holoviews.plotting.bokeh  # noqa: F401 - registers the Bokeh renderer for to_bokeh()
+from bokeh.layouts import column, gridplot, row
+from bokeh.models import (
+    BoxAnnotation, ColumnDataSource, DataRange1d, Div, HoverTool, Legend, LegendItem, Range1d, Span,
+)
+from bokeh.plotting import figure
 
 __all__ = [
-    "to_bokeh", "bokeh_rows", "TimeSeriesGrid", "STATE_PANELS", "CASE_COLORS", "style_for", "legend_html", "FIGURE_WIDTH",
-    "excitation_plot", "closed_loop_plot", "fit_plot", "validation_plot", "bode_plots",
-    "residual_plots", "lse_fit_plot", "decimate",
+    "STATE_PANELS", "CASE_COLORS", "FIGURE_WIDTH", "MAX_POINTS", "decimate", "style_for", "legend_html",
+    "TimeSeriesGrid", "ExcitationFigure", "ClosedLoopFigure", "FitFigure", "BodeFigure", "ValidationFigure",
+    "ResidualFigure", "LseFitFigure", "FrequencyView", "frequency_view", "LseView", "lse_view",
 ]
 
 #: (field, axis label, scale from SI to the display unit)
@@ -25,154 +43,44 @@ STATE_PANELS = (
 )
 CASE_COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
 _MODEL_DASH = {"nonlinear": "solid", "linear": "dashed", "linear-positive": "dotted", "linear-negative": "dotdash"}
-#: Points drawn per curve at most: a 5 s run at 1 kHz is shown every 2 ms, plenty for
-#: the paper's 2 Hz inputs and it halves what the browser receives.
+#: Points drawn per curve at most: a 5 s run at 1 kHz is shown every 2 ms, plenty
+#: for the paper's 2 Hz inputs, and it halves what the browser receives.
 MAX_POINTS = 2500
-
-
-def bokeh_rows(obj) -> list[list]:
-    """Render a HoloViews object to rows of Bokeh figures (a Layout: panel by panel).
-
-    Shared x axes are linked by giving the figures one range model. The app puts
-    each figure in its own Panel pane (a GridPlot swapped into a Panel pane
-    collapses to zero width); :func:`to_bokeh` joins them for standalone pages.
-    """
-    if not isinstance(obj, hv.Layout):
-        return [[hv.render(obj, backend="bokeh")]]
-    figures = [hv.render(item, backend="bokeh") for item in obj]
-    if hv.Store.lookup_options("bokeh", obj, "plot").kwargs.get("shared_axes", True):
-        for fig in figures[1:]:
-            fig.x_range = figures[0].x_range
-    ncols = obj._max_cols or len(figures)
-    return [figures[i:i + ncols] for i in range(0, len(figures), ncols)]
-
-
-def to_bokeh(obj):
-    """One Bokeh model for a HoloViews object (for standalone HTML, e.g. the report)."""
-    rows = bokeh_rows(obj)
-    if len(rows) == 1 and len(rows[0]) == 1:
-        return rows[0][0]
-    from bokeh.layouts import gridplot
-
-    return gridplot(rows, merge_tools=True, toolbar_location="right")
+#: Width in pixels of the identification figures: fits the app's main column at 1366 px.
+FIGURE_WIDTH = 1000
+_TOOLS = "pan,box_zoom,wheel_zoom,reset,save"
 
 
 def decimate(t: np.ndarray, *ys: np.ndarray, max_points: int = MAX_POINTS):
     """Every k-th sample so that at most ``max_points`` remain (the last one kept)."""
+    t = np.asarray(t)
     n = t.size
     if n <= max_points:
         return (t, *ys)
     k = int(np.ceil(n / max_points))
     idx = np.r_[np.arange(0, n, k), n - 1] if (n - 1) % k else np.arange(0, n, k)
-    return (t[idx], *(y[idx] for y in ys))
+    return (t[idx], *(np.asarray(y)[idx] for y in ys))
+
+
+def _f32(a) -> np.ndarray:
+    return np.ascontiguousarray(np.asarray(a, dtype=np.float32))
 
 
 def style_for(index: int, model: str) -> dict:
     return {"color": CASE_COLORS[index % len(CASE_COLORS)], "line_dash": _MODEL_DASH.get(model, "solid")}
 
 
-def _legend_label(res) -> str:
-    label = res.label or "run"
-    return f"{label} ({res.model})"
+def _escape(text: str) -> str:
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
 
 
-class TimeSeriesGrid:
-    """x, v, p1, p2 against t: a 2 x 2 grid of Bokeh figures with a shared time axis.
-
-    Built once and updated in place (:meth:`update`), which takes a few
-    milliseconds where re-rendering HoloViews overlays of eight curves takes
-    about a second. All lines read one ColumnDataSource (columns t, x_0..x_7,
-    v_0..v_7, ...), so an update is a single change for the browser to apply
-    rather than 32. Bokeh stops auto-ranging an axis once the user zooms, so a
-    zoom survives new data; a different set of curves or horizon resets the view.
-    """
-
-    def __init__(self, results=(), *, max_lines: int = 8, height: int = 250):
-        from bokeh.models import ColumnDataSource, DataRange1d, Div, HoverTool
-        from bokeh.plotting import figure
-
-        self.max_lines = max_lines
-        self._signature = None
-        self.legend = Div(text="", sizing_mode="stretch_width", styles={"font-size": "12px"})
-        self.source = ColumnDataSource(data=self._empty_columns())
-        self.x_range = DataRange1d(range_padding=0.01)
-        self.figures, self.renderers = [], []
-        for field, ylabel, _ in STATE_PANELS:
-            fig = figure(height=height, sizing_mode="stretch_width", x_range=self.x_range,
-                         y_range=DataRange1d(), tools="pan,box_zoom,wheel_zoom,reset,save",
-                         active_scroll=None, x_axis_label="t [s]", y_axis_label=ylabel,
-                         output_backend="canvas")
-            fig.toolbar.logo = None
-            fig.add_tools(HoverTool(tooltips=[("run", "$name"), ("t", "@t{0.000} s"), (ylabel, "$y{0.000}")]))
-            rends = []
-            for i in range(max_lines):
-                r = fig.line("t", f"{field}_{i}", source=self.source, line_width=1.6,
-                             color=CASE_COLORS[i % len(CASE_COLORS)], visible=False, name=f"slot {i}")
-                rends.append(r)
-            self.figures.append(fig)
-            self.renderers.append(rends)
-        if len(results):
-            self.update(results)
-
-    def _empty_columns(self, n: int = 0) -> dict:
-        cols = {"t": np.zeros(n)}
-        for field, _, _ in STATE_PANELS:
-            for i in range(self.max_lines):
-                cols[f"{field}_{i}"] = np.full(n, np.nan)
-        return cols
-
-    @property
-    def grid(self):
-        """The four figures as a Bokeh grid (shared toolbar)."""
-        from bokeh.layouts import gridplot
-
-        return gridplot([self.figures[:2], self.figures[2:]], sizing_mode="stretch_width", merge_tools=True,
-                        toolbar_location="right")
-
-    @property
-    def layout(self):
-        """Legend strip and grid, for embedding in a page."""
-        from bokeh.layouts import column
-
-        return column(self.legend, self.grid, sizing_mode="stretch_width")
-
-    def update(self, results) -> None:
-        """Show ``results`` (at most ``max_lines``, on one time grid), colour per label, dash per model."""
-        from bokeh.models import DataRange1d
-
-        results = list(results)[: self.max_lines]
-        keys: dict[str, int] = {}
-        for res in results:
-            keys.setdefault(res.label, len(keys))
-        signature = tuple((r.label, r.model, float(r.t[-1])) for r in results)
-        if self._signature is not None and signature != self._signature:
-            # a different set of curves: fresh auto-ranges (the user's zoom no longer applies)
-            self.x_range = DataRange1d(range_padding=0.01)
-            for fig in self.figures:
-                fig.x_range = self.x_range
-                fig.y_range = DataRange1d()
-        self._signature = signature
-        if results:
-            t = decimate(results[0].t)[0]
-            cols = self._empty_columns(t.size)
-            cols["t"] = t
-            for i, res in enumerate(results):
-                if res.t.size != results[0].t.size:
-                    raise ValueError("TimeSeriesGrid: all runs shown together must share one time grid")
-                for field, _, scale in STATE_PANELS:
-                    cols[f"{field}_{i}"] = decimate(res.t, getattr(res, field))[1] * scale
-        else:
-            cols = self._empty_columns()
-        self.source.data = cols
-        for k in range(len(STATE_PANELS)):
-            for i, r in enumerate(self.renderers[k]):
-                if i < len(results):
-                    style = style_for(keys[results[i].label], results[i].model)
-                    r.glyph.line_color = style["color"]
-                    r.glyph.line_dash = style["line_dash"]
-                    r.name = _legend_label(results[i])
-                r.visible = i < len(results)
-        self.legend.text = legend_html(results)
+def _figure(**kwargs):
+    kwargs.setdefault("tools", _TOOLS)
+    kwargs.setdefault("active_scroll", None)
+    kwargs.setdefault("output_backend", "canvas")
+    fig = figure(**kwargs)
+    fig.toolbar.logo = None
+    return fig
 
 
 def legend_html(results) -> str:
@@ -180,10 +88,7 @@ def legend_html(results) -> str:
     keys: dict[str, int] = {}
     for res in results:
         keys.setdefault(res.label, len(keys))
-    models = []
-    for res in results:
-        if res.model not in models:
-            models.append(res.model)
+    models = list(dict.fromkeys(res.model for res in results))
     parts = []
     for label, i in keys.items():
         color = CASE_COLORS[i % len(CASE_COLORS)]
@@ -201,132 +106,389 @@ def legend_html(results) -> str:
     return "".join(parts)
 
 
-def _escape(text: str) -> str:
-    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+# -- open-loop runs (Figs. 2-7) ---------------------------------------------------------
+
+class TimeSeriesGrid:
+    """x, v, p1, p2 against t: a 2 x 2 grid of figures with a shared time axis.
+
+    All curves of a panel are one MultiLine glyph reading one ColumnDataSource
+    shared by the four panels (columns xs, x, v, p1, p2 hold one array per run;
+    color, dash and label one value per run): a page holds 4 renderers instead
+    of 32, and an update is one change for the browser to apply. Bokeh stops
+    auto-ranging an axis once the user zooms, so a zoom survives new data; a
+    different set of curves or horizon resets the view.
+    """
+
+    def __init__(self, results=(), *, max_lines: int = 8, height: int = 250):
+        self.max_lines = max_lines
+        self._signature = None
+        self.legend = Div(text="", sizing_mode="stretch_width", styles={"font-size": "12px"})
+        self.source = ColumnDataSource(data=self._columns([]))
+        self.x_range = DataRange1d(range_padding=0.01)
+        self.figures = []
+        self.renderers = []
+        for field, ylabel, _ in STATE_PANELS:
+            fig = _figure(height=height, sizing_mode="stretch_width", x_range=self.x_range, y_range=DataRange1d(),
+                          x_axis_label="t [s]", y_axis_label=ylabel)
+            fig.add_tools(HoverTool(tooltips=[("run", "@label"), ("t", "$x{0.000} s"), (ylabel, "$y{0.000}")]))
+            r = fig.multi_line("xs", field, source=self.source, line_width=1.6, line_color="color",
+                               line_dash="dash", name=field)
+            self.figures.append(fig)
+            self.renderers.append(r)
+        self.grid = gridplot([self.figures[:2], self.figures[2:]], sizing_mode="stretch_width", merge_tools=True,
+                             toolbar_location="right")
+        self.layout = column(self.legend, self.grid, sizing_mode="stretch_width")
+        if len(results):
+            self.update(results)
+
+    def _columns(self, results) -> dict:
+        keys: dict[str, int] = {}
+        for res in results:
+            keys.setdefault(res.label, len(keys))
+        cols = {"xs": [], "color": [], "dash": [], "label": []}
+        for field, _, _ in STATE_PANELS:
+            cols[field] = []
+        for res in results:
+            t, *states = decimate(res.t, *(getattr(res, f) for f, _, _ in STATE_PANELS))
+            cols["xs"].append(_f32(t))
+            for (field, _, scale), y in zip(STATE_PANELS, states):
+                cols[field].append(_f32(y * scale))
+            style = style_for(keys[res.label], res.model)
+            cols["color"].append(style["color"])
+            cols["dash"].append(style["line_dash"])
+            cols["label"].append(f"{res.label or 'run'} ({res.model})")
+        return cols
+
+    @property
+    def line_count(self) -> int:
+        return len(self.source.data["xs"])
+
+    def update(self, results) -> None:
+        """Show ``results`` (at most ``max_lines``): colour per label, dash per model."""
+        results = list(results)[: self.max_lines]
+        signature = tuple((r.label, r.model, float(r.t[-1])) for r in results)
+        if self._signature is not None and signature != self._signature:
+            # a different set of curves: fresh auto-ranges (the user's zoom no longer applies)
+            self.x_range = DataRange1d(range_padding=0.01)
+            for fig in self.figures:
+                fig.x_range = self.x_range
+                fig.y_range = DataRange1d()
+        self._signature = signature
+        self.source.data = self._columns(results)
+        self.legend.text = legend_html(results)
 
 
-# -- frequency-domain identification (Figs. 8-13) ------------------------------------
+# -- frequency-domain identification (Figs. 8-13) ----------------------------------------
 
-#: Width in pixels of the identification figures: fits the app's main column at
-#: 1366 px and a report page. (Responsive HoloViews layouts collapse to zero width
-#: when filled while hidden, so sizes are explicit.)
-FIGURE_WIDTH = 1000
+@dataclass(frozen=True)
+class FrequencyView:
+    """Everything the frequency-domain figures draw, in display units (computed in a worker)."""
+
+    excitation_t: np.ndarray
+    excitation_r: np.ndarray
+    excitation_title: str
+    t: np.ndarray
+    r: np.ndarray
+    x_mm: np.ndarray
+    u: np.ndarray
+    fit_ok: bool
+    y_hat_mm: np.ndarray | None = None
+    y_theory_mm: np.ndarray | None = None
+    fit_label: str = ""
+    theory_label: str = ""
+    w: np.ndarray | None = None
+    est_db: np.ndarray | None = None
+    est_deg: np.ndarray | None = None
+    theory_db: np.ndarray | None = None
+    theory_deg: np.ndarray | None = None
+    etfe_w: np.ndarray | None = None
+    etfe_db: np.ndarray | None = None
+    etfe_deg: np.ndarray | None = None
+    validation_t: np.ndarray | None = None
+    validation_x_mm: np.ndarray | None = None
+    validation_y_mm: np.ndarray | None = None
+    validation_label: str = ""
+    validation_title: str = ""
+    lags: np.ndarray | None = None
+    autocorrelation: np.ndarray | None = None
+    cross_lags: np.ndarray | None = None
+    cross_correlation: np.ndarray | None = None
+    band: float = float("nan")
+    whiteness_title: str = ""
+    independence_title: str = ""
 
 
-def excitation_plot(excitation, ts: float, *, height: int = 240, width: int = FIGURE_WIDTH):
-    """The idinput reference signal against t (Fig. 8)."""
+def excitation_view(excitation, ts: float) -> tuple[np.ndarray, np.ndarray, str]:
+    """(t, r, title) of an idinput excitation (Fig. 8)."""
     t = np.arange(excitation.u.size) * ts
-    return hv.Curve((t, excitation.u), "t", "r").opts(
-        xlabel="t [s]", ylabel="r [m]", color=CASE_COLORS[0], width=width, height=height,
-        title=f"Excitation: idinput {excitation.type}, {excitation.u.size} samples, seed {excitation.seed}",
-        show_grid=True, tools=["hover"], interpolation="steps-post")
+    title = f"Excitation: idinput {excitation.type}, {excitation.u.size} samples, seed {excitation.seed}"
+    return t, np.asarray(excitation.u), title
 
 
-def closed_loop_plot(data, *, height: int = 240, width: int = FIGURE_WIDTH):
+def frequency_view(fi) -> FrequencyView:
+    """The arrays of Figs. 8-13 from a :class:`~eha_core.experiments.FrequencyIdentification`."""
+    from eha_core.identify.validate import compare, frequency_response
+
+    et, er, etitle = excitation_view(fi.excitation, fi.config.ts)
+    d = fi.data
+    base = dict(excitation_t=et, excitation_r=er, excitation_title=etitle, t=d.t, r=d.r, x_mm=d.x * 1e3, u=d.u)
+    e = fi.estimate
+    if fi.validation is None:
+        return FrequencyView(fit_ok=False, **base)
+    ts = fi.config.ts
+    y_hat = e.simulate(d.r, x0=e.x0, input_offset=e.input_offset)
+    num_t, den_t = fi.theoretical
+    theo = compare(num_t, den_t, d.r, d.x, ts, initial_condition="estimate")
+    w = np.logspace(-2, np.log10(np.pi / ts), 400)
+    est = e.frequency_response(w)
+    theo_fr = frequency_response(num_t, den_t, w)
+    etfe = fi.etfe
+    # the ETFE's phase is known modulo 360 deg: draw each point on the branch
+    # nearest the estimate's phase there, not on an unwrapped path through noise
+    model_phase = e.frequency_response(etfe.w).phase_deg
+    etfe_phase = model_phase + (np.asarray(etfe.phase_deg) - model_phase + 180.0) % 360.0 - 180.0
+    vd, v = fi.validation_data, fi.validation
+    ra = fi.residuals
+    return FrequencyView(
+        **base, fit_ok=True, y_hat_mm=y_hat * 1e3, y_theory_mm=theo.y_hat * 1e3,
+        fit_label=f"estimated H(s): fit {e.fit_percent:.1f} %",
+        theory_label=f"linearised H(s), eq. 24: fit {theo.fit_percent:.1f} %",
+        w=w, est_db=est.magnitude_db, est_deg=est.phase_deg, theory_db=theo_fr.magnitude_db,
+        theory_deg=theo_fr.phase_deg, etfe_w=np.asarray(etfe.w), etfe_db=np.asarray(etfe.magnitude_db),
+        etfe_deg=etfe_phase, validation_t=vd.t, validation_x_mm=vd.x * 1e3, validation_y_mm=v.y_hat * 1e3,
+        validation_label=f"estimated H(s): fit {v.fit_percent:.1f} %",
+        validation_title=f"Validation on a new excitation (seed {fi.validation_excitation.seed})",
+        lags=np.asarray(ra.lags), autocorrelation=np.asarray(ra.autocorrelation),
+        cross_lags=np.asarray(ra.cross_lags), cross_correlation=np.asarray(ra.cross_correlation),
+        band=float(ra.confidence_bound),
+        whiteness_title=f"Residual autocorrelation ({'inside' if ra.whiteness_ok else 'outside'} the 99 % band)",
+        independence_title=(f"Cross-correlation r → residual "
+                            f"({'inside' if ra.independence_ok else 'outside'} the 99 % band)"),
+    )
+
+
+def _set_legend_label(item: LegendItem, text: str) -> None:
+    item.label = {"value": text}
+
+
+class ExcitationFigure:
+    """The idinput reference signal against t (Fig. 8)."""
+
+    def __init__(self, *, height: int = 240, width: int = FIGURE_WIDTH):
+        self.source = ColumnDataSource(data={"t": _f32([]), "r": _f32([])})
+        self.fig = _figure(width=width, height=height, x_axis_label="t [s]", y_axis_label="r [m]",
+                           title="Excitation")
+        self.fig.step("t", "r", source=self.source, mode="after", color=CASE_COLORS[0])
+        self.fig.add_tools(HoverTool(tooltips=[("t", "@t{0.000} s"), ("r", "@r{0.0000}")]))
+        self.layout = self.fig
+
+    def update(self, t, r, title: str) -> None:
+        t, r = decimate(t, r, max_points=4 * MAX_POINTS)
+        self.source.data = {"t": _f32(t), "r": _f32(r)}
+        self.fig.title.text = title
+
+
+class ClosedLoopFigure:
     """Reference r [m], position x [mm] and valve command u [V] of the closed-loop run (Fig. 9).
 
     Three panels: r swings over +-1 m while x moves by centimetres (the slow
     closed loop filters most of the excitation), so one axis would hide x.
     """
-    common = dict(width=width // 3, height=height, xlabel="t [s]", show_grid=True)
-    r = hv.Curve((data.t, data.r), "t", "r").opts(color="#777777", interpolation="steps-post",
-                                                   ylabel="r [m]", title="Reference r", **common)
-    x = hv.Curve((data.t, data.x * 1e3), "t", "x").opts(color=CASE_COLORS[0], ylabel="x [mm]",
-                                                         title="Position x", **common)
-    u = hv.Curve((data.t, data.u), "t", "u").opts(color=CASE_COLORS[1], alpha=0.7, interpolation="steps-post",
-                                                  ylabel="u [V]", title="Command u = Kp (r − x)", **common)
-    return hv.Layout([r, x, u]).cols(3).opts(shared_axes=True)
+
+    def __init__(self, *, height: int = 240, width: int = FIGURE_WIDTH):
+        self.source = ColumnDataSource(data={k: _f32([]) for k in ("t", "r", "x", "u")})
+        x_range = DataRange1d()
+        self.figs = []
+        for key, ylabel, title, color, step in (("r", "r [m]", "Reference r", "#777777", True),
+                                                ("x", "x [mm]", "Position x", CASE_COLORS[0], False),
+                                                ("u", "u [V]", "Command u = Kp (r − x)", CASE_COLORS[1], True)):
+            fig = _figure(width=width // 3, height=height, x_range=x_range, x_axis_label="t [s]",
+                          y_axis_label=ylabel, title=title)
+            if step:
+                fig.step("t", key, source=self.source, mode="after", color=color, alpha=0.8)
+            else:
+                fig.line("t", key, source=self.source, color=color)
+            self.figs.append(fig)
+        self.layout = row(*self.figs)
+
+    def update(self, view: FrequencyView) -> None:
+        t, r, x, u = decimate(view.t, view.r, view.x_mm, view.u)
+        self.source.data = {"t": _f32(t), "r": _f32(r), "x": _f32(x), "u": _f32(u)}
 
 
-def fit_plot(fi, *, height: int = 300, width: int = FIGURE_WIDTH):
+class FitFigure:
     """Measured x against the estimated model's output on the estimation data (Fig. 11)."""
-    e = fi.estimate
-    d = fi.data
-    y_hat = e.simulate(d.r, x0=e.x0, input_offset=e.input_offset)
-    num_t, den_t = fi.theoretical
-    from eha_core.identify.validate import compare
 
-    theo = compare(num_t, den_t, d.r, d.x, d.t[1] - d.t[0], initial_condition="estimate")
-    return (hv.Curve((d.t, d.x * 1e3), "t", "x", label="measured (nonlinear plant)").opts(color="#333333", line_width=2)
-            * hv.Curve((d.t, y_hat * 1e3), "t", "x", label=f"estimated H(s): fit {e.fit_percent:.1f} %").opts(
-                color=CASE_COLORS[1], line_dash="dashed")
-            * hv.Curve((d.t, theo.y_hat * 1e3), "t", "x", label=f"linearised H(s), eq. 24: fit {theo.fit_percent:.1f} %").opts(
-                color=CASE_COLORS[2], line_dash="dotted")
-            ).opts(width=width, height=height, xlabel="t [s]", ylabel="x [mm]", show_grid=True,
-                   legend_position="top_left", title="Measured and simulated output (estimation data)")
+    def __init__(self, *, height: int = 300, width: int = FIGURE_WIDTH):
+        self.source = ColumnDataSource(data={k: _f32([]) for k in ("t", "x", "est", "theory")})
+        self.fig = _figure(width=width, height=height, x_axis_label="t [s]", y_axis_label="x [mm]",
+                           title="Measured and simulated output (estimation data)")
+        r0 = self.fig.line("t", "x", source=self.source, color="#333333", line_width=2)
+        r1 = self.fig.line("t", "est", source=self.source, color=CASE_COLORS[1], line_dash="dashed")
+        r2 = self.fig.line("t", "theory", source=self.source, color=CASE_COLORS[2], line_dash="dotted")
+        self.items = [LegendItem(label="measured (nonlinear plant)", renderers=[r0]),
+                      LegendItem(label="estimated H(s)", renderers=[r1]),
+                      LegendItem(label="linearised H(s), eq. 24", renderers=[r2])]
+        self.fig.add_layout(Legend(items=self.items, location="top_left"))
+        self.layout = self.fig
 
-
-def validation_plot(fi, *, height: int = 300, width: int = FIGURE_WIDTH):
-    """The model on a fresh excitation (Fig. 13)."""
-    d = fi.validation_data
-    v = fi.validation
-    return (hv.Curve((d.t, d.x * 1e3), "t", "x", label="measured (fresh excitation)").opts(color="#333333", line_width=2)
-            * hv.Curve((d.t, v.y_hat * 1e3), "t", "x", label=f"estimated H(s): fit {v.fit_percent:.1f} %").opts(
-                color=CASE_COLORS[1], line_dash="dashed")
-            ).opts(width=width, height=height, xlabel="t [s]", ylabel="x [mm]", show_grid=True,
-                   legend_position="top_left",
-                   title=f"Validation on a new excitation (seed {fi.validation_excitation.seed})")
+    def update(self, view: FrequencyView, plant: str = "nonlinear") -> None:
+        if not view.fit_ok:
+            self.source.data = {k: _f32([]) for k in ("t", "x", "est", "theory")}
+            return
+        t, x, est, theo = decimate(view.t, view.x_mm, view.y_hat_mm, view.y_theory_mm)
+        self.source.data = {"t": _f32(t), "x": _f32(x), "est": _f32(est), "theory": _f32(theo)}
+        _set_legend_label(self.items[0], f"measured ({plant} plant)")
+        _set_legend_label(self.items[1], view.fit_label)
+        _set_legend_label(self.items[2], view.theory_label)
 
 
-def bode_plots(fi, *, height: int = 240, width: int = FIGURE_WIDTH):
+class BodeFigure:
     """Bode diagram: estimate, theoretical H(s) of eq. 24, ETFE points (Fig. 12)."""
-    from eha_core.identify.validate import frequency_response
 
-    ts = fi.config.ts
-    w = np.logspace(-2, np.log10(np.pi / ts), 400)
-    est = fi.estimate.frequency_response(w)
-    theo = frequency_response(*fi.theoretical, w)
-    et = fi.etfe
-    # the ETFE's phase is known modulo 360 deg: draw each point on the branch
-    # nearest the estimate's phase there, not on an unwrapped path through noise
-    model_phase = fi.estimate.frequency_response(et.w).phase_deg
-    etfe_phase = model_phase + (np.asarray(et.phase_deg) - model_phase + 180.0) % 360.0 - 180.0
-    mag = (hv.Curve((w, est.magnitude_db), "w", "dB", label="estimated H(s)").opts(color=CASE_COLORS[1], line_width=2)
-           * hv.Curve((w, theo.magnitude_db), "w", "dB", label="linearised H(s), eq. 24").opts(color=CASE_COLORS[2], line_dash="dashed")
-           * hv.Scatter((et.w, et.magnitude_db), "w", "dB", label="ETFE of the data (ZOH)").opts(color="#333333", size=4))
-    phase = (hv.Curve((w, est.phase_deg), "w", "deg").opts(color=CASE_COLORS[1], line_width=2)
-             * hv.Curve((w, theo.phase_deg), "w", "deg").opts(color=CASE_COLORS[2], line_dash="dashed")
-             * hv.Scatter((et.w, etfe_phase), "w", "deg").opts(color="#333333", size=4))
-    common = dict(logx=True, width=width, height=height, show_grid=True, xlabel="ω [rad/s]")
-    return hv.Layout([
-        mag.opts(ylabel="magnitude [dB]", title="Bode diagram", legend_position="bottom_left", **common),
-        phase.opts(ylabel="phase [deg]", show_legend=False, **common),
-    ]).cols(1).opts(shared_axes=True)
+    def __init__(self, *, height: int = 240, width: int = FIGURE_WIDTH):
+        self.curves = ColumnDataSource(data={k: _f32([]) for k in ("w", "est_db", "est_deg", "th_db", "th_deg")})
+        self.points = ColumnDataSource(data={k: _f32([]) for k in ("w", "db", "deg")})
+        x_range = DataRange1d()
+        self.mag = _figure(width=width, height=height, x_axis_type="log", x_range=x_range,
+                           x_axis_label="ω [rad/s]", y_axis_label="magnitude [dB]", title="Bode diagram")
+        self.phase = _figure(width=width, height=height, x_axis_type="log", x_range=x_range,
+                             x_axis_label="ω [rad/s]", y_axis_label="phase [deg]")
+        r1 = self.mag.line("w", "est_db", source=self.curves, color=CASE_COLORS[1], line_width=2)
+        r2 = self.mag.line("w", "th_db", source=self.curves, color=CASE_COLORS[2], line_dash="dashed")
+        r3 = self.mag.scatter("w", "db", source=self.points, color="#333333", size=4)
+        self.phase.line("w", "est_deg", source=self.curves, color=CASE_COLORS[1], line_width=2)
+        self.phase.line("w", "th_deg", source=self.curves, color=CASE_COLORS[2], line_dash="dashed")
+        self.phase.scatter("w", "deg", source=self.points, color="#333333", size=4)
+        self.mag.add_layout(Legend(items=[LegendItem(label="estimated H(s)", renderers=[r1]),
+                                          LegendItem(label="linearised H(s), eq. 24", renderers=[r2]),
+                                          LegendItem(label="ETFE of the data (ZOH)", renderers=[r3])],
+                                   location="bottom_left"))
+        self.layout = column(self.mag, self.phase)
 
-
-def residual_plots(fi, *, height: int = 260, width: int = FIGURE_WIDTH):
-    """Residual autocorrelation and input cross-correlation with 99 % bands."""
-    ra = fi.residuals
-    band = ra.confidence_bound
-
-    def stem(lags, values, title, color):
-        spikes = hv.Spikes((lags, values), "lag", "corr").opts(color=color, line_width=2)
-        pts = hv.Scatter((lags, values), "lag", "corr").opts(color=color, size=4)
-        bounds = hv.HSpan(-band, band).opts(color="#cccccc", alpha=0.35)
-        return (bounds * spikes * pts).opts(width=width // 2, height=height, title=title, show_grid=True,
-                                            xlabel="lag [samples]", ylabel="correlation", ylim=(-1.05, 1.05))
-
-    ok_w = "inside" if ra.whiteness_ok else "outside"
-    ok_i = "inside" if ra.independence_ok else "outside"
-    return hv.Layout([
-        stem(ra.lags, ra.autocorrelation, f"Residual autocorrelation ({ok_w} the 99 % band)", CASE_COLORS[0]),
-        stem(ra.cross_lags, ra.cross_correlation, f"Cross-correlation r → residual ({ok_i} the 99 % band)", CASE_COLORS[3]),
-    ]).cols(2).opts(shared_axes=False)
+    def update(self, view: FrequencyView) -> None:
+        if not view.fit_ok:
+            self.curves.data = {k: _f32([]) for k in self.curves.data}
+            self.points.data = {k: _f32([]) for k in self.points.data}
+            return
+        self.curves.data = {"w": _f32(view.w), "est_db": _f32(view.est_db), "est_deg": _f32(view.est_deg),
+                            "th_db": _f32(view.theory_db), "th_deg": _f32(view.theory_deg)}
+        self.points.data = {"w": _f32(view.etfe_w), "db": _f32(view.etfe_db), "deg": _f32(view.etfe_deg)}
 
 
-# -- time-domain identification -------------------------------------------------------
+class ValidationFigure:
+    """The model on a fresh excitation (Fig. 13)."""
 
-def lse_fit_plot(measured, resimulated, *, height: int = 280, width: int = FIGURE_WIDTH):
-    """Measured response against the model re-simulated with the estimates (x and p1)."""
-    t, xm, p1m = decimate(measured.t, measured.x, measured.p1)
-    tr, xr, p1r = decimate(resimulated.t, resimulated.x, resimulated.p1)
-    left = (hv.Curve((t, xm * 1e3), "t", "x", label="measured").opts(color="#333333", line_width=2)
-            * hv.Curve((tr, xr * 1e3), "t", "x", label="re-simulated with the estimates").opts(
-                color=CASE_COLORS[1], line_dash="dashed")
-            ).opts(width=width // 2, height=height, xlabel="t [s]", ylabel="x [mm]", show_grid=True,
-                   legend_position="top_left", title="Position")
-    right = (hv.Curve((t, p1m * 1e-6), "t", "p1").opts(color="#333333", line_width=2)
-             * hv.Curve((tr, p1r * 1e-6), "t", "p1").opts(color=CASE_COLORS[1], line_dash="dashed")
-             ).opts(width=width // 2, height=height, xlabel="t [s]", ylabel="p₁ [MPa]", show_grid=True,
-                    title="Piston-chamber pressure")
-    return hv.Layout([left, right]).cols(2).opts(shared_axes=True)
+    def __init__(self, *, height: int = 300, width: int = FIGURE_WIDTH):
+        self.source = ColumnDataSource(data={k: _f32([]) for k in ("t", "x", "est")})
+        self.fig = _figure(width=width, height=height, x_axis_label="t [s]", y_axis_label="x [mm]",
+                           title="Validation on a new excitation")
+        r0 = self.fig.line("t", "x", source=self.source, color="#333333", line_width=2)
+        r1 = self.fig.line("t", "est", source=self.source, color=CASE_COLORS[1], line_dash="dashed")
+        self.items = [LegendItem(label="measured (fresh excitation)", renderers=[r0]),
+                      LegendItem(label="estimated H(s)", renderers=[r1])]
+        self.fig.add_layout(Legend(items=self.items, location="top_left"))
+        self.layout = self.fig
+
+    def update(self, view: FrequencyView) -> None:
+        if not view.fit_ok:
+            self.source.data = {k: _f32([]) for k in ("t", "x", "est")}
+            return
+        t, x, est = decimate(view.validation_t, view.validation_x_mm, view.validation_y_mm)
+        self.source.data = {"t": _f32(t), "x": _f32(x), "est": _f32(est)}
+        _set_legend_label(self.items[1], view.validation_label)
+        self.fig.title.text = view.validation_title
+
+
+class ResidualFigure:
+    """Residual autocorrelation and input cross-correlation with their 99 % bands."""
+
+    def __init__(self, *, height: int = 260, width: int = FIGURE_WIDTH):
+        self.sources = []
+        self.bands = []
+        self.figs = []
+        for title, color in (("Residual autocorrelation", CASE_COLORS[0]),
+                             ("Cross-correlation r → residual", CASE_COLORS[3])):
+            src = ColumnDataSource(data={"lag": _f32([]), "c": _f32([]), "zero": _f32([])})
+            fig = _figure(width=width // 2, height=height, title=title, x_axis_label="lag [samples]",
+                          y_axis_label="correlation", y_range=Range1d(-1.05, 1.05))
+            band = BoxAnnotation(bottom=0, top=0, fill_color="#cccccc", fill_alpha=0.35, line_alpha=0)
+            fig.add_layout(band)
+            fig.add_layout(Span(location=0, dimension="width", line_color="#999999", line_width=1))
+            fig.segment("lag", "zero", "lag", "c", source=src, color=color, line_width=2)
+            fig.scatter("lag", "c", source=src, color=color, size=4)
+            self.sources.append(src)
+            self.bands.append(band)
+            self.figs.append(fig)
+        self.layout = row(*self.figs)
+
+    def update(self, view: FrequencyView) -> None:
+        if not view.fit_ok:
+            for src in self.sources:
+                src.data = {"lag": _f32([]), "c": _f32([]), "zero": _f32([])}
+            return
+        for src, band, fig, lags, c, title in (
+                (self.sources[0], self.bands[0], self.figs[0], view.lags, view.autocorrelation, view.whiteness_title),
+                (self.sources[1], self.bands[1], self.figs[1], view.cross_lags, view.cross_correlation,
+                 view.independence_title)):
+            src.data = {"lag": _f32(lags), "c": _f32(c), "zero": _f32(np.zeros(len(lags)))}
+            band.bottom, band.top = -view.band, view.band
+            fig.title.text = title
+
+
+# -- time-domain identification ------------------------------------------------------------
+
+@dataclass(frozen=True)
+class LseView:
+    """Measured x and p1 and, when the estimate is physical, the re-simulated ones."""
+
+    t: np.ndarray
+    x_mm: np.ndarray
+    p1_mpa: np.ndarray
+    resim_t: np.ndarray | None = None
+    resim_x_mm: np.ndarray | None = None
+    resim_p1_mpa: np.ndarray | None = None
+
+
+def lse_view(measured, resimulated) -> LseView:
+    t, x, p1 = decimate(measured.t, measured.x * 1e3, measured.p1 * 1e-6)
+    if resimulated is None:
+        return LseView(t=t, x_mm=x, p1_mpa=p1)
+    tr, xr, p1r = decimate(resimulated.t, resimulated.x * 1e3, resimulated.p1 * 1e-6)
+    return LseView(t=t, x_mm=x, p1_mpa=p1, resim_t=tr, resim_x_mm=xr, resim_p1_mpa=p1r)
+
+
+class LseFitFigure:
+    """Measured response against the model re-simulated with the estimates (x and p1).
+
+    Without a re-simulation (an estimate that is not physical) only the
+    measured curves are drawn and the legend says why.
+    """
+
+    def __init__(self, *, height: int = 280, width: int = FIGURE_WIDTH):
+        self.measured = ColumnDataSource(data={k: _f32([]) for k in ("t", "x", "p1")})
+        self.resim = ColumnDataSource(data={k: _f32([]) for k in ("t", "x", "p1")})
+        x_range = DataRange1d()
+        self.left = _figure(width=width // 2, height=height, x_range=x_range, x_axis_label="t [s]",
+                            y_axis_label="x [mm]", title="Position")
+        self.right = _figure(width=width // 2, height=height, x_range=x_range, x_axis_label="t [s]",
+                             y_axis_label="p₁ [MPa]", title="Piston-chamber pressure")
+        m0 = self.left.line("t", "x", source=self.measured, color="#333333", line_width=2)
+        self.resim_renderers = [
+            self.left.line("t", "x", source=self.resim, color=CASE_COLORS[1], line_dash="dashed"),
+            self.right.line("t", "p1", source=self.resim, color=CASE_COLORS[1], line_dash="dashed"),
+        ]
+        self.right.line("t", "p1", source=self.measured, color="#333333", line_width=2)
+        self.resim_item = LegendItem(label="re-simulated with the estimates", renderers=[self.resim_renderers[0]])
+        self.left.add_layout(Legend(items=[LegendItem(label="measured", renderers=[m0]), self.resim_item],
+                                    location="top_left"))
+        self.layout = row(self.left, self.right)
+
+    def update(self, view: LseView) -> None:
+        self.measured.data = {"t": _f32(view.t), "x": _f32(view.x_mm), "p1": _f32(view.p1_mpa)}
+        if view.resim_t is None:
+            self.resim.data = {k: _f32([]) for k in ("t", "x", "p1")}
+            _set_legend_label(self.resim_item, "no re-simulation: the estimate is not physical")
+        else:
+            self.resim.data = {"t": _f32(view.resim_t), "x": _f32(view.resim_x_mm), "p1": _f32(view.resim_p1_mpa)}
+            _set_legend_label(self.resim_item, "re-simulated with the estimates")

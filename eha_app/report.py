@@ -43,7 +43,7 @@ __all__ = ["ReportSettings", "ReportResult", "build_report", "SECTIONS"]
 
 #: Section ids, in the paper's order (the test checks each is present).
 SECTIONS = ("parameters", "fig2", "fig3", "figs4-7", "tables3-4", "figs8-13", "differences", "versions")
-PACKAGES = ("eha", "numpy", "scipy", "control", "numba", "pandas", "holoviews", "bokeh", "panel")
+PACKAGES = ("eha", "numpy", "scipy", "control", "numba", "pandas", "bokeh", "panel")
 STATES = (("x", "mm", 1e3), ("v", "mm/s", 1e3), ("p1", "MPa", 1e-6), ("p2", "MPa", 1e-6))
 
 
@@ -344,12 +344,15 @@ def build_report(out_dir: str | Path, *, seed: int = 0, reduced: bool = False,
         numbers["beta_e_gain"] = fi.backout.beta_e_from_gain
         numbers["beta_e_stiffness"] = fi.backout.beta_e_from_stiffness
     _write_freq_data(data_dir, fi)
-    figures["fig8"] = plots.to_bokeh(plots.excitation_plot(fi.excitation, cfg.ts))
-    figures["fig9"] = plots.to_bokeh(plots.closed_loop_plot(fi.data))
-    figures["fig11"] = plots.to_bokeh(plots.fit_plot(fi))
-    figures["fig12"] = plots.to_bokeh(plots.bode_plots(fi))
-    figures["fig13"] = plots.to_bokeh(plots.validation_plot(fi))
-    figures["residuals"] = plots.to_bokeh(plots.residual_plots(fi))
+    view = plots.frequency_view(fi)
+    fig8 = plots.ExcitationFigure()
+    fig8.update(view.excitation_t, view.excitation_r, view.excitation_title)
+    figures["fig8"] = fig8.layout
+    for key, cls in (("fig9", plots.ClosedLoopFigure), ("fig11", plots.FitFigure), ("fig12", plots.BodeFigure),
+                     ("fig13", plots.ValidationFigure), ("residuals", plots.ResidualFigure)):
+        fig = cls()
+        fig.update(view)
+        figures[key] = fig.layout
     freq_html = freq_summary_html(fi) + "<h3>Backed-out parameters (eq. 27)</h3>" + backout_html(fi)
 
     step("where we differ from the paper")
@@ -372,7 +375,7 @@ def build_report(out_dir: str | Path, *, seed: int = 0, reduced: bool = False,
 def _bokeh_js() -> str:
     """Bokeh's JavaScript, inlined: the figures need the core and the widgets (the legend
     Div) only. The tags are written here from the raw code because, once Panel is
-    imported (HoloViews imports it), Bokeh's rendered resources also reference
+    imported, Bokeh's rendered resources also reference
     Panel's module shim, a file a saved page cannot load."""
     from bokeh.resources import Resources
 

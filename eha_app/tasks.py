@@ -1,80 +1,165 @@
-"""Running a computation for one session without blocking the others.
+"""Running one session's computations on the shared queue and showing their results.
 
-A run happens in a worker thread (the compiled kernels release the GIL), while
-the page shows a loading indicator; the results are then applied to the
-session's document under its lock (Bokeh models may only change there). An
-exception becomes a message in the page: the session keeps working.
+:class:`SessionRunner` hands a computation to the process's
+:class:`~eha_app.jobs.JobQueue` (a worker thread computes; nothing in it
+touches Bokeh, HoloViews or Panel objects) and, when it ends, applies the
+result to the session's own document in one callback on the event loop, under
+the document's lock, with the document's events held and combined: the
+browser receives one message per result instead of one per changed property
+(a first "Compare both" used to send 76).
+
+Two details learnt the hard way:
+
+- Panel must know which session it updates: the callback runs under
+  ``set_curdoc(doc)`` (with a bare Bokeh next-tick callback about one update
+  in 25 never reached the browser).
+- The document is captured when the user's event arrives; by the time a
+  result is ready Panel's "current document" may belong to another session.
+
+Without a server (tests, a notebook) the computation runs at once in the
+calling thread and its result is shown directly.
 """
 
 from __future__ import annotations
 
-import asyncio
 import logging
-import time
-import traceback
-from typing import Callable
+from functools import partial
+from typing import Any, Callable, Hashable, Sequence
 
 import panel as pn
+from panel.io.document import hold
 from panel.io.state import set_curdoc
 
-__all__ = ["run_task", "apply_locked"]
+from eha_core.cancel import Cancelled, CancelToken
+
+from .jobs import Job, JobQueue, default_queue
+
+__all__ = ["SessionRunner", "apply_locked", "LOADING_DELAY_S", "served_document"]
 
 log = logging.getLogger("eha_app")
 
-#: Show the loading indicator only when a computation takes longer than this.
+#: Show the loading indicator only when a result takes longer than this: toggling
+#: it re-lays-out the plots, which costs more than a 20 ms simulation.
 LOADING_DELAY_S = 0.2
 
 
-def apply_locked(fn: Callable[[], None], doc=None) -> None:
-    """Run ``fn`` on the event loop with ``doc``'s lock, as Panel's current document.
-
-    ``doc`` is the session's document, captured when the user's event arrived:
-    after an ``await`` Panel's current document may belong to another session.
-    Going through ``pn.state.execute`` under ``set_curdoc`` matters: with a bare
-    Bokeh next-tick callback Panel does not know which session it updates and
-    about one update in 25 never reached the browser (measured by clicking the
-    same run button 40 times).
-    """
-    doc = doc if doc is not None else pn.state.curdoc
-    if doc is not None and getattr(doc, "session_context", None) is not None:
-        with set_curdoc(doc):
-            pn.state.execute(fn, schedule=True)
-    else:
-        fn()
-
-
-async def run_task(compute: Callable[[], object], apply: Callable[[object, float], None],
-                   fail: Callable[[str], None], busy: list,
-                   apply_bokeh: Callable[[object, float], None] | None = None) -> None:
-    """Compute in a thread, then show the result.
-
-    ``apply_bokeh(result, seconds)`` changes raw Bokeh models and runs under the
-    session document's lock; ``apply(result, seconds)`` changes Panel
-    components and runs right here in the coroutine, where Panel schedules
-    the updates itself. (Panel updates made inside a bare Bokeh next-tick
-    callback were occasionally never sent to the browser: 1 in ~25 clicks.)
-    ``busy`` are Panel components shown as loading meanwhile. An exception
-    calls ``fail(message)`` instead.
-    """
+def served_document():
+    """The current session's document when running in a server, else None."""
     doc = pn.state.curdoc
-    t0 = time.perf_counter()
-    future = asyncio.get_running_loop().run_in_executor(None, compute)
+    if doc is not None and getattr(doc, "session_context", None) is not None:
+        return doc
+    return None
+
+
+def apply_locked(fn: Callable[[], None], doc=None) -> None:
+    """Run ``fn`` on the session's document: now if there is no server, else on
+    its event loop, under its lock, with its events held and combined."""
+    doc = doc if doc is not None else served_document()
+    if doc is None:
+        fn()
+        return
+
+    def locked():
+        with set_curdoc(doc), hold(doc):
+            fn()
+
     try:
-        # the loading indicator only for runs a user would wait for: toggling it
-        # re-lays-out the plots, which costs more than a 20 ms simulation
-        done, _ = await asyncio.wait({future}, timeout=LOADING_DELAY_S)
-        if not done:
-            for c in busy:
-                c.loading = True
-        result = await future
-        elapsed = time.perf_counter() - t0
-        if apply_bokeh is not None:
-            apply_locked(lambda: apply_bokeh(result, elapsed), doc)
-        apply(result, elapsed)
-    except Exception as exc:  # noqa: BLE001 - any failure becomes a message in the page
-        log.warning("computation failed: %s\n%s", exc, traceback.format_exc())
-        fail(" ".join(str(exc).split()) or type(exc).__name__)
-    finally:
-        for c in busy:
-            if c.loading:
-                c.loading = False
+        doc.add_next_tick_callback(locked)
+    except Exception as exc:  # noqa: BLE001 - the session was closed meanwhile: nobody to show it to
+        log.debug("result not shown, the session is gone: %s", exc)
+
+
+def _message(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+class SessionRunner:
+    """Runs a session's computations one at a time on the shared queue."""
+
+    def __init__(self, owner: Hashable, queue: JobQueue | None = None):
+        self.owner = owner
+        self._queue = queue
+
+    @property
+    def queue(self) -> JobQueue:
+        return self._queue if self._queue is not None else default_queue()
+
+    def run(self, label: str, compute: Callable[[CancelToken], Any], show: Callable[[Any, Job], None], *,
+            fail: Callable[[str], None], busy: Sequence = (), note: Callable[[str], None] | None = None) -> Job:
+        """Compute ``compute(token)`` and then call ``show(result, job)`` on the page.
+
+        ``fail(message)`` instead when it raised; ``busy`` are Panel components
+        shown as loading while the user waits; ``note(text)`` tells the user
+        about the queue ("waiting: 3 runs ahead", "replaced") and is called
+        with "" when there is nothing to say.
+        """
+        note = note or (lambda _text: None)
+        doc = served_document()
+        if doc is None:
+            return self._run_here(label, compute, show, fail, note)
+
+        def done(job: Job) -> None:        # a worker thread, or the submitting thread for "replaced"
+            apply_locked(partial(self._finish, job, show, fail, busy, note), doc)
+
+        job, replaced = self.queue.submit(self.owner, compute, label=label, on_done=done)
+        note(f"Your earlier request ({replaced.label}) was replaced by this one." if replaced is not None else "")
+
+        def waiting() -> None:
+            if job.finished:
+                return
+            with set_curdoc(doc), hold(doc):
+                for c in busy:
+                    c.loading = True
+                ahead = self.queue.ahead_of(job)
+                if job.state == "queued":
+                    note(f"Waiting for the server: {ahead} run{'s' if ahead != 1 else ''} ahead of yours."
+                         if ahead else "Waiting for a free worker: yours is next.")
+
+        try:
+            doc.add_timeout_callback(waiting, int(LOADING_DELAY_S * 1000))
+        except Exception:  # noqa: BLE001 - the session is closing
+            pass
+        return job
+
+    def cancel(self, reason: str = "cancelled") -> None:
+        """Cancel this session's waiting and running computations."""
+        self.queue.cancel_owner(self.owner, reason)
+
+    # -- internals -------------------------------------------------------------------
+    @staticmethod
+    def _finish(job: Job, show, fail, busy, note) -> None:
+        try:
+            if job.state == "done":
+                show(job.result, job)
+                note("")
+            elif job.state == "failed":
+                log.debug("job %s failed", job.label)
+                fail(_message(job.error))
+                note("")
+            elif job.state == "replaced":
+                return          # its successor owns the indicators now
+            else:               # cancelled
+                note(f"Stopped: {job.token.reason or 'cancelled'}.")
+        finally:
+            if job.state != "replaced":
+                for c in busy:
+                    if c.loading:
+                        c.loading = False
+
+    def _run_here(self, label, compute, show, fail, note) -> Job:
+        job = Job(owner=self.owner, label=label, fn=compute)
+        job.state = "running"
+        job.started_at = job.submitted_at
+        try:
+            job.result = compute(job.token)
+            job.state = "done"
+        except Cancelled as exc:
+            job.state, job.error = "cancelled", exc
+        except Exception as exc:  # noqa: BLE001 - shown in the page, as in a server
+            job.state, job.error = "failed", exc
+            log.warning("computation %r failed: %s", label, exc, exc_info=True)
+        import time
+
+        job.finished_at = time.perf_counter()
+        self._finish(job, show, fail, (), note)
+        return job

@@ -139,9 +139,16 @@ def build_parser() -> argparse.ArgumentParser:
     sv.add_argument("--address", default="127.0.0.1",
                     help="address to listen on (default 127.0.0.1; 0.0.0.0 for every network interface)")
     sv.add_argument("--num-procs", type=int, default=1,
-                    help="worker processes (default 1; more serve a large class on a multi-core machine)")
+                    help="server processes sharing the port (default 1; see the README for sizing a class)")
+    sv.add_argument("--workers", type=int, default=None,
+                    help="computation threads per process (default: the cores divided by --num-procs)")
     sv.add_argument("--allow-websocket-origin", action="append", default=None, metavar="HOST[:PORT]",
                     help="hosts allowed to connect (default: this machine's names; '*' when listening on 0.0.0.0)")
+    sv.add_argument("--behind-proxy", action="store_true",
+                    help="trust X-Forwarded-* headers from a reverse proxy such as nginx")
+    sv.add_argument("--nginx-config", type=int, default=None, metavar="N",
+                    help="print an nginx configuration for N eha serve processes on ports PORT+1..PORT+N behind "
+                         "nginx listening on PORT, with the commands that start them, and exit")
     sv.add_argument("--show", action="store_true", help="open the app in a browser")
     sv.set_defaults(handler=_cmd_serve)
     return parser
@@ -238,29 +245,33 @@ def _lan_address() -> str | None:
 
 def serve_argv(args) -> list[str]:
     """The `panel serve` command line for `eha serve` (validated)."""
-    from pathlib import Path
+    from eha_app.serving import ENTRY_POINT, serve_argv as app_serve_argv
 
     if not 1 <= args.port <= 65535:
         raise UsageError(f"--port = {args.port} is not allowed: use 1-65535")
     if args.num_procs < 1:
         raise UsageError(f"--num-procs = {args.num_procs} is not allowed: use 1 or more")
-    entry = Path(__file__).resolve().parent.parent / "eha_app" / "eha.py"
-    if not entry.exists():
-        raise UsageError(f"the app entry point {entry} is missing: reinstall the package")
-    argv = ["panel", "serve", str(entry), "--port", str(args.port), "--address", args.address,
-            "--num-procs", str(args.num_procs)]
-    origins = args.allow_websocket_origin
-    if origins is None and args.address in ("0.0.0.0", "::"):
-        origins = ["*"]
-    for origin in origins or ():
-        argv += ["--allow-websocket-origin", origin]
-    if args.show:
-        argv.append("--show")
-    return argv
+    if not ENTRY_POINT.exists():
+        raise UsageError(f"the app entry point {ENTRY_POINT} is missing: reinstall the package")
+    return app_serve_argv(port=args.port, address=args.address, num_procs=args.num_procs,
+                          allow_websocket_origin=args.allow_websocket_origin, show=args.show,
+                          behind_proxy=args.behind_proxy)
 
 
 def _cmd_serve(args) -> int:
+    import os
+
+    if args.nginx_config is not None:
+        return _print_nginx_config(args)
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers = {args.workers} is not allowed: use 1 or more")
     argv = serve_argv(args)
+    if args.workers is not None:
+        os.environ["EHA_WORKERS"] = str(args.workers)
+    elif "EHA_WORKERS" not in os.environ:
+        # the processes share the cores: one computation per core in all
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        os.environ["EHA_WORKERS"] = str(max(1, cores // args.num_procs))
     host = "localhost" if args.address in ("127.0.0.1", "localhost", "0.0.0.0", "::") else args.address
     print(f"EHA app: http://{host}:{args.port}/eha", flush=True)
     if args.address in ("0.0.0.0", "::"):
@@ -272,6 +283,28 @@ def _cmd_serve(args) -> int:
 
     sys.argv = argv
     panel_main()
+    return 0
+
+
+def _print_nginx_config(args) -> int:
+    from eha_app.serving import nginx_config
+
+    n = args.nginx_config
+    if not 1 <= n <= 64:
+        raise UsageError(f"--nginx-config = {n} is not allowed: use 1-64 processes")
+    if not 1 <= args.port <= 65535 - n:
+        raise UsageError(f"--port = {args.port} is not allowed: use 1-{65535 - n} (the processes take the next ports)")
+    import os
+
+    backends = [f"127.0.0.1:{args.port + k}" for k in range(1, n + 1)]
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    print(nginx_config(backends, listen=str(args.port)))
+    origin = f"{_lan_address() or 'localhost'}:{args.port}"
+    print("# Start the app processes (each on its own port, all on this machine):")
+    for k in range(1, n + 1):
+        print(f"#   eha serve --port {args.port + k} --behind-proxy --workers {max(1, cores // n)} "
+              f"--allow-websocket-origin {origin} &")
+    print(f"# then put this file in /etc/nginx/conf.d/ and reload nginx; students open http://{origin}/eha")
     return 0
 
 

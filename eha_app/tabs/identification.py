@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import panel as pn
-import param
 
 from eha_core.experiments import (
     LSE_INPUT, LSE_INPUT_RICH, LSE_INPUT_RICH_T_END, LSE_SCENARIOS, FrequencyExperiment, lse_data,
@@ -16,23 +16,46 @@ from eha_core.params import ParameterError
 from eha_core.signals import SignalSpecError, parse_signal
 
 from .. import plots
+from ..form import Field, Form, Group, InputError, parse_fields
+from ..limits import check_frequency, check_lse
 from ..state import AppState
 from ..tables import SCENARIOS, backout_html, freq_summary_html, lse_table_html, table4_html
-from ..tasks import run_task
+from ..tasks import SessionRunner
 
-__all__ = ["IdentificationTab", "LseRequest", "FreqRequest"]
+__all__ = ["IdentificationTab", "LseRequest", "LSE_FORM", "FREQ_FORM", "parse_lse", "parse_freq"]
 
 EXCITATIONS = {"paper": "u = 6 sin(4πt), 5 s (default)",
                "rich": "u = 8 sin(4πt) + 4 sin(10πt), 20 s (narrows B)"}
 
+# -- the least-squares request ---------------------------------------------------------------
 
-class LseRequest(param.Parameterized):
-    scenario = param.Selector(default="none", objects=list(SCENARIOS), label="disturbance")
-    custom = param.String(default="sine:1000:3", label="custom d(t)")
-    model = param.Selector(default="constant", objects=["constant", "harmonic"], label="disturbance model")
-    freq_text = param.String(default="", label="harmonic frequency [Hz] (blank: estimate)")
-    seed = param.Integer(default=0, bounds=(0, 10**6), label="noise seed")
-    excitation = param.Selector(default="paper", objects=list(EXCITATIONS), label="excitation")
+LSE_FORM = (Group("Least squares", (
+    Field("lse_scenario", "disturbance", "select", options=tuple(SCENARIOS.items()), short="disturbance"),
+    Field("lse_custom", "custom d(t)", "text", short="custom d(t)",
+          tip="none, sine:AMP[:FREQ_HZ], white:SIGMA, or any signal of the simulation, e.g. sine:500:2+noise:100:1"),
+    Field("lse_model", "disturbance model", "select", options=(("constant", "constant d0 (the paper's)"),
+                                                               ("harmonic", "d0 + a sinusoid")),
+          short="disturbance model"),
+    Field("lse_freq", "harmonic frequency", "text", unit="Hz", placeholder="blank: estimate it",
+          short="harmonic frequency"),
+    Field("lse_seed", "noise seed", "integer", lo=0, hi=10**6, short="noise seed"),
+    Field("lse_excitation", "excitation", "select", options=tuple(EXCITATIONS.items()), short="excitation"),
+)),)
+LSE_DEFAULTS = {"lse_scenario": "none", "lse_custom": "sine:1000:3", "lse_model": "constant", "lse_freq": "",
+                "lse_seed": "0", "lse_excitation": "paper"}
+_LSE_FIELDS = {f.name: f for g in LSE_FORM for f in g.fields}
+
+
+@dataclass(frozen=True)
+class LseRequest:
+    """A parsed least-squares request."""
+
+    scenario: str = "none"
+    custom: str = "sine:1000:3"
+    model: str = "constant"
+    frequency_hz: float | None = None
+    seed: int = 0
+    excitation: str = "paper"
 
     def disturbance(self):
         spec = self.custom if self.scenario == "custom" else LSE_SCENARIOS[self.scenario]
@@ -44,280 +67,450 @@ class LseRequest(param.Parameterized):
             # any signal the simulation tab understands, e.g. sine:500:2+noise:100:1
             return parse_signal(spec, name="custom d(t)")
 
-    def frequency(self) -> float | None:
-        text = self.freq_text.strip()
-        if self.model != "harmonic" or not text:
-            return None
-        try:
-            f = float(text)
-        except ValueError:
-            raise ValueError(f"harmonic frequency = {text!r} is not allowed: a number in Hz, or blank to estimate it") from None
-        if not (math.isfinite(f) and 0 < f < 500):
-            raise ValueError(f"harmonic frequency = {text} is not allowed: must lie in (0, 500) Hz")
-        return f
-
     def input_signal(self):
         return (LSE_INPUT, 5.0) if self.excitation == "paper" else (LSE_INPUT_RICH, LSE_INPUT_RICH_T_END)
 
-    def check(self) -> dict[str, str]:
-        errors = {}
+
+def lse_hidden(texts: dict) -> list[str]:
+    hidden = []
+    if texts.get("lse_scenario") != "custom":
+        hidden.append("lse_custom")
+    if texts.get("lse_model") != "harmonic":
+        hidden.append("lse_freq")
+    return hidden
+
+
+def parse_lse(texts: dict) -> tuple[LseRequest, dict]:
+    """The least-squares request the form describes, and a message per invalid field."""
+    hidden = set(lse_hidden(texts))
+    values, errors = parse_fields(_LSE_FIELDS.values(), texts, skip=hidden)
+    freq = None
+    text = str(texts.get("lse_freq", "")).strip()
+    if "lse_freq" not in hidden and text:
         try:
-            self.disturbance()
+            freq = float(text.replace(",", "."))
+            if not (math.isfinite(freq) and 0 < freq < 500):
+                raise ValueError
+        except ValueError:
+            errors["lse_freq"] = (f"harmonic frequency = {text} is not allowed: a number in (0, 500) Hz, "
+                                  f"or blank to estimate it")
+            freq = None
+    req = LseRequest(scenario=values.get("lse_scenario", "none"), custom=texts.get("lse_custom", ""),
+                     model=values.get("lse_model", "constant"), frequency_hz=freq,
+                     seed=values.get("lse_seed", 0), excitation=values.get("lse_excitation", "paper"))
+    if "lse_custom" not in hidden and not errors.get("lse_custom"):
+        try:
+            req.disturbance()
         except (ValueError, SignalSpecError) as exc:
-            errors["custom"] = str(exc)
-        try:
-            self.frequency()
-        except ValueError as exc:
-            errors["freq_text"] = str(exc)
-        return errors
+            errors["lse_custom"] = " ".join(str(exc).split())
+    return req, errors
 
 
-class FreqRequest(param.Parameterized):
-    signal_type = param.Selector(default="sine", objects=["sine", "rgs", "rbs", "prbs"], label="idinput type")
-    n_samples = param.Integer(default=1000, bounds=(50, 20000), label="samples N")
-    band_lo = param.Number(default=0.0, bounds=(0.0, 1.0), step=0.01, label="band low [× Nyquist]")
-    band_hi = param.Number(default=1.0, bounds=(0.0, 1.0), step=0.01, label="band high [× Nyquist]")
-    range_lo = param.Number(default=-1.0, label="range min")
-    range_hi = param.Number(default=1.0, label="range max")
-    n_sines = param.Integer(default=100, bounds=(1, 5000), label="sinusoids")
-    n_trials = param.Integer(default=50, bounds=(1, 500), label="trials")
-    grid_skip = param.Integer(default=1, bounds=(1, 100), label="grid skip")
-    seed = param.Integer(default=0, bounds=(0, 10**6), label="seed")
-    ts = param.Number(default=0.01, bounds=(1e-4, 1.0), label="Ts [s]")
-    kp = param.Number(default=10.0, bounds=(0.01, 1000.0), label="Kp [V/m]")
-    plant = param.Selector(default="nonlinear", objects=["nonlinear", "linear"], label="plant")
-    n_poles = param.Integer(default=3, bounds=(1, 6), label="poles")
-    n_zeros = param.Integer(default=0, bounds=(0, 5), label="zeros")
-    initial_condition = param.Selector(default="estimate", objects=["estimate", "zero"], label="initial condition")
-    input_offset = param.Selector(default="estimate", objects=["estimate", "zero"], label="input offset")
+# -- the frequency-domain request --------------------------------------------------------------
 
-    def config(self) -> FrequencyExperiment:
-        return FrequencyExperiment(
-            n_samples=self.n_samples, ts=self.ts, signal_type=self.signal_type,
-            band=(self.band_lo, self.band_hi), range=(self.range_lo, self.range_hi),
-            sinedata=(self.n_sines, self.n_trials, self.grid_skip), seed=self.seed, kp=self.kp,
-            plant=self.plant, n_poles=self.n_poles, n_zeros=self.n_zeros,
-            initial_condition=self.initial_condition, input_offset=self.input_offset)
+FREQ_FORM = (
+    Group("Excitation (idinput)", (
+        Field("signal_type", "idinput type", "select",
+              options=(("sine", "sine"), ("rgs", "rgs"), ("rbs", "rbs"), ("prbs", "prbs")), short="idinput type"),
+        Field("n_samples", "samples N", "integer", lo=20, hi=20000, short="N"),
+        Field("freq_seed", "seed", "integer", lo=0, hi=10**6, short="seed"),
+        Field("band_lo", "band low", "number", unit="× Nyquist", lo=0.0, hi=1.0, short="band low"),
+        Field("band_hi", "band high", "number", unit="× Nyquist", lo=0.0, hi=1.0, short="band high"),
+        Field("range_lo", "range min", "number", unit="m", short="range min"),
+        Field("range_hi", "range max", "number", unit="m", short="range max"),
+        Field("n_sines", "sinusoids", "integer", lo=1, hi=5000, short="sinusoids"),
+        Field("n_trials", "trials", "integer", lo=1, hi=500, short="trials"),
+        Field("grid_skip", "grid skip", "integer", lo=1, hi=100, short="grid skip"),
+        Field("ts", "Ts", "number", unit="s", lo=1e-4, hi=1.0, short="Ts", tip="sample time of the controller"),
+    )),
+    Group("Loop and model", (
+        Field("freq_kp", "Kp", "number", unit="V/m", lo=0.01, hi=1000.0, short="Kp"),
+        Field("plant", "plant", "select", options=(("nonlinear", "nonlinear"), ("linear", "linearised")),
+              short="plant"),
+        Field("n_poles", "poles", "integer", lo=1, hi=6, short="poles"),
+        Field("n_zeros", "zeros", "integer", lo=0, hi=5, short="zeros"),
+        Field("initial_condition", "initial condition", "select", options=(("estimate", "estimate"), ("zero", "zero")),
+              short="initial condition"),
+        Field("input_offset", "input offset", "select", options=(("estimate", "estimate"), ("zero", "zero")),
+              short="input offset"),
+    )),
+)
+_FREQ_FIELDS = {f.name: f for g in FREQ_FORM for f in g.fields}
+_CONFIG_NAME = {"signal_type": "signal_type", "n_samples": "n_samples", "freq_seed": "seed", "ts": "ts",
+                "freq_kp": "kp", "plant": "plant", "n_poles": "n_poles", "n_zeros": "n_zeros",
+                "initial_condition": "initial_condition", "input_offset": "input_offset"}
+_DEFAULT_CONFIG = FrequencyExperiment()
+FREQ_DEFAULTS = {
+    "signal_type": _DEFAULT_CONFIG.signal_type, "n_samples": str(_DEFAULT_CONFIG.n_samples),
+    "freq_seed": str(_DEFAULT_CONFIG.seed), "band_lo": f"{_DEFAULT_CONFIG.band[0]:g}",
+    "band_hi": f"{_DEFAULT_CONFIG.band[1]:g}", "range_lo": f"{_DEFAULT_CONFIG.range[0]:g}",
+    "range_hi": f"{_DEFAULT_CONFIG.range[1]:g}", "n_sines": str(_DEFAULT_CONFIG.sinedata[0]),
+    "n_trials": str(_DEFAULT_CONFIG.sinedata[1]), "grid_skip": str(_DEFAULT_CONFIG.sinedata[2]),
+    "ts": f"{_DEFAULT_CONFIG.ts:g}", "freq_kp": f"{_DEFAULT_CONFIG.kp:g}", "plant": _DEFAULT_CONFIG.plant,
+    "n_poles": str(_DEFAULT_CONFIG.n_poles), "n_zeros": str(_DEFAULT_CONFIG.n_zeros),
+    "initial_condition": _DEFAULT_CONFIG.initial_condition, "input_offset": _DEFAULT_CONFIG.input_offset,
+}
 
-    def check(self) -> str:
-        """'' when the experiment can run, else the message."""
-        try:
-            cfg = self.config()
-            cfg.excitation()
-        except (ValueError, TypeError) as exc:
-            return " ".join(str(exc).split())
-        return ""
+
+def freq_hidden(texts: dict) -> list[str]:
+    return [] if texts.get("signal_type", "sine") == "sine" else ["n_sines", "n_trials", "grid_skip"]
 
 
-def _show_figure(area: pn.Column, rows) -> None:
-    """Replace what ``area`` shows by rows of Bokeh figures, one pane each."""
-    area.objects = [pn.Row(*(pn.pane.Bokeh(fig) for fig in row)) for row in rows]
+def _field_of_message(message: str) -> str | None:
+    """The form field a core message (``NAME = VALUE is not allowed: ...``) is about."""
+    head = message.split(" = ", 1)[0].strip()
+    for form_name, config_name in _CONFIG_NAME.items():
+        if head == config_name:
+            return form_name
+    return {"band": "band_lo", "range": "range_lo", "sinedata": "n_sines"}.get(head)
 
 
-class IdentificationTab(pn.viewable.Viewer):
-    """Step 3 of the paper: identification (Fig. 17), time and frequency domain."""
+def parse_freq(texts: dict) -> tuple[FrequencyExperiment | None, dict]:
+    """The experiment the form describes (None if invalid), and a message per invalid field ("" for the rest)."""
+    hidden = set(freq_hidden(texts))
+    values, errors = parse_fields(_FREQ_FIELDS.values(), texts, skip=hidden)
+    if errors:
+        return None, errors
+    d = _DEFAULT_CONFIG
+    try:
+        cfg = FrequencyExperiment(
+            n_samples=values["n_samples"], ts=values["ts"], signal_type=values["signal_type"],
+            band=(values["band_lo"], values["band_hi"]), range=(values["range_lo"], values["range_hi"]),
+            sinedata=(values.get("n_sines", d.sinedata[0]), values.get("n_trials", d.sinedata[1]),
+                      values.get("grid_skip", d.sinedata[2])),
+            seed=values["freq_seed"], kp=values["freq_kp"], plant=values["plant"], n_poles=values["n_poles"],
+            n_zeros=values["n_zeros"], initial_condition=values["initial_condition"],
+            input_offset=values["input_offset"])
+    except (ValueError, TypeError) as exc:
+        message = " ".join(str(exc).split())
+        return None, {_field_of_message(message) or "": message}
+    return cfg, {}
 
-    def __init__(self, state: AppState, **kwargs):
+
+# -- the tab -------------------------------------------------------------------------------------
+
+class LeastSquaresPanel(pn.viewable.Viewer):
+    """Time domain: least squares on eqs. 15-18, one scenario or Table 4."""
+
+    def __init__(self, state: AppState, runner: SessionRunner, query: dict | None = None, **kwargs):
         super().__init__(**kwargs)
         self.state = state
-        self.lse_req = LseRequest()
-        self.freq_req = FreqRequest()
-        self.lse_result = None
-        self.lse_all = None
-        self.freq_result = None
-        # time domain
-        self.lse_table = pn.pane.HTML("<p>Choose a disturbance and run the least squares.</p>",
-                                      sizing_mode="stretch_width", css_classes=["eha-lse-table"])
-        self.lse_plot = pn.Column(min_height=290)
-        self.lse_area = pn.Column(self.lse_table, self.lse_plot, sizing_mode="stretch_width")
+        self.runner = runner
+        self.result = None
+        self.all_results = None
+        texts = dict(LSE_DEFAULTS)
+        texts.update({k: v for k, v in (query or {}).items() if k in _LSE_FIELDS})
+        self.form = Form(spec=[g.to_spec() for g in LSE_FORM], values=texts, url_defaults=LSE_DEFAULTS, width=270,
+                         css_classes=["eha-lse-form"], margin=(5, 10))
+        self.form.param.watch(self._update_enabled, "values")
+        self.table = pn.pane.HTML("<p>Choose a disturbance and run the least squares.</p>",
+                                  sizing_mode="stretch_width", css_classes=["eha-lse-table"])
+        # the figure is built with the first result: an empty figure is no use to
+        # anyone and makes Bokeh complain that it cannot range it
+        self.figure: plots.LseFitFigure | None = None
+        self.plot = pn.Column(sizing_mode="stretch_width", css_classes=["eha-lse-plot"])
+        self.area = pn.Column(self.table, self.plot, sizing_mode="stretch_width")
         self.table4 = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-table4-pane"])
         self.table4_area = pn.Column(self.table4, sizing_mode="stretch_width")
-        self.lse_alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width")
-        self.lse_errors = {k: pn.pane.HTML("", visible=False, styles={"color": "#b00020", "font-size": "12px"},
-                                           css_classes=["eha-error", f"eha-error-{k}"], width=260)
-                           for k in ("custom", "freq_text")}
-        self.lse_button = pn.widgets.Button(label="Run least squares", color="primary", width=260,
-                                            css_classes=["eha-run-lse"])
-        self.lse_all_button = pn.widgets.Button(label="Run all four scenarios (Table 4)", color="success",
-                                                width=260, css_classes=["eha-run-table4"])
-        self.lse_button.on_click(self._run_lse)
-        self.lse_all_button.on_click(self._run_lse_all)
-        # frequency domain
-        self.freq_error = pn.pane.HTML("", visible=False, styles={"color": "#b00020", "font-size": "12px"},
-                                       css_classes=["eha-error", "eha-error-freq"], width=260)
-        self.freq_button = pn.widgets.Button(label="Run experiment and estimate", color="primary", width=260,
-                                             css_classes=["eha-run-freq"])
-        self.freq_button.on_click(self._run_freq)
-        self.freq_summary = pn.pane.HTML("<p>Configure the excitation (Fig. 8) and run the closed-loop experiment.</p>",
-                                         sizing_mode="stretch_width", css_classes=["eha-freq-summary"])
-        self.backout = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-backout"])
-        self.excitation_plot = pn.Column(min_height=250)
-        self.freq_plots = {k: pn.Column(min_height=270) for k in ("data", "fit", "bode", "validation", "residuals")}
-        self.freq_alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width")
-        self.freq_area = pn.Column(self.freq_summary, self.backout, sizing_mode="stretch_width")
-
-        self.lse_req.param.watch(self._update_enabled, list(self.lse_req.param)[1:])
-        self.freq_req.param.watch(self._on_freq_config, list(self.freq_req.param)[1:])
+        self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
+                                   css_classes=["eha-lse-alert"])
+        self.notice = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-lse-notice"])
+        self.queue_note = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-queue-note"],
+                                       styles={"color": "#555", "font-size": "12px"})
+        self.button = pn.widgets.Button(label="Run least squares", color="primary", width=260,
+                                        css_classes=["eha-run-lse"])
+        self.all_button = pn.widgets.Button(label="Run all four scenarios (Table 4)", color="success", width=260,
+                                            css_classes=["eha-run-table4"])
+        self.button.on_click(lambda _e: self.run())
+        self.all_button.on_click(lambda _e: self.run_all())
         state.param.watch(self._update_enabled, "valid")
-        self._on_freq_config()
-
-    # -- enabling ----------------------------------------------------------------------
-    def _update_enabled(self, *_events) -> None:
-        errors = self.lse_req.check()
-        for k, pane in self.lse_errors.items():
-            pane.object = errors.get(k, "")
-            pane.visible = k in errors
-        ok = self.state.valid
-        self.lse_button.disabled = not ok or bool(errors)
-        self.lse_all_button.disabled = not ok
-        self.freq_button.disabled = not ok or bool(self.freq_error.object)
-
-    def _on_freq_config(self, *_events) -> None:
-        message = self.freq_req.check()
-        self.freq_error.object = message
-        self.freq_error.visible = bool(message)
-        if not message:
-            cfg = self.freq_req.config()
-            _show_figure(self.excitation_plot, plots.bokeh_rows(plots.excitation_plot(cfg.excitation(), cfg.ts)))
         self._update_enabled()
 
-    # -- time domain -------------------------------------------------------------------
-    def compute_lse(self):
-        req = self.lse_req
-        params = self.state.params
-        d = req.disturbance()
+    def request(self) -> tuple[LseRequest, dict]:
+        return parse_lse(self.form.values)
+
+    def _update_enabled(self, *_events) -> None:
+        _, errors = self.request()
+        self.form.errors = errors
+        self.form.hidden = lse_hidden(self.form.values)
+        ok = self.state.valid
+        self.button.disabled = not ok or bool(errors)
+        self.all_button.disabled = not ok or "lse_seed" in errors
+        if not ok:
+            self.notice.object = ('<span class="eha-warn">A parameter on the first tab is not valid: '
+                                  'fix it to run the identification.</span>')
+        elif errors:
+            self.notice.object = f'<span class="eha-warn">Fix the input to run: {next(iter(errors.values()))}</span>'
+        self.notice.visible = not ok or bool(errors)
+
+    def _fail(self, message: str) -> None:
+        self.alert.object = f"The identification failed: {message}"
+        self.alert.visible = True
+
+    def _note(self, text: str) -> None:
+        self.queue_note.object = text
+        self.queue_note.visible = bool(text)
+
+    def run(self):
+        req, errors = self.request()
+        if errors or not self.state.valid:
+            return None
         u, t_end = req.input_signal()
-        data = lse_data(params, d, u=u, t_end=t_end, seed=req.seed)
-        res = identify_lse(data, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency())
+        self.alert.visible = False
         try:
-            resim = lse_resimulation(res, params, data, u=u)
-            resim_error = ""
-        except ParameterError as exc:
-            resim, resim_error = None, f"No re-simulation: the estimate is not physical ({exc})."
-        return res, data, resim, resim_error
-
-    async def _run_lse(self, _event=None) -> None:
-        scenario = self.lse_req.scenario if self.lse_req.excitation == "paper" else None
-
-        def apply(out, elapsed):
-            res, data, resim, resim_error = out
-            self.lse_result = res
-            note = f"<p class='eha-note'>Simulated, identified and re-simulated in {elapsed * 1e3:.0f} ms. {resim_error}</p>"
-            warn = "" if res.success else f"<div class='eha-warn'>{res.message}</div>"
-            self.lse_table.object = warn + lse_table_html(res, scenario if scenario != "custom" else None) + note
-            _show_figure(self.lse_plot, plots.bokeh_rows(plots.lse_fit_plot(data, resim if resim is not None else data)))
-
-        await run_task(self.compute_lse, apply, self._lse_fail, busy=[self.lse_area])
-
-    async def _run_lse_all(self, _event=None) -> None:
+            check_lse(t_end)
+        except ValueError as exc:
+            self._fail(str(exc))
+            return None
         params = self.state.params
-        seed = self.lse_req.seed
+        scenario = req.scenario if req.excitation == "paper" else None
 
-        def compute():
-            return {m: run_lse_table(params, disturbance_model=m, seed=seed) for m in ("constant", "harmonic")}
+        def compute(token):
+            d = req.disturbance()
+            data = lse_data(params, d, u=u, t_end=t_end, seed=req.seed, cancel=token)
+            res = identify_lse(data, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz)
+            try:
+                resim = lse_resimulation(res, params, data, u=u, cancel=token)
+                resim_error = ""
+            except ParameterError as exc:
+                resim, resim_error = None, f"No re-simulation: the estimate is not physical ({exc})."
+            return res, plots.lse_view(data, resim), resim_error
 
-        def apply(results, elapsed):
-            self.lse_all = results
+        def show(out, job):
+            res, view, resim_error = out
+            self.result = res
+            note = (f"<p class='eha-note'>Simulated, identified and re-simulated in {job.run_s * 1e3:.0f} ms"
+                    + (f" (and {job.wait_s:.1f} s waiting for the server)" if job.wait_s > 0.05 else "")
+                    + f". {resim_error}</p>")
+            warn = "" if res.success else f"<div class='eha-warn'>{res.message}</div>"
+            self.table.object = warn + lse_table_html(res, scenario if scenario != "custom" else None) + note
+            if self.figure is None:
+                self.figure = plots.LseFitFigure()
+                self.figure.update(view)
+                self.plot.objects = [pn.pane.Bokeh(self.figure.layout)]
+            else:
+                self.figure.update(view)
+
+        return self.runner.run("least squares", compute, show, fail=self._fail, busy=[self.area], note=self._note)
+
+    def run_all(self):
+        _, errors = self.request()
+        if not self.state.valid or "lse_seed" in errors:
+            return None
+        self.alert.visible = False
+        params = self.state.params
+        seed = int(self.form.values.get("lse_seed", "0"))
+
+        def compute(token):
+            return {m: run_lse_table(params, disturbance_model=m, seed=seed, cancel=token)
+                    for m in ("constant", "harmonic")}
+
+        def show(results, job):
+            self.all_results = results
             self.table4.object = (f"<h4>Table 4: four scenarios, both disturbance models, beside the paper "
-                                  f"({elapsed * 1e3:.0f} ms)</h4>" + table4_html(results))
+                                  f"({job.run_s * 1e3:.0f} ms)</h4>" + table4_html(results))
 
-        await run_task(compute, apply, self._lse_fail, busy=[self.table4_area])
+        return self.runner.run("Table 4", compute, show, fail=self._fail, busy=[self.table4_area], note=self._note)
 
-    def _lse_fail(self, message: str) -> None:
-        self.lse_alert.object = f"The identification failed: {message}"
-        self.lse_alert.visible = True
-
-    # -- frequency domain ----------------------------------------------------------------
-    def compute_freq(self):
-        fi = run_frequency_identification(self.state.params, self.freq_req.config())
-        figures = {"data": plots.closed_loop_plot(fi.data)}
-        if fi.validation is not None:
-            figures.update(fit=plots.fit_plot(fi), bode=plots.bode_plots(fi),
-                           validation=plots.validation_plot(fi), residuals=plots.residual_plots(fi))
-        # rendered here, in the worker thread: only swapping models is left for the page
-        return fi, {k: plots.bokeh_rows(v) for k, v in figures.items()}
-
-    async def _run_freq(self, _event=None) -> None:
-        self.freq_alert.visible = False
-
-        def apply(out, elapsed):
-            fi, figures = out
-            self.freq_result = fi
-            timing = (f"<p class='eha-note'>Experiment, estimation, validation and figures in {elapsed:.2f} s "
-                      f"(estimation alone {fi.timings.get('tfest', float('nan')):.2f} s).</p>")
-            self.freq_summary.object = freq_summary_html(fi) + timing
-            self.backout.object = "<h4>Backed-out parameters (eq. 27)</h4>" + backout_html(fi)
-            for k, area in self.freq_plots.items():
-                _show_figure(area, figures.get(k, []))
-
-        def fail(message):
-            self.freq_alert.object = f"The experiment failed: {message}"
-            self.freq_alert.visible = True
-
-        await run_task(self.compute_freq, apply, fail, busy=[self.freq_area])
-
-    # -- layout ----------------------------------------------------------------------------
-    def _lse_panel(self):
-        r = self.lse_req
-        custom = pn.widgets.TextInput.from_param(r.param.custom, width=260)
-        custom.param.watch(lambda e: setattr(r, "custom", e.new), "value_input")
-        custom.visible = pn.bind(lambda s: s == "custom", r.param.scenario)
-        self.lse_errors["custom"].visible = False
-        freq = pn.widgets.TextInput.from_param(r.param.freq_text, width=260)
-        freq.param.watch(lambda e: setattr(r, "freq_text", e.new), "value_input")
-        freq.visible = pn.bind(lambda m: m == "harmonic", r.param.model)
-        controls = pn.Column(
-            pn.widgets.Select.from_param(r.param.scenario, width=260, css_classes=["eha-lse-scenario"]),
-            custom, self.lse_errors["custom"],
-            pn.widgets.Select.from_param(r.param.model, width=260, css_classes=["eha-lse-model"]),
-            freq, self.lse_errors["freq_text"],
-            pn.widgets.IntInput.from_param(r.param.seed, width=120),
-            pn.widgets.Select.from_param(r.param.excitation, width=260),
-            self.lse_button, self.lse_all_button, width=280)
+    def __panel__(self):
+        controls = pn.Column(self.form, self.notice, self.button, self.all_button, self.queue_note, width=280)
         explain = pn.pane.HTML(
             "<p class='eha-note'>Least squares on eq. 15 filtered by H(s) = 1/(0.01 s + 1) (eqs. 16-18): "
             "y<sub>1</sub> = A<sub>1</sub>p<sub>1</sub> − A<sub>2</sub>p<sub>2</sub> = M dv/dt + B v + "
             "A<sub>f</sub> S(v) + d<sub>0</sub>, and dp<sub>1</sub>/dt = β<sub>e</sub> φ<sub>2</sub>. "
             "D<sub>c</sub>, d<sub>c</sub>, L<sub>0</sub>, K<sub>q</sub> are measured; 1 kHz sensors.</p>",
             sizing_mode="stretch_width")
-        return pn.Row(controls, pn.Column(explain, self.lse_alert, self.lse_area, self.table4_area,
-                                          sizing_mode="stretch_width"), sizing_mode="stretch_width")
-
-    def _freq_panel(self):
-        r = self.freq_req
-        w = dict(width=125)
-        config = pn.Column(
-            pn.widgets.Select.from_param(r.param.signal_type, width=260),
-            pn.Row(pn.widgets.IntInput.from_param(r.param.n_samples, **w),
-                   pn.widgets.IntInput.from_param(r.param.seed, **w)),
-            pn.Row(pn.widgets.FloatInput.from_param(r.param.band_lo, **w),
-                   pn.widgets.FloatInput.from_param(r.param.band_hi, **w)),
-            pn.Row(pn.widgets.FloatInput.from_param(r.param.range_lo, **w),
-                   pn.widgets.FloatInput.from_param(r.param.range_hi, **w)),
-            pn.Row(pn.widgets.IntInput.from_param(r.param.n_sines, width=80),
-                   pn.widgets.IntInput.from_param(r.param.n_trials, width=80),
-                   pn.widgets.IntInput.from_param(r.param.grid_skip, width=80)),
-            pn.Row(pn.widgets.FloatInput.from_param(r.param.ts, **w),
-                   pn.widgets.FloatInput.from_param(r.param.kp, **w)),
-            pn.widgets.Select.from_param(r.param.plant, width=260),
-            pn.Row(pn.widgets.IntInput.from_param(r.param.n_poles, **w),
-                   pn.widgets.IntInput.from_param(r.param.n_zeros, **w)),
-            pn.Row(pn.widgets.Select.from_param(r.param.initial_condition, **w),
-                   pn.widgets.Select.from_param(r.param.input_offset, **w)),
-            self.freq_error, self.freq_button, width=280)
-        figures = pn.Tabs(
-            ("Fig. 8 excitation", self.excitation_plot),
-            ("Fig. 9 closed-loop data", self.freq_plots["data"]),
-            ("Fig. 11 fit", self.freq_plots["fit"]),
-            ("Fig. 12 Bode", self.freq_plots["bode"]),
-            ("Fig. 13 validation", self.freq_plots["validation"]),
-            ("Residuals", self.freq_plots["residuals"]),
-            dynamic=False, sizing_mode="stretch_width")
-        return pn.Row(config, pn.Column(self.freq_alert, figures, self.freq_area, sizing_mode="stretch_width"),
+        return pn.Row(controls, pn.Column(explain, self.alert, self.area, self.table4_area, sizing_mode="stretch_width"),
                       sizing_mode="stretch_width")
 
-    def __panel__(self):
+
+_FIGURES = (("Fig. 8 excitation", "excitation", plots.ExcitationFigure),
+            ("Fig. 9 closed-loop data", "data", plots.ClosedLoopFigure),
+            ("Fig. 11 fit", "fit", plots.FitFigure),
+            ("Fig. 12 Bode", "bode", plots.BodeFigure),
+            ("Fig. 13 validation", "validation", plots.ValidationFigure),
+            ("Residuals", "residuals", plots.ResidualFigure))
+
+
+class FrequencyPanel(pn.viewable.Viewer):
+    """Frequency domain: the closed-loop experiment, tfest, validation, back-out (Figs. 8-13)."""
+
+    def __init__(self, state: AppState, runner: SessionRunner, query: dict | None = None, **kwargs):
+        super().__init__(**kwargs)
+        self.state = state
+        self.runner = runner
+        # the excitation preview is a job of its own: typing N must not wait behind an experiment
+        self.preview_runner = SessionRunner((runner.owner, "preview"), runner._queue)
+        self.result = None
+        self.view: plots.FrequencyView | None = None
+        self.preview = None
+        texts = dict(FREQ_DEFAULTS)
+        texts.update({k: v for k, v in (query or {}).items() if k in _FREQ_FIELDS})
+        self.form = Form(spec=[g.to_spec() for g in FREQ_FORM], values=texts, url_defaults=FREQ_DEFAULTS, width=270,
+                         css_classes=["eha-freq-form"], margin=(5, 10))
+        self.form.param.watch(self._on_config, "values")
+        self.error = pn.pane.HTML("", visible=False, width=260, css_classes=["eha-error", "eha-error-freq"],
+                                  styles={"color": "#b00020", "font-size": "12px"})
+        self.button = pn.widgets.Button(label="Run experiment and estimate", color="primary", width=260,
+                                        css_classes=["eha-run-freq"])
+        self.button.on_click(lambda _e: self.run())
+        self.queue_note = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-queue-note"],
+                                       styles={"color": "#555", "font-size": "12px"})
+        self.summary = pn.pane.HTML("<p>Configure the excitation (Fig. 8) and run the closed-loop experiment.</p>",
+                                    sizing_mode="stretch_width", css_classes=["eha-freq-summary"])
+        self.backout = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-backout"])
+        self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
+                                   css_classes=["eha-freq-alert"])
+        self.area = pn.Column(self.summary, self.backout, sizing_mode="stretch_width")
+        self.config_errors: dict = {}
+        self.excitation_errors: dict = {}
+        self.figures: dict[str, object] = {}
+        self._slots = {key: pn.Column(pn.pane.HTML(
+            "<p class='eha-note'>" + ("Computing the excitation…" if key == "excitation" else
+                                      "Run the experiment to see this figure.") + "</p>"),
+            min_height=260, sizing_mode="stretch_width") for _, key, _ in _FIGURES}
+        self.figure_tabs = pn.Tabs(*((title, self._slots[key]) for title, key, _ in _FIGURES), dynamic=False,
+                                   sizing_mode="stretch_width", css_classes=["eha-freq-figures"])
+        self._shown = {"excitation"}
+        self.figure_tabs.param.watch(self._on_figure_tab, "active")
+        state.param.watch(self._update_enabled, "valid")
+        self._on_config()
+
+    # A figure is built when it is first shown with data to draw; afterwards
+    # only its data change.
+    def _on_figure_tab(self, event) -> None:
+        key = _FIGURES[event.new][1]
+        self._shown.add(key)
+        self._draw(key)
+
+    def _has_data(self, key: str) -> bool:
+        return self.preview is not None if key == "excitation" else self.view is not None
+
+    def _draw(self, key: str) -> None:
+        if key not in self._shown or not self._has_data(key):
+            return
+        fig = self.figures.get(key)
+        built = fig is None
+        if built:
+            fig = self.figures[key] = next(c for _, k, c in _FIGURES if k == key)()
+        if key == "excitation":
+            fig.update(*self.preview)
+        elif key == "fit":
+            fig.update(self.view, self.result.config.plant if self.result is not None else "nonlinear")
+        else:
+            fig.update(self.view)
+        if built:
+            self._slots[key].objects = [pn.pane.Bokeh(fig.layout)]
+
+    def _update_enabled(self, *_events) -> None:
+        errors = {**self.config_errors, **self.excitation_errors}
+        self.form.errors = {k: v for k, v in errors.items() if k}
+        ok = self.state.valid and not errors
+        self.button.disabled = not ok
+        if not self.state.valid:
+            self.error.object = "A parameter on the first tab is not valid: fix it to run the experiment."
+        else:
+            self.error.object = errors.get("", "") or (f"Fix the input to run: {next(iter(errors.values()))}"
+                                                       if errors else "")
+        self.error.visible = bool(self.error.object)
+
+    def _on_config(self, *_events) -> None:
+        cfg, errors = parse_freq(self.form.values)
+        self.config_errors = errors
+        self.form.hidden = freq_hidden(self.form.values)
+        if cfg is None:
+            self._update_enabled()
+            return
+        ts = cfg.ts
+
+        def show(out, _job):
+            self.excitation_errors = {}
+            self.preview = out
+            self._draw("excitation")
+            self._update_enabled()
+
+        def fail(message):
+            # idinput checks the band, range and sinusoid settings against N
+            self.excitation_errors = {_field_of_message(message) or "": message}
+            self._update_enabled()
+
         self._update_enabled()
-        return pn.Tabs(("Time domain: least squares", self._lse_panel()),
-                       ("Frequency domain: transfer function", self._freq_panel()),
-                       dynamic=False, sizing_mode="stretch_width")
+        self.preview_runner.run("excitation preview", lambda token: plots.excitation_view(cfg.excitation(), ts),
+                                show, fail=fail)
+
+    def _fail(self, message: str) -> None:
+        self.alert.object = f"The experiment failed: {message}"
+        self.alert.visible = True
+
+    def _note(self, text: str) -> None:
+        self.queue_note.object = text
+        self.queue_note.visible = bool(text)
+
+    def run(self):
+        cfg, errors = parse_freq(self.form.values)
+        if cfg is None or not self.state.valid or self.excitation_errors:
+            return None
+        self.alert.visible = False
+        try:
+            check_frequency(cfg)
+        except ValueError as exc:
+            self._fail(str(exc))
+            return None
+        params = self.state.params
+
+        def compute(token):
+            fi = run_frequency_identification(params, cfg, cancel=token)
+            return fi, plots.frequency_view(fi)
+
+        def show(out, job):
+            fi, view = out
+            self.result = fi
+            self.view = view
+            self.preview = (view.excitation_t, view.excitation_r, view.excitation_title)
+            timing = (f"<p class='eha-note'>Experiment, estimation and validation in {job.run_s:.2f} s "
+                      f"(estimation alone {fi.timings.get('tfest', float('nan')):.2f} s)"
+                      + (f", after {job.wait_s:.1f} s waiting for the server" if job.wait_s > 0.05 else "")
+                      + ".</p>")
+            self.summary.object = freq_summary_html(fi) + timing
+            self.backout.object = "<h4>Backed-out parameters (eq. 27)</h4>" + backout_html(fi)
+            for _, key, _ in _FIGURES:
+                self._draw(key)
+
+        return self.runner.run("frequency experiment", compute, show, fail=self._fail, busy=[self.area],
+                               note=self._note)
+
+    def __panel__(self):
+        config = pn.Column(self.form, self.error, self.button, self.queue_note, width=280)
+        return pn.Row(config, pn.Column(self.alert, self.figure_tabs, self.area, sizing_mode="stretch_width"),
+                      sizing_mode="stretch_width")
+
+
+class IdentificationTab(pn.viewable.Viewer):
+    """Step 3 of the paper: identification (Fig. 17), time and frequency domain.
+
+    The frequency-domain panel is built when first shown.
+    """
+
+    def __init__(self, state: AppState, *, runner: SessionRunner | None = None, query: dict | None = None,
+                 **kwargs):
+        super().__init__(**kwargs)
+        self.state = state
+        self.runner = runner if runner is not None else SessionRunner(state)
+        self._query = query
+        self.lse = LeastSquaresPanel(state, self.runner, query)
+        self.freq: FrequencyPanel | None = None
+        self._freq_slot = pn.Column(sizing_mode="stretch_width")
+        self.tabs = pn.Tabs(("Time domain: least squares", self.lse),
+                            ("Frequency domain: transfer function", self._freq_slot),
+                            dynamic=False, sizing_mode="stretch_width", css_classes=["eha-ident-tabs"])
+        self.tabs.param.watch(lambda e: self.frequency_panel() if e.new == 1 else None, "active")
+
+    def frequency_panel(self) -> FrequencyPanel:
+        """The frequency-domain panel, built now if never shown."""
+        if self.freq is None:
+            self.freq = FrequencyPanel(self.state, self.runner, self._query)
+            self._freq_slot.objects = [self.freq]
+        return self.freq
+
+    def __panel__(self):
+        return self.tabs

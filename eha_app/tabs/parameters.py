@@ -2,65 +2,63 @@
 
 from __future__ import annotations
 
+from functools import lru_cache
 from pathlib import Path
 
 import panel as pn
 
 from eha_core.params import FIELD_INFO, PARAM_NAMES
 
-from ..tables import derived_html
+from ..form import Field, Form, Group
 from ..state import AppState
+from ..tables import derived_html
 
-__all__ = ["ParametersTab", "SCHEMATIC_PATH"]
+__all__ = ["ParametersTab", "SCHEMATIC_PATH", "PARAMETER_FORM"]
 
 SCHEMATIC_PATH = Path(__file__).resolve().parents[2] / "assets" / "eha_schematic.svg"
 
-_SYMBOL = {"beta_e": "β<sub>e</sub>", "Af": "A<sub>f</sub>", "Dc": "D<sub>c</sub>", "dc": "d<sub>c</sub>",
-           "d0": "d<sub>0</sub>", "L0": "L<sub>0</sub>", "Kq1": "K<sub>q1</sub>", "Kq2": "K<sub>q2</sub>",
-           "ps": "p<sub>s</sub>", "pr": "p<sub>r</sub>", "k_f": "k<sub>f</sub>", "x0": "x(0)", "v0": "v(0)",
-           "p1_0": "p<sub>1</sub>(0)", "p2_0": "p<sub>2</sub>(0)"}
 _PLAIN = {"beta_e": "βe", "Af": "Af", "Dc": "Dc", "dc": "dc", "d0": "d0", "L0": "L0", "Kq1": "Kq1", "Kq2": "Kq2",
           "ps": "ps", "pr": "pr", "k_f": "kf", "x0": "x(0)", "v0": "v(0)", "p1_0": "p1(0)", "p2_0": "p2(0)"}
 
 
-class NumberField(pn.viewable.Viewer):
-    """A labelled text input in display units with its error message beneath."""
+def _field(name: str) -> Field:
+    if name == "kp":
+        return Field("kp", "Kp", kind="text", unit="V/m", tip="proportional gain of the controller in H(s) (eq. 22)")
+    info = FIELD_INFO[name]
+    return Field(name, _PLAIN.get(name, name), kind="text", unit=info.display_unit, tip=info.description,
+                 placeholder="force balance" if name == "p2_0" else "")
 
-    def __init__(self, state: AppState, name: str, **kwargs):
-        super().__init__(**kwargs)
-        self.state = state
-        self.name_ = name
-        if name == "kp":
-            label, tip, text = "Kp [V/m]", "proportional gain of the controller in H(s) (eq. 22)", state.kp_text
-        else:
-            info = FIELD_INFO[name]
-            label = f"{_PLAIN.get(name, name)} [{info.display_unit}]"
-            tip = info.description
-            text = state.texts[name]
-        self.input = pn.widgets.TextInput(label=label, value=text, description=tip, width=190,
-                                          placeholder="force balance" if name == "p2_0" else "",
-                                          css_classes=[f"eha-field-{name}"])
-        self.error = pn.pane.HTML("", visible=False, css_classes=["eha-error", f"eha-error-{name}"],
-                                  styles={"color": "#b00020", "font-size": "12px"}, width=190, margin=(0, 10, 6, 10))
-        self.input.param.watch(self._typed, "value_input")
-        self.input.param.watch(self._typed, "value")
 
-    def _typed(self, event) -> None:
-        if event.new is not None:
-            self.state.set_text(self.name_, event.new)
+def _group(group: str) -> tuple[Field, ...]:
+    return tuple(_field(n) for n in PARAM_NAMES if FIELD_INFO[n].group == group)
 
-    def refresh(self) -> None:
-        """Show the state's text (after a reset) and this field's error, if any."""
-        text = self.state.kp_text if self.name_ == "kp" else self.state.texts[self.name_]
-        if self.input.value_input != text:
-            self.input.value = text
-        message = self.state.errors.get(self.name_, "")
-        self.error.object = message
-        self.error.visible = bool(message)
-        self.input.css_classes = [f"eha-field-{self.name_}"] + (["eha-invalid"] if message else [])
 
-    def __panel__(self):
-        return pn.Column(self.input, self.error, margin=0)
+#: Tab 1's form: the model's parameters in display units (parsed by AppState).
+PARAMETER_FORM = (
+    Group("Load, friction, cylinder", _group("main")),
+    Group("Advanced: valve, supply, chamber", _group("advanced"), collapsible=True, collapsed=True),
+    Group("Initial conditions and controller", _group("initial") + (_field("kp"),), collapsible=True, collapsed=True),
+)
+
+
+@lru_cache(maxsize=1)
+def default_texts() -> dict:
+    """Tab 1's fields as they open: the paper's values in display units."""
+    s = AppState()
+    return {**s.texts, "kp": s.kp_text}
+
+
+@lru_cache(maxsize=1)
+def _schematic_svg() -> str:
+    # read once per server process: every session shows the same picture
+    return SCHEMATIC_PATH.read_text(encoding="utf-8") if SCHEMATIC_PATH.exists() else ""
+
+
+@lru_cache(maxsize=256)
+def _derived(params, kp: float, stale: bool) -> str:
+    # a pure function of hashable inputs: the page of every student who has
+    # not changed a value yet is the same, computed once per server process
+    return derived_html(params, kp, stale=stale)
 
 
 class ParametersTab(pn.viewable.Viewer):
@@ -69,44 +67,44 @@ class ParametersTab(pn.viewable.Viewer):
     def __init__(self, state: AppState, **kwargs):
         super().__init__(**kwargs)
         self.state = state
-        self.fields = {n: NumberField(state, n) for n in PARAM_NAMES + ("kp",)}
-        self.reset_button = pn.widgets.Button(label="Reset to paper defaults", color="default")
+        self.form = Form(spec=[g.to_spec() for g in PARAMETER_FORM], values=self._texts(), width=250,
+                         url_defaults=default_texts(), css_classes=["eha-param-form"], margin=(5, 10))
+        self.form.param.watch(self._typed, "values")
+        self.reset_button = pn.widgets.Button(label="Reset to paper defaults", color="default", width=250)
         self.reset_button.on_click(self._reset)
         self.derived = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-derived"])
-        self.status = pn.pane.HTML("", sizing_mode="stretch_width")
+        self.status = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-param-status"])
         state.param.watch(self._on_state, ["errors", "revision", "kp"])
         self._on_state()
 
-    def _group(self, group: str):
-        return [self.fields[n] for n in PARAM_NAMES if FIELD_INFO[n].group == group]
+    def _texts(self) -> dict:
+        return {**self.state.texts, "kp": self.state.kp_text}
+
+    def _typed(self, event) -> None:
+        old = event.old or {}
+        for name, text in event.new.items():
+            if old.get(name) != text and text is not None:
+                self.state.set_text(name, text)
 
     def _reset(self, _event=None) -> None:
         self.state.reset_defaults()
-        for f in self.fields.values():
-            f.refresh()
+        self.form.values = self._texts()
 
     def _on_state(self, *_events) -> None:
-        for f in self.fields.values():
-            f.refresh()
         s = self.state
+        self.form.errors = dict(s.errors)
         if s.valid:
             self.status.object = ('<div class="eha-ok">All inputs valid. The derived values below follow '
                                   'what you type.</div>')
         else:
             first = next(iter(s.errors.values()))
-            self.status.object = (f'<div class="eha-warn">Fix the highlighted input to enable the runs: {first}</div>')
-        self.derived.object = derived_html(self.state.params, self.state.kp, stale=not self.state.valid)
+            self.status.object = f'<div class="eha-warn">Fix the highlighted input to enable the runs: {first}</div>'
+        self.derived.object = _derived(s.params, s.kp, not s.valid)
 
     def __panel__(self):
-        main = pn.Card(*self._group("main"), title="Load, friction, cylinder", collapsible=False,
-                       sizing_mode="stretch_width")
-        advanced = pn.Card(*self._group("advanced"), title="Advanced: valve, supply, chamber", collapsed=True,
-                           sizing_mode="stretch_width")
-        initial = pn.Card(*self._group("initial"), self.fields["kp"], title="Initial conditions and controller",
-                          collapsed=True, sizing_mode="stretch_width")
-        inputs = pn.Column(self.reset_button, main, advanced, initial, width=250, scroll=True, max_height=1400)
-        schematic = pn.pane.SVG(SCHEMATIC_PATH, width=520, css_classes=["eha-schematic"]) \
-            if SCHEMATIC_PATH.exists() else pn.pane.HTML("")
+        inputs = pn.Column(self.reset_button, self.form, width=270)
+        svg = _schematic_svg()
+        schematic = pn.pane.HTML(svg, width=520, css_classes=["eha-schematic"]) if svg else pn.pane.HTML("")
         picture = pn.Column(self.status, schematic, width=540)
         derived = pn.Column(self.derived, sizing_mode="stretch_width", min_width=420)
         return pn.Row(inputs, picture, derived, sizing_mode="stretch_width")

@@ -4,57 +4,107 @@ from __future__ import annotations
 
 import io
 import math
+from dataclasses import dataclass, fields as dc_fields, replace
+from functools import lru_cache
 
 import panel as pn
-import param
 from bokeh.layouts import column as bokeh_column
 from bokeh.models import Div
 
-from eha_core.experiments import PAPER_CASES
+from eha_core.experiments import PAPER_CASES, run_paper_cases
 from eha_core.signals import ZERO, Chirp, Sine, Square, Step, WhiteNoise
 from eha_core.simulate import runs_to_pandas, simulate_many
 
+from ..form import Field, Form, Group, InputError, parse_fields
+from ..limits import check_simulation
 from ..plots import TimeSeriesGrid
 from ..state import AppState
-from ..tasks import run_task
+from ..tasks import SessionRunner
 
-__all__ = ["SimulationTab", "SimulationRequest", "build_inputs"]
+__all__ = ["SimulationTab", "SimulationRequest", "SIMULATION_FORM", "build_inputs", "parse_t_end", "compute_runs"]
 
-INPUT_KINDS = ("sine", "step", "square", "chirp")
-DISTURBANCE_KINDS = ("none", "sine", "white noise")
 MODEL_CHOICES = {"nonlinear": ("nonlinear",), "linear": ("linear",), "both": ("nonlinear", "linear")}
 MAX_T_END = 60.0
+DT = 1e-3
 
 
-class SimulationRequest(param.Parameterized):
+@dataclass(frozen=True)
+class SimulationRequest:
     """What to simulate: a paper case, all four, or a custom input and disturbance."""
 
-    preset = param.Selector(default="custom", objects=["custom", 1, 2, 3, 4, "all"])
-    u_kind = param.Selector(default="sine", objects=list(INPUT_KINDS), label="input u(t)")
-    u_amplitude = param.Number(default=6.0, bounds=(0.0, 10.0), step=0.1, label="amplitude [V]")
-    u_freq = param.Number(default=2.0, bounds=(0.05, 20.0), step=0.05, label="frequency [Hz]")
-    u_freq_end = param.Number(default=10.0, bounds=(0.05, 40.0), step=0.05, label="chirp end frequency [Hz]")
-    u_t0 = param.Number(default=0.5, bounds=(0.0, MAX_T_END), step=0.1, label="step time [s]")
-    d_kind = param.Selector(default="sine", objects=list(DISTURBANCE_KINDS), label="disturbance d(t)")
-    d_amplitude = param.Number(default=5000.0, bounds=(0.0, 50000.0), step=100.0, label="amplitude [N]")
-    d_freq = param.Number(default=1.0, bounds=(0.05, 20.0), step=0.05, label="frequency [Hz]")
-    d_sigma = param.Number(default=1000.0, bounds=(0.0, 20000.0), step=100.0, label="σ [N]")
-    d_seed = param.Integer(default=0, bounds=(0, 10**6), label="noise seed")
-    t_end_text = param.String(default="5", label="horizon [s]")
+    preset: object = "custom"
+    u_kind: str = "sine"
+    u_amplitude: float = 6.0
+    u_freq: float = 2.0
+    u_freq_end: float = 10.0
+    u_t0: float = 0.5
+    d_kind: str = "sine"
+    d_amplitude: float = 5000.0
+    d_freq: float = 1.0
+    d_sigma: float = 1000.0
+    d_seed: int = 0
+    t_end: float = 5.0
 
 
-def parse_t_end(text: str, dt: float = 1e-3) -> float:
-    """The horizon typed by the user; ValueError with a message when not allowed."""
-    try:
-        value = float((text or "").strip().replace(",", "."))
-    except ValueError:
-        raise ValueError(f"horizon = {text!r} is not allowed: enter a number of seconds in (0, {MAX_T_END:g}]") from None
-    if not math.isfinite(value) or value <= 0 or value > MAX_T_END:
-        raise ValueError(f"horizon = {text.strip()} is not allowed: must lie in (0, {MAX_T_END:g}] s")
+_U = Field("u_kind", "input u(t)", "select", options=(("sine", "sine"), ("step", "step"), ("square", "square"),
+                                                     ("chirp", "chirp")))
+_D = Field("d_kind", "disturbance d(t)", "select", options=(("none", "none"), ("sine", "sine"),
+                                                            ("white noise", "white noise")))
+SIMULATION_FORM = (
+    Group("Input and disturbance", (
+        _U,
+        Field("u_amplitude", "amplitude", "slider", unit="V", lo=0.0, hi=10.0, step=0.1, short="u amplitude",
+              tip="valve command amplitude (the valve saturates the flow, not the command)"),
+        Field("u_freq", "frequency", "slider", unit="Hz", lo=0.05, hi=20.0, step=0.05, short="u frequency"),
+        Field("u_freq_end", "chirp end frequency", "slider", unit="Hz", lo=0.05, hi=40.0, step=0.05,
+              short="chirp end frequency"),
+        Field("u_t0", "step time", "slider", unit="s", lo=0.0, hi=MAX_T_END, step=0.1, short="step time"),
+        _D,
+        Field("d_amplitude", "amplitude", "slider", unit="N", lo=0.0, hi=50000.0, step=100.0, short="d amplitude"),
+        Field("d_freq", "frequency", "slider", unit="Hz", lo=0.05, hi=20.0, step=0.05, short="d frequency"),
+        Field("d_sigma", "σ", "slider", unit="N", lo=0.0, hi=20000.0, step=100.0, short="d σ",
+              tip="standard deviation of the white force noise, held over each 1 ms sample"),
+        Field("d_seed", "noise seed", "integer", lo=0, hi=10**6, short="noise seed"),
+        Field("t_end", "horizon", "number", unit="s", lo=0.0, hi=MAX_T_END, lo_open=True, short="horizon",
+              tip="simulated time, a whole number of milliseconds"),
+    )),
+)
+_FIELDS = {f.name: f for g in SIMULATION_FORM for f in g.fields}
+DEFAULT_TEXTS = {name: f.text(getattr(SimulationRequest(), name)) for name, f in _FIELDS.items()}
+#: which fields each choice shows
+_SHOWN = {"u_freq": ("sine", "square", "chirp"), "u_freq_end": ("chirp",), "u_t0": ("step",),
+          "d_amplitude": ("sine",), "d_freq": ("sine",), "d_sigma": ("white noise",), "d_seed": ("white noise",)}
+
+
+def parse_t_end(text: str, dt: float = DT) -> float:
+    """The horizon typed by the user; InputError with a message when not allowed."""
+    value = _FIELDS["t_end"].parse(text)
     n = round(value / dt)
     if abs(n * dt - value) > 1e-9:
-        raise ValueError(f"horizon = {text.strip()} is not allowed: use a whole number of milliseconds")
+        raise InputError("t_end", f"horizon = {str(text).strip()} is not allowed: use a whole number of milliseconds")
     return n * dt
+
+
+def hidden_fields(u_kind: str, d_kind: str) -> list[str]:
+    kinds = {"u": u_kind, "d": d_kind}
+    return [name for name, shown in _SHOWN.items() if kinds[name[0]] not in shown]
+
+
+def parse_request(texts: dict, preset) -> tuple[SimulationRequest, dict]:
+    """The request the form's texts describe, and a message per invalid field.
+
+    Fields hidden by the chosen kinds are not checked: they take no part in the run.
+    """
+    kinds, _ = parse_fields([_U, _D], texts)
+    hidden = set(hidden_fields(kinds.get("u_kind", "sine"), kinds.get("d_kind", "sine")))
+    values, errors = parse_fields([f for f in _FIELDS.values() if f.name != "t_end"], texts, skip=hidden)
+    if preset != "all":
+        try:
+            values["t_end"] = parse_t_end(texts.get("t_end", ""))
+        except InputError as exc:
+            errors["t_end"] = str(exc)
+    known = {f.name for f in dc_fields(SimulationRequest)}
+    return replace(SimulationRequest(), preset=preset, **{k: v for k, v in values.items() if k in known}), errors
 
 
 def build_inputs(req: SimulationRequest):
@@ -62,7 +112,7 @@ def build_inputs(req: SimulationRequest):
     if req.preset == "all":
         cases = [PAPER_CASES[k] for k in (1, 2, 3, 4)]
         return [c.label for c in cases], [c.u for c in cases], [c.d for c in cases], 5.0
-    t_end = parse_t_end(req.t_end_text)
+    t_end = req.t_end
     if req.u_kind == "sine":
         u = Sine(req.u_amplitude, req.u_freq)
     elif req.u_kind == "step":
@@ -76,9 +126,25 @@ def build_inputs(req: SimulationRequest):
     elif req.d_kind == "sine":
         d = Sine(req.d_amplitude, req.d_freq)
     else:
-        d = WhiteNoise(req.d_sigma, seed=req.d_seed, hold_s=1e-3)
+        d = WhiteNoise(req.d_sigma, seed=req.d_seed, hold_s=DT)
     label = f"Case {req.preset}" if req.preset in (1, 2, 3, 4) else f"u = {u.label}, d = {d.label}"
     return [label], [u], [d], t_end
+
+
+def compute_runs(params, req: SimulationRequest, model: str, cancel=None):
+    """The runs for a request (in a worker thread in the app)."""
+    labels, us, ds, t_end = build_inputs(req)
+    results = []
+    for m in MODEL_CHOICES[model]:
+        results += simulate_many(params, us, ds, t_end=t_end, dt=DT, model=m, labels=labels, cancel=cancel)
+    return results
+
+
+@lru_cache(maxsize=32)
+def _paper_figure_2(params):
+    # what every student sees when first opening the tab: computed once per
+    # parameter set and server process (results are never modified)
+    return tuple(run_paper_cases(params, "nonlinear"))
 
 
 def results_csv(results) -> str:
@@ -89,10 +155,12 @@ def results_csv(results) -> str:
 class SimulationTab(pn.viewable.Viewer):
     """Step 2 of the paper: define u(t) and d(t), run the models, compare (Fig. 16)."""
 
-    def __init__(self, state: AppState, **kwargs):
+    def __init__(self, state: AppState, *, runner: SessionRunner | None = None, query: dict | None = None,
+                 **kwargs):
         super().__init__(**kwargs)
         self.state = state
-        self.request = SimulationRequest()
+        self.runner = runner if runner is not None else SessionRunner(state)
+        self.preset = "all"
         self.results: list = []
         self.last_model = "nonlinear"
         self.last_elapsed_s = float("nan")
@@ -107,126 +175,151 @@ class SimulationTab(pn.viewable.Viewer):
         # the loading indicator goes on a Panel layout: setting it on the Bokeh pane
         # would touch the raw Bokeh model outside the document lock
         self.plot_area = pn.Column(self.plot_pane, sizing_mode="stretch_width", css_classes=["eha-sim-plots"])
-        self.notice = pn.pane.HTML("", visible=False, sizing_mode="stretch_width")
-        self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width")
-        self.t_end_error = pn.pane.HTML("", visible=False, styles={"color": "#b00020", "font-size": "12px"},
-                                        css_classes=["eha-error", "eha-error-t_end"])
+        self.notice = pn.pane.HTML("", visible=False, sizing_mode="stretch_width", css_classes=["eha-sim-notice"])
+        self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
+                                   css_classes=["eha-sim-alert"])
+        self.queue_note = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-queue-note"],
+                                       styles={"color": "#555", "font-size": "12px"})
+        texts = dict(DEFAULT_TEXTS)
+        restored = {k: v for k, v in (query or {}).items() if k in _FIELDS}
+        texts.update(restored)
+        self.form = Form(spec=[g.to_spec() for g in SIMULATION_FORM], values=texts, url_defaults=DEFAULT_TEXTS,
+                         width=270, css_classes=["eha-sim-form"], margin=(5, 10))
+        self.form.param.watch(self._typed, "values")
 
         self.preset_buttons = []
         for k in (1, 2, 3, 4):
-            b = pn.widgets.Button(label=f"Case {k}", width=68, margin=(2, 2), description=PAPER_CASES[k].title)
+            b = pn.widgets.Button(label=f"Case {k}", width=62, margin=(2, 2), description=PAPER_CASES[k].title)
             b.on_click(self._preset_handler(k))
             self.preset_buttons.append(b)
-        b = pn.widgets.Button(label="All four cases", width=140, margin=(2, 2),
+        b = pn.widgets.Button(label="All four cases", width=130, margin=(2, 2),
                               description="the four cases of Figs. 2 and 3, overlaid")
         b.on_click(self._preset_handler("all"))
         self.preset_buttons.append(b)
-
         self.run_buttons = {
-            "nonlinear": pn.widgets.Button(label="Run nonlinear", color="primary", width=130, css_classes=["eha-run-nonlinear"]),
-            "linear": pn.widgets.Button(label="Run linearised", color="primary", width=130, css_classes=["eha-run-linear"]),
+            "nonlinear": pn.widgets.Button(label="Run nonlinear", color="primary", width=130,
+                                           css_classes=["eha-run-nonlinear"]),
+            "linear": pn.widgets.Button(label="Run linearised", color="primary", width=130,
+                                        css_classes=["eha-run-linear"]),
             "both": pn.widgets.Button(label="Compare both", color="success", width=130, css_classes=["eha-run-both"]),
         }
         for model, button in self.run_buttons.items():
             button.on_click(self._run_handler(model))
         self.download = pn.widgets.FileDownload(callback=self._csv, filename="eha_simulation.csv",
                                                 color="default", label="Download CSV", disabled=True, width=270)
-        self.t_end_input = pn.widgets.TextInput.from_param(self.request.param.t_end_text, width=120)
-        self.t_end_input.param.watch(lambda e: setattr(self.request, "t_end_text", e.new), "value_input")
-        self.request.param.watch(self._on_request_change, [p for p in self.request.param if p not in ("name", "preset")])
-        self.request.param.watch(self._update_enabled, "t_end_text")
+        if restored:
+            self.preset = "custom"       # the student had been editing inputs
         state.param.watch(self._update_enabled, "valid")
         self._update_enabled()
         # open on the paper's Fig. 2 (four cases, nonlinear) rather than on empty axes
-        self.request.preset = "all"
-        first = self.compute("nonlinear")
-        self._draw(first, float("nan"))
-        self._show(first, float("nan"))
+        first = list(_paper_figure_2(state.params))
+        self._show(first, None)
 
-    # -- events ------------------------------------------------------------------
+    # -- inputs ------------------------------------------------------------------------
+    def request(self) -> tuple[SimulationRequest, dict]:
+        return parse_request(self.form.values, self.preset)
+
+    def set_inputs(self, **texts) -> None:
+        """Type into the form (tests, presets): values as text or numbers."""
+        self.form.set_values(**texts)
+
+    def _typed(self, event) -> None:
+        if not getattr(self, "_applying_preset", False) and self.preset != "custom":
+            self.preset = "custom"        # editing an input leaves the preset
+        self._update_enabled()
+
+    def _apply_preset(self, preset) -> None:
+        """Show a paper case in the form (or mark 'all four')."""
+        self._applying_preset = True
+        try:
+            if preset in (1, 2, 3, 4):
+                c = PAPER_CASES[preset]
+                texts = dict(u_kind="sine", u_amplitude=f"{c.u.amplitude:g}", u_freq=f"{c.u.freq_hz:g}",
+                             d_kind="sine" if c.d != ZERO else "none", t_end="5")
+                if c.d != ZERO:
+                    texts.update(d_amplitude=f"{c.d.amplitude:g}", d_freq=f"{c.d.freq_hz:g}")
+                self.form.set_values(**texts)
+            else:
+                self.form.set_values(t_end="5")
+            self.preset = preset
+        finally:
+            self._applying_preset = False
+        self._update_enabled()
+
+    def _update_enabled(self, *_events) -> None:
+        req, errors = self.request()
+        self.form.errors = errors
+        self.form.hidden = hidden_fields(self.form.values.get("u_kind", "sine"), self.form.values.get("d_kind", "sine"))
+        ok = self.state.valid and not errors
+        for b in list(self.run_buttons.values()) + self.preset_buttons:
+            b.disabled = not ok
+        if not self.state.valid:
+            self.notice.object = ('<span class="eha-warn">A parameter on the first tab is not valid: '
+                                  'fix it to run the models.</span>')
+        elif errors:
+            self.notice.object = f'<span class="eha-warn">Fix the input to run the models: {next(iter(errors.values()))}</span>'
+        self.notice.visible = not ok
+
+    # -- events ------------------------------------------------------------------------
     def _preset_handler(self, preset):
-        async def handler(_event):
+        def handler(_event):
             self._apply_preset(preset)
-            await self.run(self.last_model)
+            self.run(self.last_model)
         return handler
 
     def _run_handler(self, model):
-        async def handler(_event):
-            await self.run(model)
+        def handler(_event):
+            self.run(model)
         return handler
 
-    def _apply_preset(self, preset) -> None:
-        """Show a paper case in the input widgets (or mark 'all four')."""
-        with param.parameterized.discard_events(self.request):
-            if preset in (1, 2, 3, 4):
-                c = PAPER_CASES[preset]
-                self.request.param.update(u_kind="sine", u_amplitude=c.u.amplitude, u_freq=c.u.freq_hz,
-                                          d_kind="sine" if c.d != ZERO else "none", t_end_text="5")
-                if c.d != ZERO:
-                    self.request.param.update(d_amplitude=c.d.amplitude, d_freq=c.d.freq_hz)
-            else:
-                self.request.t_end_text = "5"
-        self.request.preset = preset
-        self.t_end_input.value = self.request.t_end_text
-        self._update_enabled()
-
-    def _on_request_change(self, *_events) -> None:
-        # editing an input leaves the preset
-        if self.request.preset != "custom":
-            self.request.preset = "custom"
-
-    def _update_enabled(self, *_events) -> None:
-        message = ""
-        if self.request.preset != "all":
-            try:
-                parse_t_end(self.request.t_end_text)
-            except ValueError as exc:
-                message = str(exc)
-        self.t_end_error.object = message
-        self.t_end_error.visible = bool(message)
-        ok = self.state.valid and not message
-        for b in list(self.run_buttons.values()) + self.preset_buttons:
-            b.disabled = not ok
-        self.notice.object = ('<span class="eha-warn">A parameter on the first tab is not valid: '
-                              'fix it to run the models.</span>')
-        self.notice.visible = not self.state.valid
-
-    # -- running -------------------------------------------------------------------
-    def compute(self, model: str):
+    # -- running -----------------------------------------------------------------------
+    def compute(self, model: str, cancel=None):
         """The runs for the current request (also used without a browser)."""
-        labels, us, ds, t_end = build_inputs(self.request)
-        params = self.state.params
-        results = []
-        for m in MODEL_CHOICES[model]:
-            results += simulate_many(params, us, ds, t_end=t_end, dt=1e-3, model=m, labels=labels)
-        return results
+        req, errors = self.request()
+        if errors:
+            raise InputError(next(iter(errors)), next(iter(errors.values())))
+        return compute_runs(self.state.params, req, model, cancel)
 
-    async def run(self, model: str) -> None:
-        if not self.state.valid:
-            return
+    def run(self, model: str):
+        """Queue a run of ``model`` ('nonlinear', 'linear' or 'both'); returns the job."""
+        req, errors = self.request()
+        if not self.state.valid or errors:
+            return None
         self.last_model = model
         self.alert.visible = False
+        labels, _, _, t_end = build_inputs(req)
+        try:
+            check_simulation(t_end, DT, n_runs=len(labels) * len(MODEL_CHOICES[model]))
+        except ValueError as exc:
+            self.alert.object = str(exc)
+            self.alert.visible = True
+            return None
+        params = self.state.params
 
         def fail(message):
             self.alert.object = f"The simulation failed: {message}"
             self.alert.visible = True
 
-        await run_task(lambda: self.compute(model), self._show, fail, busy=[self.plot_area],
-                       apply_bokeh=self._draw)
+        return self.runner.run(f"simulation ({model})", lambda token: compute_runs(params, req, model, token),
+                               self._show, fail=fail, busy=[self.plot_area], note=self._note)
 
-    def _draw(self, results, elapsed: float) -> None:
-        """Bokeh side of showing a run: the plots' data, then the status line."""
+    def _note(self, text: str) -> None:
+        self.queue_note.object = text
+        self.queue_note.visible = bool(text)
+
+    def _show(self, results, job) -> None:
+        """Show a run: the plots' data, then the status line, then the download."""
+        elapsed = float("nan") if job is None else job.elapsed_s
         self.run_count += 1
         self.grid.update(results)
         what = ", ".join(dict.fromkeys(r.label for r in results))
         models = " and ".join(dict.fromkeys(r.model for r in results))
         timing = "" if math.isnan(elapsed) else f", computed in {elapsed * 1e3:.0f} ms"
+        if job is not None and job.wait_s > 0.05:
+            timing += f" (of which {job.wait_s:.1f} s waiting for the server)"
         self.info.text = (f"<b>{what}</b> — {models} model, {results[0].t[-1]:g} s{timing}. "
                           f"<span class='eha-run-count' style='color:#999'>run {self.run_count}</span>")
-
-    def _show(self, results, elapsed: float) -> None:
-        """Panel side of showing a run: results for the download, failures."""
-        self.results = results
+        self.results = list(results)
         self.last_elapsed_s = elapsed
         failed = [r for r in results if not r.success]
         if failed:
@@ -237,36 +330,11 @@ class SimulationTab(pn.viewable.Viewer):
     def _csv(self):
         return io.BytesIO(results_csv(self.results).encode())
 
-    # -- layout ----------------------------------------------------------------------
-    def _input_widgets(self):
-        r = self.request
-        kind = pn.widgets.Select.from_param(r.param.u_kind, width=250)
-        amp = pn.widgets.FloatSlider.from_param(r.param.u_amplitude, width=250)
-        freq = pn.widgets.FloatSlider.from_param(r.param.u_freq, width=250)
-        freq_end = pn.widgets.FloatSlider.from_param(r.param.u_freq_end, width=250)
-        t0 = pn.widgets.FloatSlider.from_param(r.param.u_t0, width=250)
-        freq.visible = pn.bind(lambda k: k in ("sine", "square", "chirp"), r.param.u_kind)
-        freq_end.visible = pn.bind(lambda k: k == "chirp", r.param.u_kind)
-        t0.visible = pn.bind(lambda k: k == "step", r.param.u_kind)
-        d_kind = pn.widgets.Select.from_param(r.param.d_kind, width=250)
-        d_amp = pn.widgets.FloatSlider.from_param(r.param.d_amplitude, width=250)
-        d_freq = pn.widgets.FloatSlider.from_param(r.param.d_freq, width=250)
-        d_sigma = pn.widgets.FloatSlider.from_param(r.param.d_sigma, width=250)
-        d_seed = pn.widgets.IntInput.from_param(r.param.d_seed, width=120)
-        d_amp.visible = pn.bind(lambda k: k == "sine", r.param.d_kind)
-        d_freq.visible = pn.bind(lambda k: k == "sine", r.param.d_kind)
-        d_sigma.visible = pn.bind(lambda k: k == "white noise", r.param.d_kind)
-        d_seed.visible = pn.bind(lambda k: k == "white noise", r.param.d_kind)
-        return [kind, amp, freq, freq_end, t0, d_kind, d_amp, d_freq, d_sigma, d_seed]
-
+    # -- layout --------------------------------------------------------------------------
     def __panel__(self):
-        presets = pn.Column("**Paper cases** (one click runs)", pn.FlexBox(*self.preset_buttons), width=280)
-        note = pn.pane.HTML("<span class='eha-note'>The plots show the paper's four cases; changing an input "
-                            "below makes a custom run.</span>", width=250,
-                            visible=self.request.param.preset.rx() == "all")
-        custom = pn.Card(note, *self._input_widgets(), pn.Column(self.t_end_input, self.t_end_error),
-                         title="Input and disturbance", collapsed=False, width=280)
-        runs = pn.Column(*self.run_buttons.values(), self.download, width=280)
-        side = pn.Column(presets, runs, custom, width=290)
+        presets = pn.Column(pn.pane.HTML("<b>Paper cases</b> (one click runs)", margin=(0, 10)),
+                            pn.FlexBox(*self.preset_buttons), width=280)
+        runs = pn.Column(*self.run_buttons.values(), self.download, self.queue_note, width=280)
+        side = pn.Column(presets, runs, self.form, width=290)
         main = pn.Column(self.notice, self.alert, self.plot_area, sizing_mode="stretch_width")
         return pn.Row(side, main, sizing_mode="stretch_width")

@@ -33,7 +33,7 @@ def test_every_section_is_present(report):
     # self-contained: no script or stylesheet loaded from anywhere else
     assert "<script src=" not in page and "<link " not in page
     assert "[7/7] done" in progress and "report written in" in progress
-    for name in ("numpy", "scipy", "control", "numba", "bokeh", "holoviews"):
+    for name in ("numpy", "scipy", "control", "numba", "bokeh", "panel"):
         assert f"<td>{name}</td>" in page
     assert "Seed 3" in page
 

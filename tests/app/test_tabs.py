@@ -1,13 +1,20 @@
+import io
+
 import numpy as np
 import pandas as pd
 import pytest
-import io
 
 from eha_app.app import create_app
+from eha_app.form import InputError
 from eha_app.state import AppState
 from eha_app.tabs.identification import IdentificationTab
 from eha_app.tabs.parameters import ParametersTab
 from eha_app.tabs.simulation import SimulationTab, parse_t_end
+
+
+def type_into(form, **texts):
+    """What the browser sends while a student types: the form's whole text dict."""
+    form.values = {**form.values, **{k: str(v) for k, v in texts.items()}}
 
 
 def test_parameters_tab_shows_eq23_and_follows_typing():
@@ -15,65 +22,72 @@ def test_parameters_tab_shows_eq23_and_follows_typing():
     tab = ParametersTab(s)
     html = tab.derived.object
     assert "243.7" in html and "430.1" in html and "1.721·10<sup>4</sup>" in html and "2437" in html
-    tab.fields["M"].input.value_input = "8000"       # what the browser sends while typing
+    type_into(tab.form, M="8000")
     assert s.params.M == 8000.0
     assert "215" in tab.derived.object and "430.1" not in tab.derived.object   # l1 halves
-    tab.fields["M"].input.value_input = "-8000"
-    assert tab.fields["M"].error.visible and "M = -8000" in tab.fields["M"].error.object
+    type_into(tab.form, M="-8000")
+    assert "M = -8000" in tab.form.errors["M"]
     assert "Fix the highlighted input" in tab.status.object
     tab._reset()
-    assert tab.fields["M"].input.value == "4000" and not tab.fields["M"].error.visible
+    assert tab.form.values["M"] == "4000" and tab.form.errors == {}
 
 
-def test_simulation_runs_four_case_comparison(run_async):
+def test_simulation_runs_four_case_comparison():
     s = AppState()
     tab = SimulationTab(s)
     assert len(tab.results) == 4                      # opens on Fig. 2
     tab._apply_preset("all")
-    run_async(tab.run("both"))
+    job = tab.run("both")
+    assert job.state == "done"
     assert len(tab.results) == 8
     assert {r.model for r in tab.results} == {"nonlinear", "linear"}
     assert all(r.success and r.t[-1] == 5.0 for r in tab.results)
-    # the plot sources hold the data (x in mm)
+    # the plot source holds the data (x in mm, p in MPa), one line per run, every ~2 ms
     src = tab.grid.source.data
-    np.testing.assert_allclose(src["x_2"][-1], tab.results[2].x[-1] * 1e3)
-    np.testing.assert_allclose(src["p2_7"][-1], tab.results[7].p2[-1] * 1e-6)
-    assert sum(r.visible for r in tab.grid.renderers[0]) == 8
+    assert tab.grid.line_count == 8
+    np.testing.assert_allclose(src["x"][2][-1], tab.results[2].x[-1] * 1e3, rtol=1e-6)
+    np.testing.assert_allclose(src["p2"][7][-1], tab.results[7].p2[-1] * 1e-6, rtol=1e-6)
+    assert src["dash"][0] == "solid" and src["dash"][7] == "dashed"
     assert "computed in" in tab.info.text
     df = pd.read_csv(io.StringIO(tab._csv().read().decode()))
     assert list(df.columns) == ["run", "model", "t", "x", "v", "p1", "p2", "u", "d"]
     assert len(df) == 8 * 5001
 
 
-def test_simulation_custom_input_and_preset(run_async):
+def test_simulation_custom_input_and_preset():
     s = AppState()
     tab = SimulationTab(s)
     tab._apply_preset(3)
-    run_async(tab.run("nonlinear"))
+    tab.run("nonlinear")
     assert [r.label for r in tab.results] == ["Case 3"]
-    tab.request.param.update(u_kind="step", u_amplitude=2.0, d_kind="none", t_end_text="1.5")
-    assert tab.request.preset == "custom"
-    run_async(tab.run("linear"))
+    type_into(tab.form, u_kind="step", u_amplitude="2", d_kind="none", t_end="1.5")
+    assert tab.preset == "custom"
+    tab.run("linear")
     assert tab.results[0].t[-1] == 1.5 and tab.results[0].model == "linear"
+    assert "d_amplitude" in tab.form.hidden and "u_t0" not in tab.form.hidden
 
 
 def test_invalid_inputs_disable_runs():
     s = AppState()
     tab = SimulationTab(s)
     ident = IdentificationTab(s)
+    freq = ident.frequency_panel()
     s.set_text("dc", "200")
     assert all(b.disabled for b in tab.run_buttons.values())
-    assert ident.lse_button.disabled and ident.freq_button.disabled
+    assert ident.lse.button.disabled and freq.button.disabled
     s.set_text("dc", "70")
     assert not any(b.disabled for b in tab.run_buttons.values())
-    tab.request.t_end_text = "-2"
-    assert tab.t_end_error.visible and "horizon = -2" in tab.t_end_error.object
+    type_into(tab.form, t_end="-2")
+    assert "horizon = -2 is not allowed" in tab.form.errors["t_end"]
     assert all(b.disabled for b in tab.run_buttons.values())
-    with pytest.raises(ValueError, match="milliseconds"):
+    with pytest.raises(InputError, match="milliseconds"):
         parse_t_end("1.0005")
+    type_into(tab.form, t_end="2", u_amplitude="12")    # beyond the slider: a message, not a silent clip
+    assert tab.form.errors["u_amplitude"] == "u amplitude = 12 is not allowed: must lie in [0, 10] V"
+    assert tab.run("nonlinear") is None
 
 
-def test_a_failing_computation_is_shown_and_the_session_keeps_working(run_async, monkeypatch):
+def test_a_failing_computation_is_shown_and_the_session_keeps_working(monkeypatch):
     s = AppState()
     tab = SimulationTab(s)
     import eha_app.tabs.simulation as sim
@@ -81,59 +95,74 @@ def test_a_failing_computation_is_shown_and_the_session_keeps_working(run_async,
     def boom(*a, **k):
         raise RuntimeError("integrator exploded")
     monkeypatch.setattr(sim, "simulate_many", boom)
-    run_async(tab.run("nonlinear"))
+    tab.run("nonlinear")
     assert tab.alert.visible and "integrator exploded" in tab.alert.object
     assert not tab.plot_area.loading
     monkeypatch.undo()
-    run_async(tab.run("nonlinear"))
+    tab.run("nonlinear")
     assert len(tab.results) == 4
 
 
-def test_identification_least_squares_and_table4(run_async):
+def test_identification_least_squares_and_table4():
     s = AppState()
     tab = IdentificationTab(s)
-    tab.lse_req.scenario = "5000 sin"
-    tab.lse_req.model = "harmonic"
-    run_async(tab._run_lse())
-    res = tab.lse_result
+    type_into(tab.lse.form, lse_scenario="5000 sin", lse_model="harmonic")
+    tab.lse.run()
+    res = tab.lse.result
     assert abs(res.rel_error["B"]) < 0.02
-    assert "paper (Table 3/4)" in tab.lse_table.object and "1326.3" in tab.lse_table.object
-    assert len(tab.lse_plot.objects) == 1
-    run_async(tab._run_lse_all())
-    assert set(tab.lse_all) == {"constant", "harmonic"}
-    assert "white noise" in tab.table4.object and "4003.4" in tab.table4.object
+    assert "paper (Table 3/4)" in tab.lse.table.object and "1326.3" in tab.lse.table.object
+    assert len(tab.lse.plot.objects) == 1 and len(tab.lse.figure.resim.data["t"]) > 1000
+    tab.lse.run_all()
+    assert set(tab.lse.all_results) == {"constant", "harmonic"}
+    assert "white noise" in tab.lse.table4.object and "4003.4" in tab.lse.table4.object
 
 
 def test_identification_custom_disturbance_validation():
     s = AppState()
     tab = IdentificationTab(s)
-    tab.lse_req.scenario = "custom"
-    tab.lse_req.custom = "sine:x"
-    assert tab.lse_errors["custom"].visible and tab.lse_button.disabled
-    tab.lse_req.custom = "sine:800:3+noise:50:2"
-    assert not tab.lse_errors["custom"].visible and not tab.lse_button.disabled
-    tab.lse_req.model = "harmonic"
-    tab.lse_req.freq_text = "abc"
-    assert tab.lse_errors["freq_text"].visible and tab.lse_button.disabled
+    type_into(tab.lse.form, lse_scenario="custom", lse_custom="sine:x")
+    assert "lse_custom" in tab.lse.form.errors and tab.lse.button.disabled
+    type_into(tab.lse.form, lse_custom="sine:800:3+noise:50:2")
+    assert "lse_custom" not in tab.lse.form.errors and not tab.lse.button.disabled
+    type_into(tab.lse.form, lse_model="harmonic", lse_freq="abc")
+    assert "lse_freq" in tab.lse.form.errors and tab.lse.button.disabled
 
 
-def test_identification_frequency_domain(run_async):
+def test_identification_frequency_domain():
     s = AppState()
     tab = IdentificationTab(s)
-    run_async(tab._run_freq())
-    fi = tab.freq_result
+    assert tab.freq is None                       # built when first shown
+    freq = tab.frequency_panel()
+    assert len(freq.figures["excitation"].source.data["t"]) == 1000
+    freq.run()
+    fi = freq.result
     assert fi.success and fi.estimate.den[1] < 50
-    assert "Ĥ(s)" in tab.freq_summary.object and "84.81" in tab.freq_summary.object
-    assert "friction" in tab.backout.object and "u &lt; 0 branch" in tab.backout.object
-    assert all(len(area.objects) >= 1 for area in tab.freq_plots.values())
-    tab.freq_req.band_lo = 0.9
-    tab.freq_req.band_hi = 0.2
-    assert tab.freq_error.visible and tab.freq_button.disabled
+    assert "Ĥ(s)" in freq.summary.object and "84.81" in freq.summary.object
+    assert "friction" in freq.backout.object and "u &lt; 0 branch" in freq.backout.object
+    # figures shown later draw the last result
+    for i, key in enumerate(("data", "fit", "bode", "validation", "residuals"), start=1):
+        freq.figure_tabs.active = i
+        assert key in freq.figures
+    assert len(freq.figures["bode"].points.data["w"]) == fi.etfe.w.size
+    type_into(freq.form, band_lo="0.9", band_hi="0.2")
+    assert freq.error.visible and freq.button.disabled
 
 
-def test_each_app_has_its_own_state():
+def test_each_app_has_its_own_state_and_builds_tabs_when_shown():
     a, b = create_app(), create_app()
     assert a.eha_state is not b.eha_state
     a.eha_state.set_text("M", "5000")
     assert b.eha_state.params.M == 4000.0
-    assert [t for t in a.eha_tabs._names] == ["1. Parameters", "2. Simulation", "3. Identification"]
+    assert list(a.eha_tabs._names) == ["1. Parameters", "2. Simulation", "3. Identification"]
+    assert set(a.eha_lazy.built) == {0}
+    a.eha_tabs.active = 2
+    assert isinstance(a.eha_lazy.built[2], IdentificationTab) and 1 not in a.eha_lazy.built
+
+
+def test_the_address_restores_what_was_typed():
+    page = create_app(query={"M": "6000", "dc": "130", "tab": "2", "u_kind": "step", "t_end": "-1"})
+    state = page.eha_state
+    assert state.params.M == 6000.0
+    assert "dc" in state.errors                   # a bad value gets its message, the page still opens
+    sim = page.eha_lazy.built[1]
+    assert sim.form.values["u_kind"] == "step" and "t_end" in sim.form.errors

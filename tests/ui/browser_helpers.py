@@ -45,8 +45,8 @@ def wait_until(condition, timeout: float = 30.0, interval: float = 0.05, message
 
 JS_TEXT = """el => {
   const root = el.shadowRoot || el;
-  return Array.from(root.children).filter(c => !['STYLE', 'LINK'].includes(c.tagName))
-              .map(c => c.innerText).join('\\n');
+  const kids = Array.from(root.children).filter(c => !['STYLE', 'LINK'].includes(c.tagName));
+  return kids.length ? kids.map(c => c.innerText).join('\\n') : el.innerText;
 }"""
 
 

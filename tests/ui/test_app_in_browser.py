@@ -17,9 +17,13 @@ JS_STATE_FIGURES = """() => {
     const label = m.left.length ? m.left[0].axis_label : null;
     let points = 0;
     for (const r of m.renderers) {
-      if (!r.visible || !r.data_source || !r.glyph || !r.glyph.y) continue;
-      const col = r.data_source.data[r.glyph.y.field];
-      if (col) points += Array.from(col).filter(Number.isFinite).length;
+      if (!r.visible || !r.data_source || !r.glyph) continue;
+      const spec = r.glyph.ys || r.glyph.y;
+      const col = spec && spec.field ? r.data_source.data[spec.field] : null;
+      if (!col) continue;
+      // a MultiLine column holds one array per curve
+      const curves = col.length && typeof col[0] === 'object' ? Array.from(col) : [col];
+      for (const c of curves) points += Array.from(c).filter(Number.isFinite).length;
     }
     out[label] = points;
   }
@@ -94,8 +98,9 @@ def test_two_sessions_do_not_see_each_other(new_session):
     # B still has the paper's parameters and its own results
     assert "430.1" in derived_text(b.page) and "215" not in derived_text(b.page)
     assert b.page.locator(".eha-field-M input").input_value() == "4000"
-    b.tab("2. Simulation")
-    assert "Case 1, Case 2, Case 3, Case 4" in text_of(b.page, ".eha-sim-info")
+    b.tab("2. Simulation")                       # built when first shown: wait for it
+    b.page.wait_for_selector(".eha-sim-info >> text=Case 1, Case 2, Case 3, Case 4")
+    assert text_of(b.page, ".eha-sim-info").startswith("Case 1, Case 2, Case 3, Case 4 — nonlinear model")
 
 
 def test_four_case_comparison_latency(session, record_property):

@@ -1,0 +1,88 @@
+"""The page's link to the server: says when it is lost, comes back when the server does.
+
+Bokeh's client only logs a lost websocket to the console: the page looks alive
+while every click goes nowhere. :class:`ConnectionWatch` is an invisible
+component that listens for the document's ``connection_lost`` event, then
+covers the page with a notice (so nobody clicks into the void), asks the server
+every two seconds whether it answers again, and reloads the page when it does.
+A restarted server has no memory of the old session, but nothing typed is
+lost: every form writes its fields into the page's address as they are typed,
+and the app reads them back when it starts (:func:`eha_app.app.create_app`).
+
+It also keeps the address in step with the open tab (``tab=2``).
+"""
+
+from __future__ import annotations
+
+import param
+from panel.custom import JSComponent
+
+__all__ = ["ConnectionWatch"]
+
+
+class ConnectionWatch(JSComponent):
+    """Invisible; see the module docstring. ``retry_ms``: how often to ask the server."""
+
+    retry_ms = param.Integer(default=2000, bounds=(100, None))
+    tabs_class = param.String(default="eha-main-tabs", doc="css class of the Tabs whose index goes into the URL")
+
+    _esm = """
+export function render({ view, model, el }) {
+  el.style.display = 'none'
+  const doc = view.model.document
+  let overlay = null
+  let lost = false
+  function show(text) {
+    if (overlay === null) {
+      overlay = document.createElement('div')
+      overlay.className = 'eha-offline'
+      overlay.setAttribute('role', 'alertdialog')
+      overlay.setAttribute('aria-live', 'assertive')
+      Object.assign(overlay.style, {
+        position: 'fixed', inset: '0', zIndex: '100000', background: 'rgba(255,255,255,0.72)',
+        display: 'flex', alignItems: 'flex-start', justifyContent: 'center', paddingTop: '80px',
+      })
+      const box = document.createElement('div')
+      box.className = 'eha-offline-box'
+      Object.assign(box.style, {
+        background: '#fff4e5', border: '2px solid #b26a00', borderRadius: '8px', padding: '16px 22px',
+        maxWidth: '560px', font: '15px sans-serif', color: '#3d2500', boxShadow: '0 4px 18px rgba(0,0,0,0.18)',
+      })
+      overlay.append(box)
+      document.body.append(overlay)
+    }
+    overlay.firstChild.textContent = text
+    if (document.activeElement && document.activeElement.blur) { document.activeElement.blur() }
+  }
+  function poll() {
+    fetch(window.location.href, { method: 'HEAD', cache: 'no-store' })
+      .then((response) => {
+        if (response.ok) {
+          show('The server is back: reloading the page with your values…')
+          window.location.reload()
+        } else {
+          setTimeout(poll, model.retry_ms)
+        }
+      })
+      .catch(() => setTimeout(poll, model.retry_ms))
+  }
+  doc.on_event('connection_lost', () => {
+    if (lost) { return }
+    lost = true
+    show('The connection to the server was lost. Your values are kept in this page\\'s address; ' +
+         'it reconnects by itself as soon as the server answers again.')
+    setTimeout(poll, model.retry_ms)
+  })
+  // the open tab goes into the address, next to the fields the forms write there
+  for (const m of doc.all_models) {
+    if (m.css_classes !== undefined && m.css_classes.includes(model.tabs_class)) {
+      m.property('active').change.connect(() => {
+        const query = new URLSearchParams(window.location.search)
+        if (m.active === 0) { query.delete('tab') } else { query.set('tab', String(m.active + 1)) }
+        const search = query.toString()
+        window.history.replaceState(null, '', window.location.pathname + (search ? '?' + search : '') + window.location.hash)
+      })
+    }
+  }
+}
+"""

@@ -1,0 +1,355 @@
+"""A form of labelled inputs drawn in the browser as one component.
+
+Why not one Panel widget per input: every Panel widget is several Bokeh models
+(the widget, its tooltip, the error pane, a layout), and a page of them costs
+about 1 ms of the server's single event loop per model to build and serialise.
+Tab 1's eighteen fields were 114 models and 0.2 s per student opening the
+page; as one :class:`Form` they are one model and 20 ms. A class of thirty
+opening the page together waits for the sum of those.
+
+The form only carries text: what the student typed goes to the server
+unchanged (``values``); the server parses and validates it and sends back a
+message per field (``errors``), shown beside the field, which is marked and,
+if it sits in a collapsed group, opened. The server never rewrites a value
+while the student types; it sets ``values`` only for an explicit action
+(reset, a preset, a restored link).
+
+:class:`Field` describes one input and parses its text with a message in the
+field's own unit (``NAME = TEXT is not allowed: WHAT``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import param
+from panel.custom import JSComponent
+
+__all__ = ["Form", "Field", "Group", "InputError", "parse_fields"]
+
+
+class InputError(ValueError):
+    """A typed value that is not allowed, with the field it belongs to."""
+
+    def __init__(self, name: str, message: str):
+        self.field = name
+        super().__init__(message)
+
+
+@dataclass(frozen=True)
+class Field:
+    """One input: how it is drawn and how its text is read.
+
+    ``kind`` is ``"number"`` (a text box for a number in ``unit``, within
+    ``[lo, hi]``), ``"integer"``, ``"slider"`` (a number with a slider over
+    ``[lo, hi]``), ``"select"`` (one of ``options``, pairs of value and label)
+    or ``"text"`` (free text, parsed by the owner).
+    """
+
+    name: str
+    label: str
+    kind: str = "number"
+    unit: str = ""
+    tip: str = ""
+    lo: float | None = None
+    hi: float | None = None
+    step: float | None = None
+    options: tuple = ()
+    placeholder: str = ""
+    lo_open: bool = False
+    short: str = ""
+
+    @property
+    def display(self) -> str:
+        """The name a message uses: the short symbol, else the label."""
+        return self.short or self.label
+
+    def to_spec(self) -> dict:
+        spec = {"name": self.name, "label": self.label, "kind": self.kind, "unit": self.unit, "tip": self.tip,
+                "placeholder": self.placeholder}
+        if self.kind == "slider":
+            spec.update(lo=self.lo, hi=self.hi, step=self.step or (self.hi - self.lo) / 100)
+        if self.kind == "select":
+            spec["options"] = [[str(v), str(lab)] for v, lab in self.options]
+        return spec
+
+    def _range_text(self) -> str:
+        unit = f" {self.unit}" if self.unit else ""
+        left = "(" if self.lo_open else "["
+        if self.lo is not None and self.hi is not None:
+            return f"must lie in {left}{self.lo:g}, {self.hi:g}]{unit}"
+        if self.lo is not None:
+            return f"must be {'>' if self.lo_open else '>='} {self.lo:g}{unit}"
+        if self.hi is not None:
+            return f"must be <= {self.hi:g}{unit}"
+        return f"must be a number{(' in ' + self.unit) if self.unit else ''}"
+
+    def parse(self, text: str):
+        """The value of ``text``; :class:`InputError` naming the field, the text and what is allowed."""
+        raw = "" if text is None else str(text)
+        shown = raw.strip() or "(empty)"
+        if self.kind == "select":
+            allowed = [str(v) for v, _ in self.options]
+            if raw not in allowed:
+                raise InputError(self.name, f"{self.display} = {shown} is not allowed: use one of {', '.join(allowed)}")
+            return next(v for v, _ in self.options if str(v) == raw)
+        if self.kind == "text":
+            return raw.strip()
+        s = raw.strip().replace(",", ".")
+        what = "a whole number" if self.kind == "integer" else "a number"
+        try:
+            value = float(s)
+        except ValueError:
+            raise InputError(self.name, f"{self.display} = {shown} is not allowed: enter {what}; "
+                                        f"{self._range_text()}") from None
+        if not math.isfinite(value):
+            raise InputError(self.name, f"{self.display} = {shown} is not allowed: {self._range_text()}")
+        if self.kind == "integer":
+            if value != int(value):
+                raise InputError(self.name, f"{self.display} = {shown} is not allowed: enter a whole number; "
+                                            f"{self._range_text()}")
+            value = int(value)
+        low_bad = self.lo is not None and (value <= self.lo if self.lo_open else value < self.lo)
+        high_bad = self.hi is not None and value > self.hi
+        if low_bad or high_bad:
+            raise InputError(self.name, f"{self.display} = {shown} is not allowed: {self._range_text()}")
+        return value
+
+    def text(self, value) -> str:
+        """How a value is written into the field."""
+        if self.kind in ("select", "text"):
+            return str(value)
+        if self.kind == "integer":
+            return str(int(value))
+        return f"{value:.6g}"
+
+
+@dataclass(frozen=True)
+class Group:
+    """Fields shown together; ``collapsible`` groups can be folded (``collapsed`` at first)."""
+
+    title: str
+    fields: tuple[Field, ...]
+    collapsible: bool = False
+    collapsed: bool = False
+    css: str = ""
+
+    def to_spec(self) -> dict:
+        return {"title": self.title, "collapsible": self.collapsible, "collapsed": self.collapsed,
+                "css": self.css, "fields": [f.to_spec() for f in self.fields]}
+
+
+def parse_fields(fields, values: dict, skip=()) -> tuple[dict, dict]:
+    """Parse every field's text: (values by name, messages by name)."""
+    parsed, errors = {}, {}
+    for f in fields:
+        if f.name in skip:
+            continue
+        try:
+            parsed[f.name] = f.parse(values.get(f.name, ""))
+        except InputError as exc:
+            errors[f.name] = str(exc)
+    return parsed, errors
+
+
+_CSS = """
+:host { display: block; }
+.eha-form { font-size: 13px; font-family: inherit; }
+.eha-group { border: 1px solid #d8dde6; border-radius: 6px; margin: 0 0 8px 0; padding: 4px 8px 6px 8px; background: #fff; }
+.eha-group > summary, .eha-group-title { font-weight: 600; cursor: pointer; padding: 3px 0; color: #223; list-style-position: inside; }
+.eha-group-title { cursor: default; }
+.eha-field { margin: 4px 0 6px 0; }
+.eha-field label { display: block; color: #333; margin-bottom: 2px; }
+.eha-tip { display: inline-block; width: 14px; height: 14px; line-height: 14px; border-radius: 7px; background: #e4e8ef;
+           color: #556; font-size: 10px; text-align: center; margin-left: 4px; cursor: help; }
+.eha-field input[type=text], .eha-field select { box-sizing: border-box; width: 100%; padding: 4px 6px;
+           border: 1px solid #c3c9d3; border-radius: 4px; font: inherit; background: #fff; }
+.eha-field input[type=range] { width: 100%; margin: 2px 0 0 0; }
+.eha-slider-row { display: flex; gap: 6px; align-items: center; }
+.eha-slider-row input[type=text] { width: 80px; flex: none; }
+.eha-field input:focus, .eha-field select:focus { outline: 2px solid #8ab4f8; border-color: #4a7fd6; }
+.eha-field.eha-invalid input[type=text], .eha-field.eha-invalid select { border: 2px solid #b00020; background: #fff4f4; }
+.eha-field.eha-invalid label { color: #b00020; }
+.eha-error { color: #b00020; font-size: 12px; margin-top: 2px; }
+.eha-error:empty { display: none; }
+.eha-hidden { display: none; }
+.eha-form.eha-disabled { opacity: 0.6; pointer-events: none; }
+"""
+
+
+class Form(JSComponent):
+    """Labelled inputs, each with its message beneath (see the module docstring).
+
+    ``spec`` is a list of :meth:`Group.to_spec` dicts; ``values`` the text of
+    each field; ``errors`` a message per invalid field; ``hidden`` the names of
+    fields not shown; ``disabled`` greys the whole form out.
+    """
+
+    spec = param.List(default=[], doc="groups of fields to draw")
+    values = param.Dict(default={}, doc="the text of each field, as typed")
+    errors = param.Dict(default={}, doc="a message per invalid field")
+    hidden = param.List(default=[], doc="names of the fields not shown")
+    disabled = param.Boolean(default=False)
+    url_defaults = param.Dict(default=None, allow_None=True, doc="""
+        When set, the fields' texts are written into the page's address as they
+        are typed (those that differ from these defaults), so that a reload or a
+        shared link restores them.""")
+
+    _stylesheets = [_CSS]
+
+    _esm = """
+export function render({ model, el }) {
+  const root = document.createElement('div')
+  root.className = 'eha-form'
+  const fields = {}
+  const groupOf = {}
+  for (const group of model.spec) {
+    let box
+    if (group.collapsible) {
+      box = document.createElement('details')
+      box.open = !group.collapsed
+      const summary = document.createElement('summary')
+      summary.textContent = group.title
+      box.append(summary)
+    } else {
+      box = document.createElement('div')
+      if (group.title) {
+        const title = document.createElement('div')
+        title.className = 'eha-group-title'
+        title.textContent = group.title
+        box.append(title)
+      }
+    }
+    box.className = 'eha-group' + (group.css ? ' ' + group.css : '')
+    for (const f of group.fields) {
+      const wrap = document.createElement('div')
+      wrap.className = 'eha-field eha-field-' + f.name
+      const label = document.createElement('label')
+      const id = 'eha-input-' + f.name
+      label.htmlFor = id
+      label.textContent = f.label + (f.unit ? ' [' + f.unit + ']' : '')
+      if (f.tip) {
+        const tip = document.createElement('span')
+        tip.className = 'eha-tip'
+        tip.textContent = '?'
+        tip.title = f.tip
+        label.title = f.tip
+        label.append(tip)
+      }
+      wrap.append(label)
+      let input
+      let slider = null
+      if (f.kind === 'select') {
+        input = document.createElement('select')
+        for (const [value, text] of f.options) {
+          const opt = document.createElement('option')
+          opt.value = value
+          opt.textContent = text
+          input.append(opt)
+        }
+        input.addEventListener('change', () => send(f.name, input.value))
+      } else {
+        input = document.createElement('input')
+        input.type = 'text'
+        input.autocomplete = 'off'
+        input.spellcheck = false
+        if (f.placeholder) { input.placeholder = f.placeholder }
+        input.addEventListener('input', () => {
+          send(f.name, input.value)
+          if (slider !== null) {
+            const v = parseFloat(input.value.replace(',', '.'))
+            if (Number.isFinite(v)) { slider.value = String(v) }
+          }
+        })
+      }
+      input.id = id
+      input.setAttribute('aria-describedby', 'eha-error-' + f.name)
+      if (f.kind === 'slider') {
+        slider = document.createElement('input')
+        slider.type = 'range'
+        slider.min = String(f.lo)
+        slider.max = String(f.hi)
+        slider.step = String(f.step)
+        slider.setAttribute('aria-label', f.label)
+        const s = slider
+        s.addEventListener('input', () => { input.value = s.value })
+        s.addEventListener('change', () => { input.value = s.value; send(f.name, s.value) })
+        const row = document.createElement('div')
+        row.className = 'eha-slider-row'
+        row.append(s, input)
+        wrap.append(row)
+      } else {
+        wrap.append(input)
+      }
+      const error = document.createElement('div')
+      error.className = 'eha-error eha-error-' + f.name
+      error.id = 'eha-error-' + f.name
+      error.setAttribute('role', 'alert')
+      wrap.append(error)
+      box.append(wrap)
+      fields[f.name] = { wrap, input, slider, error }
+      groupOf[f.name] = box
+    }
+    root.append(box)
+  }
+  el.append(root)
+
+  function send(name, text) {
+    model.values = { ...model.values, [name]: text }
+    syncUrl()
+  }
+  function syncUrl() {
+    const defaults = model.url_defaults
+    if (defaults === null || defaults === undefined) { return }
+    const query = new URLSearchParams(window.location.search)
+    for (const name of Object.keys(fields)) {
+      const text = model.values[name]
+      if (text === undefined || text === null || String(text) === String(defaults[name] ?? '')) {
+        query.delete(name)
+      } else {
+        query.set(name, String(text))
+      }
+    }
+    const search = query.toString()
+    window.history.replaceState(null, '', window.location.pathname + (search ? '?' + search : '') + window.location.hash)
+  }
+  function showValues() {
+    syncUrl()
+    const active = el.getRootNode().activeElement
+    for (const [name, f] of Object.entries(fields)) {
+      const text = model.values[name]
+      if (text === undefined || text === null) { continue }
+      if (f.input !== active && f.input.value !== String(text)) { f.input.value = String(text) }
+      if (f.slider !== null) {
+        const v = parseFloat(String(text).replace(',', '.'))
+        if (Number.isFinite(v)) { f.slider.value = String(v) }
+      }
+    }
+  }
+  function showErrors() {
+    for (const [name, f] of Object.entries(fields)) {
+      const message = model.errors[name] || ''
+      f.error.textContent = message
+      f.wrap.classList.toggle('eha-invalid', message !== '')
+      f.input.setAttribute('aria-invalid', message !== '' ? 'true' : 'false')
+      const box = groupOf[name]
+      if (message !== '' && box.tagName === 'DETAILS' && !box.open) { box.open = true }
+    }
+  }
+  function showHidden() {
+    const hidden = new Set(model.hidden)
+    for (const [name, f] of Object.entries(fields)) { f.wrap.classList.toggle('eha-hidden', hidden.has(name)) }
+  }
+  function showDisabled() { root.classList.toggle('eha-disabled', model.disabled) }
+  showValues(); showErrors(); showHidden(); showDisabled()
+  model.on('values', showValues)
+  model.on('errors', showErrors)
+  model.on('hidden', showHidden)
+  model.on('disabled', showDisabled)
+}
+"""
+
+    def set_values(self, **texts) -> None:
+        """Write texts into fields (an explicit action: reset, preset, restored link)."""
+        self.values = {**self.values, **{k: str(v) for k, v in texts.items()}}

@@ -1,0 +1,268 @@
+"""The server's computations: a fair queue shared by every session of the process.
+
+A class of thirty shares a few cores. Without rules one student clicking a
+heavy experiment eight times held all of the default executor's threads and
+another student's 0.08 s simulation waited 78 s. The rules here:
+
+- **One run per session at a time.** A session has at most one job running
+  and at most one waiting; a new request while one runs replaces the waiting
+  one (which is dropped, and the page says so).
+- **Sessions take turns.** A free worker takes, among the sessions that have
+  nothing running, the one served least recently (then the longest waiting):
+  no session can hold more than one worker, and one that was just served goes
+  behind those still waiting.
+- **Work for nobody is stopped.** Closing the page cancels the session's jobs
+  (:meth:`JobQueue.cancel_owner`); a running job stops at its next check of
+  its :class:`~eha_core.cancel.CancelToken` (between integration chunks,
+  estimator iterations).
+- **The event loop comes first.** Workers are threads (the compiled kernels
+  release the GIL) running at a lower OS priority than the server's event
+  loop, with numba limited to one thread each, so a student typing is served
+  before anyone's computation.
+
+Per-request limits (steps and memory) are checked before a job is queued, in
+the tabs, with :mod:`eha_app.limits`.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import os
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Hashable
+
+from eha_core.cancel import Cancelled, CancelToken
+
+__all__ = ["Job", "JobQueue", "default_queue", "worker_count"]
+
+log = logging.getLogger("eha_app")
+
+#: Nice value of the worker threads (Linux applies it per thread): computations
+#: yield the CPU to the event loop that serves every student's clicks.
+WORKER_NICE = 10
+
+
+def worker_count() -> int:
+    """Worker threads per server process: ``EHA_WORKERS``, else one per core."""
+    env = os.environ.get("EHA_WORKERS", "").strip()
+    if env:
+        try:
+            n = int(env)
+        except ValueError:
+            raise ValueError(f"EHA_WORKERS = {env} is not allowed: use a whole number >= 1") from None
+        if n < 1:
+            raise ValueError(f"EHA_WORKERS = {env} is not allowed: use a whole number >= 1")
+        return n
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+
+
+@dataclass(eq=False)
+class Job:
+    """One computation for one session.
+
+    ``state`` goes ``queued`` -> ``running`` -> ``done`` / ``failed`` /
+    ``cancelled``; a queued job replaced by a newer request of the same session
+    ends as ``replaced``. ``result`` or ``error`` hold the outcome.
+    """
+
+    owner: Hashable
+    label: str
+    fn: Callable[[CancelToken], Any]
+    on_done: Callable[["Job"], None] | None = None
+    token: CancelToken = field(default_factory=CancelToken)
+    state: str = "queued"
+    seq: int = 0
+    submitted_at: float = field(default_factory=time.perf_counter)
+    started_at: float | None = None
+    finished_at: float | None = None
+    result: Any = None
+    error: BaseException | None = None
+
+    @property
+    def finished(self) -> bool:
+        return self.state in ("done", "failed", "cancelled", "replaced")
+
+    @property
+    def wait_s(self) -> float:
+        """Seconds spent waiting for a worker."""
+        end = self.started_at if self.started_at is not None else (self.finished_at or time.perf_counter())
+        return end - self.submitted_at
+
+    @property
+    def run_s(self) -> float:
+        """Seconds of computation (0 if it never started)."""
+        if self.started_at is None:
+            return 0.0
+        return (self.finished_at or time.perf_counter()) - self.started_at
+
+    @property
+    def elapsed_s(self) -> float:
+        """From the request to the result."""
+        return (self.finished_at or time.perf_counter()) - self.submitted_at
+
+
+class JobQueue:
+    """Worker threads and the fair queue described in the module docstring."""
+
+    def __init__(self, workers: int | None = None, *, nice: int = WORKER_NICE, name: str = "eha-worker"):
+        self.workers = worker_count() if workers is None else int(workers)
+        if self.workers < 1:
+            raise ValueError(f"workers = {workers} is not allowed: use 1 or more")
+        self._nice = nice
+        self._cond = threading.Condition()
+        self._queued: dict[Hashable, Job] = {}
+        self._running: dict[Hashable, Job] = {}
+        self._seq = itertools.count()
+        self._last_served: dict[Hashable, int] = {}
+        self._closed = False
+        self.completed = 0
+        self._threads = [threading.Thread(target=self._work, name=f"{name}-{i}", daemon=True)
+                         for i in range(self.workers)]
+        for t in self._threads:
+            t.start()
+
+    # -- asking -------------------------------------------------------------------
+    def submit(self, owner: Hashable, fn: Callable[[CancelToken], Any], *, label: str = "",
+               on_done: Callable[[Job], None] | None = None) -> tuple[Job, Job | None]:
+        """Queue ``fn(token)`` for ``owner``; returns the job and the queued job it replaced, if any.
+
+        ``on_done(job)`` is called in the worker thread once the job has ended
+        in any state (including ``replaced``, from the submitting thread).
+        """
+        job = Job(owner=owner, label=label, fn=fn, on_done=on_done)
+        with self._cond:
+            if self._closed:
+                raise RuntimeError("the job queue is shut down")
+            job.seq = next(self._seq)
+            replaced = self._queued.pop(owner, None)
+            if replaced is not None:
+                replaced.state = "replaced"
+                replaced.finished_at = time.perf_counter()
+                replaced.token.cancel("replaced by a newer request")
+            self._queued[owner] = job
+            self._cond.notify()
+        if replaced is not None:
+            self._notify(replaced)
+        return job, replaced
+
+    def cancel_owner(self, owner: Hashable, reason: str = "cancelled") -> list[Job]:
+        """Cancel the owner's waiting and running jobs (e.g. its page was closed)."""
+        with self._cond:
+            jobs = [j for j in (self._queued.pop(owner, None), self._running.get(owner)) if j is not None]
+            self._last_served.pop(owner, None)
+            for j in jobs:
+                j.token.cancel(reason)
+                if j.state == "queued":
+                    j.state = "cancelled"
+                    j.finished_at = time.perf_counter()
+        for j in jobs:
+            if j.state == "cancelled":
+                self._notify(j)
+        return jobs
+
+    def ahead_of(self, job: Job) -> int:
+        """About how many jobs start before ``job`` (0 when it is running or next)."""
+        with self._cond:
+            if job.state != "queued":
+                return 0
+            mine = (self._last_served.get(job.owner, -1), job.seq)
+            return sum(1 for o, j in self._queued.items()
+                       if j is not job and (self._last_served.get(o, -1), j.seq) < mine)
+
+    def snapshot(self) -> dict:
+        """Counts for monitoring: queued, running, completed, workers."""
+        with self._cond:
+            return {"queued": len(self._queued), "running": len(self._running), "completed": self.completed,
+                    "workers": self.workers}
+
+    def shutdown(self) -> None:
+        """Stop the workers after their current jobs (tests)."""
+        with self._cond:
+            self._closed = True
+            for j in self._queued.values():
+                j.token.cancel("the server is stopping")
+            self._cond.notify_all()
+        for t in self._threads:
+            t.join(timeout=30)
+
+    # -- the workers ---------------------------------------------------------------
+    def _next(self) -> Job | None:
+        """The next job to start (call with the lock): among owners with nothing
+        running, the one served least recently, then the longest waiting."""
+        best, best_key = None, None
+        for owner, job in self._queued.items():
+            if owner in self._running:
+                continue
+            key = (self._last_served.get(owner, -1), job.seq)
+            if best is None or key < best_key:
+                best, best_key = job, key
+        return best
+
+    def _work(self) -> None:
+        self._lower_priority()
+        while True:
+            with self._cond:
+                job = self._next()
+                while job is None:
+                    if self._closed:
+                        return
+                    self._cond.wait()
+                    job = self._next()
+                del self._queued[job.owner]
+                self._running[job.owner] = job
+                self._last_served[job.owner] = next(self._seq)
+                job.state = "running"
+                job.started_at = time.perf_counter()
+            try:
+                job.token.check()
+                job.result = job.fn(job.token)
+                job.state = "done"
+            except Cancelled as exc:
+                job.state, job.error = "cancelled", exc
+            except Exception as exc:  # noqa: BLE001 - a failure is the job's outcome, shown in its page
+                job.state, job.error = "failed", exc
+                log.warning("job %r of %r failed: %s", job.label, job.owner, exc, exc_info=True)
+            job.finished_at = time.perf_counter()
+            with self._cond:
+                if self._running.get(job.owner) is job:
+                    del self._running[job.owner]
+                self.completed += 1
+                self._cond.notify_all()
+            self._notify(job)
+
+    @staticmethod
+    def _notify(job: Job) -> None:
+        if job.on_done is None:
+            return
+        try:
+            job.on_done(job)
+        except Exception:  # noqa: BLE001 - a broken page must not stop a worker
+            log.exception("showing the result of job %r failed", job.label)
+
+    def _lower_priority(self) -> None:
+        try:
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), self._nice)
+        except (AttributeError, OSError):  # not Linux, or not permitted: run at normal priority
+            pass
+        try:
+            import numba
+
+            numba.set_num_threads(1)  # per calling thread: one core per job, jobs in parallel
+        except Exception:  # noqa: BLE001 - numba missing or no threading layer: nothing to limit
+            pass
+
+
+_default: JobQueue | None = None
+_default_lock = threading.Lock()
+
+
+def default_queue() -> JobQueue:
+    """The process's queue, created on first use (after the server has forked its processes)."""
+    global _default
+    with _default_lock:
+        if _default is None:
+            _default = JobQueue()
+        return _default

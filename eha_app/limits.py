@@ -1,0 +1,91 @@
+"""What one request may cost on a shared server, checked before it is queued.
+
+The heaviest frequency experiment the form allows (N = 20000 samples at
+Ts = 0.5 s) is 2 x 10000 s of closed-loop simulation, 40 M integration steps:
+tens of seconds of a core that thirty students share. Each request's cost is
+estimated by the core (:func:`eha_core.simulate.simulation_cost` and friends,
+no simulation needed) and refused beyond these limits with a message that says
+what was asked, what is allowed and what to change. ``EHA_MAX_STEPS`` and
+``EHA_MAX_MEMORY_MB`` change them for a server with more to spare.
+"""
+
+from __future__ import annotations
+
+import os
+
+from eha_core.simulate import DEFAULT_H_MAX, simulation_cost
+
+__all__ = ["max_steps", "max_bytes", "check_cost", "check_simulation", "check_frequency", "check_lse"]
+
+#: Integration steps per request: about 1.5 s of one core with the compiled kernel.
+DEFAULT_MAX_STEPS = 10_000_000
+#: Estimated peak memory per request.
+DEFAULT_MAX_MEMORY_MB = 256
+
+
+def _env_int(name: str, default: int) -> int:
+    text = os.environ.get(name, "").strip()
+    if not text:
+        return default
+    try:
+        value = int(float(text))
+    except ValueError:
+        raise ValueError(f"{name} = {text} is not allowed: use a whole number > 0") from None
+    if value <= 0:
+        raise ValueError(f"{name} = {text} is not allowed: use a whole number > 0")
+    return value
+
+
+def max_steps() -> int:
+    return _env_int("EHA_MAX_STEPS", DEFAULT_MAX_STEPS)
+
+
+def max_bytes() -> int:
+    return _env_int("EHA_MAX_MEMORY_MB", DEFAULT_MAX_MEMORY_MB) * 2**20
+
+
+def _millions(n: float) -> str:
+    return f"{n / 1e6:.3g} M"
+
+
+def check_cost(what: str, steps: int, peak_bytes: int, simulated_s: float, hint: str) -> None:
+    """ValueError with a message when ``steps`` or ``peak_bytes`` exceed the limits.
+
+    ``simulated_s`` is the simulated time the steps stand for, ``hint`` what
+    the user can change.
+    """
+    limit_steps, limit_bytes = max_steps(), max_bytes()
+    if steps > limit_steps:
+        per_second = steps / simulated_s if simulated_s > 0 else 1.0 / DEFAULT_H_MAX
+        raise ValueError(
+            f"{what} is not allowed here: it simulates {simulated_s:.6g} s, {_millions(steps)} integration steps, "
+            f"and this server allows {_millions(limit_steps)} per run (about {limit_steps / per_second:.4g} s "
+            f"simulated): {hint}.")
+    if peak_bytes > limit_bytes:
+        raise ValueError(
+            f"{what} is not allowed here: it needs about {peak_bytes / 2**20:.0f} MB of memory and this server "
+            f"allows {limit_bytes / 2**20:.0f} MB per run: {hint}.")
+
+
+def check_simulation(t_end: float, dt: float, *, n_runs: int = 1) -> None:
+    """The simulation tab's runs (open loop, ``n_runs`` runs of ``t_end`` s)."""
+    cost = simulation_cost(t_end, dt, n_runs=n_runs)
+    check_cost(f"{n_runs} run{'s' if n_runs != 1 else ''} of {t_end:g} s", cost.steps, cost.peak_bytes,
+               n_runs * t_end, "shorten the horizon")
+
+
+def check_frequency(config) -> None:
+    """The closed-loop experiment (estimation and validation runs, tfest)."""
+    cost = config.cost()
+    duration = config.n_samples * config.ts
+    check_cost(f"N × Ts = {config.n_samples} × {config.ts:g} s", cost.steps, cost.peak_bytes, 2 * duration,
+               "lower N or Ts")
+
+
+def check_lse(t_end: float) -> None:
+    """The least-squares experiment (simulation and estimation)."""
+    from eha_core.experiments import lse_cost
+
+    cost = lse_cost(t_end)
+    check_cost(f"the least-squares experiment over {t_end:g} s", cost.steps, cost.peak_bytes, t_end,
+               "use a shorter excitation")

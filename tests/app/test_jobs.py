@@ -1,0 +1,144 @@
+"""The server's job queue: one run per session, sessions in turn, cancellation, failures."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from eha_app.jobs import JobQueue, worker_count
+
+TIMEOUT = 10.0
+
+
+def wait_for(condition, timeout=TIMEOUT):
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError("timed out")
+        time.sleep(0.002)
+
+
+@pytest.fixture
+def queue():
+    q = JobQueue(workers=1)
+    yield q
+    q.shutdown()
+
+
+def gate():
+    """A job body that runs until its gate opens (or it is cancelled)."""
+    opened = threading.Event()
+
+    def body(token):
+        while not opened.wait(0.005):
+            token.check()
+        return "done"
+    return opened, body
+
+
+def test_one_run_per_session_and_a_new_request_replaces_the_waiting_one(queue):
+    ended = []
+    open_a, body_a = gate()
+    a1, replaced = queue.submit("A", body_a, label="a1", on_done=ended.append)
+    assert replaced is None
+    wait_for(lambda: a1.state == "running")
+    a2, replaced = queue.submit("A", lambda t: "a2", label="a2", on_done=ended.append)
+    a3, replaced = queue.submit("A", lambda t: "a3", label="a3", on_done=ended.append)
+    assert replaced is a2 and a2.state == "replaced" and a2.token.cancelled
+    assert a3.state == "queued"                      # waits behind its own running job
+    assert ended == [a2]                             # told at once that it was dropped
+    open_a.set()
+    wait_for(lambda: a3.finished)
+    assert [j.label for j in ended] == ["a2", "a1", "a3"]
+    assert a1.result == "done" and a3.result == "a3" and a2.started_at is None
+
+
+def test_sessions_take_turns(queue):
+    order = []
+    open_a, body_a = gate()
+    a1, _ = queue.submit("A", body_a, label="a1")
+    wait_for(lambda: a1.state == "running")
+    waiting = {label: queue.submit(owner, lambda t, label=label: order.append(label), label=label)[0]
+               for owner, label in (("A", "a2"), ("B", "b1"), ("C", "c1"))}
+    # A was just served: B and C, who have had nothing, go first
+    assert queue.ahead_of(waiting["a2"]) == 2 and queue.ahead_of(waiting["b1"]) == 0
+    open_a.set()
+    wait_for(lambda: len(order) == 3)
+    assert order == ["b1", "c1", "a2"]
+
+
+def test_no_session_holds_two_workers_and_all_jobs_finish():
+    q = JobQueue(workers=3)
+    running: dict[str, int] = {}
+    peak = {"total": 0, "per_owner": 0}
+    lock = threading.Lock()
+
+    def body(owner):
+        def run(token):
+            with lock:
+                running[owner] = running.get(owner, 0) + 1
+                peak["total"] = max(peak["total"], sum(running.values()))
+                peak["per_owner"] = max(peak["per_owner"], running[owner])
+            time.sleep(0.003)
+            with lock:
+                running[owner] -= 1
+            return owner
+        return run
+
+    jobs = []
+    try:
+        for rnd in range(5):
+            for k in range(30):
+                owner = f"s{k}"
+                job, _ = q.submit(owner, body(owner), label=f"{owner}-{rnd}")
+                jobs.append(job)
+        wait_for(lambda: all(j.finished for j in jobs))
+    finally:
+        q.shutdown()
+    assert peak["per_owner"] == 1 and peak["total"] <= 3
+    done = [j for j in jobs if j.state == "done"]
+    replaced = [j for j in jobs if j.state == "replaced"]
+    assert len(done) + len(replaced) == len(jobs)
+    # every session's last request ran
+    last = {j.owner: j for j in jobs}
+    assert all(j.state == "done" for j in last.values())
+
+
+def test_closing_a_session_cancels_its_running_and_waiting_jobs(queue):
+    open_a, body_a = gate()
+    ended = []
+    a1, _ = queue.submit("A", body_a, label="a1", on_done=ended.append)
+    wait_for(lambda: a1.state == "running")
+    a2, _ = queue.submit("A", lambda t: "never", label="a2", on_done=ended.append)
+    t0 = time.perf_counter()
+    queue.cancel_owner("A", "the page was closed")
+    wait_for(lambda: a1.finished)
+    assert time.perf_counter() - t0 < 1.0           # the running job stopped at its next check
+    assert a1.state == "cancelled" and a2.state == "cancelled"
+    assert a1.token.reason == "the page was closed"
+    assert {j.label for j in ended} == {"a1", "a2"}
+    b, _ = queue.submit("B", lambda t: 42, label="b")  # the worker is free for the others
+    wait_for(lambda: b.finished)
+    assert b.result == 42
+
+
+def test_a_failing_job_is_reported_and_the_worker_goes_on(queue):
+    def boom(token):
+        raise RuntimeError("integrator exploded")
+    bad, _ = queue.submit("A", boom, label="bad")
+    good, _ = queue.submit("B", lambda t: "fine", label="good")
+    wait_for(lambda: bad.finished and good.finished)
+    assert bad.state == "failed" and "integrator exploded" in str(bad.error)
+    assert good.state == "done" and good.result == "fine"
+
+
+def test_worker_count_from_the_environment(monkeypatch):
+    monkeypatch.setenv("EHA_WORKERS", "3")
+    assert worker_count() == 3
+    monkeypatch.setenv("EHA_WORKERS", "0")
+    with pytest.raises(ValueError, match="EHA_WORKERS = 0 is not allowed"):
+        worker_count()
+    monkeypatch.delenv("EHA_WORKERS")
+    assert worker_count() >= 1
