@@ -197,6 +197,10 @@ class Form(JSComponent):
         shared link restores them.""")
 
     _stylesheets = [_CSS]
+    # Panel batches a browser's changes for 50 ms before handling them; a form
+    # already sends one message per keystroke, and the answer (derived values,
+    # messages) should come as soon as possible
+    _priority_changes = ["values"]
 
     _esm = """
 export function render({ model, el }) {

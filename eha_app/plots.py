@@ -15,6 +15,11 @@ figures only draw. Display units: mm, mm/s, MPa, kN; the core stays in SI.
 Curves are sent as float32 (7 digits are plenty on a screen, and it halves
 what each student's browser receives) and decimated to at most
 ``MAX_POINTS`` points.
+
+Figures and their ranges are marked ``syncable=False``: by default the
+browser sends the server each range it computes and each size it lays out
+(13 messages after one "Compare both"), which the server never reads but has
+to process, for every student, on its one event loop.
 """
 
 from __future__ import annotations
@@ -24,7 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 from bokeh.layouts import column, gridplot, row
 from bokeh.models import (
-    BoxAnnotation, ColumnDataSource, DataRange1d, Div, HoverTool, Legend, LegendItem, Range1d, Span,
+    BoxAnnotation, ColumnDataSource, DataRange1d, Div, GlyphRenderer, HoverTool, Legend, LegendItem, MultiLine,
+    Range1d, Span,
 )
 from bokeh.plotting import figure
 
@@ -66,6 +72,16 @@ def _f32(a) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(a, dtype=np.float32))
 
 
+def _lean(*figs) -> None:
+    """Drop the selection and muting copies of every glyph: no tool here selects or
+    mutes, and each copy is one more model for every student's browser."""
+    for fig in figs:
+        for r in fig.renderers:
+            if isinstance(r, GlyphRenderer):
+                r.nonselection_glyph = None
+                r.muted_glyph = None
+
+
 def style_for(index: int, model: str) -> dict:
     return {"color": CASE_COLORS[index % len(CASE_COLORS)], "line_dash": _MODEL_DASH.get(model, "solid")}
 
@@ -80,6 +96,9 @@ def _figure(**kwargs):
     kwargs.setdefault("output_backend", "canvas")
     fig = figure(**kwargs)
     fig.toolbar.logo = None
+    # the browser would echo every range it computes and size it lays out
+    for model in (fig, fig.x_range, fig.y_range):
+        model.syncable = False
     return fig
 
 
@@ -124,15 +143,19 @@ class TimeSeriesGrid:
         self._signature = None
         self.legend = Div(text="", sizing_mode="stretch_width", styles={"font-size": "12px"})
         self.source = ColumnDataSource(data=self._columns([]))
-        self.x_range = DataRange1d(range_padding=0.01)
+        self.x_range = DataRange1d(range_padding=0.01, syncable=False)
         self.figures = []
         self.renderers = []
         for field, ylabel, _ in STATE_PANELS:
             fig = _figure(height=height, sizing_mode="stretch_width", x_range=self.x_range, y_range=DataRange1d(),
                           x_axis_label="t [s]", y_axis_label=ylabel)
             fig.add_tools(HoverTool(tooltips=[("run", "@label"), ("t", "$x{0.000} s"), (ylabel, "$y{0.000}")]))
-            r = fig.multi_line("xs", field, source=self.source, line_width=1.6, line_color="color",
-                               line_dash="dash", name=field)
+            # built by hand: figure.multi_line would add selection and muting copies
+            # of the glyph that nothing here uses, and that every page would carry
+            r = GlyphRenderer(data_source=self.source, name=field, nonselection_glyph=None, muted_glyph=None,
+                              glyph=MultiLine(xs="xs", ys=field, line_width=1.6, line_color="color",
+                                              line_dash="dash"))
+            fig.renderers.append(r)
             self.figures.append(fig)
             self.renderers.append(r)
         self.grid = gridplot([self.figures[:2], self.figures[2:]], sizing_mode="stretch_width", merge_tools=True,
@@ -169,10 +192,10 @@ class TimeSeriesGrid:
         signature = tuple((r.label, r.model, float(r.t[-1])) for r in results)
         if self._signature is not None and signature != self._signature:
             # a different set of curves: fresh auto-ranges (the user's zoom no longer applies)
-            self.x_range = DataRange1d(range_padding=0.01)
+            self.x_range = DataRange1d(range_padding=0.01, syncable=False)
             for fig in self.figures:
                 fig.x_range = self.x_range
-                fig.y_range = DataRange1d()
+                fig.y_range = DataRange1d(syncable=False)
         self._signature = signature
         self.source.data = self._columns(results)
         self.legend.text = legend_html(results)
@@ -280,6 +303,7 @@ class ExcitationFigure:
                            title="Excitation")
         self.fig.step("t", "r", source=self.source, mode="after", color=CASE_COLORS[0])
         self.fig.add_tools(HoverTool(tooltips=[("t", "@t{0.000} s"), ("r", "@r{0.0000}")]))
+        _lean(self.fig)
         self.layout = self.fig
 
     def update(self, t, r, title: str) -> None:
@@ -309,6 +333,7 @@ class ClosedLoopFigure:
             else:
                 fig.line("t", key, source=self.source, color=color)
             self.figs.append(fig)
+        _lean(*self.figs)
         self.layout = row(*self.figs)
 
     def update(self, view: FrequencyView) -> None:
@@ -330,6 +355,7 @@ class FitFigure:
                       LegendItem(label="estimated H(s)", renderers=[r1]),
                       LegendItem(label="linearised H(s), eq. 24", renderers=[r2])]
         self.fig.add_layout(Legend(items=self.items, location="top_left"))
+        _lean(self.fig)
         self.layout = self.fig
 
     def update(self, view: FrequencyView, plant: str = "nonlinear") -> None:
@@ -364,6 +390,7 @@ class BodeFigure:
                                           LegendItem(label="linearised H(s), eq. 24", renderers=[r2]),
                                           LegendItem(label="ETFE of the data (ZOH)", renderers=[r3])],
                                    location="bottom_left"))
+        _lean(self.mag, self.phase)
         self.layout = column(self.mag, self.phase)
 
     def update(self, view: FrequencyView) -> None:
@@ -388,6 +415,7 @@ class ValidationFigure:
         self.items = [LegendItem(label="measured (fresh excitation)", renderers=[r0]),
                       LegendItem(label="estimated H(s)", renderers=[r1])]
         self.fig.add_layout(Legend(items=self.items, location="top_left"))
+        _lean(self.fig)
         self.layout = self.fig
 
     def update(self, view: FrequencyView) -> None:
@@ -420,6 +448,7 @@ class ResidualFigure:
             self.sources.append(src)
             self.bands.append(band)
             self.figs.append(fig)
+        _lean(*self.figs)
         self.layout = row(*self.figs)
 
     def update(self, view: FrequencyView) -> None:
@@ -482,6 +511,7 @@ class LseFitFigure:
         self.resim_item = LegendItem(label="re-simulated with the estimates", renderers=[self.resim_renderers[0]])
         self.left.add_layout(Legend(items=[LegendItem(label="measured", renderers=[m0]), self.resim_item],
                                     location="top_left"))
+        _lean(self.left, self.right)
         self.layout = row(self.left, self.right)
 
     def update(self, view: LseView) -> None:

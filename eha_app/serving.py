@@ -1,5 +1,13 @@
 """How the app is served: the `panel serve` command line, and nginx in front of several processes.
 
+Several processes on one machine
+    ``eha serve --num-procs N`` starts N independent server processes that
+    all listen on the same port with ``SO_REUSEPORT``, so that the kernel
+    spreads the connections evenly over them (:func:`share_port`,
+    :func:`supervise`). Bokeh's own ``--num-procs`` forks processes that share
+    one listening socket, and Linux then wakes the same busy process again and
+    again: 28 of 30 students landed in one of two processes.
+
 One process
     ``eha serve`` runs Panel's server on the file entry point
     :mod:`eha_app.eha` with settings for a class:
@@ -27,7 +35,7 @@ from __future__ import annotations
 from pathlib import Path
 
 __all__ = ["ENTRY_POINT", "UNUSED_SESSION_MS", "serve_argv", "nginx_config", "nginx_standalone_config",
-           "use_local_resources"]
+           "use_local_resources", "share_port", "supervise"]
 
 ENTRY_POINT = Path(__file__).resolve().parent / "eha.py"
 #: A closed page's session (and its computations) ends this long after its websocket closed.
@@ -53,6 +61,71 @@ def use_local_resources(doc) -> None:
     if "dist_url" not in doc.template_variables:
         rel = pn.state.rel_path
         doc.template_variables["dist_url"] = f"{rel}/{LOCAL_DIST}" if rel else LOCAL_DIST
+
+
+def share_port() -> None:
+    """Make this process's Bokeh server bind its port with ``SO_REUSEPORT``.
+
+    Then several processes can listen on one port and Linux hands each new
+    connection to one of them by a hash of its addresses: an even spread.
+    """
+    from functools import partial
+
+    import bokeh.server.server as bokeh_server
+    from tornado import netutil
+
+    def bind_sockets(address, port):
+        sockets = netutil.bind_sockets(port=port or 0, address=address, reuse_port=True)
+        return sockets, sockets[0].getsockname()[1]
+
+    bokeh_server.bind_sockets = partial(bind_sockets)
+
+
+def supervise(child_argv: list[str], n: int, *, env: dict | None = None, restart_delay_s: float = 2.0) -> int:
+    """Run ``n`` copies of ``child_argv`` until interrupted; restart one that dies.
+
+    A crashed process must not take the class down with it: its students
+    reload (the page reconnects by itself) and land on the others meanwhile.
+    """
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    procs: list = [None] * n
+
+    def start(k):
+        procs[k] = subprocess.Popen(child_argv, env=env)
+
+    def stop(*_args):
+        for p in procs:
+            if p is not None and p.poll() is None:
+                p.terminate()
+        deadline = time.monotonic() + 10
+        for p in procs:
+            if p is not None:
+                try:
+                    p.wait(timeout=max(0.1, deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    p.kill()
+        raise SystemExit(0)
+
+    signal.signal(signal.SIGTERM, stop)
+    for k in range(n):
+        start(k)
+    try:
+        while True:
+            time.sleep(0.5)
+            for k, p in enumerate(procs):
+                code = p.poll()
+                if code is not None:
+                    print(f"eha serve: process {k + 1} of {n} exited with code {code}; restarting it",
+                          file=sys.stderr, flush=True)
+                    time.sleep(restart_delay_s)
+                    start(k)
+    except KeyboardInterrupt:
+        stop()
+    return 0
 
 
 def serve_argv(*, port: int, address: str, num_procs: int = 1, allow_websocket_origin=None,

@@ -22,7 +22,11 @@ calling thread and its result is shown directly.
 
 from __future__ import annotations
 
+import collections
 import logging
+import threading
+import time
+from contextlib import contextmanager
 from functools import partial
 from typing import Any, Callable, Hashable, Sequence
 
@@ -34,7 +38,7 @@ from eha_core.cancel import Cancelled, CancelToken
 
 from .jobs import Job, JobQueue, default_queue
 
-__all__ = ["SessionRunner", "apply_locked", "LOADING_DELAY_S", "served_document"]
+__all__ = ["SessionRunner", "PageUpdates", "apply_locked", "frozen_models", "LOADING_DELAY_S", "served_document"]
 
 log = logging.getLogger("eha_app")
 
@@ -51,22 +55,128 @@ def served_document():
     return None
 
 
+@contextmanager
+def frozen_models():
+    """Recompute the session document's model graph once, after a block of changes."""
+    doc = served_document()
+    if doc is None:
+        yield
+        return
+    with doc.models.freeze():
+        yield
+
+
+class PageUpdates:
+    """The server's big page changes, one at a time, when the event loop is idle.
+
+    Building a tab or showing a result costs the event loop 20-250 ms of Bokeh
+    model building and serialisation. When thirty students click at once,
+    thirty such callbacks back to back would hold every other message for
+    seconds: a student typing waited 3.8 s while ten others opened tab 2. And
+    merely taking turns is not enough, because one small interaction (a
+    keystroke: read the message, take the session's lock, update, write the
+    answer) spans several turns of the loop, and a big change could slip into
+    each of them. So the changes wait in a line, and the next one starts only
+    when nothing else is ready to run (or after ``MAX_DEFER_S``, so that a
+    busy server still makes progress): small interactions always go first,
+    and wait for at most the one big change already running.
+
+    Each change runs under its session document's lock (a Bokeh next-tick
+    callback), as Panel's current document, with the document's events held
+    and combined (one message to the browser) and its model graph recomputed
+    once at the end (``models.freeze``).
+    """
+
+    #: Look for an idle loop this often [s] ...
+    POLL_S = 0.002
+    #: ... but never defer a change longer than this [s].
+    MAX_DEFER_S = 0.5
+
+    def __init__(self):
+        self._pending: collections.deque = collections.deque()
+        self._lock = threading.Lock()
+        self._pumping = False
+        self._loop = None
+        self._waiting_since = None
+        self.done = 0
+
+    def submit(self, doc, fn: Callable[[], None]) -> None:
+        """Run ``fn`` on ``doc`` in turn (callable from any thread)."""
+        with self._lock:
+            self._pending.append((doc, fn))
+            if self._pumping:
+                return
+            self._pumping = True
+        self._schedule()
+
+    def _schedule(self) -> None:
+        """Schedule the first pending change on its document, dropping those of closed sessions."""
+        while True:
+            with self._lock:
+                if not self._pending:
+                    self._pumping = False
+                    return
+                doc, _ = self._pending[0]
+            try:
+                doc.add_next_tick_callback(partial(self._when_idle, doc))
+                return
+            except Exception:  # noqa: BLE001 - the session was closed meanwhile: nobody to show it to
+                with self._lock:
+                    self._pending.popleft()
+
+    def _loop_busy(self) -> bool:
+        # asyncio keeps the callbacks ready to run in ``_ready`` (CPython's
+        # base event loop); if a loop does not, every change counts as idle
+        loop = self._loop
+        ready = getattr(loop, "_ready", None)
+        return bool(ready)
+
+    def _when_idle(self, doc) -> None:
+        # runs on the event loop under ``doc``'s lock; ``doc`` is the first pending
+        import asyncio
+
+        self._loop = asyncio.get_running_loop()
+        now = time.perf_counter()
+        if self._waiting_since is None:
+            self._waiting_since = now
+        if self._loop_busy() and now - self._waiting_since < self.MAX_DEFER_S:
+            # let the others' messages through first; look again shortly (outside the lock)
+            self._loop.call_later(self.POLL_S, self._retry, doc)
+            return
+        self._waiting_since = None
+        with self._lock:
+            first_doc, fn = self._pending.popleft()
+        assert first_doc is doc
+        try:
+            with set_curdoc(doc), hold(doc), doc.models.freeze():
+                fn()
+        except Exception:  # noqa: BLE001 - one page's failure must not stop the others'
+            log.exception("a page update failed")
+        self.done += 1
+        self._schedule()
+
+    def _retry(self, doc) -> None:
+        try:
+            doc.add_next_tick_callback(partial(self._when_idle, doc))
+        except Exception:  # noqa: BLE001 - the session closed while waiting
+            with self._lock:
+                if self._pending and self._pending[0][0] is doc:
+                    self._pending.popleft()
+            self._waiting_since = None
+            self._schedule()
+
+
+_updates = PageUpdates()
+
+
 def apply_locked(fn: Callable[[], None], doc=None) -> None:
-    """Run ``fn`` on the session's document: now if there is no server, else on
-    its event loop, under its lock, with its events held and combined."""
+    """Run ``fn`` on the session's document: now if there is no server, else in
+    turn through :class:`PageUpdates` (locked, held, frozen)."""
     doc = doc if doc is not None else served_document()
     if doc is None:
         fn()
         return
-
-    def locked():
-        with set_curdoc(doc), hold(doc):
-            fn()
-
-    try:
-        doc.add_next_tick_callback(locked)
-    except Exception as exc:  # noqa: BLE001 - the session was closed meanwhile: nobody to show it to
-        log.debug("result not shown, the session is gone: %s", exc)
+    _updates.submit(doc, fn)
 
 
 def _message(exc: BaseException) -> str:
@@ -107,7 +217,7 @@ class SessionRunner:
         def waiting() -> None:
             if job.finished:
                 return
-            with set_curdoc(doc), hold(doc):
+            with set_curdoc(doc), hold(doc), doc.models.freeze():
                 for c in busy:
                     c.loading = True
                 ahead = self.queue.ahead_of(job)
@@ -158,8 +268,6 @@ class SessionRunner:
         except Exception as exc:  # noqa: BLE001 - shown in the page, as in a server
             job.state, job.error = "failed", exc
             log.warning("computation %r failed: %s", label, exc, exc_info=True)
-        import time
-
         job.finished_at = time.perf_counter()
         self._finish(job, show, fail, (), note)
         return job

@@ -150,6 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="print an nginx configuration for N eha serve processes on ports PORT+1..PORT+N behind "
                          "nginx listening on PORT, with the commands that start them, and exit")
     sv.add_argument("--show", action="store_true", help="open the app in a browser")
+    sv.add_argument("--share-port", action="store_true", help=argparse.SUPPRESS)
     sv.set_defaults(handler=_cmd_serve)
     return parser
 
@@ -272,13 +273,36 @@ def _cmd_serve(args) -> int:
         # the processes share the cores: one computation per core in all
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
         os.environ["EHA_WORKERS"] = str(max(1, cores // args.num_procs))
-    host = "localhost" if args.address in ("127.0.0.1", "localhost", "0.0.0.0", "::") else args.address
-    print(f"EHA app: http://{host}:{args.port}/eha", flush=True)
-    if args.address in ("0.0.0.0", "::"):
-        lan = _lan_address()
-        if lan:
-            print(f"for the class (same network): http://{lan}:{args.port}/eha", flush=True)
-    print("Ctrl+C stops the server.", flush=True)
+    if not args.share_port:
+        host = "localhost" if args.address in ("127.0.0.1", "localhost", "0.0.0.0", "::") else args.address
+        print(f"EHA app: http://{host}:{args.port}/eha", flush=True)
+        if args.address in ("0.0.0.0", "::"):
+            lan = _lan_address()
+            if lan:
+                print(f"for the class (same network): http://{lan}:{args.port}/eha", flush=True)
+        print("Ctrl+C stops the server.", flush=True)
+    if args.num_procs > 1:
+        from eha_app.serving import supervise
+
+        # N independent processes on one port (SO_REUSEPORT): the kernel spreads
+        # the students evenly, where Bokeh's forked processes did not
+        child = [sys.executable, "-c", "import sys; from eha_core.cli import main; sys.exit(main())", "serve",
+                 "--port", str(args.port), "--address", args.address, "--num-procs", "1", "--share-port",
+                 "--workers", os.environ["EHA_WORKERS"]]
+        for origin in args.allow_websocket_origin or ():
+            child += ["--allow-websocket-origin", origin]
+        if args.behind_proxy:
+            child.append("--behind-proxy")
+        if args.show:
+            import threading
+            import webbrowser
+
+            threading.Timer(8.0, webbrowser.open, args=(f"http://localhost:{args.port}/eha",)).start()
+        return supervise(child, args.num_procs)
+    if args.share_port:
+        from eha_app.serving import share_port
+
+        share_port()
     from panel.command import main as panel_main
 
     sys.argv = argv

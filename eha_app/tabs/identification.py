@@ -20,7 +20,7 @@ from ..form import Field, Form, Group, InputError, parse_fields
 from ..limits import check_frequency, check_lse
 from ..state import AppState
 from ..tables import SCENARIOS, backout_html, freq_summary_html, lse_table_html, table4_html
-from ..tasks import SessionRunner
+from ..tasks import SessionRunner, apply_locked, frozen_models
 
 __all__ = ["IdentificationTab", "LseRequest", "LSE_FORM", "FREQ_FORM", "parse_lse", "parse_freq"]
 
@@ -381,7 +381,7 @@ class FrequencyPanel(pn.viewable.Viewer):
     def _on_figure_tab(self, event) -> None:
         key = _FIGURES[event.new][1]
         self._shown.add(key)
-        self._draw(key)
+        apply_locked(lambda: self._draw(key))
 
     def _has_data(self, key: str) -> bool:
         return self.preview is not None if key == "excitation" else self.view is not None
@@ -499,17 +499,19 @@ class IdentificationTab(pn.viewable.Viewer):
         self._query = query
         self.lse = LeastSquaresPanel(state, self.runner, query)
         self.freq: FrequencyPanel | None = None
-        self._freq_slot = pn.Column(sizing_mode="stretch_width")
+        self._freq_slot = pn.Column(pn.pane.HTML("<p class='eha-note'>Preparing the frequency domain…</p>"),
+                                    sizing_mode="stretch_width")
         self.tabs = pn.Tabs(("Time domain: least squares", self.lse),
                             ("Frequency domain: transfer function", self._freq_slot),
                             dynamic=False, sizing_mode="stretch_width", css_classes=["eha-ident-tabs"])
-        self.tabs.param.watch(lambda e: self.frequency_panel() if e.new == 1 else None, "active")
+        self.tabs.param.watch(lambda e: apply_locked(self.frequency_panel) if e.new == 1 else None, "active")
 
     def frequency_panel(self) -> FrequencyPanel:
         """The frequency-domain panel, built now if never shown."""
         if self.freq is None:
-            self.freq = FrequencyPanel(self.state, self.runner, self._query)
-            self._freq_slot.objects = [self.freq]
+            with frozen_models():
+                self.freq = FrequencyPanel(self.state, self.runner, self._query)
+                self._freq_slot.objects = [self.freq]
         return self.freq
 
     def __panel__(self):

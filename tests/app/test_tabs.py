@@ -166,3 +166,11 @@ def test_the_address_restores_what_was_typed():
     assert "dc" in state.errors                   # a bad value gets its message, the page still opens
     sim = page.eha_lazy.built[1]
     assert sim.form.values["u_kind"] == "step" and "t_end" in sim.form.errors
+
+
+def test_the_server_warm_up_runs():
+    import eha_app.app as app_module
+
+    app_module._warm = False
+    app_module.warm_up()
+    assert app_module._warm

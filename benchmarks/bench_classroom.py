@@ -1,0 +1,482 @@
+"""A class at once: N students clicking each step of the app together, measured.
+
+Serves the app (``eha serve`` on a free port, a fresh server for every class
+size; or ``--url`` for a running deployment, e.g. nginx in front of several
+processes) and drives N sessions at the protocol level (the Bokeh websocket,
+as a browser would, without drawing; see ``classroom_client.py``) through the
+workflow of a lab:
+
+  open     open the page (GET, websocket, pull of the document; from the GET's start)
+  param    type M = 6000 into tab 1; done when the derived values change
+  tab2     show tab 2 (built when first shown; done when its content arrived)
+  compare  "Compare both"; done when the status line shows the next "run N"
+  tab3     show tab 3
+  lse      "Run least squares"; done when the table arrived (an alert "... failed" is an error)
+  freqtab  show tab 3's "Frequency domain: transfer function"
+  freq     "Run experiment and estimate"; done when the summary shows Ĥ(s) (an alert is an error)
+
+Between steps a barrier: every student finishes (or times out, ``--timeout``,
+an error) before the next step; within a step each starts at a random moment
+of the first ``--spread`` seconds ("everyone clicks within a second"). One
+more session, the observer, opened before the class and not counted, types
+into M every 2 s throughout (alternating two values) and records how long
+the page takes to answer: what a student feels while the others compute.
+
+Printed per class size (1 student first): per step p50 / p95 / max [s],
+successes, errors (the first few messages), the Bokeh messages and kB the
+server sent per student, the server's CPU seconds, the observer's delays
+during the step; the server's memory (peak VmHWM and RSS, summed over its
+processes) and the client's own CPU time. The last line is
+
+    sessions=N errors=E open_p95=… compare_p95=… freq_ok=K/N observer_p95=…
+
+for the largest N (E counts failed or timed-out steps, the server's ERROR
+replies, broken connections and failed observer changes).
+
+``--churn K`` instead opens and closes K sessions, 10 at a time, and prints
+the server's memory every 50 sessions and after the server discarded them.
+
+    python benchmarks/bench_classroom.py                        # 1, 10, 30 students
+    python benchmarks/bench_classroom.py --sessions 1,10 --procs 2
+    python benchmarks/bench_classroom.py --url http://127.0.0.1:8080/eha --sessions 30 --server-pid 1234
+    python benchmarks/bench_classroom.py --sessions 30 --steps open,param,compare --json class.json
+    python benchmarks/bench_classroom.py --churn 200
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import math
+import os
+import re
+import resource
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from benchmarks.classroom_client import (
+    STEP_NAMES,
+    STEPS,
+    ClassResult,
+    Student,
+    do_step,
+    run_class,
+)
+
+_TICK = os.sysconf("SC_CLK_TCK")
+
+
+# -- the server ------------------------------------------------------------------------------
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class ProcTree:
+    """Processes and their descendants (e.g. the workers ``--num-procs`` forks), read from /proc:
+    memory and CPU time."""
+
+    def __init__(self, *pids: int):
+        self.roots = list(pids)
+
+    def pids(self) -> list[int]:
+        out, todo = [], list(self.roots)
+        while todo:
+            pid = todo.pop()
+            if pid in out or not os.path.exists(f"/proc/{pid}"):
+                continue
+            out.append(pid)
+            try:
+                for task in os.listdir(f"/proc/{pid}/task"):
+                    with open(f"/proc/{pid}/task/{task}/children") as f:
+                        todo += [int(c) for c in f.read().split()]
+            except OSError:
+                pass
+        return out
+
+    def memory_mb(self) -> tuple[float, float, int]:
+        """(RSS now, peak RSS = VmHWM) summed over the processes, in MB, and how many processes."""
+        rss = hwm = 0.0
+        n = 0
+        for pid in self.pids():
+            try:
+                with open(f"/proc/{pid}/status") as f:
+                    for line in f:
+                        if line.startswith("VmRSS:"):
+                            rss += int(line.split()[1]) / 1024
+                        elif line.startswith("VmHWM:"):
+                            hwm += int(line.split()[1]) / 1024
+                n += 1
+            except OSError:
+                pass
+        return rss, hwm, n
+
+    def cpu_s(self) -> float:
+        """User + system CPU seconds of the processes (and their reaped children)."""
+        total = 0
+        for pid in self.pids():
+            try:
+                with open(f"/proc/{pid}/stat") as f:
+                    fields = f.read().rsplit(")", 1)[1].split()
+                total += sum(int(x) for x in fields[11:15])     # utime stime cutime cstime
+            except (OSError, IndexError, ValueError):
+                pass
+        return total / _TICK
+
+
+class Server:
+    """``eha serve`` in a subprocess on a free port.
+
+    ``eha serve`` already passes ``--unused-session-lifetime 4000
+    --check-unused-sessions 1000`` to Panel (eha_app/serving.py): a closed page's
+    session is discarded about 5 s later, which the churn mode relies on.
+    """
+
+    def __init__(self, procs: int = 1):
+        self.port = free_port()
+        fd, self.log_path = tempfile.mkstemp(prefix="eha-serve-", suffix=".log")
+        self.log = os.fdopen(fd, "w+")
+        eha = Path(sys.executable).with_name("eha")
+        cmd = ([str(eha)] if eha.exists() else [sys.executable, "-m", "eha_core.cli"])
+        cmd += ["serve", "--port", str(self.port), "--address", "127.0.0.1", "--num-procs", str(procs)]
+        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT)
+        self.tree = ProcTree(self.proc.pid)
+        self.url = f"http://127.0.0.1:{self.port}/eha"
+        deadline = time.monotonic() + 180
+        while True:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"eha serve exited with {self.proc.returncode}: {self.log_text()[-2000:]}")
+            try:
+                with urllib.request.urlopen(self.url, timeout=10) as r:
+                    if r.status == 200:
+                        break
+            except OSError:
+                pass
+            if time.monotonic() > deadline:
+                self.stop()
+                raise RuntimeError("eha serve did not answer within 180 s")
+            time.sleep(0.3)
+
+    def log_text(self) -> str:
+        if not self.log.closed:
+            self.log.flush()
+        return Path(self.log_path).read_text(errors="replace")
+
+    def log_problems(self) -> list[str]:
+        """The first line of each traceback or error the server logged."""
+        lines = self.log_text().splitlines()
+        out = []
+        for i, ln in enumerate(lines):
+            if ln.startswith("Traceback"):
+                j = i + 1
+                while j < len(lines) and (lines[j].startswith(" ") or not lines[j].strip()):
+                    j += 1
+                out.append(lines[j] if j < len(lines) else ln)
+            elif re.search(r"\b(ERROR|CRITICAL)\b", ln):
+                out.append(ln)
+        return out
+
+    def stop(self, keep_log: bool = False) -> None:
+        """Stop the server and the processes it forked (with --num-procs they outlive their parent);
+        remove its log unless ``keep_log``."""
+        children = [p for p in self.tree.pids() if p != self.proc.pid]
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        deadline = time.monotonic() + 10
+        for pid in children:
+            try:
+                os.kill(pid, signal.SIGTERM)
+            except ProcessLookupError:
+                continue
+        for pid in children:
+            while os.path.exists(f"/proc/{pid}") and _ppid(pid) == 1 and time.monotonic() < deadline:
+                time.sleep(0.1)
+            if os.path.exists(f"/proc/{pid}") and _ppid(pid) == 1:
+                os.kill(pid, signal.SIGKILL)
+        self.log.close()
+        if not keep_log:
+            Path(self.log_path).unlink(missing_ok=True)
+
+
+def _ppid(pid: int) -> int | None:
+    """The parent of ``pid`` (None if it is gone): an orphaned fork of ours is re-parented to 1."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return int(f.read().rsplit(")", 1)[1].split()[1])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+# -- figures -----------------------------------------------------------------------------------
+
+def pct(values, q):
+    if not values:
+        return float("nan")
+    v = sorted(values)
+    k = (len(v) - 1) * q / 100
+    lo, hi = int(k), min(int(k) + 1, len(v) - 1)
+    return v[lo] + (v[hi] - v[lo]) * (k - lo)
+
+
+def fmt(x, width=6, digits=2):
+    return f"{'-':>{width}s}" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:{width}.{digits}f}"
+
+
+def client_cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def report(r: ClassResult, extra: dict, out=print) -> dict:
+    n = r.sessions
+    out(f"\n== {n} student{'s' if n != 1 else ''} ({extra['server']}) ==")
+    out(f"{'step':22s} {'p50':>6s} {'p95':>6s} {'max':>6s} {'ok':>7s} {'err':>4s} {'msgs/st':>7s} "
+        f"{'kB/st':>7s} {'srvCPU':>6s} {'obs95':>6s} {'wall':>6s}")
+    summary = {"sessions": n, "steps": {}}
+    obs_all = [o.delay for o in r.observer if o.delay is not None]
+    for step, outs in r.steps.items():
+        t = r.times(step)
+        errs = r.errors(step)
+        msgs = [o.messages for o in outs]
+        kb = [o.bytes / 1e3 for o in outs]
+        obs = [o.delay for o in r.observer if o.step == step and o.delay is not None]
+        cpu = extra["server_cpu"].get(step)
+        wall = r.step_wall.get(step, (0, 0))
+        out(f"{STEP_NAMES.get(step, step):22s} {fmt(pct(t, 50))} {fmt(pct(t, 95))} {fmt(max(t) if t else None)} "
+            f"{r.ok(step):>3d}/{len(outs):<3d} {len(errs):>4d} {fmt(sum(msgs) / len(msgs) if msgs else None, 7, 1)} "
+            f"{fmt(sum(kb) / len(kb) if kb else None, 7, 0)} {fmt(cpu, 6, 1)} {fmt(pct(obs, 95))} "
+            f"{fmt(wall[1] - wall[0])}")
+        shown = {}
+        for e in errs:      # the first few, the same message once with a count
+            key = re.sub(r"^student \d+: ", "", e)[:200]
+            shown[key] = shown.get(key, 0) + 1
+        for k, (msg, count) in enumerate(shown.items()):
+            if k == 3:
+                out(f"    ... and {len(shown) - 3} other message(s)")
+                break
+            out(f"    error{f' (x{count})' if count > 1 else ''}: {msg}")
+        summary["steps"][step] = {"p50": pct(t, 50), "p95": pct(t, 95), "max": max(t) if t else None,
+                                  "ok": r.ok(step), "n": len(outs), "errors": errs,
+                                  "messages_per_student": sum(msgs) / len(msgs) if msgs else None,
+                                  "kB_per_student": sum(kb) / len(kb) if kb else None, "server_cpu_s": cpu}
+    obs_err = [o for o in r.observer if o.error]
+    if r.observer:
+        out(f"{'observer typing M':22s} {fmt(pct(obs_all, 50))} {fmt(pct(obs_all, 95))} "
+            f"{fmt(max(obs_all) if obs_all else None)} {len(obs_all):>7d} {len(obs_err):>4d}   "
+            f"(every 2 s, all steps)")
+    if r.upstreams:
+        out("backends (the proxy's X-Eha-Upstream): "
+            + ", ".join(f"{k} x{v}" for k, v in sorted(r.upstreams.items())))
+    for o in obs_err[:3]:
+        out(f"    observer error during {o.step}: {o.error[:200]}")
+    for e in r.session_errors[:3]:
+        out(f"    session error: {e[:200]}")
+    mem = extra.get("memory")
+    if mem:
+        out(f"server memory: peak (VmHWM) {mem['peak']:.0f} MB, RSS before {mem['before']:.0f} MB, "
+            f"at the end {mem['end']:.0f} MB ({mem['procs']} process{'es' if mem['procs'] != 1 else ''})")
+    else:
+        out("server memory: not measured (--url without --server-pid)")
+    if extra.get("log_problems") is not None:
+        probs = extra["log_problems"]
+        out(f"server log: {len(probs)} traceback(s)/error line(s)"
+            + (f", e.g. {probs[0][:200]} (log kept: {extra['log_path']})" if probs else ""))
+    out(f"client CPU: {extra['client_cpu']:.1f} s for {n} students + observer over {extra['wall']:.0f} s "
+        f"({100 * extra['client_cpu'] / max(extra['wall'], 1e-9):.0f}% of one core)")
+    errors = r.error_count()
+    summary.update(errors=errors, observer_p50=pct(obs_all, 50), observer_p95=pct(obs_all, 95),
+                   observer_max=max(obs_all) if obs_all else None, memory_mb=mem,
+                   client_cpu_s=extra["client_cpu"], wall_s=extra["wall"])
+    return summary
+
+
+def summary_line(s: dict) -> str:
+    def p95(step):
+        return s["steps"].get(step, {}).get("p95", float("nan"))
+    freq = s["steps"].get("freq", {})
+    return (f"sessions={s['sessions']} errors={s['errors']} open_p95={p95('open'):.2f} "
+            f"compare_p95={p95('compare'):.2f} freq_ok={freq.get('ok', 0)}/{s['sessions']} "
+            f"observer_p95={s['observer_p95']:.2f}")
+
+
+# -- modes -------------------------------------------------------------------------------------
+
+def run_one(n: int, args, steps) -> tuple[dict, dict]:
+    server = None if args.url else Server(args.procs)
+    tree = server.tree if server else _tree_of(args.server_pid)
+    try:
+        url = args.url or server.url
+        before = tree.memory_mb()[0] if tree else None
+        cpu_marks: dict = {}
+        server_cpu: dict = {}
+
+        def on_step(step, when):
+            if tree is None:
+                return
+            if when == "start":
+                cpu_marks[step] = tree.cpu_s()
+            else:
+                server_cpu[step] = tree.cpu_s() - cpu_marks[step]
+
+        c0, w0 = client_cpu(), time.perf_counter()
+        result = asyncio.run(run_class(url, n, steps, spread=args.spread, timeout=args.timeout,
+                                       observer=not args.no_observer, seed=args.seed, on_step=on_step))
+        c1, w1 = client_cpu(), time.perf_counter()
+        memory = None
+        if tree:
+            rss, hwm, nproc = tree.memory_mb()
+            memory = {"before": before, "peak": hwm, "end": rss, "procs": nproc}
+        problems = server.log_problems() if server else None
+    finally:
+        if server:
+            server.stop(keep_log=bool(problems))
+    extra = {"server": args.url or f"eha serve --num-procs {args.procs}", "server_cpu": server_cpu,
+             "memory": memory, "log_problems": problems, "client_cpu": c1 - c0, "wall": w1 - w0,
+             "log_path": server.log_path if server else None}
+    summary = report(result, extra)
+    return summary, {"summary": summary, "raw": result.to_json(), "server_cpu_s": server_cpu,
+                     "log_problems": problems}
+
+
+async def churn(url: str, tree: ProcTree | None, k: int, steps, timeout: float) -> list:
+    """Open and close ``k`` sessions, 10 at a time; the server's RSS as it goes."""
+    def rss():
+        return tree.memory_mb()[0] if tree else float("nan")
+    rows = []
+    print(f"\n== {k} sessions opened ({', '.join(steps)}) and closed, 10 at a time ==")
+    print(f"server RSS at the start: {rss():.1f} MB")
+    errors = 0
+    done = 0
+    t0 = time.perf_counter()
+    while done < k:
+        batch = [Student(url, name=f"s{done + i + 1}", timeout=timeout) for i in range(min(10, k - done))]
+        for step in steps:
+            outs = await asyncio.gather(*(do_step(s, step, timeout) for s in batch), return_exceptions=True)
+            errors += sum(isinstance(o, BaseException) for o in outs)
+        await asyncio.gather(*(s.close() for s in batch))
+        done += len(batch)
+        if done % 50 == 0 or done == k:
+            rows.append((done, rss()))
+            print(f"after {done:4d} sessions: RSS {rows[-1][1]:7.1f} MB   ({time.perf_counter() - t0:.0f} s, "
+                  f"{errors} error(s))")
+    # eha serve discards a closed page's session 4 s after its websocket closed, checking every 1 s
+    for wait in (8, 15):
+        await asyncio.sleep(wait)
+        rows.append((f"+{wait}s", rss()))
+        print(f"{wait:2d} s after the last close (sessions discarded): RSS {rows[-1][1]:7.1f} MB")
+    first = next((m for d, m in rows if d == 50), rows[0][1])
+    last = rows[-1][1]
+    print(f"growth from 50 sessions to the end: {last - first:+.1f} MB "
+          f"({(last - first) / max(k - 50, 1) * 100:+.2f} MB per 100 sessions); errors {errors}")
+    return rows
+
+
+def _tree_of(server_pid: str | None) -> ProcTree | None:
+    return ProcTree(*(int(p) for p in server_pid.split(",") if p.strip())) if server_pid else None
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sessions", default="1,10,30", help="class sizes, run in this order (default 1,10,30; "
+                    "1 is added first if missing)")
+    ap.add_argument("--url", help="a running server's app URL, e.g. http://host/eha (default: start "
+                    "eha serve, fresh for each size)")
+    ap.add_argument("--server-pid", help="with --url: the server's pid(s), comma-separated (e.g. each backend "
+                    "behind nginx), for memory and CPU; their children are counted too")
+    ap.add_argument("--procs", type=int, default=1, help="--num-procs for eha serve (default 1)")
+    ap.add_argument("--spread", type=float, default=1.0, help="students start a step within this many "
+                    "seconds (default 1)")
+    ap.add_argument("--timeout", type=float, default=180.0, help="a step not done after this is an error "
+                    "[s] (default 180)")
+    ap.add_argument("--steps", default=None, help=f"subset of {','.join(STEPS)} (starting with "
+                    "open; a run step shows its tab itself)")
+    ap.add_argument("--no-observer", action="store_true", help="no observer session")
+    ap.add_argument("--seed", type=int, default=0, help="of the random start offsets")
+    ap.add_argument("--json", help="write every raw timing to this file")
+    ap.add_argument("--churn", type=int, default=0, metavar="K", help="instead: open and close K sessions, "
+                    "10 at a time (steps: --steps, default open,param,tab2)")
+    args = ap.parse_args(argv)
+    try:
+        sizes = [int(x) for x in args.sessions.split(",") if x.strip()]
+        if not sizes or min(sizes) < 1:
+            raise ValueError
+    except ValueError:
+        print(f"bench_classroom: error: --sessions = {args.sessions} is not allowed: use e.g. 1,10,30",
+              file=sys.stderr)
+        return 2
+    steps = [s.strip() for s in (args.steps or ",".join(STEPS)).split(",") if s.strip()]
+    if not steps or any(s not in STEPS for s in steps) or steps[0] != "open":
+        print(f"bench_classroom: error: --steps = {args.steps} is not allowed: start with open, "
+              f"then any of {','.join(STEPS[1:])}", file=sys.stderr)
+        return 2
+    if args.server_pid and not args.url:
+        print("bench_classroom: error: --server-pid is only for --url", file=sys.stderr)
+        return 2
+    if args.server_pid and not re.fullmatch(r"\d+(,\d+)*", args.server_pid.replace(" ", "")):
+        print(f"bench_classroom: error: --server-pid = {args.server_pid} is not allowed: use e.g. 1234 or "
+              "1234,1240", file=sys.stderr)
+        return 2
+    print(f"machine: {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; server: "
+          f"{args.url or f'eha serve --num-procs {args.procs}'}; spread {args.spread:g} s, timeout {args.timeout:g} s")
+    if not args.churn:
+        print("columns: seconds per student (p50 p95 max); ok/students; errors; Bokeh messages and kB the server "
+              "sent each student during the step;\n         the server's CPU seconds; the observer's p95 delay "
+              "during the step; the step's duration (spread included)")
+
+    if args.churn:
+        churn_steps = steps if args.steps else ["open", "param", "tab2"]
+        server = None if args.url else Server(args.procs)
+        tree = server.tree if server else _tree_of(args.server_pid)
+        c0 = client_cpu()
+        try:
+            rows = asyncio.run(churn(args.url or server.url, tree, args.churn, churn_steps, args.timeout))
+        finally:
+            if server:
+                server.stop()
+        print(f"client CPU: {client_cpu() - c0:.1f} s")
+        if args.json:
+            Path(args.json).write_text(json.dumps({"churn": rows}, indent=1, default=str))
+        return 0
+
+    if 1 not in sizes:
+        sizes = [1, *sizes]
+    summaries, raw = [], []
+    for n in sizes:
+        summary, data = run_one(n, args, steps)
+        summaries.append(summary)
+        raw.append(data)
+        if args.json:       # after every size: a crash later keeps what was measured
+            Path(args.json).write_text(json.dumps(raw, indent=1, default=str))
+    base = summaries[0]
+    largest = max(summaries, key=lambda s: s["sessions"])
+    if largest is not base:
+        ratios = []
+        for s in steps:
+            b, last = base["steps"][s]["p95"], largest["steps"][s]["p95"]
+            if not math.isnan(b) and not math.isnan(last) and b > 0:
+                ratios.append(f"{s} {last / b:.1f}x")
+        print(f"\np95 with {largest['sessions']} students / with 1: " + ", ".join(ratios))
+    print(summary_line(largest))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,858 @@
+"""Students at the protocol level: what a browser says to the app's server, without drawing.
+
+:class:`StudentSession` is one browser tab, spoken at the Bokeh websocket
+protocol (Bokeh 3):
+
+1. ``GET`` the page with a cookie jar of its own (behind nginx the cookies
+   carry the session affinity, so they go with the websocket request too);
+   the page's embed script holds the session token (``"token": "..."``);
+2. open the websocket at ``<page path>/ws?<page query>`` with the
+   subprotocols ``["bokeh", token]``; the server sends ``ACK``;
+3. ``PULL-DOC-REQ``; the ``PULL-DOC-REPLY`` holds the whole document, every
+   model once as ``{"type": "object", "name": ..., "id": ..., "attributes":
+   {...}}`` and then by reference, ``{"id": ...}``;
+4. a ``PATCH-DOC`` with the ``document_ready`` event, as BokehJS sends once the
+   page is drawn.
+
+A message is three text frames (header, metadata, content) and, for each of
+the header's ``num_buffers``, a text frame naming the buffer and a binary frame
+with its bytes. The session keeps an index of the document's models, updated
+from every ``PATCH-DOC`` the server sends (new models arrive inline in the
+events and are indexed as they come), and acts on it with the messages BokehJS
+sends (checked against bokehjs ``Serializer``/``bokeh_events``, and against the
+server, which applies them):
+
+* a property change: ``{"kind": "ModelChanged", "model": {"id": ID}, "attr":
+  A, "new": V}`` (a JS object value is encoded as ``{"type": "map",
+  "entries": [[k, v], ...]}``);
+* a UI event, e.g. a button press: ``{"kind": "MessageSent", "msg_type":
+  "bokeh_event", "msg_data": {"type": "event", "name": "button_click",
+  "values": {"type": "map", "entries": [["model", {"id": ID}]]}}}``;
+  ``document_ready`` has no values, which BokehJS encodes ``{"type": "map"}``.
+
+Nothing is drawn and only JSON is parsed, so thirty sessions cost the machine
+little beside the server's own work. Nothing answers the server except the
+initial pull: the server's ``OK`` replies are counted, its ``ERROR`` replies
+recorded as errors.
+
+:class:`Student` adds the app's vocabulary, one method per user action (type
+into a parameter field, show a tab, press a run button and wait for its
+result), finding models by type, css class and label, never by id; it waits
+for a tab's content to arrive before it presses its buttons (tabs are built
+when first shown). When the UI changes, that class is what to adapt.
+
+:func:`run_class` (async) / :func:`run_students` drive N students through the
+steps together, with an optional observer typing every 2 s; the tests and
+``bench_classroom.py`` use them.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import html
+import json
+import random
+import re
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from http.cookies import SimpleCookie
+from typing import Any
+from urllib.parse import urlsplit
+
+from tornado.httpclient import AsyncHTTPClient, HTTPRequest
+from tornado.websocket import websocket_connect
+
+__all__ = [
+    "STEPS",
+    "STEP_NAMES",
+    "ClassResult",
+    "Model",
+    "ObserverSample",
+    "Outcome",
+    "ProtocolError",
+    "StepFailed",
+    "StepTimeout",
+    "Student",
+    "StudentSession",
+    "run_class",
+    "run_students",
+]
+
+_TOKEN = re.compile(r'"token"\s*:\s*"([^"]+)"')
+
+
+class ProtocolError(RuntimeError):
+    """The server said something a browser would not accept, or closed the connection."""
+
+
+class StepTimeout(RuntimeError):
+    """A waited-for condition did not happen in time."""
+
+
+class StepFailed(RuntimeError):
+    """The page showed a failure (an alert) instead of the result."""
+
+
+# -- the document's models -------------------------------------------------------------------
+
+@dataclass
+class Model:
+    """One Bokeh model as the client knows it: type name and attributes (references as ``{"id": ...}``)."""
+
+    id: str
+    type: str
+    attributes: dict = field(default_factory=dict)
+
+    @property
+    def css(self) -> list:
+        return self.attributes.get("css_classes") or []
+
+    def get(self, attr: str, default=None):
+        return self.attributes.get(attr, default)
+
+    def text(self) -> str:
+        """The model's text (Div, Panel's HTML/Markdown panes: their ``text``), HTML entities unescaped."""
+        value = self.attributes.get("text", "")
+        if isinstance(value, dict):          # a value spec
+            value = value.get("value", "")
+        return html.unescape("" if value is None else str(value))
+
+    def __repr__(self) -> str:
+        return f"<{self.type} {self.id} css={self.css}>"
+
+
+def _plain(value):
+    """Bokeh's JSON encodings made plain enough to read: maps to dicts, inline models to references."""
+    if isinstance(value, dict):
+        kind = value.get("type")
+        if kind == "map":
+            return {k: _plain(v) for k, v in value.get("entries", [])}
+        if kind == "object" and "id" in value:
+            return {"id": value["id"]}
+        if kind in ("ndarray", "bytes", "typed_array", "number", "value", "field", "expr"):
+            return value
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_plain(v) for v in value]
+    return value
+
+
+def _refs(value, out: list) -> None:
+    """The model ids ``value`` refers to."""
+    if isinstance(value, dict):
+        if "id" in value and len(value) == 1:
+            out.append(value["id"])
+        else:
+            for v in value.values():
+                if isinstance(v, (dict, list)):
+                    _refs(v, out)
+    elif isinstance(value, list):
+        for v in value:
+            if isinstance(v, (dict, list)):
+                _refs(v, out)
+
+
+def _encode(value):
+    """A Python value as BokehJS's serializer sends it (plain objects as maps)."""
+    if isinstance(value, Model):
+        return {"id": value.id}
+    if isinstance(value, dict):
+        if set(value) == {"id"}:
+            return value
+        if not value:
+            return {"type": "map"}
+        return {"type": "map", "entries": [[k, _encode(v)] for k, v in value.items()]}
+    if isinstance(value, (list, tuple)):
+        return [_encode(v) for v in value]
+    return value
+
+
+# -- one browser tab ----------------------------------------------------------------------------
+
+class StudentSession:
+    """One browser session at the Bokeh protocol level (see the module docstring)."""
+
+    def __init__(self, url: str, *, name: str = "student", timeout: float = 180.0):
+        self.url = url
+        self.name = name
+        self.timeout = timeout
+        self.models: dict[str, Model] = {}
+        self.roots: list[str] = []
+        self.cookies: dict[str, str] = {}
+        self.upstream = ""              # which backend served the page, if a proxy says so
+        # what the server sent: messages, frames and bytes (all frames), by message type
+        self.messages_in = 0
+        self.frames_in = 0
+        self.bytes_in = 0
+        self.buffers_in = 0
+        self.by_type: dict[str, int] = {}
+        self.events_in: dict[str, int] = {}
+        self.messages_out = 0
+        self.errors: list[str] = []     # the server's ERROR replies and a broken connection
+        self._ws = None
+        self._reader: asyncio.Future | None = None
+        self._changed = asyncio.Event()
+        self._pending: dict[str, asyncio.Future] = {}
+        self._ack: asyncio.Future | None = None
+        self._live: set | None = None
+        self._closed = False
+        self._broken: str | None = None
+
+    # -- opening ------------------------------------------------------------------------------
+    async def open(self, timeout: float | None = None) -> float:
+        """Open the page as a browser does; returns the seconds from the GET's start until the
+        document is pulled and indexed."""
+        timeout = self.timeout if timeout is None else timeout
+        t0 = time.perf_counter()
+        client = AsyncHTTPClient(force_instance=True)   # no shared 10-connection pool between students
+        try:
+            response = await client.fetch(HTTPRequest(self.url, request_timeout=timeout, follow_redirects=True,
+                                                      headers=self._cookie_header()), raise_error=False)
+        finally:
+            client.close()
+        if response.code != 200:
+            raise ProtocolError(f"GET {self.url}: HTTP {response.code} {response.reason or ''}".strip())
+        self._keep_cookies(response.headers.get_list("Set-Cookie"))
+        self.upstream = response.headers.get("X-Eha-Upstream", "")
+        self.bytes_in += len(response.body or b"")
+        page = response.body.decode("utf-8", "replace")
+        match = _TOKEN.search(page)
+        if not match:
+            raise ProtocolError("no session token in the page")
+        parts = urlsplit(response.effective_url)
+        scheme = "wss" if parts.scheme == "https" else "ws"
+        ws_url = f"{scheme}://{parts.netloc}{parts.path.rstrip('/')}/ws" + (f"?{parts.query}" if parts.query else "")
+        request = HTTPRequest(ws_url, request_timeout=timeout,
+                              headers={**self._cookie_header(), "Origin": f"{parts.scheme}://{parts.netloc}"})
+        loop = asyncio.get_running_loop()
+        self._ack = loop.create_future()
+        self._ws = await websocket_connect(request, subprotocols=["bokeh", match.group(1)],
+                                           max_message_size=1024 * 2**20)
+        self._reader = asyncio.ensure_future(self._read_forever())
+        await asyncio.wait_for(asyncio.shield(self._ack), timeout)
+        reply = await self._request("PULL-DOC-REQ", {}, timeout)
+        doc = reply["content"]["doc"]
+        self._index(doc)
+        self.roots = [r["id"] for r in doc.get("roots", []) if isinstance(r, dict) and "id" in r]
+        self._live = None
+        seconds = time.perf_counter() - t0
+        await self.send_event("document_ready")
+        return seconds
+
+    def _cookie_header(self) -> dict:
+        return {"Cookie": "; ".join(f"{k}={v}" for k, v in self.cookies.items())} if self.cookies else {}
+
+    def _keep_cookies(self, headers) -> None:
+        for h in headers:
+            c = SimpleCookie()
+            try:
+                c.load(h)
+            except Exception:  # noqa: BLE001, S112 - a cookie Python cannot parse is one a test cannot need
+                continue
+            for k, morsel in c.items():
+                self.cookies[k] = morsel.value
+
+    async def close(self) -> None:
+        """Close the websocket, as closing the browser tab does."""
+        self._closed = True
+        if self._ws is not None:
+            self._ws.close()
+        if self._reader is not None:
+            self._reader.cancel()
+            try:
+                await self._reader
+            except (asyncio.CancelledError, Exception):  # noqa: BLE001, S110 - closing anyway
+                pass
+        for fut in self._pending.values():
+            if not fut.done():
+                fut.cancel()
+
+    # -- the wire -------------------------------------------------------------------------------
+    async def _frame(self):
+        data = await self._ws.read_message()
+        if data is None:
+            raise ProtocolError("the server closed the connection")
+        self.frames_in += 1
+        self.bytes_in += len(data) if isinstance(data, bytes) else len(data.encode("utf-8"))
+        return data
+
+    async def _read_message(self) -> dict:
+        parts = []
+        for what in ("header", "metadata", "content"):
+            frame = await self._frame()
+            if not isinstance(frame, str):
+                raise ProtocolError(f"expected the message's {what} as a text frame, got {len(frame)} bytes")
+            parts.append(json.loads(frame))
+        header, metadata, content = parts
+        for _ in range(header.get("num_buffers", 0) or 0):
+            ref = await self._frame()           # the buffer's header: {"id": ...}
+            data = await self._frame()          # its bytes (not decoded: nothing here draws)
+            if not isinstance(ref, str) or not isinstance(data, bytes):
+                raise ProtocolError("a buffer was not a text frame followed by a binary frame")
+            self.buffers_in += 1
+        self.messages_in += 1
+        kind = header.get("msgtype", "?")
+        self.by_type[kind] = self.by_type.get(kind, 0) + 1
+        return {"header": header, "metadata": metadata, "content": content}
+
+    async def _send(self, msgtype: str, content: dict, msgid: str | None = None) -> str:
+        if self._broken:
+            raise ProtocolError(self._broken)
+        msgid = msgid or uuid.uuid4().hex
+        await self._ws.write_message(json.dumps({"msgid": msgid, "msgtype": msgtype}))
+        await self._ws.write_message("{}")
+        await self._ws.write_message(json.dumps(content))
+        self.messages_out += 1
+        return msgid
+
+    async def _request(self, msgtype: str, content: dict, timeout: float) -> dict:
+        fut = asyncio.get_running_loop().create_future()
+        msgid = uuid.uuid4().hex
+        self._pending[msgid] = fut          # before sending: the reply may come while the frames are flushed
+        try:
+            await self._send(msgtype, content, msgid)
+            msg = await asyncio.wait_for(fut, timeout)
+        finally:
+            self._pending.pop(msgid, None)
+        if msg["header"].get("msgtype") == "ERROR":
+            raise ProtocolError(f"{msgtype}: {msg['content'].get('text')}")
+        return msg
+
+    async def _read_forever(self) -> None:
+        try:
+            while True:
+                self._handle(await self._read_message())
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - recorded: a closed or broken connection
+            if not self._closed:
+                self._broken = f"connection: {type(exc).__name__}: {exc}"
+                self.errors.append(self._broken)
+                for fut in [self._ack, *self._pending.values()]:
+                    if fut is not None and not fut.done():
+                        fut.set_exception(ProtocolError(self._broken))
+            self._changed.set()
+
+    def _handle(self, msg: dict) -> None:
+        header = msg["header"]
+        kind = header.get("msgtype")
+        if kind == "ACK" and self._ack is not None and not self._ack.done():
+            self._ack.set_result(msg)
+        elif kind == "ERROR":
+            self.errors.append(f"server ERROR reply: {str(msg['content'].get('text', ''))[:300]}")
+        elif kind == "PATCH-DOC":
+            for event in msg["content"].get("events", []):
+                self._apply(event)
+            self._live = None
+        reqid = header.get("reqid")
+        if reqid in self._pending and not self._pending[reqid].done():
+            self._pending[reqid].set_result(msg)
+        self._changed.set()
+
+    async def send_patch(self, events: list) -> None:
+        """A ``PATCH-DOC`` with these events (the server answers OK, or ERROR)."""
+        await self._send("PATCH-DOC", {"events": events})
+
+    async def set_property(self, model: Model, attr: str, value) -> None:
+        """Change a property as BokehJS does (and in the local copy)."""
+        model.attributes[attr] = value
+        await self.send_patch([{"kind": "ModelChanged", "model": {"id": model.id}, "attr": attr,
+                                "new": _encode(value)}])
+
+    async def send_event(self, name: str, values: dict | None = None) -> None:
+        """A UI event (``bokeh_event``), as BokehJS's ``EventManager.send_event`` sends it."""
+        await self.send_patch([{"kind": "MessageSent", "msg_type": "bokeh_event",
+                                "msg_data": {"type": "event", "name": name, "values": _encode(values or {})}}])
+
+    async def click(self, button: Model) -> None:
+        """Press a Button: its ``button_click`` event."""
+        await self.send_event("button_click", {"model": {"id": button.id}})
+
+    # -- the document -------------------------------------------------------------------------
+    def _index(self, obj) -> None:
+        """Index every model defined inline in ``obj``."""
+        if isinstance(obj, dict):
+            if obj.get("type") == "object" and "id" in obj and "name" in obj:
+                attrs = {k: _plain(v) for k, v in (obj.get("attributes") or {}).items()}
+                model = self.models.get(obj["id"])
+                if model is None:
+                    self.models[obj["id"]] = Model(obj["id"], obj["name"], attrs)
+                else:
+                    model.attributes.update(attrs)
+            for v in obj.values():
+                if isinstance(v, (dict, list)):
+                    self._index(v)
+        elif isinstance(obj, list):
+            for v in obj:
+                if isinstance(v, (dict, list)):
+                    self._index(v)
+
+    def _apply(self, event: dict) -> None:
+        kind = event.get("kind", "?")
+        self.events_in[kind] = self.events_in.get(kind, 0) + 1
+        self._index(event)
+        if kind == "ModelChanged":
+            model = self.models.get(event["model"]["id"])
+            if model is not None:
+                model.attributes[event["attr"]] = _plain(event["new"])
+        elif kind == "RootAdded":
+            rid = event.get("model", {}).get("id")
+            if rid and rid not in self.roots:
+                self.roots.append(rid)
+        elif kind == "RootRemoved":
+            rid = event.get("model", {}).get("id")
+            if rid in self.roots:
+                self.roots.remove(rid)
+        elif kind == "TitleChanged":
+            self.title = event.get("title")
+        # ColumnDataChanged / ColumnsStreamed / ColumnsPatched carry plot data: indexed
+        # above for any models inside, their numbers are not kept (nothing here draws).
+
+    def live_ids(self) -> set:
+        """Ids of the models reachable from the document's roots (models replaced since are not)."""
+        if self._live is None:
+            seen, todo = set(), list(self.roots)
+            while todo:
+                mid = todo.pop()
+                if mid in seen or mid not in self.models:
+                    continue
+                seen.add(mid)
+                out: list = []
+                _refs(self.models[mid].attributes, out)
+                todo.extend(out)
+            self._live = seen
+        return self._live
+
+    def find(self, type_suffix: str | None = None, *, css: str | None = None, label: str | None = None,
+             where: Callable[[Model], bool] | None = None, live: bool = True) -> list[Model]:
+        """Models whose type name ends with ``type_suffix``, with css class ``css``, label ``label``,
+        for which ``where`` holds; by default only those in the document now."""
+        ids = self.live_ids() if live else None
+        out = []
+        for m in self.models.values():
+            if ids is not None and m.id not in ids:
+                continue
+            if type_suffix and not m.type.endswith(type_suffix):
+                continue
+            if css and css not in m.css:
+                continue
+            if label is not None and m.attributes.get("label") != label:
+                continue
+            if where is not None and not where(m):
+                continue
+            out.append(m)
+        return out
+
+    async def wait_for(self, condition: Callable[[], Any], timeout: float | None = None, what: str = "condition"):
+        """Wait until ``condition()`` is truthy (checked after every message from the server) and
+        return its value. ``condition`` may raise (e.g. :class:`StepFailed`) to stop waiting."""
+        timeout = self.timeout if timeout is None else timeout
+        deadline = time.perf_counter() + timeout
+        while True:
+            value = condition()
+            if value:
+                return value
+            if self._broken:
+                raise ProtocolError(f"{self.name}: {self._broken} (waiting for {what})")
+            left = deadline - time.perf_counter()
+            if left <= 0:
+                raise StepTimeout(f"{self.name}: timed out after {timeout:g} s waiting for {what}")
+            self._changed.clear()
+            try:
+                await asyncio.wait_for(self._changed.wait(), left)
+            except asyncio.TimeoutError:
+                pass
+
+    async def wait_for_model(self, type_suffix: str | None = None, *, css: str | None = None,
+                             label: str | None = None, where: Callable[[Model], bool] | None = None,
+                             timeout: float | None = None) -> Model:
+        """Wait until a model matching these exists in the document; returns the first."""
+        what = " ".join(x for x in (type_suffix or "model", f".{css}" if css else "",
+                                    f"{label!r}" if label is not None else "") if x)
+        found = await self.wait_for(lambda: self.find(type_suffix, css=css, label=label, where=where),
+                                    timeout, what)
+        return found[0]
+
+    async def wait_until(self, model: Model, attr: str, predicate: Callable[[Any], bool],
+                         timeout: float | None = None, what: str | None = None):
+        """Wait until ``predicate(model.attr)`` holds; returns the attribute's value."""
+        def check():
+            value = model.attributes.get(attr)
+            return (value,) if predicate(value) else None
+        return (await self.wait_for(check, timeout, what or f"{model!r}.{attr}"))[0]
+
+
+# -- a student of this app ------------------------------------------------------------------------
+
+class Student(StudentSession):
+    """A student of this app: its tabs, fields and buttons by name, one method per user action.
+
+    Each action returns the seconds from its start (the first message it sends)
+    until the page showed its result; it raises :class:`StepTimeout`,
+    :class:`StepFailed` (the page's alert, e.g. "The experiment failed: ...")
+    or :class:`ProtocolError`.
+    """
+
+    MAIN_TABS = "eha-main-tabs"
+    IDENT_TABS = "eha-ident-tabs"
+    FORM = "eha-param-form"
+
+    def _one(self, what: str, found: list[Model]) -> Model:
+        if not found:
+            raise LookupError(f"{self.name}: no {what} in the page")
+        return found[0]
+
+    async def open(self, timeout: float | None = None) -> float:
+        """Open the page; returns the seconds until tab 1's fields arrived (the
+        server sends the page's frame first and its first tab right after)."""
+        t0 = time.perf_counter()
+        await super().open(timeout)
+        await self.wait_for_model(css=self.FORM, timeout=timeout)
+        return time.perf_counter() - t0
+
+    def pane(self, css: str) -> Model:
+        return self._one(f"pane .{css}", self.find(css=css))
+
+    def button(self, label: str) -> Model:
+        return self._one(f"button {label!r}", self.find("Button", label=label))
+
+    def main_tabs(self) -> Model:
+        # the page's Tabs: by css class, else the first Tabs of the page
+        found = self.find("Tabs", css=self.MAIN_TABS) or self.find("Tabs")
+        return self._one("tabs", found)
+
+    def _alert(self, css: str | None) -> tuple[Model | None, tuple]:
+        found = self.find(css=css) if css else []
+        m = found[0] if found else None
+        return m, ((m.attributes.get("visible"), m.text()) if m else (None, ""))
+
+    @staticmethod
+    def _alert_news(alert: Model | None, before: tuple) -> str | None:
+        """The alert's text if it appeared or changed since ``before``."""
+        if alert is None or not alert.attributes.get("visible", True):
+            return None
+        now = (alert.attributes.get("visible"), alert.text())
+        return now[1] if now != before and now[1].strip() else None
+
+    # the user's actions ----------------------------------------------------------------------------
+    async def change_parameter(self, name: str, text: str, timeout: float | None = None) -> float:
+        """Type ``text`` into tab 1's field ``name``; done when the derived values (``.eha-derived``) change
+        (so ``text`` must differ from the field's current value).
+
+        Today's tab 1 is one form component (``.eha-param-form``) whose data model's
+        ``values`` holds every field's text: the browser sends the whole dict on each
+        keystroke. A Panel ``TextInput`` with css class ``eha-field-NAME`` (the form
+        before) is typed into as BokehJS does: ``value_input`` per keystroke, then
+        ``value`` on Enter.
+        """
+        derived = self.pane("eha-derived")
+        before = derived.text()
+        t0 = time.perf_counter()
+        box = self.find("TextInput", css=f"eha-field-{name}")
+        if box:
+            await self.set_property(box[0], "value_input", text)
+            await self.set_property(box[0], "value", text)
+        else:
+            form = self._one(f"form .{self.FORM}", self.find(css=self.FORM))
+            ref = form.attributes.get("data")
+            data = self.models.get(ref["id"]) if isinstance(ref, dict) and "id" in ref else None
+            target = data if data is not None and "values" in data.attributes else form
+            values = dict(target.attributes.get("values") or {})
+            if name not in values:
+                raise LookupError(f"{self.name}: no field {name!r} in the form")
+            await self.set_property(target, "values", {**values, name: text})
+        await self.wait_for(lambda: derived.text() != before, timeout, f"the derived values after {name} = {text}")
+        return time.perf_counter() - t0
+
+    async def show_tab(self, index: int, ready_css: str, timeout: float | None = None) -> float:
+        """Click main tab ``index`` (0-based); done when its content (a model with ``ready_css``) arrived.
+        Tabs are built when first shown: the content comes in a later PATCH-DOC."""
+        t0 = time.perf_counter()
+        tabs = self.main_tabs()
+        if tabs.attributes.get("active") != index:
+            await self.set_property(tabs, "active", index)
+        await self.wait_for_model(css=ready_css, timeout=timeout)
+        return time.perf_counter() - t0
+
+    async def show_subtab(self, tabs_css: str, index: int, ready_css: str, timeout: float | None = None) -> float:
+        t0 = time.perf_counter()
+        tabs = await self.wait_for_model("Tabs", css=tabs_css, timeout=timeout)
+        if tabs.attributes.get("active") != index:
+            await self.set_property(tabs, "active", index)
+        await self.wait_for_model(css=ready_css, timeout=timeout)
+        return time.perf_counter() - t0
+
+    async def press_and_wait(self, label: str, result_css: str, done: Callable[[Model, str], bool],
+                             alert_css: str | None, timeout: float | None = None) -> tuple[float, str]:
+        """Press the button ``label``; wait until ``done(result, text_before)`` holds for the pane
+        ``result_css``, or fail with the alert's text if the alert (``alert_css``) appears."""
+        result = self.pane(result_css)
+        before = result.text()
+        alert, alert_before = self._alert(alert_css)
+        button = self.button(label)
+        t0 = time.perf_counter()
+        await self.click(button)
+
+        def finished():
+            news = self._alert_news(alert, alert_before)
+            if news is not None and "failed" in news.lower():
+                raise StepFailed(f"{self.name}: {news[:300]}")
+            return done(result, before)
+
+        await self.wait_for(finished, timeout, f"the result of {label!r}")
+        seconds = time.perf_counter() - t0
+        news = self._alert_news(alert, alert_before)
+        if news is not None:
+            raise StepFailed(f"{self.name}: {news[:300]}")
+        return seconds, result.text()
+
+    async def show_simulation(self, timeout: float | None = None) -> float:
+        return await self.show_tab(1, "eha-sim-info", timeout)
+
+    async def show_identification(self, timeout: float | None = None) -> float:
+        return await self.show_tab(2, "eha-lse-table", timeout)
+
+    async def show_frequency(self, timeout: float | None = None) -> float:
+        """Tab 3's inner tab "Frequency domain: transfer function"."""
+        t0 = time.perf_counter()
+        await self.show_tab(2, self.IDENT_TABS, timeout)
+        await self.show_subtab(self.IDENT_TABS, 1, "eha-freq-summary", timeout)
+        return time.perf_counter() - t0
+
+    async def compare_both(self, timeout: float | None = None) -> float:
+        """Tab 2, "Compare both"; done when the status line (``.eha-sim-info``) shows the next run."""
+        t0 = time.perf_counter()
+        await self.show_simulation(timeout)
+        count = _run_count(self.pane("eha-sim-info").text())
+        await self.press_and_wait("Compare both", "eha-sim-info", lambda m, _: _run_count(m.text()) > count,
+                                  "eha-sim-alert", timeout)
+        return time.perf_counter() - t0
+
+    async def least_squares(self, timeout: float | None = None) -> float:
+        """Tab 3, "Run least squares"; done when ``.eha-lse-table`` holds a new table."""
+        t0 = time.perf_counter()
+        await self.show_identification(timeout)
+        await self.press_and_wait("Run least squares", "eha-lse-table",
+                                  lambda m, before: m.text() != before and "<table" in m.text(),
+                                  "eha-lse-alert", timeout)
+        return time.perf_counter() - t0
+
+    async def frequency_experiment(self, timeout: float | None = None) -> float:
+        """Tab 3's frequency panel, "Run experiment and estimate"; done when ``.eha-freq-summary``
+        shows the estimate Ĥ(s)."""
+        t0 = time.perf_counter()
+        await self.show_frequency(timeout)
+        _, text = await self.press_and_wait("Run experiment and estimate", "eha-freq-summary",
+                                            lambda m, before: m.text() != before, "eha-freq-alert", timeout)
+        if "Ĥ(s)" not in text:
+            raise StepFailed(f"{self.name}: the summary has no estimate: {re.sub('<[^>]+>', ' ', text)[:200]}")
+        return time.perf_counter() - t0
+
+
+def _run_count(text: str) -> int:
+    m = re.search(r"run (\d+)", text)
+    return int(m.group(1)) if m else 0
+
+
+# -- a class ------------------------------------------------------------------------------------------
+
+#: The workflow, in order. The "show" steps are a first visit of a tab (built then); a
+#: run step shows its tab itself if no "show" step came before.
+STEPS = ("open", "param", "tab2", "compare", "tab3", "lse", "freqtab", "freq")
+STEP_NAMES = {"open": "open the page", "param": "change M (tab 1)", "tab2": "show tab 2 (first)",
+              "compare": '"Compare both"', "tab3": "show tab 3 (first)", "lse": "least squares",
+              "freqtab": "show frequency tab", "freq": "frequency experiment"}
+OBSERVER_VALUES = ("5000", "5500")
+
+
+async def do_step(student: Student, step: str, timeout: float | None = None) -> float:
+    """One step of the workflow for one student; returns its seconds."""
+    if step == "open":
+        return await student.open(timeout)
+    if step == "param":
+        return await student.change_parameter("M", "6000", timeout)
+    if step == "tab2":
+        return await student.show_simulation(timeout)
+    if step == "compare":
+        return await student.compare_both(timeout)
+    if step == "tab3":
+        return await student.show_identification(timeout)
+    if step == "lse":
+        return await student.least_squares(timeout)
+    if step == "freqtab":
+        return await student.show_frequency(timeout)
+    if step == "freq":
+        return await student.frequency_experiment(timeout)
+    raise ValueError(f"step = {step} is not allowed: use one of {', '.join(STEPS)}")
+
+
+@dataclass
+class Outcome:
+    """One student's step: seconds (None if it failed), its error, what the server sent meanwhile."""
+
+    student: str
+    step: str
+    start: float            # offset of the student's start within the step [s]
+    seconds: float | None
+    error: str | None
+    messages: int           # Bokeh messages the server sent this student during the step
+    bytes: int              # websocket bytes (all frames; the page's HTML for "open")
+    server_errors: list = field(default_factory=list)   # ERROR replies during the step
+    by_type: dict = field(default_factory=dict)         # those messages by type (ACK, OK, PATCH-DOC, ...)
+
+
+@dataclass
+class ObserverSample:
+    step: str
+    at: float               # seconds since the class started
+    delay: float | None
+    error: str | None = None
+
+
+@dataclass
+class ClassResult:
+    sessions: int
+    steps: dict             # step -> list[Outcome]
+    observer: list          # list[ObserverSample]
+    step_wall: dict         # step -> (start, end) seconds since the class started
+    session_errors: list    # connection errors outside a step
+    upstreams: dict = field(default_factory=dict)   # backend (a proxy's X-Eha-Upstream) -> students
+
+    def ok(self, step: str) -> int:
+        return sum(1 for o in self.steps.get(step, []) if o.seconds is not None and not o.server_errors)
+
+    def times(self, step: str) -> list:
+        return [o.seconds for o in self.steps.get(step, []) if o.seconds is not None]
+
+    def errors(self, step: str) -> list:
+        out = []
+        for o in self.steps.get(step, []):
+            if o.error:
+                out.append(f"{o.student}: {o.error}")
+            out += [f"{o.student}: {e}" for e in o.server_errors]
+        return out
+
+    def error_count(self) -> int:
+        return (sum(len(self.errors(s)) for s in self.steps) + len(self.session_errors)
+                + sum(1 for o in self.observer if o.error))
+
+    def to_json(self) -> dict:
+        return {"sessions": self.sessions,
+                "steps": {s: [asdict(o) for o in outs] for s, outs in self.steps.items()},
+                "observer": [asdict(o) for o in self.observer],
+                "step_wall": self.step_wall, "session_errors": self.session_errors, "upstreams": self.upstreams}
+
+
+async def run_class(url: str, n: int, steps=STEPS, *, spread: float = 1.0, timeout: float = 180.0,
+                    observer: bool = True, observer_period: float = 2.0, seed: int = 0,
+                    on_step: Callable[[str, str], Any] | None = None) -> ClassResult:
+    """N students through ``steps`` together: within a step each starts at a random moment of the
+    first ``spread`` seconds; the next step starts when all are done (or timed out). An observer
+    session, opened first and not counted, types into M every ``observer_period`` seconds and
+    records how long the derived values take to change. ``on_step(step, "start"|"end")`` is
+    called around each step (the benchmark samples the server's CPU time there)."""
+    steps = list(steps)
+    if not steps or steps[0] != "open":
+        raise ValueError(f"steps = {','.join(steps)} is not allowed: the first step must be open")
+    rng = random.Random(seed)
+    students = [Student(url, name=f"student {i + 1}", timeout=timeout) for i in range(n)]
+    result = ClassResult(n, {s: [] for s in steps}, [], {}, [])
+    current = ["before"]
+    t_class = time.perf_counter()
+    stop = asyncio.Event()
+    obs_ready = asyncio.Event()
+
+    async def observe():
+        o = Student(url, name="observer", timeout=timeout)
+        try:
+            await o.open(timeout)
+        except Exception as exc:  # noqa: BLE001 - recorded
+            result.observer.append(ObserverSample("open", 0.0, None, f"observer: {type(exc).__name__}: {exc}"))
+            obs_ready.set()
+            return
+        obs_ready.set()
+        k = 0
+        next_tick = time.perf_counter()
+        try:
+            while not stop.is_set():
+                at = time.perf_counter() - t_class
+                step = current[0]
+                try:
+                    delay = await o.change_parameter("M", OBSERVER_VALUES[k % 2], timeout)
+                    result.observer.append(ObserverSample(step, at, delay))
+                except Exception as exc:  # noqa: BLE001 - recorded
+                    result.observer.append(ObserverSample(step, at, None, f"{type(exc).__name__}: {exc}"))
+                    if o._broken:
+                        return
+                k += 1
+                next_tick += observer_period
+                while next_tick < time.perf_counter():       # a late answer skips ticks, never bunches them
+                    next_tick += observer_period
+                try:
+                    await asyncio.wait_for(stop.wait(), next_tick - time.perf_counter())
+                except asyncio.TimeoutError:
+                    pass
+        finally:
+            await o.close()
+
+    async def act(student: Student, step: str) -> Outcome:
+        start = rng.uniform(0, spread) if spread > 0 else 0.0
+        # counted from the step's start: what arrives while the student waits to click belongs here
+        m0, b0, e0 = student.messages_in, student.bytes_in, len(student.errors)
+        types0 = dict(student.by_type)
+        await asyncio.sleep(start)
+        seconds, error = None, None
+        try:
+            seconds = await do_step(student, step, timeout)
+        except Exception as exc:  # noqa: BLE001 - every failure is a result here
+            error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, (StepTimeout, StepFailed)) else str(exc)
+            if error.startswith(f"{student.name}: "):
+                error = error[len(student.name) + 2:]
+        new_errors = [e for e in student.errors[e0:] if not e.startswith("connection")]
+        by_type = {k: v - types0.get(k, 0) for k, v in student.by_type.items() if v != types0.get(k, 0)}
+        return Outcome(student.name, step, round(start, 4), seconds, error, student.messages_in - m0,
+                       student.bytes_in - b0, new_errors, by_type)
+
+    obs_task = asyncio.ensure_future(observe()) if observer else None
+    try:
+        if obs_task is not None:
+            await obs_ready.wait()
+        active = list(students)
+        for step in steps:
+            current[0] = step
+            if on_step:
+                on_step(step, "start")
+            t0 = time.perf_counter() - t_class
+            outcomes = await asyncio.gather(*(act(s, step) for s in active))
+            result.step_wall[step] = (round(t0, 3), round(time.perf_counter() - t_class, 3))
+            if on_step:
+                on_step(step, "end")
+            result.steps[step] = list(outcomes)
+            if step == "open":
+                # a student without a page cannot go on: later steps count only those who have one
+                active = [s for s, o in zip(active, outcomes) if o.seconds is not None]
+            else:
+                active = [s for s in active if not s._broken]
+    finally:
+        current[0] = "after"
+        stop.set()
+        if obs_task is not None:
+            await obs_task
+        result.session_errors = [f"{s.name}: {e}" for s in students for e in s.errors if e.startswith("connection")]
+        for s in students:
+            if s.upstream:
+                result.upstreams[s.upstream] = result.upstreams.get(s.upstream, 0) + 1
+        await asyncio.gather(*(s.close() for s in students), return_exceptions=True)
+    return result
+
+
+def run_students(url: str, n: int, steps=STEPS, **kwargs) -> ClassResult:
+    """:func:`run_class` from synchronous code (a test): N students through ``steps``.
+
+    >>> r = run_students("http://127.0.0.1:5006/eha", 3, ["open", "param"], observer=False)  # doctest: +SKIP
+    >>> r.ok("param"), r.errors("param")                                                     # doctest: +SKIP
+    (3, [])
+    """
+    return asyncio.run(run_class(url, n, steps, **kwargs))
