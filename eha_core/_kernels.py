@@ -13,7 +13,10 @@ state's range against a tight implicit reference (benchmarks/bench_simulate.py).
 
 Inputs are pre-sampled in numpy for every step at its three RK4 stage times
 (start, middle, just before the end), so any Python callable can drive the
-compiled loop without calling back into Python.
+compiled loop without calling back into Python. A long run is integrated in
+chunks of steps, each sampled just before its kernel call: a chunk starts at an
+output sample and at a controller instant, so the kernel needs nothing from the
+previous chunk but its final state (``y_end``).
 """
 
 from __future__ import annotations

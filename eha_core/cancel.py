@@ -32,24 +32,36 @@ class Cancelled(Exception):
 
 
 class CancelToken:
-    """A flag one thread sets and another checks (thread-safe)."""
+    """A flag one thread sets and another checks (thread-safe).
+
+    Any thread may call :meth:`cancel`, any number of times: the first reason
+    given is kept. Checking is one read of a :class:`threading.Event`, cheap
+    enough for every iteration of an estimator.
+    """
 
     def __init__(self):
         self._event = threading.Event()
+        self._lock = threading.Lock()
         self._reason = ""
 
     def cancel(self, reason: str = "") -> None:
-        """Ask the computation holding this token to stop."""
-        if not self._event.is_set():
-            self._reason = reason or "cancelled"
-            self._event.set()
+        """Ask the computation holding this token to stop (``reason`` tells the user why)."""
+        # the lock makes "first reason wins" hold when two threads cancel at
+        # once; the reason is written before the event, so a checker that sees
+        # the event also sees its reason
+        with self._lock:
+            if not self._event.is_set():
+                self._reason = reason or "cancelled"
+                self._event.set()
 
     @property
     def cancelled(self) -> bool:
+        """True once :meth:`cancel` was called."""
         return self._event.is_set()
 
     @property
     def reason(self) -> str:
+        """The reason given to the first :meth:`cancel` ("cancelled" if none), or ""."""
         return self._reason
 
     def check(self) -> None:

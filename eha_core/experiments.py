@@ -19,7 +19,7 @@ from dataclasses import field
 
 import numpy as np
 
-from .cancel import check
+from .cancel import CancelToken, check
 from .params import ActuatorParams
 from .signals import ZERO, Signal, Sine, WhiteNoise
 from .simulate import SimulationResult, simulate, simulate_many
@@ -66,10 +66,12 @@ PAPER_CASES: dict[int, Case] = {
 
 def run_paper_cases(params: ActuatorParams | None = None, model: str = "nonlinear",
                     cases=(1, 2, 3, 4), *, dt: float = 1e-3, branch: str = "switching",
-                    t_end: float | None = None, cancel=None, **kwargs) -> list[SimulationResult]:
+                    t_end: float | None = None, cancel: CancelToken | None = None,
+                    **kwargs) -> list[SimulationResult]:
     """Simulate the chosen paper cases as one batch (Fig. 2: nonlinear, Fig. 3: linear).
 
-    ``t_end`` shortens (or lengthens) the paper's 5 s horizon.
+    ``t_end`` shortens (or lengthens) the paper's 5 s horizon; ``cancel`` and
+    ``kwargs`` (e.g. ``parallel=False``) go to :func:`~eha_core.simulate.simulate_many`.
     """
     chosen = []
     for c in cases:
@@ -154,15 +156,19 @@ def parse_disturbance(spec: str | Signal, *, seed: int = 0, dt: float = 1e-3, na
 
 def lse_simulation(params: ActuatorParams | None = None, disturbance: str | Signal = "none", *,
                    u: Signal = LSE_INPUT, t_end: float = 5.0, dt: float = 1e-3, seed: int = 0,
-                   cancel=None) -> SimulationResult:
-    """Simulate the nonlinear plant for the least-squares experiment (sampled at dt)."""
+                   cancel: CancelToken | None = None) -> SimulationResult:
+    """Simulate the nonlinear plant for the least-squares experiment (sampled at dt).
+
+    ``cancel`` (a :class:`~eha_core.cancel.CancelToken`) is checked between
+    integration chunks, as in every function of this module that takes it.
+    """
     d = parse_disturbance(disturbance, seed=seed, dt=dt)
     return simulate(params, u=u, d=d, t_end=t_end, dt=dt, label=f"d = {d.label}", cancel=cancel)
 
 
 def lse_data(params: ActuatorParams | None = None, disturbance: str | Signal = "none", *,
              u: Signal = LSE_INPUT, t_end: float = 5.0, dt: float = 1e-3, seed: int = 0,
-             measurement_noise: dict[str, float] | None = None, cancel=None):
+             measurement_noise: dict[str, float] | None = None, cancel: CancelToken | None = None):
     """Measurements for the least squares: the simulated sensors, optionally noisy."""
     from .identify.lse import MeasuredData
 
@@ -178,19 +184,23 @@ def lse_data(params: ActuatorParams | None = None, disturbance: str | Signal = "
 def run_lse(params: ActuatorParams | None = None, disturbance: str | Signal = "none", *,
             disturbance_model: str = "constant", disturbance_freq_hz: float | None = None,
             u: Signal = LSE_INPUT, t_end: float = 5.0, dt: float = 1e-3, seed: int = 0,
-            measurement_noise: dict[str, float] | None = None, tau_f: float = 0.01, cancel=None):
-    """Simulate a scenario and identify it: the time-domain experiment in one call."""
+            measurement_noise: dict[str, float] | None = None, tau_f: float = 0.01,
+            cancel: CancelToken | None = None):
+    """Simulate a scenario and identify it: the time-domain experiment in one call.
+
+    ``cancel`` reaches the simulation and :func:`~eha_core.identify.lse.identify_lse`.
+    """
     from .identify.lse import identify_lse
 
     params = params if params is not None else ActuatorParams()
     data = lse_data(params, disturbance, u=u, t_end=t_end, dt=dt, seed=seed, measurement_noise=measurement_noise,
                     cancel=cancel)
     return identify_lse(data, params, tau_f=tau_f, disturbance_model=disturbance_model,
-                        disturbance_freq_hz=disturbance_freq_hz)
+                        disturbance_freq_hz=disturbance_freq_hz, cancel=cancel)
 
 
 def lse_resimulation(result, params: ActuatorParams, measured, *, u: Signal = LSE_INPUT,
-                     cancel=None) -> SimulationResult:
+                     cancel: CancelToken | None = None) -> SimulationResult:
     """The nonlinear model re-simulated with the estimates, from the measured initial state.
 
     The disturbance is what the model estimated: d0, plus the sinusoid for the
@@ -208,36 +218,83 @@ def lse_resimulation(result, params: ActuatorParams, measured, *, u: Signal = LS
 
 
 def run_lse_table(params: ActuatorParams | None = None, *, disturbance_model: str = "constant",
-                  seed: int = 0, u: Signal = LSE_INPUT, t_end: float = 5.0, cancel=None) -> dict:
-    """Table 4: the four disturbance scenarios, identified with one disturbance model."""
+                  seed: int = 0, u: Signal = LSE_INPUT, t_end: float = 5.0,
+                  cancel: CancelToken | None = None) -> dict:
+    """Table 4: the four disturbance scenarios, identified with one disturbance model.
+
+    ``cancel`` reaches every scenario's simulation and estimation.
+    """
     return {name: run_lse(params, spec, disturbance_model=disturbance_model, seed=seed, u=u, t_end=t_end,
                           cancel=cancel)
             for name, spec in LSE_SCENARIOS.items()}
 
 
-#: Peak memory of identify_lse per measured sample [bytes]: regressors and
-#: filters on the 16-times finer spline grid (tracemalloc: 2.06 kB per sample
-#: for 5 s and 20 s records).
-LSE_BYTES_PER_SAMPLE = 2100
+#: Peak memory of the least-squares experiment [bytes] per measured sample
+#: and per sample of identify_lse's fine grid (the regressors and filters on
+#: the spline grid, up to 16 times finer): tracemalloc of identify_lse gives
+#: 2.06 kB per sample at 16 times (5 s and 20 s records), 0.94 kB at 7
+#: (250 s), 0.22 kB at 1 (1000 s), i.e. about 94 + 123 x factor; rounded up
+#: for the data the caller holds meanwhile.
+LSE_BYTES_PER_SAMPLE = 150
+LSE_BYTES_PER_FINE_SAMPLE = 125
+#: identify_lse's time per measured sample [s]: 3-5 us (best of 3, records of
+#: 5 s to 250 s at 1 kHz, this project's 2-core machine). A rough guide.
+LSE_SECONDS_PER_SAMPLE = 5e-6
 
 
-def lse_cost(t_end: float = 5.0, dt: float = 1e-3):
-    """Estimated cost of the least-squares experiment (its simulation and estimation)."""
+def lse_cost(t_end: float = 5.0, dt: float = 1e-3, *, resimulation: bool = False):
+    """Estimated cost of the least-squares experiment, without running it.
+
+    Parameters
+    ----------
+    t_end, dt : float
+        Horizon and sample interval of the simulated record [s].
+    resimulation : bool
+        Count the re-simulation with the estimates too
+        (:func:`lse_resimulation`).
+
+    Returns
+    -------
+    eha_core.simulate.SimulationCost
+        Steps of the simulation(s); the peak memory of the simulation or of
+        :func:`~eha_core.identify.lse.identify_lse`, whichever is larger (they
+        run one after the other); the estimation's time in ``other_seconds``.
+
+    Examples
+    --------
+    >>> c = lse_cost(5.0)
+    >>> c.steps, c.output_samples, round(c.peak_bytes / 2**20)
+    (10000, 5001, 10)
+    """
+    from .identify.lse import fine_grid_factor
     from .simulate import SimulationCost, simulation_cost
 
     sim = simulation_cost(t_end, dt)
-    n = int(round(t_end / dt)) + 1
-    return SimulationCost(steps=sim.steps, output_samples=sim.output_samples,
-                          peak_bytes=max(sim.peak_bytes, n * LSE_BYTES_PER_SAMPLE), h=sim.h)
+    n = sim.output_samples
+    runs = 2 if resimulation else 1
+    estimation = n * (LSE_BYTES_PER_SAMPLE + LSE_BYTES_PER_FINE_SAMPLE * fine_grid_factor(n))
+    return SimulationCost(steps=runs * sim.steps, output_samples=runs * n,
+                          peak_bytes=max(sim.peak_bytes, estimation), h=sim.h,
+                          other_seconds=n * LSE_SECONDS_PER_SAMPLE)
 
 
 # -- frequency-domain identification (section III-B, eqs. 19-27, Figs. 8-13) ----------
 
-#: Peak memory of run_frequency_identification per sample beyond the
-#: simulations' chunk buffers [bytes]: tfest's filtered regressors,
-#: instruments and Jacobian, the ETFE, the validation (tracemalloc: 3.1-3.2 kB
-#: per sample at N = 1000, 4000 and 20000).
-FREQUENCY_BYTES_PER_SAMPLE = 3200
+#: Peak memory of run_frequency_identification's estimation per sample
+#: [bytes]: tfest's filtered regressors, instruments and Jacobian, with the
+#: records held meanwhile (tracemalloc: 3.1-3.2 kB per sample at N = 1000,
+#: 4000 and 20000, Ts = 0.01 and 0.5 s).
+FREQUENCY_BYTES_PER_SAMPLE = 3300
+#: The first record's arrays (t, x, v, p1, p2, u, d, r and the excitation),
+#: held while the validation run is simulated [bytes per sample].
+FREQUENCY_RECORD_BYTES_PER_SAMPLE = 100
+#: tfest's time in run_frequency_identification [s]: a fixed part and a part
+#: per sample. Measured (best of 2, this project's 2-core machine): 0.19 s at
+#: N = 1000, 0.27 s at 4000, 1.1 s at 20000 (Ts = 0.01 s); 1.4 s at 4000 and
+#: 3.5 s at 20000 (Ts = 0.5 s, more iterations). It depends on the data: a
+#: rough guide, within a factor of 3 of those.
+TFEST_SECONDS = 0.2
+TFEST_SECONDS_PER_SAMPLE = 1.5e-4
 
 #: The paper's estimates: H_hat (eq. 25), its fit, P_hat (eq. 26), beta_e.
 PAPER_EQ25 = ((2.932e3,), (1.0, 11.12, 1.716e4, 3.539e-6))
@@ -308,7 +365,8 @@ class FrequencyExperiment:
         return idinput([self.n_samples, 1, 1], self.signal_type, self.band, self.range,
                        self.sinedata, seed=self.seed if seed is None else seed)
 
-    def closed_loop(self, params: ActuatorParams, excitation, cancel=None) -> SimulationResult:
+    def closed_loop(self, params: ActuatorParams, excitation,
+                    cancel: CancelToken | None = None) -> SimulationResult:
         """Run the loop on ``excitation.u`` and record r, u, x at Ts."""
         from .simulate import simulate_closed_loop
 
@@ -318,13 +376,30 @@ class FrequencyExperiment:
                                     label=f"closed loop, seed {excitation.seed}", cancel=cancel)
 
     def cost(self):
-        """Estimated cost of :func:`run_frequency_identification`: two closed-loop
-        runs (estimation and validation) and the estimation."""
+        """Estimated cost of :func:`run_frequency_identification`, without running it.
+
+        Returns
+        -------
+        eha_core.simulate.SimulationCost
+            The steps and samples of both closed-loop runs (estimation and
+            validation); the peak memory, the larger of a simulation's (with
+            the first record held during the second) and the estimation's
+            (``FREQUENCY_BYTES_PER_SAMPLE``), as they run one after the
+            other; tfest's time in ``other_seconds``.
+
+        Examples
+        --------
+        >>> c = FrequencyExperiment(n_samples=20000, ts=0.5).cost()
+        >>> c.steps, c.output_samples
+        (39998000, 40000)
+        """
         from .simulate import SimulationCost, simulation_cost
 
         one = simulation_cost((self.n_samples - 1) * self.ts, self.ts, ts=self.ts)
-        return SimulationCost(steps=2 * one.steps, output_samples=2 * one.output_samples,
-                              peak_bytes=one.peak_bytes + self.n_samples * FREQUENCY_BYTES_PER_SAMPLE, h=one.h)
+        n = self.n_samples
+        peak = max(one.peak_bytes + n * FREQUENCY_RECORD_BYTES_PER_SAMPLE, n * FREQUENCY_BYTES_PER_SAMPLE)
+        return SimulationCost(steps=2 * one.steps, output_samples=2 * one.output_samples, peak_bytes=peak,
+                              h=one.h, other_seconds=TFEST_SECONDS + TFEST_SECONDS_PER_SAMPLE * n)
 
 
 @dataclass(frozen=True, eq=False)
@@ -379,7 +454,7 @@ class FrequencyIdentification:
 
 def run_frequency_identification(params: ActuatorParams | None = None,
                                  config: FrequencyExperiment | None = None, *,
-                                 cancel=None) -> FrequencyIdentification:
+                                 cancel: CancelToken | None = None) -> FrequencyIdentification:
     """Run the paper's closed-loop experiment and everything that follows from it.
 
     1. excitation (Fig. 8) and closed-loop data (Fig. 9);
@@ -392,6 +467,12 @@ def run_frequency_identification(params: ActuatorParams | None = None,
     Why H_hat's s^2 coefficient lies far below the linearised 430.1: see
     :mod:`eha_core.identify.backout` (the friction saturates at the
     experiment's velocities; l1 holds its slope at v = 0).
+
+    ``cancel`` (a :class:`~eha_core.cancel.CancelToken`) reaches both
+    simulations (checked between integration chunks) and tfest (between SRIVC
+    iterations and residual evaluations), and is checked between the stages;
+    a set token raises :class:`~eha_core.cancel.Cancelled`.
+    :meth:`FrequencyExperiment.cost` estimates the cost beforehand.
     """
     from .identify.backout import backout, open_loop_from_closed
     from .identify.tfest import tfest
@@ -418,18 +499,24 @@ def run_frequency_identification(params: ActuatorParams | None = None,
                 cancel=cancel)
     timings["tfest"] = time.perf_counter() - t0
 
+    check(cancel)
     freqs = excitation.freqs if excitation.freqs.size else None
     etfe = etfe_periodic(data.r, data.x, config.n_samples, config.ts, freqs=freqs)
 
+    check(cancel)
     validation_excitation = config.excitation(config.validation_seed if config.validation_seed is not None
                                               else excitation.seed + 1)
     validation_data = config.closed_loop(params, validation_excitation, cancel)
-    check(cancel)
     open_loop = back = validation = residuals = None
     if est.success and np.all(np.isfinite(est.den)):
+        # compare and the residuals simulate the estimate once each (as one
+        # tfest residual): checks between them are enough
+        check(cancel)
         validation = compare(est.num, est.den, validation_data.r, validation_data.x, config.ts,
                              initial_condition=config.initial_condition, input_offset=config.input_offset)
+        check(cancel)
         residuals = residual_analysis(data.x - est.simulate(data.r, x0=est.x0, input_offset=est.input_offset), data.r)
+        check(cancel)
         if (config.n_poles, config.n_zeros) == (3, 0):
             open_loop = open_loop_from_closed(est.num, est.den, config.kp)
             back = backout(*open_loop, params, lin.op, std_h=est.param_std, kp=config.kp)

@@ -206,6 +206,10 @@ class Chirp(Signal):
         return f"{_g(self.amplitude)} chirp {_g(self.f0_hz)}-{_g(self.f1_hz)} Hz"
 
 
+#: Normal draws between the generator states a :class:`WhiteNoise` keeps.
+_NOISE_BLOCK = 1 << 16
+
+
 @dataclass(frozen=True)
 class WhiteNoise(Signal):
     """Zero-mean white Gaussian noise, standard deviation ``sigma``, held over
@@ -226,8 +230,39 @@ class WhiteNoise(Signal):
         # the small offset keeps t = k hold_s on sample k despite rounding
         k = np.floor(t / self.hold_s + 1e-9).astype(np.int64)
         k = np.maximum(k, 0)
-        draws = np.random.default_rng(self.seed).standard_normal(int(k.max()) + 1)
-        return self.sigma * draws[k]
+        first, draws = self._draws(int(k.min()), int(k.max()))
+        return self.sigma * draws[k - first]
+
+    def _draws(self, k_lo: int, k_hi: int) -> tuple[int, np.ndarray]:
+        """``(first, draws)``: draws ``first .. k_hi`` of the stream, ``first <= k_lo``.
+
+        The simulator asks for the noise one integration chunk at a time; drawing
+        the stream from its start at every call would make a long run quadratic
+        in its length and allocate the whole stream each time. The generator's
+        state is kept every :data:`_NOISE_BLOCK` draws, so a call starts from
+        the block holding ``k_lo``; the draws are those of one call from the
+        start, bit for bit (numpy's normal draws of one generator concatenate).
+        The saved states are a few hundred bytes per block, kept on the signal;
+        concurrent calls at worst both save the same state.
+        """
+        states = self.__dict__.setdefault("_states", {})
+        target = k_lo // _NOISE_BLOCK
+        block = max((b for b in states if b <= target), default=0)
+        rng = np.random.default_rng(self.seed)
+        if block:
+            rng.bit_generator.state = states[block]
+        while block < target:  # skip to k_lo's block, saving the states on the way
+            rng.standard_normal(_NOISE_BLOCK)
+            block += 1
+            states.setdefault(block, rng.bit_generator.state)
+        first = block * _NOISE_BLOCK
+        draws = np.empty(k_hi + 1 - first)
+        for start in range(0, draws.size, _NOISE_BLOCK):
+            piece = draws[start:start + _NOISE_BLOCK]
+            rng.standard_normal(out=piece)
+            if piece.size == _NOISE_BLOCK:
+                states.setdefault((first + start) // _NOISE_BLOCK + 1, rng.bit_generator.state)
+        return first, draws
 
     @property
     def spec(self):

@@ -8,6 +8,13 @@ point is added back (eq. 14), as the paper plots them. The nonlinear model
 enforces its physical bounds (pressures in [pr, ps], end stops); the linearised
 model has none, by construction.
 
+For a server shared by many users: runs are integrated in chunks of
+``CHUNK_STEPS`` steps, the inputs sampled one chunk at a time, so memory
+follows the output and not the step count; every function takes ``cancel``
+(a :class:`~eha_core.cancel.CancelToken`, checked between chunks); and
+:func:`simulation_cost` tells the steps, samples and peak memory of a run
+before it is started.
+
 Examples
 --------
 >>> from eha_core.simulate import simulate
@@ -28,6 +35,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ._checks import positive_number
+from .cancel import CancelToken
 from .linear import OperatingPoint, linearize
 from .model import pack_params
 from .params import ActuatorParams
@@ -51,10 +59,12 @@ MAX_STEPS = 20_000_000
 MAX_OUTPUT_SAMPLES = 2_000_000
 
 _STATE_NAMES = ("x", "v", "p1", "p2")
-#: Integration steps per chunk. Inputs are sampled at the RK4 stage times one
-#: chunk at a time, so memory follows the output, not the step count (a
-#: 20 M-step closed loop needed 1.3 GB of stage samples at once), and a
-#: computation can be cancelled between chunks (about 5 ms of work each).
+#: Integration steps per chunk (rounded to a multiple of the output and
+#: controller periods). Inputs are sampled at the RK4 stage times one chunk at
+#: a time, so memory follows the output, not the step count (a 20 M-step closed
+#: loop needed 1.3 GB of stage samples at once), and a computation can be
+#: cancelled between chunks: 50 000 steps are about 10 ms of work, and the
+#: per-chunk overhead (a kernel call, a few numpy calls) is below 1 %.
 CHUNK_STEPS = 50_000
 
 
@@ -280,8 +290,13 @@ def _integrate_chunked(n_runs, y0s, h, n_steps, sub, prms, mode, lins, stage_sou
     """Integrate ``n_runs`` runs chunk by chunk; returns (outs, status).
 
     ``stage_sources(j, start, count)`` gives run j's (u, d, r) stage samples
-    for steps ``start .. start + count``. The result is bitwise the same as one
-    kernel call over all steps (tests/core/test_simulate.py checks it).
+    for steps ``start .. start + count``. Each chunk starts at an output sample
+    and a controller instant (:func:`_chunk_length`), where the kernel starts
+    afresh: it writes the chunk's output rows, samples the controller at its
+    first step, and leaves the state for the next chunk in ``y_end``. The
+    result is bitwise that of one kernel call over all steps
+    (tests/core/test_chunks_and_cancel.py checks it); a failure is reported at
+    its global step.
     """
     from . import _kernels as K
 
@@ -297,29 +312,31 @@ def _integrate_chunked(n_runs, y0s, h, n_steps, sub, prms, mode, lins, stage_sou
         last = start + count == n_steps
         k0 = start // sub
         rows = count // sub + (1 if last else 0)
-        stages = [stage_sources(j, start, count) for j in range(n_runs)]
+        # runs that failed are left alone: their state is not finite any more
+        alive = np.flatnonzero(status < 0)
         y_end = np.empty((n_runs, 4))
-        if n_runs == 1 or not parallel:
-            for j in range(n_runs):
-                if status[j] >= 0:
-                    continue
-                u_st, d_st, r_st = stages[j]
+        if alive.size == 1 or not parallel:
+            for j in alive:
+                u_st, d_st, r_st = stage_sources(j, start, count)
                 st = K.integrate(y[j], h, count, sub, prms[j], mode, lins[j], u_st, d_st, ctrl, kp, r_st,
                                  ctrl_every, u_limit, outs[j, k0:k0 + rows], y_end[j])
                 if st >= 0:
                     status[j] = start + st
         else:
-            buf = np.zeros((n_runs, rows, 5))
-            st = np.full(n_runs, -1, dtype=np.int64)
-            K.integrate_batch(y, h, count, sub, prms, mode, lins, np.stack([g[0] for g in stages]),
-                              np.stack([g[1] for g in stages]), ctrl, kp, np.stack([g[2] for g in stages]),
-                              ctrl_every, u_limit, buf, st, y_end)
-            for j in range(n_runs):
-                if status[j] >= 0:
-                    continue
-                outs[j, k0:k0 + rows] = buf[j]
-                if st[j] >= 0:
-                    status[j] = start + st[j]
+            # views, not copies, while every run is alive (the usual case)
+            sel = slice(None) if alive.size == n_runs else alive
+            stages = [stage_sources(j, start, count) for j in alive]
+            buf = np.zeros((alive.size, rows, 5))
+            st = np.full(alive.size, -1, dtype=np.int64)
+            ends = np.empty((alive.size, 4))
+            K.integrate_batch(y[sel], h, count, sub, prms[sel], mode, lins[sel],
+                              np.stack([g[0] for g in stages]), np.stack([g[1] for g in stages]), ctrl, kp,
+                              np.stack([g[2] for g in stages]), ctrl_every, u_limit, buf, st, ends)
+            del stages
+            outs[sel, k0:k0 + rows] = buf
+            y_end[sel] = ends
+            failed = st >= 0
+            status[alive[failed]] = start + st[failed]
         y = y_end
         start += count
         if np.all(status >= 0):
@@ -327,45 +344,110 @@ def _integrate_chunked(n_runs, y0s, h, n_steps, sub, prms, mode, lins, stage_sou
     return outs, status
 
 
-def simulation_cost(t_end: float, dt: float, *, ts: float | None = None, h_max: float = DEFAULT_H_MAX,
-                    n_runs: int = 1) -> "SimulationCost":
-    """What a simulation will cost, without running it: steps, samples, peak memory, seconds.
-
-    >>> c = simulation_cost(5.0, 1e-3, n_runs=4)
-    >>> c.steps, c.output_samples
-    (40000, 20004)
-    """
-    h, sub, ctrl_every, n_steps, n_out = _grid(t_end, dt, h_max, ts)
-    chunk = min(n_steps, _chunk_length(n_steps, sub, ctrl_every))
-    # outputs (n_out x 5), the result's copies of them, d, t and r; per chunk the
-    # stage samples of two signals (u and d, or d and r: chunk x 3 each) and,
-    # while one is sampled, its half-step times and values
-    per_run_out = n_out * (5 + 5 + 3) * 8
-    per_run_chunk = (chunk + 1) * 3 * 8 * 2 + (2 * chunk + 3) * 8 * 2
-    return SimulationCost(steps=n_runs * n_steps, output_samples=n_runs * n_out,
-                          peak_bytes=n_runs * (per_run_out + per_run_chunk), h=h)
-
-
 @dataclass(frozen=True)
 class SimulationCost:
-    """Estimated cost of a computation: integration steps, samples, peak memory [bytes]."""
+    """Estimated cost of a computation, known before running it.
+
+    Attributes
+    ----------
+    steps : int
+        RK4 steps over all runs.
+    output_samples : int
+        Output samples over all runs.
+    peak_bytes : int
+        Estimated peak of the memory the computation allocates [bytes]
+        (within a factor of 2 of tracemalloc's peak; tested).
+    h : float
+        Integration step [s].
+    other_seconds : float
+        Estimated time of the work that is not integration (estimators) [s].
+    """
 
     steps: int
     output_samples: int
     peak_bytes: int
     h: float = float("nan")
+    other_seconds: float = 0.0
 
-    #: RK4 steps per second of one core with the compiled kernel (measured with
-    #: benchmarks/bench_simulate.py on a 2-core machine; a rough guide).
-    STEPS_PER_SECOND = 1.0e7
+    #: RK4 steps per second on one core, the sampling of the inputs included:
+    #: 5-6 M/s for the nonlinear model in open and closed loop on the 2-core
+    #: machine this was written on (a 4 M-step closed loop in 0.65 s, a 2 M-step
+    #: open loop in 0.39 s; 10 M/s for the linearised model). A rough guide:
+    #: another machine, or a loaded one, differs.
+    STEPS_PER_SECOND = 5.0e6
 
     @property
     def seconds_estimate(self) -> float:
-        return self.steps / self.STEPS_PER_SECOND
+        """Rough wall time on one core [s]: ``steps / STEPS_PER_SECOND + other_seconds``."""
+        return self.steps / self.STEPS_PER_SECOND + self.other_seconds
 
-    def __add__(self, other: "SimulationCost") -> "SimulationCost":
+    def __add__(self, other: SimulationCost) -> SimulationCost:
+        """Two computations one after the other: counts and times add, the peak is the larger."""
         return SimulationCost(self.steps + other.steps, self.output_samples + other.output_samples,
-                              max(self.peak_bytes, other.peak_bytes), self.h)
+                              max(self.peak_bytes, other.peak_bytes), self.h,
+                              self.other_seconds + other.other_seconds)
+
+
+def simulation_cost(t_end: float, dt: float, *, ts: float | None = None, h_max: float = DEFAULT_H_MAX,
+                    n_runs: int = 1, parallel: bool = True) -> SimulationCost:
+    """What a simulation will cost, without running it: steps, samples, peak memory, seconds.
+
+    Parameters
+    ----------
+    t_end, dt : float
+        Horizon and output interval [s], as given to :func:`simulate`.
+    ts : float, optional
+        Controller sample time [s] of a closed-loop run
+        (:func:`simulate_closed_loop`); the step grid is aligned with it.
+    h_max : float
+        Largest integration step [s].
+    n_runs : int
+        Runs simulated together (:func:`simulate_many`).
+    parallel : bool
+        As given to :func:`simulate_many`: a parallel batch holds every run's
+        stage samples of a chunk at once.
+
+    Returns
+    -------
+    SimulationCost
+        ``peak_bytes`` is the larger of the memory while integrating (outputs,
+        one chunk's stage samples, the temporaries of sampling a signal) and
+        at the end (outputs, the result's copies of them, t, d and r). The
+        chunked integration never holds the inputs of more than one chunk, so
+        it does not grow with the step count. Within a factor of 2 of
+        tracemalloc's peak (tests/core/test_chunks_and_cancel.py).
+
+    Raises
+    ------
+    ValueError
+        As the simulation would: a grid that does not fit, or beyond the
+        guards ``MAX_STEPS`` and ``MAX_OUTPUT_SAMPLES``.
+
+    Examples
+    --------
+    >>> c = simulation_cost(5.0, 1e-3, n_runs=4)
+    >>> c.steps, c.output_samples
+    (40000, 20004)
+    """
+    if isinstance(n_runs, bool) or not isinstance(n_runs, (int, np.integer)) or n_runs < 1:
+        raise ValueError(f"n_runs = {n_runs!r} is not allowed: must be a whole number of runs >= 1")
+    h, sub, ctrl_every, n_steps, n_out = _grid(t_end, dt, h_max, ts)
+    chunk = min(n_steps, _chunk_length(n_steps, sub, ctrl_every))
+    # one run's stage samples of two signals in a chunk (u and d, or d and r)
+    stages = 2 * (chunk + 1) * 3 * 8
+    if n_runs > 1 and parallel:
+        # every run's at once, and their stacked copies for the batch kernel
+        stages *= 2 * n_runs
+    # while a signal is sampled: its half-step times and about four temporaries
+    # of the same size (tracemalloc: a held signal, Sampled or WhiteNoise, takes
+    # five or six; a sine three)
+    sampling = 5 * (2 * chunk + 3) * 8
+    integrating = n_runs * n_out * (5 + 1) * 8 + stages + sampling
+    # at the end: the outputs (x, v, p1, p2, u), the results' copies of them,
+    # and t, d and r
+    finishing = n_runs * n_out * (5 + 5 + 3) * 8
+    return SimulationCost(steps=n_runs * n_steps, output_samples=n_runs * n_out,
+                          peak_bytes=max(integrating, finishing), h=h)
 
 
 # -- public API --------------------------------------------------------------------
@@ -373,7 +455,7 @@ class SimulationCost:
 def simulate(params: ActuatorParams | None = None, u=None, d=None, *, t_end: float = 5.0,
              dt: float = 1e-3, model: str = "nonlinear", branch: str = "switching",
              x0=None, op: OperatingPoint | None = None, h_max: float = DEFAULT_H_MAX,
-             label: str = "", cancel=None) -> SimulationResult:
+             label: str = "", cancel: CancelToken | None = None) -> SimulationResult:
     """Open-loop run: valve command ``u(t)`` [V] and load disturbance ``d(t)`` [N].
 
     Parameters
@@ -408,14 +490,39 @@ def simulate_many(params: ActuatorParams | Sequence[ActuatorParams] | None, us: 
                   *, t_end: float = 5.0, dt: float = 1e-3, model: str = "nonlinear",
                   branch: str = "switching", x0s: Sequence | None = None,
                   op: OperatingPoint | None = None, h_max: float = DEFAULT_H_MAX,
-                  labels: Sequence[str] | None = None, cancel=None, parallel: bool = True) -> list[SimulationResult]:
+                  labels: Sequence[str] | None = None, cancel: CancelToken | None = None,
+                  parallel: bool = True) -> list[SimulationResult]:
     """Several open-loop runs on one time grid, integrated in parallel.
 
-    ``params`` is one parameter set for all runs or one per run; ``us``/``ds``
-    give each run's input and disturbance (see :func:`simulate`). ``cancel``
-    (a :class:`~eha_core.cancel.CancelToken`) is checked between chunks;
-    ``parallel=False`` integrates the runs one after another on the calling
-    thread's core (a server that runs several users' jobs at once wants that).
+    Parameters
+    ----------
+    params : ActuatorParams or sequence of ActuatorParams, optional
+        One parameter set for all runs, or one per run.
+    us, ds : sequence
+        Each run's input and disturbance (see :func:`simulate`).
+    t_end, dt, model, branch, op, h_max
+        As for :func:`simulate`.
+    x0s : sequence of arrays of 4, optional
+        Each run's initial state.
+    labels : sequence of str, optional
+    cancel : eha_core.cancel.CancelToken, optional
+        Checked between integration chunks; raises
+        :class:`~eha_core.cancel.Cancelled` when set.
+    parallel : bool
+        True: the runs are integrated at once by numba's parallel kernel, over
+        as many threads as ``numba.get_num_threads()`` in the calling thread
+        (all cores by default). False: one after another on the calling
+        thread's core, bitwise the same results. A server running several
+        users' jobs in worker threads wants one core per job: ``parallel=False``
+        gives that with any numba threading layer, and never launches a
+        parallel region from several threads at once (which aborts the process
+        under the 'workqueue' layer). ``numba.set_num_threads(1)`` in the
+        worker thread also confines this call to one thread: numba keeps that
+        setting per thread, as checked with the 'omp' layer (numba 0.68).
+
+    Returns
+    -------
+    list of SimulationResult
     """
     n = len(us)
     if n == 0:
@@ -466,7 +573,8 @@ def simulate_closed_loop(params: ActuatorParams | None = None, r=None, *, kp: fl
                          t_end: float | None = None, dt: float | None = None,
                          model: str = "nonlinear", branch: str = "switching", x0=None,
                          op: OperatingPoint | None = None, u_limit: float | None = None,
-                         h_max: float = DEFAULT_H_MAX, label: str = "", cancel=None) -> SimulationResult:
+                         h_max: float = DEFAULT_H_MAX, label: str = "",
+                         cancel: CancelToken | None = None) -> SimulationResult:
     """Closed loop with the proportional controller u = Kp (r - x) (eq. 22).
 
     Parameters

@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize, signal
 
+from ..cancel import CancelToken, check
 from ..params import ActuatorParams
 
 __all__ = ["MeasuredData", "LSEResult", "identify_lse", "prefilter", "DISTURBANCE_MODELS"]
@@ -210,8 +211,11 @@ class LSEResult:
         }
 
 
-def _solve(Phi: np.ndarray, y: np.ndarray, lags: int):
-    """Column-scaled SVD least squares with textbook and HAC covariances."""
+def _solve(Phi: np.ndarray, y: np.ndarray, lags: int, cancel: CancelToken | None = None):
+    """Column-scaled SVD least squares with textbook and HAC covariances.
+
+    ``cancel`` is checked at every Newey-West lag (each a pass over the data).
+    """
     scale = np.sqrt(np.sum(Phi * Phi, axis=0))
     scale[scale == 0] = 1.0
     Z = Phi / scale
@@ -227,12 +231,19 @@ def _solve(Phi: np.ndarray, y: np.ndarray, lags: int):
     g = Z * e[:, None]
     S = g.T @ g
     for lag in range(1, min(lags, n - 1) + 1):
+        check(cancel)
         w = 1.0 - lag / (lags + 1.0)
         G = g[lag:].T @ g[:-lag]
         S += w * (G + G.T)
     S *= n / max(n - p, 1)
     cov_hac = ZtZ_inv @ S @ ZtZ_inv / np.outer(scale, scale)
     return theta, e, cov_text, cov_hac, rank, cond
+
+
+def fine_grid_factor(n_samples: int) -> int:
+    """How many times finer than the data the cubic interpolation's grid is:
+    16, less for records so long that the grid would exceed ``_MAX_FINE_SAMPLES``."""
+    return max(1, min(16, _MAX_FINE_SAMPLES // max(int(n_samples), 1)))
 
 
 def _fine_grid(data: "MeasuredData", upsample: int):
@@ -261,8 +272,11 @@ def _harmonic_regressors(t, f_hz, ts, tau_f):
     return s_f, c_f
 
 
-def _estimate_frequency(t, e, Phi, y, ts, tau_f, keep):
-    """Frequency [Hz] of a sinusoidal disturbance hidden in the residual ``e``."""
+def _estimate_frequency(t, e, Phi, y, ts, tau_f, keep, cancel: CancelToken | None = None):
+    """Frequency [Hz] of a sinusoidal disturbance hidden in the residual ``e``.
+
+    ``cancel`` is checked at every trial frequency (each a least-squares fit).
+    """
     n = e.size
     nfft = 1 << int(math.ceil(math.log2(8 * n)))
     spec = np.abs(np.fft.rfft((e - e.mean()) * np.hanning(n), nfft))
@@ -273,6 +287,7 @@ def _estimate_frequency(t, e, Phi, y, ts, tau_f, keep):
     df = 1.0 / (n * ts)
 
     def rss(f):
+        check(cancel)
         s_f, c_f = _harmonic_regressors(t, f, ts, tau_f)
         P = np.column_stack([Phi, s_f[keep], c_f[keep]])
         th, *_ = np.linalg.lstsq(P / np.linalg.norm(P, axis=0), y, rcond=None)
@@ -287,7 +302,8 @@ def _estimate_frequency(t, e, Phi, y, ts, tau_f, keep):
 def identify_lse(data: MeasuredData, params: ActuatorParams | None = None, *, tau_f: float = 0.01,
                  disturbance_model: str = "constant", disturbance_freq_hz: float | None = None,
                  skip_s: float | None = None, hac_lags: int | None = None,
-                 interpolation: str = "cubic", nominal: ActuatorParams | None = None) -> LSEResult:
+                 interpolation: str = "cubic", nominal: ActuatorParams | None = None,
+                 cancel: CancelToken | None = None) -> LSEResult:
     """Estimate M, B, Af, d0 (eq. 15a) and beta_e (eq. 15b) by filtered least squares (eq. 18).
 
     Parameters
@@ -313,7 +329,12 @@ def identify_lse(data: MeasuredData, params: ActuatorParams | None = None, *, ta
     nominal : ActuatorParams, optional
         True parameters, when known (simulated data), for relative errors;
         defaults to ``params``.
+    cancel : eha_core.cancel.CancelToken, optional
+        Checked on entry and between the stages (interpolation, each filter,
+        each Newey-West lag, each trial frequency); raises
+        :class:`~eha_core.cancel.Cancelled` when set.
     """
+    check(cancel)
     params = params if params is not None else ActuatorParams()
     nominal = nominal if nominal is not None else params
     if not (isinstance(tau_f, (int, float)) and math.isfinite(tau_f) and tau_f > 0):
@@ -335,11 +356,12 @@ def identify_lse(data: MeasuredData, params: ActuatorParams | None = None, *, ta
 
     p = params
     t = data.t
-    upsample = 1 if interpolation == "linear" else max(1, min(16, _MAX_FINE_SAMPLES // t.size))
+    upsample = 1 if interpolation == "linear" else fine_grid_factor(t.size)
     tf_, hf, x, v, p1, p2, u = _fine_grid(data, upsample)
 
     def f(sig):
         """H[sig] and (s H)[sig] at the samples."""
+        check(cancel)
         hy, dhy = prefilter(sig, hf, tau_f)
         return hy[::upsample], dhy[::upsample]
 
@@ -358,16 +380,17 @@ def identify_lse(data: MeasuredData, params: ActuatorParams | None = None, *, ta
     if disturbance_model == "harmonic":
         if disturbance_freq_hz is None:
             theta0, e0, *_ = _solve(base, y1f[keep], 0)
-            freq, freq_estimated = _estimate_frequency(t, e0, base, y1f[keep], ts, tau_f, keep), True
+            freq = _estimate_frequency(t, e0, base, y1f[keep], ts, tau_f, keep, cancel)
+            freq_estimated = True
         else:
             freq = float(disturbance_freq_hz)
         s_f, c_f = _harmonic_regressors(t, freq, ts, tau_f)
         cols += [s_f, c_f]
         names += ["d_sin", "d_cos"]
     Phi1 = np.column_stack(cols)[keep]
-    theta1, e1, cov1_t, cov1_h, rank, cond = _solve(Phi1, y1f[keep], lags)
+    theta1, e1, cov1_t, cov1_h, rank, cond = _solve(Phi1, y1f[keep], lags, cancel)
     Phi2 = phi2f[keep, None]
-    theta2, e2, cov2_t, cov2_h, _, _ = _solve(Phi2, dp1f[keep], lags)
+    theta2, e2, cov2_t, cov2_h, _, _ = _solve(Phi2, dp1f[keep], lags, cancel)
 
     estimates = {n: float(th) for n, th in zip(names, theta1)}
     estimates["beta_e"] = float(theta2[0])

@@ -77,6 +77,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._checks import positive_integer, positive_number
+from ..cancel import CancelToken, check
 import scipy.optimize
 import scipy.signal
 
@@ -317,13 +318,14 @@ class _OutputError:
     """
 
     def __init__(self, u: np.ndarray, y: np.ndarray, ts: float, n: int, estimate_x0: bool,
-                 estimate_offset: bool = False, cancel=None):
+                 estimate_offset: bool = False, cancel: CancelToken | None = None):
         self.u, self.y, self.ts, self.n = u, y, ts, n
         self.estimate_x0 = estimate_x0
         self.estimate_offset = estimate_offset
         self.nfev = 0
-        # every SRIVC iteration and output-error evaluation passes here: a
-        # cancelled computation stops within one simulation of the model
+        # checked at every evaluation (each residual of the output-error stage,
+        # each Jacobian column of the covariance) and by every SRIVC iteration:
+        # a cancelled computation stops within one simulation of the model
         self.cancel = cancel
 
     @property
@@ -350,8 +352,7 @@ class _OutputError:
         With ``linear`` given, those coefficients are used instead of the
         least-squares ones (for the Jacobian at fixed linear terms).
         """
-        if self.cancel is not None:
-            self.cancel.check()
+        check(self.cancel)
         self.nfev += 1
         num, den = _split(theta, self.n)
         if not np.all(np.isfinite(theta)):
@@ -507,6 +508,7 @@ def _srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
     Returns ``(best_theta, best_cost, iterations, converged)``; the best
     iterate by output-error cost is kept (SRIVC may oscillate on poor data).
     """
+    check(criterion.cancel)
     kind, value = start
     n_theta = n + m + 1
     ic = criterion.estimate_x0
@@ -541,6 +543,9 @@ def _srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
     converged = False
     iterations = 0
     for iterations in range(1, max_iter + 1):
+        # an iteration filters the data several times: as costly as a few
+        # simulations of the model, so a cancel is looked at before each
+        check(criterion.cancel)
         num, den = _split(theta, n)
         den_f = _stabilise(den)
         svf = _StateVariableFilter(den_f, ts)
@@ -738,7 +743,7 @@ def _finish(criterion, theta, n, m, ts, success, message, method, nit, srivc_the
 # ---------------------------------------------------------------------------
 def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_offset="zero",
           init=None, lambda_svf=None, refine=True, n_refine=2, max_iter=50, max_nfev=None,
-          tol=1e-10, cancel=None) -> TFEstimate:
+          tol=1e-10, cancel: CancelToken | None = None) -> TFEstimate:
     """Estimate a continuous-time transfer function from sampled data (MATLAB ``tfest``).
 
     SRIVC (refined instrumental variables with state-variable filters) gives
@@ -786,8 +791,9 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
         Relative tolerance: SRIVC stops when the coefficients change by less;
         ``xtol``, ``ftol`` and ``gtol`` of ``least_squares``.
     cancel : eha_core.cancel.CancelToken, optional
-        Checked at every simulation of a candidate model; raises
-        :class:`~eha_core.cancel.Cancelled` when set.
+        Checked before every SRIVC iteration and every simulation of a
+        candidate model (each output-error residual), so a cancel lands within
+        one of them; raises :class:`~eha_core.cancel.Cancelled` when set.
 
     Returns
     -------
@@ -799,6 +805,8 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
     ------
     ValueError
         For invalid arguments (the message names the argument).
+    eha_core.cancel.Cancelled
+        When ``cancel`` was set.
 
     Examples
     --------
@@ -908,7 +916,7 @@ def _distinct(candidates, k: int, n: int, m: int):
 
 
 def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", input_offset="zero",
-           max_nfev=None, tol=1e-10, cancel=None) -> TFEstimate:
+           max_nfev=None, tol=1e-10, cancel: CancelToken | None = None) -> TFEstimate:
     """Plain output-error fit of a continuous-time transfer function from a start model.
 
     The same criterion, parameterisation and optimiser as the second stage of
@@ -932,7 +940,8 @@ def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", input_offset="zero
     tol : float
         ``xtol``, ``ftol`` and ``gtol`` of ``least_squares``.
     cancel : eha_core.cancel.CancelToken, optional
-        Checked at every simulation of the model.
+        Checked at every simulation of the model (each output-error
+        residual); raises :class:`~eha_core.cancel.Cancelled` when set.
 
     Returns
     -------
