@@ -515,6 +515,13 @@ class Student(StudentSession):
     def pane(self, css: str) -> Model:
         return self._one(f"pane .{css}", self.find(css=css))
 
+    def form(self, css: str) -> Model:
+        """The model holding the ``values`` of the form with css class ``css`` (its data model)."""
+        form = self._one(f"form .{css}", self.find(css=css))
+        ref = form.attributes.get("data")
+        data = self.models.get(ref["id"]) if isinstance(ref, dict) and "id" in ref else None
+        return data if data is not None and "values" in data.attributes else form
+
     def button(self, label: str) -> Model:
         return self._one(f"button {label!r}", self.find("Button", label=label))
 
@@ -555,10 +562,7 @@ class Student(StudentSession):
             await self.set_property(box[0], "value_input", text)
             await self.set_property(box[0], "value", text)
         else:
-            form = self._one(f"form .{self.FORM}", self.find(css=self.FORM))
-            ref = form.attributes.get("data")
-            data = self.models.get(ref["id"]) if isinstance(ref, dict) and "id" in ref else None
-            target = data if data is not None and "values" in data.attributes else form
+            target = self.form(self.FORM)
             values = dict(target.attributes.get("values") or {})
             if name not in values:
                 raise LookupError(f"{self.name}: no field {name!r} in the form")

@@ -55,7 +55,8 @@ export function render({ view, model, el }) {
     if (document.activeElement && document.activeElement.blur) { document.activeElement.blur() }
   }
   function poll() {
-    fetch(window.location.href, { method: 'HEAD', cache: 'no-store' })
+    // a GET: the page handler answers nothing else (HEAD is 405)
+    fetch(window.location.href, { cache: 'no-store' })
       .then((response) => {
         if (response.ok) {
           show('The server is back: reloading the page with your values…')

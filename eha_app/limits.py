@@ -86,6 +86,6 @@ def check_lse(t_end: float) -> None:
     """The least-squares experiment (simulation and estimation)."""
     from eha_core.experiments import lse_cost
 
-    cost = lse_cost(t_end)
+    cost = lse_cost(t_end, resimulation=True)
     check_cost(f"the least-squares experiment over {t_end:g} s", cost.steps, cost.peak_bytes, t_end,
                "use a shorter excitation")

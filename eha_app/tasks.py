@@ -76,15 +76,17 @@ class PageUpdates:
     merely taking turns is not enough, because one small interaction (a
     keystroke: read the message, take the session's lock, update, write the
     answer) spans several turns of the loop, and a big change could slip into
-    each of them. So the changes wait in a line, and the next one starts only
-    when nothing else is ready to run (or after ``MAX_DEFER_S``, so that a
-    busy server still makes progress): small interactions always go first,
-    and wait for at most the one big change already running.
+    each of them. So the changes wait in a line, worked off by one task of the
+    event loop, and the next one starts only when nothing else is ready to run
+    (or after ``MAX_DEFER_S``, so that a busy server still makes progress):
+    small interactions always go first, and wait for at most the one big
+    change already running.
 
-    Each change runs under its session document's lock (a Bokeh next-tick
-    callback), as Panel's current document, with the document's events held
-    and combined (one message to the browser) and its model graph recomputed
-    once at the end (``models.freeze``).
+    Each change runs under its session document's lock (Bokeh's
+    ``with_locked_document``; a closed session's changes are dropped), as
+    Panel's current document, with the document's events held and combined
+    (one message to the browser) and its model graph recomputed once at the
+    end (``models.freeze``).
     """
 
     #: Look for an idle loop this often [s] ...
@@ -95,75 +97,66 @@ class PageUpdates:
     def __init__(self):
         self._pending: collections.deque = collections.deque()
         self._lock = threading.Lock()
-        self._pumping = False
         self._loop = None
-        self._waiting_since = None
+        self._task = None
         self.done = 0
 
     def submit(self, doc, fn: Callable[[], None]) -> None:
         """Run ``fn`` on ``doc`` in turn (callable from any thread)."""
+        import asyncio
+
         with self._lock:
             self._pending.append((doc, fn))
-            if self._pumping:
-                return
-            self._pumping = True
-        self._schedule()
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:
+            loop = None
+        if loop is not None:
+            self._loop = loop
+            self._start()
+        elif self._loop is not None:
+            self._loop.call_soon_threadsafe(self._start)
+        else:       # a worker thread before any page event reached this process: ask the document
+            doc.add_next_tick_callback(self._start)
 
-    def _schedule(self) -> None:
-        """Schedule the first pending change on its document, dropping those of closed sessions."""
-        while True:
-            with self._lock:
-                if not self._pending:
-                    self._pumping = False
-                    return
-                doc, _ = self._pending[0]
-            try:
-                doc.add_next_tick_callback(partial(self._when_idle, doc))
-                return
-            except Exception:  # noqa: BLE001 - the session was closed meanwhile: nobody to show it to
-                with self._lock:
-                    self._pending.popleft()
-
-    def _loop_busy(self) -> bool:
-        # asyncio keeps the callbacks ready to run in ``_ready`` (CPython's
-        # base event loop); if a loop does not, every change counts as idle
-        loop = self._loop
-        ready = getattr(loop, "_ready", None)
-        return bool(ready)
-
-    def _when_idle(self, doc) -> None:
-        # runs on the event loop under ``doc``'s lock; ``doc`` is the first pending
+    def _start(self) -> None:
         import asyncio
 
         self._loop = asyncio.get_running_loop()
-        now = time.perf_counter()
-        if self._waiting_since is None:
-            self._waiting_since = now
-        if self._loop_busy() and now - self._waiting_since < self.MAX_DEFER_S:
-            # let the others' messages through first; look again shortly (outside the lock)
-            self._loop.call_later(self.POLL_S, self._retry, doc)
-            return
-        self._waiting_since = None
-        with self._lock:
-            first_doc, fn = self._pending.popleft()
-        assert first_doc is doc
-        try:
-            with set_curdoc(doc), hold(doc), doc.models.freeze():
-                fn()
-        except Exception:  # noqa: BLE001 - one page's failure must not stop the others'
-            log.exception("a page update failed")
-        self.done += 1
-        self._schedule()
+        if self._task is None or self._task.done():
+            self._task = self._loop.create_task(self._work())
 
-    def _retry(self, doc) -> None:
-        try:
-            doc.add_next_tick_callback(partial(self._when_idle, doc))
-        except Exception:  # noqa: BLE001 - the session closed while waiting
+    def _loop_busy(self) -> bool:
+        # asyncio keeps the callbacks ready to run in ``_ready`` (CPython's
+        # base event loop); if a loop does not, every moment counts as idle
+        return bool(getattr(self._loop, "_ready", None))
+
+    async def _work(self) -> None:
+        import asyncio
+
+        while True:
             with self._lock:
-                if self._pending and self._pending[0][0] is doc:
-                    self._pending.popleft()
-            self._waiting_since = None
-            self._schedule()
+                if not self._pending:
+                    return
+                doc, fn = self._pending.popleft()
+            waited = 0.0
+            await asyncio.sleep(0)
+            while self._loop_busy() and waited < self.MAX_DEFER_S:
+                await asyncio.sleep(self.POLL_S)
+                waited += self.POLL_S
+            context = getattr(doc, "session_context", None)
+            if context is None or context.destroyed:
+                continue            # the page was closed: nobody to show it to
+
+            async def locked(locked_doc, fn=fn):
+                with set_curdoc(locked_doc), hold(locked_doc), locked_doc.models.freeze():
+                    fn()
+
+            try:
+                await context.with_locked_document(locked)
+            except Exception:  # noqa: BLE001 - one page's failure must not stop the others'
+                log.exception("a page update failed")
+            self.done += 1
 
 
 _updates = PageUpdates()

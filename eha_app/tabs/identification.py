@@ -268,7 +268,8 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         def compute(token):
             d = req.disturbance()
             data = lse_data(params, d, u=u, t_end=t_end, seed=req.seed, cancel=token)
-            res = identify_lse(data, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz)
+            res = identify_lse(data, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
+                               cancel=token)
             try:
                 resim = lse_resimulation(res, params, data, u=u, cancel=token)
                 resim_error = ""

@@ -1,0 +1,86 @@
+"""Served-app tests: real `eha serve` processes (and nginx), driven at the protocol level.
+
+The students are :class:`benchmarks.classroom_client.Student` sessions: the
+page, the Bokeh websocket, widget changes and button events exactly as BokehJS
+sends them, without a browser (tests/ui drives a real one).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+EHA = Path(sys.executable).with_name("eha")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_http(url: str, proc=None, timeout: float = 120.0) -> None:
+    deadline = time.monotonic() + timeout
+    while True:
+        if proc is not None and proc.poll() is not None:
+            pytest.fail(f"the server exited with code {proc.returncode}")
+        try:
+            with urllib.request.urlopen(url, timeout=5) as r:
+                if r.status == 200:
+                    return
+        except OSError:
+            pass
+        if time.monotonic() > deadline:
+            pytest.fail(f"{url} did not answer within {timeout:g} s")
+        time.sleep(0.2)
+
+
+class EhaServer:
+    """``eha serve`` in a subprocess; its log is kept for the assertions."""
+
+    def __init__(self, tmp_path: Path, *args: str, port: int | None = None):
+        self.port = port or free_port()
+        self.log_path = tmp_path / f"eha-serve-{self.port}.log"
+        self.log = open(self.log_path, "w")
+        self.proc = subprocess.Popen([str(EHA), "serve", "--port", str(self.port), "--address", "127.0.0.1", *args],
+                                     cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
+        self.url = f"http://127.0.0.1:{self.port}/eha"
+        wait_http(self.url, self.proc)
+
+    def log_text(self) -> str:
+        self.log.flush()
+        return self.log_path.read_text(errors="replace")
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            os.killpg(self.proc.pid, signal.SIGTERM)
+            try:
+                self.proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+                self.proc.wait()
+        self.log.close()
+
+
+@pytest.fixture
+def serve(tmp_path):
+    """Start ``eha serve`` with the given options; stopped after the test."""
+    started = []
+
+    def start(*args, port=None):
+        s = EhaServer(tmp_path, *args, port=port)
+        started.append(s)
+        return s
+
+    yield start
+    for s in started:
+        s.stop()
