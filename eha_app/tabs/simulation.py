@@ -19,7 +19,7 @@ from ..form import Field, Form, Group, InputError, parse_fields
 from ..limits import check_simulation
 from ..plots import TimeSeriesGrid
 from ..state import AppState
-from ..tasks import SessionRunner
+from ..tasks import SessionRunner, apply_locked
 
 __all__ = ["SimulationTab", "SimulationRequest", "SIMULATION_FORM", "build_inputs", "parse_t_end", "compute_runs"]
 
@@ -165,16 +165,14 @@ class SimulationTab(pn.viewable.Viewer):
         self.last_model = "nonlinear"
         self.last_elapsed_s = float("nan")
         self.run_count = 0
-        self.grid = TimeSeriesGrid()
-        # the status line is a Bokeh Div in the grid's layout, changed after the data
-        # in the same locked callback: the browser never shows a status ahead of its plots
-        self.info = Div(text="Choose a case or an input, then run a model.", sizing_mode="stretch_width",
-                        css_classes=["eha-sim-info"])
-        self.plot_pane = pn.pane.Bokeh(bokeh_column(self.info, self.grid.layout, sizing_mode="stretch_width"),
-                                       sizing_mode="stretch_width", min_height=580)
+        # The plots are built in a second step (their half of the tab's cost), so
+        # that a server building thirty tabs serves other messages in between.
+        self.grid: TimeSeriesGrid | None = None
+        self.info: Div | None = None
         # the loading indicator goes on a Panel layout: setting it on the Bokeh pane
         # would touch the raw Bokeh model outside the document lock
-        self.plot_area = pn.Column(self.plot_pane, sizing_mode="stretch_width", css_classes=["eha-sim-plots"])
+        self.plot_area = pn.Column(pn.pane.HTML("<p class='eha-note'>Drawing the paper's Fig. 2…</p>"),
+                                   sizing_mode="stretch_width", css_classes=["eha-sim-plots"], min_height=580)
         self.notice = pn.pane.HTML("", visible=False, sizing_mode="stretch_width", css_classes=["eha-sim-notice"])
         self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
                                    css_classes=["eha-sim-alert"])
@@ -211,9 +209,20 @@ class SimulationTab(pn.viewable.Viewer):
             self.preset = "custom"       # the student had been editing inputs
         state.param.watch(self._update_enabled, "valid")
         self._update_enabled()
-        # open on the paper's Fig. 2 (four cases, nonlinear) rather than on empty axes
-        first = list(_paper_figure_2(state.params))
-        self._show(first, None)
+        apply_locked(self._build_plots)
+
+    def _build_plots(self) -> None:
+        """The four state plots, opening on the paper's Fig. 2 (four cases, nonlinear)."""
+        if self.grid is not None:
+            return
+        self.grid = TimeSeriesGrid()
+        # the status line is a Bokeh Div in the grid's layout, changed after the data
+        # in the same locked callback: the browser never shows a status ahead of its plots
+        self.info = Div(text="Choose a case or an input, then run a model.", sizing_mode="stretch_width",
+                        css_classes=["eha-sim-info"])
+        self._show(list(_paper_figure_2(self.state.params)), None)
+        self.plot_area.objects = [pn.pane.Bokeh(bokeh_column(self.info, self.grid.layout, sizing_mode="stretch_width"),
+                                                sizing_mode="stretch_width", min_height=580)]
 
     # -- inputs ------------------------------------------------------------------------
     def request(self) -> tuple[SimulationRequest, dict]:
@@ -309,6 +318,8 @@ class SimulationTab(pn.viewable.Viewer):
 
     def _show(self, results, job) -> None:
         """Show a run: the plots' data, then the status line, then the download."""
+        if self.grid is None:
+            self._build_plots()
         elapsed = float("nan") if job is None else job.elapsed_s
         self.run_count += 1
         self.grid.update(results)
