@@ -8,9 +8,10 @@ app and state. The page's address carries what the student typed (see
 import panel as pn
 
 from eha_app.app import create_app, warm_up
-from eha_app.serving import use_local_resources
+from eha_app.serving import quiet_closed_websockets, use_local_resources
 
 warm_up()
+quiet_closed_websockets()
 use_local_resources(pn.state.curdoc)
 # Neither the browser's details (language, time zone, ...) nor Panel's URL
 # model are used: without them a page sends the server 8 fewer messages when

@@ -35,7 +35,7 @@ from __future__ import annotations
 from pathlib import Path
 
 __all__ = ["ENTRY_POINT", "UNUSED_SESSION_MS", "serve_argv", "nginx_config", "nginx_standalone_config",
-           "use_local_resources", "share_port", "supervise"]
+           "use_local_resources", "share_port", "supervise", "quiet_closed_websockets"]
 
 ENTRY_POINT = Path(__file__).resolve().parent / "eha.py"
 #: A closed page's session (and its computations) ends this long after its websocket closed.
@@ -61,6 +61,48 @@ def use_local_resources(doc) -> None:
     if "dist_url" not in doc.template_variables:
         rel = pn.state.rel_path
         doc.template_variables["dist_url"] = f"{rel}/{LOCAL_DIST}" if rel else LOCAL_DIST
+
+
+def quiet_closed_websockets() -> None:
+    """Do not log a traceback when a page closes while the server writes to it.
+
+    Tornado reports each write to a websocket closed meanwhile as "Task
+    exception was never retrieved" with two tracebacks: with a class closing
+    their laptops that fills the log with noise that hides real errors. Only
+    these are silenced; everything else goes to asyncio's default handler.
+    Safe to call more than once (process-wide, on the server's event loop).
+    """
+    import asyncio
+
+    from tornado.iostream import StreamClosedError
+    from tornado.websocket import WebSocketClosedError
+
+    try:
+        loop = asyncio.get_running_loop()
+    except RuntimeError:
+        return
+    if getattr(loop, "_eha_quiet", False):
+        return
+    previous = loop.get_exception_handler()
+
+    def handler(loop, context):
+        if isinstance(context.get("exception"), (WebSocketClosedError, StreamClosedError)):
+            return
+        if previous is not None:
+            previous(loop, context)
+        else:
+            loop.default_exception_handler(context)
+
+    loop.set_exception_handler(handler)
+    loop._eha_quiet = True
+    # BokehJS sends a button's whole definition with its click when the button
+    # arrived in a patch (our tabs are built when first shown); Bokeh then warns
+    # "reference already known" and uses the model it has. Nothing is wrong.
+    import warnings
+
+    from bokeh.util.warnings import BokehUserWarning
+
+    warnings.filterwarnings("ignore", message="reference already known", category=BokehUserWarning)
 
 
 def share_port() -> None:
