@@ -35,8 +35,8 @@ def main(argv=None):
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     port = free_port()
-    server = subprocess.Popen([sys.executable, "-m", "panel", "serve", str(ROOT / "eha_app" / "eha.py"),
-                               "--port", str(port), "--address", "127.0.0.1"],
+    eha = Path(sys.executable).with_name("eha")
+    server = subprocess.Popen([str(eha), "serve", "--port", str(port), "--address", "127.0.0.1"],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     url = f"http://127.0.0.1:{port}/eha"
     try:
@@ -51,12 +51,14 @@ def main(argv=None):
             page = browser.new_page(viewport={"width": 1366, "height": 768})
             page.goto(url)
             page.wait_for_selector("text=Reset to paper defaults", timeout=60_000)
+            page.wait_for_selector(".eha-derived >> text=Transfer functions", timeout=60_000)
 
             def tab(name):
                 page.locator(".bk-header .bk-tab", has_text=name).first.click()
 
             page.screenshot(path=out / "1_parameters.png")
             tab("2. Simulation")
+            page.wait_for_selector(".eha-run-count >> text=run 1", timeout=60_000)
             page.get_by_role("button", name="All four cases").click()
             page.wait_for_selector(".eha-run-count >> text=run 2")
             page.get_by_role("button", name="Compare both").click()

@@ -140,10 +140,10 @@ def compute_runs(params, req: SimulationRequest, model: str, cancel=None):
     return results
 
 
-@lru_cache(maxsize=32)
+@lru_cache(maxsize=8)
 def _paper_figure_2(params):
     # what every student sees when first opening the tab: computed once per
-    # parameter set and server process (results are never modified)
+    # parameter set and server process (results are never modified; 0.8 MB each)
     return tuple(run_paper_cases(params, "nonlinear"))
 
 

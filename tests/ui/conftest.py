@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
 import urllib.request
 
 import pytest
@@ -26,8 +27,9 @@ def pytest_collection_modifyitems(items):
 @pytest.fixture(scope="session")
 def server():
     port = _free_port()
-    cmd = [sys.executable, "-m", "panel", "serve", str(ROOT / "eha_app" / "eha.py"), "--port", str(port),
-           "--address", "127.0.0.1", "--allow-websocket-origin", f"127.0.0.1:{port}"]
+    # the command a teacher runs (its settings for a class included)
+    cmd = [str(Path(sys.executable).with_name("eha")), "serve", "--port", str(port), "--address", "127.0.0.1",
+           "--allow-websocket-origin", f"127.0.0.1:{port}"]
     log = open(ROOT / ".pytest_cache" / "ui_server.log", "w") if (ROOT / ".pytest_cache").exists() else subprocess.DEVNULL
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
     url = f"http://127.0.0.1:{port}/eha"
