@@ -63,12 +63,14 @@ class LazyTabs:
     arriving together do not hold up the ones already working.
     """
 
-    def __init__(self, tabs: list[tuple[str, Callable[[], object]]]):
+    def __init__(self, tabs: list[tuple[str, Callable[[], object]]], active: int = 0):
         self._builders = {i: make for i, (_, make) in enumerate(tabs)}
         self._slots = {i: pn.Column(pn.pane.HTML("<p class='eha-note'>Preparing this tab…</p>"),
                                     sizing_mode="stretch_width") for i in range(len(tabs))}
         self.built: dict[int, object] = {}
-        self.tabs = pn.Tabs(*((name, self._slots[i]) for i, (name, _) in enumerate(tabs)),
+        # the open tab is set before the watcher: building it is the page's
+        # first update, once the browser has the page (see create_app)
+        self.tabs = pn.Tabs(*((name, self._slots[i]) for i, (name, _) in enumerate(tabs)), active=active,
                             dynamic=False, sizing_mode="stretch_width", css_classes=["eha-main-tabs"])
         self.tabs.param.watch(self._on_active, "active")
 
@@ -103,18 +105,20 @@ def create_app(state: AppState | None = None, *, query: dict | None = None, runn
         if name in query:
             state.set_text(name, query[name])
     runner = runner if runner is not None else SessionRunner(state)
-    lazy = LazyTabs([(TAB_NAMES[0], lambda: ParametersTab(state)),
-                     (TAB_NAMES[1], lambda: SimulationTab(state, runner=runner, query=query)),
-                     (TAB_NAMES[2], lambda: IdentificationTab(state, runner=runner, query=query))])
     tab = query.get("tab", "").strip()
     first = int(tab) - 1 if tab in ("2", "3") else 0
+    lazy = LazyTabs([(TAB_NAMES[0], lambda: ParametersTab(state)),
+                     (TAB_NAMES[1], lambda: SimulationTab(state, runner=runner, query=query)),
+                     (TAB_NAMES[2], lambda: IdentificationTab(state, runner=runner, query=query))], active=first)
     if served_document() is not None:
-        # the page's frame goes out now; its first tab once the browser has it
+        # The page's frame goes out now; its first tab once the browser has it
+        # (document_ready). A change made between the browser's pull of the
+        # document and that moment can be lost (Panel holds the changes of an
+        # unconnected session and relies on the pull): the page would stay at
+        # "Preparing this tab..." for good.
         pn.state.onload(lambda: apply_locked(lambda: lazy.build(first)))
     else:
         lazy.build(first)
-    if first:
-        lazy.tabs.active = first
     header = pn.pane.HTML(
         '<div style="display:flex;align-items:baseline;gap:16px">'
         '<h2 style="margin:4px 0">Electro-hydraulic actuator: modeling and identification</h2>'
