@@ -8,6 +8,7 @@ opening the page together would otherwise all pay at once).
 
 from __future__ import annotations
 
+import logging
 from typing import Callable
 
 import panel as pn
@@ -23,6 +24,8 @@ from .tasks import SessionRunner, apply_locked, frozen_models, served_document
 __all__ = ["create_app", "warm_up", "CSS", "TAB_NAMES"]
 
 TAB_NAMES = ("1. Parameters", "2. Simulation", "3. Identification")
+
+log = logging.getLogger("eha_app")
 
 
 def _session_style() -> None:
@@ -132,7 +135,9 @@ def create_app(state: AppState | None = None, *, query: dict | None = None, runn
     if served_document() is not None:
         def closed(_context):
             # nobody will see these results: free the workers for the others
-            runner.queue.cancel_owner(runner.owner, "the page was closed")
-            runner.queue.cancel_owner((runner.owner, "preview"), "the page was closed")
+            jobs = (runner.queue.cancel_owner(runner.owner, "the page was closed")
+                    + runner.queue.cancel_owner((runner.owner, "preview"), "the page was closed"))
+            if jobs:
+                log.info("a page was closed: cancelled %s", ", ".join(j.label for j in jobs))
         pn.state.on_session_destroyed(closed)
     return page

@@ -5,11 +5,19 @@ app and state. The page's address carries what the student typed (see
 :mod:`eha_app.connection`): a reload or a shared link restores it.
 """
 
+import logging
+
 import panel as pn
 
 from eha_app.app import create_app, warm_up
 from eha_app.serving import quiet_closed_websockets, use_local_resources
 
+if not logging.getLogger("eha_app").handlers:
+    # the app's notices (a closed page's cancelled runs, failures) in the server's log
+    handler = logging.StreamHandler()
+    handler.setFormatter(logging.Formatter("%(asctime)s %(message)s"))
+    logging.getLogger("eha_app").addHandler(handler)
+    logging.getLogger("eha_app").setLevel(logging.INFO)
 warm_up()
 quiet_closed_websockets()
 use_local_resources(pn.state.curdoc)
