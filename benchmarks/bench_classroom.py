@@ -61,11 +61,8 @@ import time
 import urllib.request
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
-
-from benchmarks.classroom_client import (
+# run as a script, this file's folder is on the path: the client is a sibling module
+from classroom_client import (
     STEP_NAMES,
     STEPS,
     ClassResult,
@@ -74,6 +71,7 @@ from benchmarks.classroom_client import (
     run_class,
 )
 
+ROOT = Path(__file__).resolve().parents[1]
 _TICK = os.sysconf("SC_CLK_TCK")
 
 
@@ -150,7 +148,7 @@ class Server:
         fd, self.log_path = tempfile.mkstemp(prefix="eha-serve-", suffix=".log")
         self.log = os.fdopen(fd, "w+")
         eha = Path(sys.executable).with_name("eha")
-        cmd = ([str(eha)] if eha.exists() else [sys.executable, "-m", "eha_core.cli"])
+        cmd = ([str(eha)] if eha.exists() else [sys.executable, "-m", "eha_app.cli"])
         cmd += ["serve", "--port", str(self.port), "--address", "127.0.0.1", "--num-procs", str(procs)]
         self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT)
         self.tree = ProcTree(self.proc.pid)
@@ -393,6 +391,24 @@ def _tree_of(server_pid: str | None) -> ProcTree | None:
     return ProcTree(*(int(p) for p in server_pid.split(",") if p.strip())) if server_pid else None
 
 
+def _sizes_and_steps(args) -> tuple[list[int], list[str]]:
+    """The class sizes and steps asked for; ValueError with the message of a bad option."""
+    try:
+        sizes = [int(x) for x in args.sessions.split(",") if x.strip()]
+    except ValueError:
+        sizes = []
+    if not sizes or min(sizes) < 1:
+        raise ValueError(f"--sessions = {args.sessions} is not allowed: use e.g. 1,10,30")
+    steps = [s.strip() for s in (args.steps or ",".join(STEPS)).split(",") if s.strip()]
+    if not steps or any(s not in STEPS for s in steps) or steps[0] != "open":
+        raise ValueError(f"--steps = {args.steps} is not allowed: start with open, then any of {','.join(STEPS[1:])}")
+    if args.server_pid and not args.url:
+        raise ValueError(f"--server-pid = {args.server_pid} is not allowed: it is only for --url")
+    if args.server_pid and not re.fullmatch(r"\d+(,\d+)*", args.server_pid.replace(" ", "")):
+        raise ValueError(f"--server-pid = {args.server_pid} is not allowed: use e.g. 1234 or 1234,1240")
+    return sizes, steps
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sessions", default="1,10,30", help="class sizes, run in this order (default 1,10,30; "
@@ -415,24 +431,9 @@ def main(argv=None) -> int:
                     "10 at a time (steps: --steps, default open,param,tab2)")
     args = ap.parse_args(argv)
     try:
-        sizes = [int(x) for x in args.sessions.split(",") if x.strip()]
-        if not sizes or min(sizes) < 1:
-            raise ValueError
-    except ValueError:
-        print(f"bench_classroom: error: --sessions = {args.sessions} is not allowed: use e.g. 1,10,30",
-              file=sys.stderr)
-        return 2
-    steps = [s.strip() for s in (args.steps or ",".join(STEPS)).split(",") if s.strip()]
-    if not steps or any(s not in STEPS for s in steps) or steps[0] != "open":
-        print(f"bench_classroom: error: --steps = {args.steps} is not allowed: start with open, "
-              f"then any of {','.join(STEPS[1:])}", file=sys.stderr)
-        return 2
-    if args.server_pid and not args.url:
-        print("bench_classroom: error: --server-pid is only for --url", file=sys.stderr)
-        return 2
-    if args.server_pid and not re.fullmatch(r"\d+(,\d+)*", args.server_pid.replace(" ", "")):
-        print(f"bench_classroom: error: --server-pid = {args.server_pid} is not allowed: use e.g. 1234 or "
-              "1234,1240", file=sys.stderr)
+        sizes, steps = _sizes_and_steps(args)
+    except ValueError as exc:
+        print(f"bench_classroom: error: {exc}", file=sys.stderr)
         return 2
     print(f"machine: {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; server: "
           f"{args.url or f'eha serve --num-procs {args.procs}'}; spread {args.spread:g} s, timeout {args.timeout:g} s")

@@ -25,10 +25,9 @@ import argparse
 import platform
 import time
 
+import control
 import numpy as np
 from scipy.integrate import solve_ivp
-
-import control
 
 from eha_core import model
 from eha_core._kernels import derivatives as compiled_derivatives
@@ -50,7 +49,7 @@ def best_time(fn, repeat: int):
 
 
 def reference(params, case, t):
-    prm = params.as_vector()
+    prm = model.pack_params(params)
 
     def f(tt, y):
         return compiled_derivatives(y[0], y[1], y[2], y[3], float(case.u(tt)), float(case.d(tt)), prm)
@@ -62,7 +61,7 @@ def reference(params, case, t):
 
 
 def python_control_runs(params, cases, t, rhs):
-    prm = params.as_vector()
+    prm = model.pack_params(params)
 
     def upd(tt, x, u, _params):
         return np.array(rhs(x[0], x[1], x[2], x[3], u[0], u[1], prm))
@@ -78,7 +77,7 @@ def python_control_runs(params, cases, t, rhs):
 
 def errors(runs, refs):
     worst = 0.0
-    for y, ref in zip(runs, refs):
+    for y, ref in zip(runs, refs, strict=True):
         span = ref.max(axis=0) - ref.min(axis=0)
         worst = max(worst, float(np.max(np.abs(y - ref).max(axis=0) / span)))
     return worst
@@ -108,12 +107,14 @@ def main(argv=None):
     refs = [reference(params, c, t) for c in cases]
     t_ref = time.perf_counter() - t0
 
-    t_pc, y_pc = best_time(lambda: python_control_runs(params, cases, t, compiled_derivatives), max(1, args.repeat // 2))
+    t_pc, y_pc = best_time(lambda: python_control_runs(params, cases, t, compiled_derivatives),
+                           max(1, args.repeat // 2))
     t_pc_py, y_pc_py = best_time(lambda: python_control_runs(params, cases, t, model.derivatives), 1)
 
     err_ours, err_pc, err_pc_py = errors(y_ours, refs), errors(y_pc, refs), errors(y_pc_py, refs)
     print(f"{'method':58s} {'time [s]':>10s} {'worst err':>10s}")
-    print(f"{'ours: compiled RK4, batch of 4, h_max = %g s' % args.h_max:58s} {t_ours:10.4f} {err_ours:10.2e}")
+    ours = f"ours: compiled RK4, batch of 4, h_max = {args.h_max:g} s"
+    print(f"{ours:58s} {t_ours:10.4f} {err_ours:10.2e}")
     print(f"{'python-control nlsys+input_output_response, compiled rhs':58s} {t_pc:10.4f} {err_pc:10.2e}")
     print(f"{'python-control nlsys+input_output_response, python rhs':58s} {t_pc_py:10.4f} {err_pc_py:10.2e}")
     print(f"{'reference: solve_ivp Radau rtol 1e-10':58s} {t_ref:10.4f} {'-':>10s}")

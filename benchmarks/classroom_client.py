@@ -749,6 +749,61 @@ class ClassResult:
                 "step_wall": self.step_wall, "session_errors": self.session_errors, "upstreams": self.upstreams}
 
 
+async def _observe(url: str, result: ClassResult, current: list, stop: asyncio.Event, ready: asyncio.Event,
+                   t_class: float, timeout: float, period: float) -> None:
+    """The observer of :func:`run_class`: types into M every ``period`` seconds until ``stop``."""
+    o = Student(url, name="observer", timeout=timeout)
+    try:
+        await o.open(timeout)
+    except Exception as exc:  # noqa: BLE001 - recorded
+        result.observer.append(ObserverSample("open", 0.0, None, f"observer: {type(exc).__name__}: {exc}"))
+        ready.set()
+        return
+    ready.set()
+    k = 0
+    next_tick = time.perf_counter()
+    try:
+        while not stop.is_set():
+            at = time.perf_counter() - t_class
+            step = current[0]
+            try:
+                delay = await o.change_parameter("M", OBSERVER_VALUES[k % 2], timeout)
+                result.observer.append(ObserverSample(step, at, delay))
+            except Exception as exc:  # noqa: BLE001 - recorded
+                result.observer.append(ObserverSample(step, at, None, f"{type(exc).__name__}: {exc}"))
+                if o._broken:
+                    return
+            k += 1
+            next_tick += period
+            while next_tick < time.perf_counter():       # a late answer skips ticks, never bunches them
+                next_tick += period
+            try:
+                await asyncio.wait_for(stop.wait(), next_tick - time.perf_counter())
+            except asyncio.TimeoutError:
+                pass
+    finally:
+        await o.close()
+
+
+async def _act(student: Student, step: str, start: float, timeout: float) -> Outcome:
+    """One student's ``step``, begun ``start`` seconds into it."""
+    # counted from the step's start: what arrives while the student waits to click belongs here
+    m0, b0, e0 = student.messages_in, student.bytes_in, len(student.errors)
+    types0 = dict(student.by_type)
+    await asyncio.sleep(start)
+    seconds, error = None, None
+    try:
+        seconds = await do_step(student, step, timeout)
+    except Exception as exc:  # noqa: BLE001 - every failure is a result here
+        error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, (StepTimeout, StepFailed)) else str(exc)
+        if error.startswith(f"{student.name}: "):
+            error = error[len(student.name) + 2:]
+    new_errors = [e for e in student.errors[e0:] if not e.startswith("connection")]
+    by_type = {k: v - types0.get(k, 0) for k, v in student.by_type.items() if v != types0.get(k, 0)}
+    return Outcome(student.name, step, round(start, 4), seconds, error, student.messages_in - m0,
+                   student.bytes_in - b0, new_errors, by_type)
+
+
 async def run_class(url: str, n: int, steps=STEPS, *, spread: float = 1.0, timeout: float = 180.0,
                     observer: bool = True, observer_period: float = 2.0, seed: int = 0,
                     on_step: Callable[[str, str], Any] | None = None) -> ClassResult:
@@ -767,76 +822,27 @@ async def run_class(url: str, n: int, steps=STEPS, *, spread: float = 1.0, timeo
     t_class = time.perf_counter()
     stop = asyncio.Event()
     obs_ready = asyncio.Event()
-
-    async def observe():
-        o = Student(url, name="observer", timeout=timeout)
-        try:
-            await o.open(timeout)
-        except Exception as exc:  # noqa: BLE001 - recorded
-            result.observer.append(ObserverSample("open", 0.0, None, f"observer: {type(exc).__name__}: {exc}"))
-            obs_ready.set()
-            return
-        obs_ready.set()
-        k = 0
-        next_tick = time.perf_counter()
-        try:
-            while not stop.is_set():
-                at = time.perf_counter() - t_class
-                step = current[0]
-                try:
-                    delay = await o.change_parameter("M", OBSERVER_VALUES[k % 2], timeout)
-                    result.observer.append(ObserverSample(step, at, delay))
-                except Exception as exc:  # noqa: BLE001 - recorded
-                    result.observer.append(ObserverSample(step, at, None, f"{type(exc).__name__}: {exc}"))
-                    if o._broken:
-                        return
-                k += 1
-                next_tick += observer_period
-                while next_tick < time.perf_counter():       # a late answer skips ticks, never bunches them
-                    next_tick += observer_period
-                try:
-                    await asyncio.wait_for(stop.wait(), next_tick - time.perf_counter())
-                except asyncio.TimeoutError:
-                    pass
-        finally:
-            await o.close()
-
-    async def act(student: Student, step: str) -> Outcome:
-        start = rng.uniform(0, spread) if spread > 0 else 0.0
-        # counted from the step's start: what arrives while the student waits to click belongs here
-        m0, b0, e0 = student.messages_in, student.bytes_in, len(student.errors)
-        types0 = dict(student.by_type)
-        await asyncio.sleep(start)
-        seconds, error = None, None
-        try:
-            seconds = await do_step(student, step, timeout)
-        except Exception as exc:  # noqa: BLE001 - every failure is a result here
-            error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, (StepTimeout, StepFailed)) else str(exc)
-            if error.startswith(f"{student.name}: "):
-                error = error[len(student.name) + 2:]
-        new_errors = [e for e in student.errors[e0:] if not e.startswith("connection")]
-        by_type = {k: v - types0.get(k, 0) for k, v in student.by_type.items() if v != types0.get(k, 0)}
-        return Outcome(student.name, step, round(start, 4), seconds, error, student.messages_in - m0,
-                       student.bytes_in - b0, new_errors, by_type)
-
-    obs_task = asyncio.ensure_future(observe()) if observer else None
+    obs_task = None
+    if observer:
+        obs_task = asyncio.ensure_future(
+            _observe(url, result, current, stop, obs_ready, t_class, timeout, observer_period))
+    on_step = on_step or (lambda _step, _when: None)
     try:
         if obs_task is not None:
             await obs_ready.wait()
         active = list(students)
         for step in steps:
             current[0] = step
-            if on_step:
-                on_step(step, "start")
+            on_step(step, "start")
             t0 = time.perf_counter() - t_class
-            outcomes = await asyncio.gather(*(act(s, step) for s in active))
+            outcomes = await asyncio.gather(*(_act(s, step, rng.uniform(0, spread) if spread > 0 else 0.0, timeout)
+                                              for s in active))
             result.step_wall[step] = (round(t0, 3), round(time.perf_counter() - t_class, 3))
-            if on_step:
-                on_step(step, "end")
+            on_step(step, "end")
             result.steps[step] = list(outcomes)
             if step == "open":
                 # a student without a page cannot go on: later steps count only those who have one
-                active = [s for s, o in zip(active, outcomes) if o.seconds is not None]
+                active = [s for s, o in zip(active, outcomes, strict=True) if o.seconds is not None]
             else:
                 active = [s for s in active if not s._broken]
     finally:

@@ -9,7 +9,7 @@ opening the page together would otherwise all pay at once).
 from __future__ import annotations
 
 import logging
-from typing import Callable
+from collections.abc import Callable
 
 import panel as pn
 

@@ -81,7 +81,8 @@ export function render({ view, model, el }) {
         const query = new URLSearchParams(window.location.search)
         if (m.active === 0) { query.delete('tab') } else { query.set('tab', String(m.active + 1)) }
         const search = query.toString()
-        window.history.replaceState(null, '', window.location.pathname + (search ? '?' + search : '') + window.location.hash)
+        const path = window.location.pathname + (search ? '?' + search : '') + window.location.hash
+        window.history.replaceState(null, '', path)
       })
     }
   }

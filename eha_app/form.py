@@ -21,7 +21,7 @@ field's own unit (``NAME = TEXT is not allowed: WHAT``).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import param
 from panel.custom import JSComponent
@@ -156,8 +156,10 @@ def parse_fields(fields, values: dict, skip=()) -> tuple[dict, dict]:
 _CSS = """
 :host { display: block; }
 .eha-form { font-size: 13px; font-family: inherit; }
-.eha-group { border: 1px solid #d8dde6; border-radius: 6px; margin: 0 0 8px 0; padding: 4px 8px 6px 8px; background: #fff; }
-.eha-group > summary, .eha-group-title { font-weight: 600; cursor: pointer; padding: 3px 0; color: #223; list-style-position: inside; }
+.eha-group { border: 1px solid #d8dde6; border-radius: 6px; margin: 0 0 8px 0; padding: 4px 8px 6px 8px;
+             background: #fff; }
+.eha-group > summary, .eha-group-title { font-weight: 600; cursor: pointer; padding: 3px 0; color: #223;
+                                         list-style-position: inside; }
 .eha-group-title { cursor: default; }
 .eha-field { margin: 4px 0 6px 0; }
 .eha-field label { display: block; color: #333; margin-bottom: 2px; }
@@ -169,7 +171,8 @@ _CSS = """
 .eha-slider-row { display: flex; gap: 6px; align-items: center; }
 .eha-slider-row input[type=text] { width: 80px; flex: none; }
 .eha-field input:focus, .eha-field select:focus { outline: 2px solid #8ab4f8; border-color: #4a7fd6; }
-.eha-field.eha-invalid input[type=text], .eha-field.eha-invalid select { border: 2px solid #b00020; background: #fff4f4; }
+.eha-field.eha-invalid input[type=text], .eha-field.eha-invalid select { border: 2px solid #b00020;
+                                                                         background: #fff4f4; }
 .eha-field.eha-invalid label { color: #b00020; }
 .eha-error { color: #b00020; font-size: 12px; margin-top: 2px; }
 .eha-error:empty { display: none; }
@@ -316,7 +319,8 @@ export function render({ model, el }) {
       }
     }
     const search = query.toString()
-    window.history.replaceState(null, '', window.location.pathname + (search ? '?' + search : '') + window.location.hash)
+    const path = window.location.pathname + (search ? '?' + search : '') + window.location.hash
+    window.history.replaceState(null, '', path)
   }
   function showValues() {
     syncUrl()

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-__all__ = ["num_html", "poly_html", "tf_html", "poles_html", "table_html"]
+__all__ = ["num_html", "poly_html", "tf_html", "poles_html", "table_html", "json_default"]
 
 
 def num_html(x: float, digits: int = 4) -> str:
@@ -66,3 +66,16 @@ def table_html(header, rows, cls: str = "eha-table") -> str:
     h = "".join(f"<th>{c}</th>" for c in header)
     body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
     return f'<table class="{cls}"><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>'
+
+
+def json_default(obj):
+    """``json.dumps(default=...)`` for results holding numpy values."""
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.floating, np.integer, np.bool_)):
+        return obj.item()
+    if isinstance(obj, complex):
+        return [obj.real, obj.imag]
+    if isinstance(obj, tuple):
+        return list(obj)
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")

@@ -31,8 +31,9 @@ import logging
 import os
 import threading
 import time
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
-from typing import Any, Callable, Hashable
+from typing import Any
 
 from eha_core.cancel import Cancelled, CancelToken
 
@@ -71,7 +72,7 @@ class Job:
     owner: Hashable
     label: str
     fn: Callable[[CancelToken], Any]
-    on_done: Callable[["Job"], None] | None = None
+    on_done: Callable[[Job], None] | None = None
     token: CancelToken = field(default_factory=CancelToken)
     state: str = "queued"
     seq: int = 0

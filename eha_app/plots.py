@@ -29,8 +29,17 @@ from dataclasses import dataclass
 import numpy as np
 from bokeh.layouts import column, gridplot, row
 from bokeh.models import (
-    BoxAnnotation, ColumnDataSource, DataRange1d, Div, GlyphRenderer, HoverTool, Legend, LegendItem, MultiLine,
-    Range1d, Span,
+    BoxAnnotation,
+    ColumnDataSource,
+    DataRange1d,
+    Div,
+    GlyphRenderer,
+    HoverTool,
+    Legend,
+    LegendItem,
+    MultiLine,
+    Range1d,
+    Span,
 )
 from bokeh.plotting import figure
 
@@ -174,7 +183,7 @@ class TimeSeriesGrid:
         for res in results:
             t, *states = decimate(res.t, *(getattr(res, f) for f, _, _ in STATE_PANELS))
             cols["xs"].append(_f32(t))
-            for (field, _, scale), y in zip(STATE_PANELS, states):
+            for (field, _, scale), y in zip(STATE_PANELS, states, strict=True):
                 cols[field].append(_f32(y * scale))
             style = style_for(keys[res.label], res.model)
             cols["color"].append(style["color"])
@@ -249,36 +258,24 @@ def excitation_view(excitation, ts: float) -> tuple[np.ndarray, np.ndarray, str]
 
 
 def frequency_view(fi) -> FrequencyView:
-    """The arrays of Figs. 8-13 from a :class:`~eha_core.experiments.FrequencyIdentification`."""
-    from eha_core.identify.validate import compare, frequency_response
-
+    """What Figs. 8-13 draw, in display units, from a
+    :class:`~eha_core.experiments.FrequencyIdentification` (the core computed every curve)."""
     et, er, etitle = excitation_view(fi.excitation, fi.config.ts)
     d = fi.data
     base = dict(excitation_t=et, excitation_r=er, excitation_title=etitle, t=d.t, r=d.r, x_mm=d.x * 1e3, u=d.u)
-    e = fi.estimate
-    if fi.validation is None:
+    if fi.validation is None or fi.bode is None:
         return FrequencyView(fit_ok=False, **base)
-    ts = fi.config.ts
-    y_hat = e.simulate(d.r, x0=e.x0, input_offset=e.input_offset)
-    num_t, den_t = fi.theoretical
-    theo = compare(num_t, den_t, d.r, d.x, ts, initial_condition="estimate")
-    w = np.logspace(-2, np.log10(np.pi / ts), 400)
-    est = e.frequency_response(w)
-    theo_fr = frequency_response(num_t, den_t, w)
-    etfe = fi.etfe
-    # the ETFE's phase is known modulo 360 deg: draw each point on the branch
-    # nearest the estimate's phase there, not on an unwrapped path through noise
-    model_phase = e.frequency_response(etfe.w).phase_deg
-    etfe_phase = model_phase + (np.asarray(etfe.phase_deg) - model_phase + 180.0) % 360.0 - 180.0
+    e, theo, bode = fi.estimate, fi.theoretical_comparison, fi.bode
     vd, v = fi.validation_data, fi.validation
     ra = fi.residuals
     return FrequencyView(
-        **base, fit_ok=True, y_hat_mm=y_hat * 1e3, y_theory_mm=theo.y_hat * 1e3,
+        **base, fit_ok=True, y_hat_mm=fi.estimate_output * 1e3, y_theory_mm=theo.y_hat * 1e3,
         fit_label=f"estimated H(s): fit {e.fit_percent:.1f} %",
         theory_label=f"linearised H(s), eq. 24: fit {theo.fit_percent:.1f} %",
-        w=w, est_db=est.magnitude_db, est_deg=est.phase_deg, theory_db=theo_fr.magnitude_db,
-        theory_deg=theo_fr.phase_deg, etfe_w=np.asarray(etfe.w), etfe_db=np.asarray(etfe.magnitude_db),
-        etfe_deg=etfe_phase, validation_t=vd.t, validation_x_mm=vd.x * 1e3, validation_y_mm=v.y_hat * 1e3,
+        w=bode.w, est_db=bode.estimate.magnitude_db, est_deg=bode.estimate.phase_deg,
+        theory_db=bode.theoretical.magnitude_db, theory_deg=bode.theoretical.phase_deg,
+        etfe_w=np.asarray(fi.etfe.w), etfe_db=np.asarray(fi.etfe.magnitude_db), etfe_deg=bode.etfe_phase_deg,
+        validation_t=vd.t, validation_x_mm=vd.x * 1e3, validation_y_mm=v.y_hat * 1e3,
         validation_label=f"estimated H(s): fit {v.fit_percent:.1f} %",
         validation_title=f"Validation on a new excitation (seed {fi.validation_excitation.seed})",
         lags=np.asarray(ra.lags), autocorrelation=np.asarray(ra.autocorrelation),
@@ -351,20 +348,20 @@ class FitFigure:
         r0 = self.fig.line("t", "x", source=self.source, color="#333333", line_width=2)
         r1 = self.fig.line("t", "est", source=self.source, color=CASE_COLORS[1], line_dash="dashed")
         r2 = self.fig.line("t", "theory", source=self.source, color=CASE_COLORS[2], line_dash="dotted")
-        self.items = [LegendItem(label="measured (nonlinear plant)", renderers=[r0]),
+        self.items = [LegendItem(label="measured (nonlinear model in the loop)", renderers=[r0]),
                       LegendItem(label="estimated H(s)", renderers=[r1]),
                       LegendItem(label="linearised H(s), eq. 24", renderers=[r2])]
         self.fig.add_layout(Legend(items=self.items, location="top_left"))
         _lean(self.fig)
         self.layout = self.fig
 
-    def update(self, view: FrequencyView, plant: str = "nonlinear") -> None:
+    def update(self, view: FrequencyView, model: str = "nonlinear") -> None:
         if not view.fit_ok:
             self.source.data = {k: _f32([]) for k in ("t", "x", "est", "theory")}
             return
         t, x, est, theo = decimate(view.t, view.x_mm, view.y_hat_mm, view.y_theory_mm)
         self.source.data = {"t": _f32(t), "x": _f32(x), "est": _f32(est), "theory": _f32(theo)}
-        _set_legend_label(self.items[0], f"measured ({plant} plant)")
+        _set_legend_label(self.items[0], f"measured ({model} model in the loop)")
         _set_legend_label(self.items[1], view.fit_label)
         _set_legend_label(self.items[2], view.theory_label)
 

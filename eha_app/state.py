@@ -72,7 +72,7 @@ class AppState(param.Parameterized):
 
     # -- inputs ------------------------------------------------------------------
     def reset_defaults(self) -> None:
-        """Back to the paper's parameters (SPEC.md section 1)."""
+        """Back to the paper's parameters (docs/model.md §2)."""
         defaults = ActuatorParams()
         self.kp_text = "10"
         self.kp = 10.0

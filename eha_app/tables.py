@@ -51,16 +51,18 @@ def derived_html(params: ActuatorParams, kp: float = 10.0, *, stale: bool = Fals
     stale = '<p class="eha-stale">Showing the last valid parameters.</p>' if stale else ""
     geometry = table_html(["quantity", "value"], [
         ["A<sub>1</sub> = π D<sub>c</sub><sup>2</sup>/4", f"{p.A1 * 1e4:.4g} cm<sup>2</sup>"],
-        ["A<sub>2</sub> = π (D<sub>c</sub><sup>2</sup> − d<sub>c</sub><sup>2</sup>)/4", f"{p.A2 * 1e4:.4g} cm<sup>2</sup>"],
+        ["A<sub>2</sub> = π (D<sub>c</sub><sup>2</sup> − d<sub>c</sub><sup>2</sup>)/4",
+         f"{p.A2 * 1e4:.4g} cm<sup>2</sup>"],
         ["end stops ±0.8 L<sub>0</sub>", f"±{p.x_max * 1e3:.4g} mm"],
         ["operating point (eq. 10)", f"x = {op.x * 1e3:.3g} mm, v = 0, p<sub>1</sub> = {op.p1 / 1e6:.4g} MPa, "
                                       f"p<sub>2</sub> = {op.p2 / 1e6:.5g} MPa, u = 0"],
     ])
     lam_rows = []
-    formulas = ["(B + 2k<sub>f</sub>A<sub>f</sub>/π)/M", "A<sub>1</sub>/M", "A<sub>2</sub>/M", "β<sub>e</sub>/L<sub>0</sub>",
+    formulas = ["(B + 2k<sub>f</sub>A<sub>f</sub>/π)/M", "A<sub>1</sub>/M", "A<sub>2</sub>/M",
+                "β<sub>e</sub>/L<sub>0</sub>",
                 "β<sub>e</sub>K<sub>q1</sub>√D<sub>3</sub>/(A<sub>1</sub>L<sub>0</sub>)",
                 "β<sub>e</sub>K<sub>q2</sub>√D<sub>4</sub>/(A<sub>2</sub>L<sub>0</sub>)"]
-    for i, (lp, ln, f) in enumerate(zip(lin.lambdas, lin.lambdas_negative, formulas), start=1):
+    for i, (lp, ln, f) in enumerate(zip(lin.lambdas, lin.lambdas_negative, formulas, strict=True), start=1):
         lam_rows.append([f"λ<sub>{i}</sub>", f, num_html(lp), num_html(ln) if ln != lp else "same"])
     lambdas = table_html(["", "formula (Table 2)", "u ≥ 0", "u < 0"], lam_rows)
     a = p.a
@@ -78,7 +80,7 @@ def derived_html(params: ActuatorParams, kp: float = 10.0, *, stale: bool = Fals
 
 
 
-def _fmt(v: float) -> str:
+def _num(v: float) -> str:
     return num_html(v, 5) if v != 0 else "0"
 
 
@@ -94,20 +96,22 @@ def lse_table_html(res, scenario: str | None) -> str:
         lo, hi = res.ci95[k]
         covers = "" if nom is None else ("✓" if lo <= nom <= hi else "✗")
         p = paper.get(k)
-        p_txt = "" if p is None else _fmt(p)
+        p_txt = "" if p is None else _num(p)
         if p is not None and nom:
             p_txt += f" ({100 * (p / nom - 1):+.2f} %)"
-        rows.append([f"{_NAMES.get(k, k)} [{_UNITS.get(k, '')}]", "" if nom is None else _fmt(nom), _fmt(v),
+        rows.append([f"{_NAMES.get(k, k)} [{_UNITS.get(k, '')}]", "" if nom is None else _num(nom), _num(v),
                      "" if rel is None else f"{100 * rel:+.3f} %",
-                     f"[{_fmt(lo)}, {_fmt(hi)}] {covers}", p_txt])
+                     f"[{_num(lo)}, {_num(hi)}] {covers}", p_txt])
     header = ["parameter", "nominal", "estimate", "rel. error", "95 % interval (covers nominal?)",
               "paper (Table 3/4)" if paper else "paper"]
     noiseless = scenario in ("none", "200 sin", "5000 sin")
+    narrower = max(res.std_errors[k] / res.std_errors_textbook[k]
+                   for k in res.std_errors if res.std_errors_textbook[k] > 0)
     note = (f"<p class='eha-note'>Disturbance model: {res.disturbance_model}"
             + (f", frequency {res.disturbance_freq_hz:.6g} Hz ({'estimated' if res.freq_estimated else 'given'})"
                if res.disturbance_freq_hz else "")
             + f". Intervals: Newey-West over {res.hac_lags} lags (the prefilter colours the residual; "
-              f"textbook intervals are up to {max(res.std_errors[k] / res.std_errors_textbook[k] for k in res.std_errors if res.std_errors_textbook[k] > 0):.1f}× narrower)."
+              f"textbook intervals are up to {narrower:.1f}× narrower)."
             + (" Without noise the intervals shrink to the regressors' numerical error (~0.003 %), so ✗ may mark "
                "a miss by that much." if noiseless else "") + "</p>")
     return table_html(header, rows) + note
@@ -126,7 +130,7 @@ def table4_html(by_model: dict) -> str:
     rows = []
     for k in names:
         nom = first.nominal[k]
-        row = [f"{_NAMES[k]} [{_UNITS[k]}]", _fmt(nom)]
+        row = [f"{_NAMES[k]} [{_UNITS[k]}]", _num(nom)]
         for scen in scenarios:
             lines = []
             for m in models:
@@ -136,12 +140,12 @@ def table4_html(by_model: dict) -> str:
                 lo, hi = res.ci95[k]
                 mark = "✓" if lo <= nom <= hi else "✗"
                 short = {"constant": "const.", "harmonic": "harm."}[m]
-                lines.append(f"<span class='eha-t4-{m}'>{short}: <b>{_fmt(v)}</b>"
+                lines.append(f"<span class='eha-t4-{m}'>{short}: <b>{_num(v)}</b>"
                              + (f" ({100 * rel:+.2f} %)" if rel is not None else "")
-                             + f"<br><small>[{_fmt(lo)}, {_fmt(hi)}] {mark}</small></span>")
+                             + f"<br><small>[{_num(lo)}, {_num(hi)}] {mark}</small></span>")
             p = PAPER_TABLE4[scen][k]
             prel = f" ({100 * (p / nom - 1):+.2f} %)" if nom else ""
-            lines.append(f"<span class='eha-t4-paper'>paper: {_fmt(p)}{prel}</span>")
+            lines.append(f"<span class='eha-t4-paper'>paper: {_num(p)}{prel}</span>")
             row.append("<br>".join(lines))
         rows.append(row)
     note = ("<p class='eha-note'>const. = the paper's constant d<sub>0</sub>; harm. = d<sub>0</sub> plus a sinusoid "
@@ -157,7 +161,7 @@ def freq_summary_html(fi) -> str:
         return f"<div class='eha-warn'>The estimation failed: {e.message}</div>"
     theo_num, theo_den = fi.theoretical
     parts = [tf_html("Ĥ(s)", e.num, e.den, f"estimated; fit {e.fit_percent:.2f} % "
-                     f"(initial condition {e.initial_condition}"
+                     f"(initial condition: {e.initial_condition}"
                      + (f", input offset {e.input_offset:.4g}" if e.input_offset is not None else "") + ")"),
              tf_html("H(s)", theo_num, theo_den, f"linearised at v = 0, eq. 24, K<sub>p</sub> = {fi.config.kp:g}"),
              tf_html("Ĥ<sub>paper</sub>(s)", PAPER_EQ25[0], PAPER_EQ25[1], f"eq. 25, fit {PAPER_FIT_PERCENT} %")]
@@ -181,29 +185,29 @@ def backout_html(fi) -> str:
     def row(name, key, unit):
         v, nom = getattr(b, key), (b.damping_nominal if key == "damping" else b.beta_e_nominal)
         lo, hi = ci[key]
-        interval = "" if math.isnan(lo) else f"[{_fmt(lo)}, {_fmt(hi)}]"
-        return [name, _fmt(nom), _fmt(v), f"{100 * rel[key]:+.2f} %", interval, unit]
+        interval = "" if math.isnan(lo) else f"[{_num(lo)}, {_num(hi)}]"
+        return [name, _num(nom), _num(v), f"{100 * rel[key]:+.2f} %", interval, unit]
 
     rows = [row("B + 2k<sub>f</sub>A<sub>f</sub>/π = λ̂<sub>1</sub> M (eq. 27a)", "damping", "N s/m"),
             row("β<sub>e</sub> from the gain (eq. 27e-f)", "beta_e_from_gain", "Pa"),
             row("β<sub>e</sub> from the s coefficient (eq. 27b-d)", "beta_e_from_stiffness", "Pa")]
     table = table_html(["quantity", "nominal / linearised", "backed out", "difference", "95 % interval", "unit"], rows)
+    lin = fi.linear
     explain = (
         f"<p class='eha-note'>The estimated s² coefficient λ̂<sub>1</sub> = {b.l1:.4g} lies far below the linearised "
-        f"{b.damping_nominal / fi.params.M:.4g}: λ<sub>1</sub> holds the friction's slope at v = 0, "
-        f"2k<sub>f</sub>A<sub>f</sub>/π = {2 * fi.params.k_f * fi.params.Af / math.pi:.4g} N s/m, but during the "
-        f"experiment the piston moves at up to {np.abs(fi.data.v).max() * 1e3:.0f} mm/s, far beyond "
+        f"{lin.lambdas[0]:.4g}: λ<sub>1</sub> holds the friction's slope at v = 0, "
+        f"2k<sub>f</sub>A<sub>f</sub>/π = {lin.friction_damping:.4g} N s/m, but during the "
+        f"experiment the piston moves at up to {fi.peak_speed * 1e3:.0f} mm/s, far beyond "
         f"1/k<sub>f</sub> = {1e3 / fi.params.k_f:.2f} mm/s where S(v) = (2/π) atan(k<sub>f</sub>v) saturates: the "
         f"friction acts as a nearly constant force ±A<sub>f</sub>, which adds almost no damping to the oscillation. "
         f"The paper found 11.12.</p>")
-    lin = linearize(fi.params)
-    g_pos = lin.tf_coeffs("positive")[0][-1]
-    g_neg = lin.tf_coeffs("negative")[0][-1]
+    g_pos, g_neg = lin.gain("positive"), lin.gain("negative")
     explain += (
         f"<p class='eha-note'>β<sub>e</sub> from the s coefficient depends on the chamber stiffness only. "
-        f"β<sub>e</sub> from the gain uses the u ≥ 0 valve branch of eq. 13 (gain {g_pos:.4g}), but u = K<sub>p</sub>(r − x) "
-        f"changes sign all the time and the u &lt; 0 branch has gain {g_neg:.4g} ({100 * (g_neg / g_pos - 1):+.0f} %): the "
-        f"data see a blend, so this route comes out low. The paper reported 1.1793·10<sup>9</sup>.</p>")
+        f"β<sub>e</sub> from the gain uses the u ≥ 0 valve branch of eq. 13 (gain {g_pos:.4g}), "
+        f"but u = K<sub>p</sub>(r − x) changes sign all the time and the u &lt; 0 branch has gain {g_neg:.4g} "
+        f"({100 * (g_neg / g_pos - 1):+.0f} %): the data see a blend, so this route comes out low. "
+        f"The paper reported 1.1793·10<sup>9</sup>.</p>")
     return table + explain
 
 

@@ -26,9 +26,10 @@ import collections
 import logging
 import threading
 import time
+from collections.abc import Callable, Hashable, Sequence
 from contextlib import contextmanager
 from functools import partial
-from typing import Any, Callable, Hashable, Sequence
+from typing import Any
 
 import panel as pn
 from panel.io.document import hold

@@ -63,6 +63,24 @@ def _f(mode, x, v, p1, p2, u, d, prm, lin):
 
 
 @njit(cache=True, nogil=True)
+def _control(kp, r, x, u_limit):
+    """The proportional controller ``u = Kp (r - x)``, clipped to ±u_limit when u_limit > 0."""
+    u = kp * (r - x)
+    if u_limit > 0.0:
+        u = min(max(u, -u_limit), u_limit)
+    return u
+
+
+@njit(cache=True, nogil=True)
+def _store(out, k, x, v, p1, p2, u):
+    out[k, 0] = x
+    out[k, 1] = v
+    out[k, 2] = p1
+    out[k, 3] = p2
+    out[k, 4] = u
+
+
+@njit(cache=True, nogil=True)
 def integrate(y0, h, n_steps, sub, prm, mode, lin, u_st, d_st,
               ctrl, kp, r_st, ctrl_every, u_limit, out, y_end):
     """Integrate one run; fill ``out`` (n_out x 5: x, v, p1, p2, u) and the final state ``y_end``.
@@ -81,23 +99,15 @@ def integrate(y0, h, n_steps, sub, prm, mode, lin, u_st, d_st,
     for i in range(n_steps):
         # the controller: sampled (zero-order hold) or continuous
         if ctrl == ZOH and i % ctrl_every == 0:
-            u_hold = kp * (r_st[i, 0] - x)
-            if u_limit > 0.0:
-                u_hold = min(max(u_hold, -u_limit), u_limit)
+            u_hold = _control(kp, r_st[i, 0], x, u_limit)
         if ctrl == OPEN_LOOP:
             ua, ub, uc = u_st[i, 0], u_st[i, 1], u_st[i, 2]
         elif ctrl == ZOH:
             ua = ub = uc = u_hold
         else:
-            ua = kp * (r_st[i, 0] - x)
-            if u_limit > 0.0:
-                ua = min(max(ua, -u_limit), u_limit)
+            ua = _control(kp, r_st[i, 0], x, u_limit)
         if i % sub == 0:
-            out[k_out, 0] = x
-            out[k_out, 1] = v
-            out[k_out, 2] = p1
-            out[k_out, 3] = p2
-            out[k_out, 4] = ua
+            _store(out, k_out, x, v, p1, p2, ua)
             k_out += 1
         da, db, dc = d_st[i, 0], d_st[i, 1], d_st[i, 2]
 
@@ -105,17 +115,13 @@ def integrate(y0, h, n_steps, sub, prm, mode, lin, u_st, d_st,
         x2 = x + half * k1x
         v2 = v + half * k1v
         if ctrl == CONTINUOUS:
-            ub = kp * (r_st[i, 1] - x2)
-            if u_limit > 0.0:
-                ub = min(max(ub, -u_limit), u_limit)
+            ub = _control(kp, r_st[i, 1], x2, u_limit)
         k2x, k2v, k2p, k2q = _f(mode, x2, v2, p1 + half * k1p, p2 + half * k1q, ub, db, prm, lin)
         x3 = x + half * k2x
         k3x, k3v, k3p, k3q = _f(mode, x3, v + half * k2v, p1 + half * k2p, p2 + half * k2q, ub, db, prm, lin)
         x4 = x + h * k3x
         if ctrl == CONTINUOUS:
-            uc = kp * (r_st[i, 2] - x4)
-            if u_limit > 0.0:
-                uc = min(max(uc, -u_limit), u_limit)
+            uc = _control(kp, r_st[i, 2], x4, u_limit)
         k4x, k4v, k4p, k4q = _f(mode, x4, v + h * k3v, p1 + h * k3p, p2 + h * k3q, uc, dc, prm, lin)
 
         x = x + h / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
@@ -134,21 +140,13 @@ def integrate(y0, h, n_steps, sub, prm, mode, lin, u_st, d_st,
     if k_out < out.shape[0]:
         if ctrl == ZOH:
             if n_steps % ctrl_every == 0:
-                u_hold = kp * (r_st[n_steps, 0] - x)
-                if u_limit > 0.0:
-                    u_hold = min(max(u_hold, -u_limit), u_limit)
+                u_hold = _control(kp, r_st[n_steps, 0], x, u_limit)
             ue = u_hold
         elif ctrl == CONTINUOUS:
-            ue = kp * (r_st[n_steps, 0] - x)
-            if u_limit > 0.0:
-                ue = min(max(ue, -u_limit), u_limit)
+            ue = _control(kp, r_st[n_steps, 0], x, u_limit)
         else:
             ue = u_st[n_steps, 0]
-        out[k_out, 0] = x
-        out[k_out, 1] = v
-        out[k_out, 2] = p1
-        out[k_out, 3] = p2
-        out[k_out, 4] = ue
+        _store(out, k_out, x, v, p1, p2, ue)
     return -1
 
 

@@ -100,6 +100,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._checks import not_allowed
+
 __all__ = ["Excitation", "idinput", "SIGNAL_TYPES"]
 
 #: The signal types, as MATLAB spells them.
@@ -316,10 +318,10 @@ def idinput(
     [2.0, 2.0]
     >>> [round(float(v), 12) for v in exc.u.std(axis=0)]     # (max-min)/2
     [1.0, 1.0]
-    >>> idinput(100, "sine", [0.2, 1.5])
+    >>> idinput(100, "sine", [0.2, 1.5])  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    ValueError: band: [0.2, 1.5] is not allowed; need [wlow, whigh] with 0 <= wlow < whigh <= 1 (fractions of the Nyquist frequency)
+    ValueError: band = [0.2, 1.5] is not allowed: need [wlow, whigh] with 0 <= wlow < whigh <= 1 (...)
     """
     kind = _parse_type(type)
     period, n_channels, n_periods = _parse_n(n)
@@ -378,10 +380,10 @@ def _random_signal(rng, kind, period, n_channels, wlow, whigh, lo, hi) -> np.nda
         bins = np.arange(period // 2 + 1)
         in_band = _closed_band_mask(bins, period, wlow, whigh)
         if not np.any(in_band[1:]):
-            raise ValueError(
-                f"band: {_fmt([wlow, whigh])} is not allowed with period P = {period}; "
-                f"need at least one DFT frequency 2*pi*k/P (k >= 1) inside "
-                f"[wlow, whigh]*pi: widen the band or lengthen the period"
+            raise not_allowed(
+                "band", [wlow, whigh],
+                f"with period P = {period} no DFT frequency 2*pi*k/P (k >= 1) lies inside "
+                f"[wlow, whigh]*pi; need at least one: widen the band or lengthen the period",
             )
     if not full_band:
         # Ideal filter applied to one period in the frequency domain, so the
@@ -439,12 +441,13 @@ def _multisine(
     grid = _sine_grid(period, wlow, whigh, grid_skip)
     needed = n_channels * n_sines
     if grid.size < needed:
-        raise ValueError(
-            f"sinedata: NumSinusoids = {n_sines} is not allowed with Nu = {n_channels}, "
-            f"P = {period}, GridSkip = {grid_skip} and band = {_fmt([wlow, whigh])}: "
+        raise not_allowed(
+            "sinedata", [n_sines, n_trials, grid_skip],
+            f"NumSinusoids = {n_sines} is too many with Nu = {n_channels}, P = {period}, "
+            f"GridSkip = {grid_skip} and band = [{wlow:.6g}, {whigh:.6g}]: "
             f"need Nu*NumSinusoids <= {grid.size}, the number of grid frequencies "
             f"2*pi*k/P strictly inside the band (MATLAB errors here too); increase "
-            f"the period or the band, or decrease the number of sinusoids"
+            f"the period or the band, or decrease the number of sinusoids",
         )
     chosen = grid[_choose(grid.size, needed)]
     # Draw order = MATLAB's loops: channel, trial, sinusoid.
@@ -514,9 +517,10 @@ def _prbs(period, n_channels, n_periods, whigh, lo, hi):
             order = min(order + 1, _PRBS_MAX_ORDER)
             full = clock * (2**order - 1)
             if full < period:
-                raise ValueError(
-                    f"n: P = {period} is not allowed for 'prbs' with clock period "
-                    f"{clock}; need P <= {full} = {clock}*(2**{_PRBS_MAX_ORDER} - 1)"
+                raise not_allowed(
+                    "n", period,
+                    f"P = {period} is too long for type prbs with clock period {clock}; "
+                    f"need P <= {full} = {clock}*(2**{_PRBS_MAX_ORDER} - 1)",
                 )
             warnings.warn(
                 f"idinput: the PRBS signal delivered is the {period} first values "
@@ -535,20 +539,6 @@ def _prbs(period, n_channels, n_periods, whigh, lo, hi):
 # --------------------------------------------------------------------------
 # Argument parsing and validation
 # --------------------------------------------------------------------------
-
-
-def _fmt(value) -> str:
-    """Render a rejected value for an error message (lists like MATLAB vectors)."""
-    if isinstance(value, np.ndarray):
-        value = value.tolist()
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_fmt(v) for v in value) + "]"
-    if isinstance(value, (float, np.floating)):
-        v = float(value)
-        return str(int(v)) if v.is_integer() else f"{v:.6g}"
-    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
-        return str(int(value))
-    return repr(value)
 
 
 def _as_sequence(value) -> list | None:
@@ -593,10 +583,7 @@ def _real_pair(value) -> tuple[float, float] | None:
 def _parse_type(value) -> str:
     kind = value.lower() if isinstance(value, str) else None
     if kind not in SIGNAL_TYPES:
-        raise ValueError(
-            f"type: {value!r} is not allowed; need one of 'rgs', 'rbs', 'prbs', "
-            f"'sine' (case-insensitive)"
-        )
+        raise not_allowed("type", value, "need one of rgs, rbs, prbs, sine (case-insensitive)")
     return kind
 
 
@@ -604,37 +591,27 @@ def _parse_n(value) -> tuple[int, int, int]:
     items = _as_sequence(value)
     ints = None if items is None else [_positive_int(x) for x in items]
     if ints is None or not 1 <= len(ints) <= 3 or any(i is None for i in ints):
-        raise ValueError(
-            f"n: {_fmt(value) if items is None else _fmt(items)} is not allowed; need a "
-            f"positive integer N or a sequence [P, Nu] or [P, Nu, M] of positive integers"
-        )
+        raise not_allowed("n", value, "need a positive integer N or a sequence [P, Nu] or "
+                                                 "[P, Nu, M] of positive integers")
     ints += [1] * (3 - len(ints))
     return ints[0], ints[1], ints[2]
 
 
 def _parse_band(value, kind: str) -> tuple[float, float]:
     pair = _real_pair(value)
-    shown = _fmt(_as_sequence(value) or value)
     if pair is None or not 0.0 <= pair[0] < pair[1] <= 1.0:
-        raise ValueError(
-            f"band: {shown} is not allowed; need [wlow, whigh] with "
-            f"0 <= wlow < whigh <= 1 (fractions of the Nyquist frequency)"
-        )
+        raise not_allowed("band", value, "need [wlow, whigh] with 0 <= wlow < whigh <= 1 "
+                                                    "(fractions of the Nyquist frequency)")
     if kind == "prbs" and pair[0] != 0.0:
-        raise ValueError(
-            f"band: {shown} is not allowed for type 'prbs'; need [0, B] with "
-            f"0 < B <= 1 (the signal is held over floor(1/B) samples)"
-        )
+        raise not_allowed("band", value, "type prbs needs [0, B] with 0 < B <= 1 "
+                                                    "(the signal is held over floor(1/B) samples)")
     return pair
 
 
 def _parse_range(value) -> tuple[float, float]:
     pair = _real_pair(value)
     if pair is None or not pair[0] < pair[1]:
-        raise ValueError(
-            f"range: {_fmt(_as_sequence(value) or value)} is not allowed; need "
-            f"[min, max] of finite numbers with min < max"
-        )
+        raise not_allowed("range", value, "need [min, max] of finite numbers with min < max")
     return pair
 
 
@@ -642,10 +619,8 @@ def _parse_sinedata(value) -> tuple[int, int, int]:
     items = _as_sequence(value)
     ints = None if items is None else [_positive_int(x) for x in items]
     if ints is None or not 1 <= len(ints) <= 3 or any(i is None for i in ints):
-        raise ValueError(
-            f"sinedata: {_fmt(items if items is not None else value)} is not allowed; "
-            f"need [NumSinusoids, NumTrials, GridSkip] of positive integers"
-        )
+        raise not_allowed("sinedata", value, "need [NumSinusoids, NumTrials, GridSkip] of "
+                                                        "positive integers")
     ints += [10, 1][len(ints) - 1 :]
     return ints[0], ints[1], ints[2]
 
@@ -654,9 +629,7 @@ def _resolve_seed(seed) -> int:
     if seed is None:
         return int(np.random.SeedSequence().entropy)
     if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, numbers.Integral) or seed < 0:
-        raise ValueError(
-            f"seed: {seed!r} is not allowed; need None or a non-negative integer"
-        )
+        raise not_allowed("seed", seed, "need None or a non-negative integer")
     return int(seed)
 
 
@@ -667,7 +640,7 @@ def _check_ts(ts) -> float:
         or not math.isfinite(float(ts))
         or ts <= 0
     ):
-        raise ValueError(f"ts: {ts!r} is not allowed; need a finite sample time > 0 s")
+        raise not_allowed("ts", ts, "need a finite sample time > 0 s")
     return float(ts)
 
 

@@ -11,24 +11,31 @@ Examples
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import math
 import time
-from dataclasses import field
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ._checks import not_allowed
 from .cancel import CancelToken, check
 from .params import ActuatorParams
-from .signals import ZERO, Signal, Sine, WhiteNoise
-from .simulate import SimulationResult, simulate, simulate_many
+from .signals import ZERO, Signal, Sine, parse_signal
+from .simulate import MODELS, SimulationResult, simulate, simulate_many
+
+if TYPE_CHECKING:  # the estimators load scipy: imported when an experiment runs
+    from .excitation import Excitation
+    from .identify.backout import BackoutResult
+    from .identify.tfest import TFEstimate
+    from .identify.validate import CompareResult, FrequencyResponseData, ResidualAnalysis
+    from .linear import LinearModel
 
 __all__ = [
     "Case", "PAPER_CASES", "run_paper_cases",
-    "LSE_INPUT", "LSE_INPUT_RICH", "LSE_INPUT_RICH_T_END", "LSE_SCENARIOS", "PAPER_TABLE4", "PAPER_TABLE3_BETA_E", "parse_disturbance",
+    "LSE_INPUT", "LSE_INPUT_RICH", "LSE_INPUT_RICH_T_END", "LSE_SCENARIOS", "PAPER_TABLE4", "PAPER_TABLE3_BETA_E",
     "lse_simulation", "lse_data", "run_lse", "lse_resimulation", "run_lse_table", "lse_cost",
-    "FrequencyExperiment", "FrequencyIdentification", "run_frequency_identification",
+    "FrequencyExperiment", "FrequencyIdentification", "run_frequency_identification", "BodeData", "bode_data",
     "PAPER_EQ25", "PAPER_EQ26", "PAPER_FIT_PERCENT", "PAPER_BETA_E_HAT",
 ]
 
@@ -76,7 +83,7 @@ def run_paper_cases(params: ActuatorParams | None = None, model: str = "nonlinea
     chosen = []
     for c in cases:
         if c not in PAPER_CASES:
-            raise ValueError(f"case = {c!r} is not allowed: use one of 1, 2, 3, 4")
+            raise not_allowed("case", c, "use one of 1, 2, 3, 4")
         chosen.append(PAPER_CASES[c])
     if t_end is None:
         t_end = chosen[0].t_end if chosen else 5.0
@@ -86,7 +93,7 @@ def run_paper_cases(params: ActuatorParams | None = None, model: str = "nonlinea
 
 # -- time-domain identification (section III-A, Tables 3-4) --------------------------
 
-#: Excitation for the least squares: not stated in the paper; our default (SPEC.md 4).
+#: Excitation for the least squares: not stated in the paper; our default (docs/model.md §4).
 LSE_INPUT: Signal = Sine(6.0, 2.0)
 
 #: A richer excitation for B (the viscous coefficient). Under white force noise
@@ -98,7 +105,7 @@ LSE_INPUT: Signal = Sine(6.0, 2.0)
 LSE_INPUT_RICH: Signal = Sine(8.0, 2.0) + Sine(4.0, 5.0)
 LSE_INPUT_RICH_T_END = 20.0
 
-#: Table 4's disturbance scenarios, as text for :func:`parse_disturbance`.
+#: Table 4's disturbance scenarios, as signal text (:func:`eha_core.signals.parse_signal`).
 LSE_SCENARIOS: dict[str, str] = {
     "none": "none",
     "200 sin": "sine:200:1",
@@ -117,43 +124,6 @@ PAPER_TABLE4: dict[str, dict[str, float]] = {
 PAPER_TABLE3_BETA_E = 9.15e8
 
 
-def parse_disturbance(spec: str | Signal, *, seed: int = 0, dt: float = 1e-3, name: str = "--disturbance") -> Signal:
-    """A disturbance scenario: ``none``, ``sine:AMP[:FREQ_HZ]`` (1 Hz default),
-    ``white:SIGMA`` (white Gaussian force noise, seeded, held over each sample
-    interval ``dt``), or any :mod:`eha_core.signals` signal.
-
-    >>> parse_disturbance("sine:5000")
-    Sine(amplitude=5000.0, freq_hz=1.0, phase=0.0, offset=0.0)
-    >>> parse_disturbance("white:1000", seed=4)
-    WhiteNoise(sigma=1000.0, seed=4, hold_s=0.001)
-    """
-    if isinstance(spec, Signal):
-        return spec
-    text = str(spec).strip()
-    kind, _, rest = text.partition(":")
-    kind = kind.lower()
-    allowed = "use none, sine:AMP[:FREQ_HZ] or white:SIGMA"
-    if kind in ("none", "zero", "0") and not rest:
-        return ZERO
-    parts = rest.split(":") if rest else []
-    try:
-        values = [float(p) for p in parts]
-    except ValueError:
-        raise ValueError(f"{name} = {text!r} is not allowed: numbers expected after '{kind}:'; {allowed}") from None
-    if not all(math.isfinite(v) for v in values):
-        raise ValueError(f"{name} = {text!r} is not allowed: numbers must be finite; {allowed}")
-    if kind == "sine" and len(values) in (1, 2):
-        freq = values[1] if len(values) == 2 else 1.0
-        if freq <= 0:
-            raise ValueError(f"{name} = {text!r} is not allowed: the frequency must be > 0 Hz")
-        return Sine(values[0], freq)
-    if kind in ("white", "noise") and len(values) == 1:
-        if values[0] < 0:
-            raise ValueError(f"{name} = {text!r} is not allowed: sigma must be >= 0 N")
-        return WhiteNoise(values[0], seed=int(seed), hold_s=dt)
-    raise ValueError(f"{name} = {text!r} is not allowed: {allowed}")
-
-
 def lse_simulation(params: ActuatorParams | None = None, disturbance: str | Signal = "none", *,
                    u: Signal = LSE_INPUT, t_end: float = 5.0, dt: float = 1e-3, seed: int = 0,
                    cancel: CancelToken | None = None) -> SimulationResult:
@@ -162,7 +132,7 @@ def lse_simulation(params: ActuatorParams | None = None, disturbance: str | Sign
     ``cancel`` (a :class:`~eha_core.cancel.CancelToken`) is checked between
     integration chunks, as in every function of this module that takes it.
     """
-    d = parse_disturbance(disturbance, seed=seed, dt=dt)
+    d = parse_signal(disturbance, name="disturbance", seed=seed, hold_s=dt)
     return simulate(params, u=u, d=d, t_end=t_end, dt=dt, label=f"d = {d.label}", cancel=cancel)
 
 
@@ -213,8 +183,9 @@ def lse_resimulation(result, params: ActuatorParams, measured, *, u: Signal = LS
         f = result.disturbance_freq_hz
         d = Sine(result.estimates["d_sin"], f) + Sine(result.estimates["d_cos"], f, phase=math.pi / 2)
     t_end = float(measured.t[-1] - measured.t[0])
-    x0 = [measured.x[0], measured.v[0], measured.p1[0], measured.p2[0]]
-    return simulate(est, u=u, d=d, t_end=t_end, dt=measured.ts, x0=x0, label="re-simulated", cancel=cancel)
+    start = [measured.x[0], measured.v[0], measured.p1[0], measured.p2[0]]
+    return simulate(est, u=u, d=d, t_end=t_end, dt=measured.ts, initial_state=start, label="re-simulated",
+                    cancel=cancel)
 
 
 def run_lse_table(params: ActuatorParams | None = None, *, disturbance_model: str = "constant",
@@ -305,7 +276,7 @@ PAPER_BETA_E_HAT = 1.1793e9
 
 @dataclass(frozen=True)
 class FrequencyExperiment:
-    """The closed-loop identification experiment (SPEC.md section 5).
+    """The closed-loop identification experiment (docs/model.md §4).
 
     Defaults are the paper's: r = idinput([1000 1 1], 'sine', [0 1], [-1 1],
     [100 50 1]) at Ts = 0.01 s, u = Kp (r - x) with Kp = 10 sampled at Ts, the
@@ -327,7 +298,7 @@ class FrequencyExperiment:
     seed: int = 0
     validation_seed: int | None = None
     kp: float = 10.0
-    plant: str = "nonlinear"
+    model: str = "nonlinear"
     controller: str = "zoh"
     n_poles: int = 3
     n_zeros: int = 0
@@ -336,7 +307,7 @@ class FrequencyExperiment:
 
     def __post_init__(self):
         def bad(name, allowed):
-            return ValueError(f"{name} = {getattr(self, name)!r} is not allowed: {allowed}")
+            return not_allowed(name, getattr(self, name), allowed)
 
         for name in ("n_samples", "n_poles"):
             v = getattr(self, name)
@@ -350,8 +321,8 @@ class FrequencyExperiment:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise bad(name, "must be a finite number > 0")
-        if self.plant not in ("nonlinear", "linear"):
-            raise bad("plant", "use nonlinear or linear")
+        if self.model not in MODELS:
+            raise bad("model", f"use one of {', '.join(MODELS)}")
         if self.controller not in ("zoh", "continuous"):
             raise bad("controller", "use zoh or continuous")
         for name in ("initial_condition", "input_offset"):
@@ -370,9 +341,8 @@ class FrequencyExperiment:
         """Run the loop on ``excitation.u`` and record r, u, x at Ts."""
         from .simulate import simulate_closed_loop
 
-        model = "nonlinear" if self.plant == "nonlinear" else "linear"
         return simulate_closed_loop(params, excitation.u, kp=self.kp, ts=self.ts,
-                                    controller=self.controller, model=model,
+                                    controller=self.controller, model=self.model,
                                     label=f"closed loop, seed {excitation.seed}", cancel=cancel)
 
     def cost(self):
@@ -403,33 +373,69 @@ class FrequencyExperiment:
 
 
 @dataclass(frozen=True, eq=False)
+class BodeData:
+    """Fig. 12: the estimate's and eq. 24's frequency responses on a grid up to
+    the Nyquist frequency, and the ETFE's phase drawn on the estimate's branch
+    (an ETFE phase is known modulo 360 degrees)."""
+
+    w: np.ndarray
+    estimate: FrequencyResponseData
+    theoretical: FrequencyResponseData
+    etfe_phase_deg: np.ndarray
+
+
+def bode_data(estimate: TFEstimate, theoretical, etfe: FrequencyResponseData, ts: float,
+              n_points: int = 400) -> BodeData:
+    """The curves of Fig. 12 from 0.01 rad/s to the Nyquist frequency pi/ts."""
+    from .identify.validate import frequency_response
+
+    w = np.logspace(-2, np.log10(np.pi / ts), n_points)
+    model_phase = estimate.frequency_response(etfe.w).phase_deg
+    etfe_phase = model_phase + (np.asarray(etfe.phase_deg) - model_phase + 180.0) % 360.0 - 180.0
+    return BodeData(w=w, estimate=estimate.frequency_response(w), theoretical=frequency_response(*theoretical, w),
+                    etfe_phase_deg=etfe_phase)
+
+
+@dataclass(frozen=True, eq=False)
 class FrequencyIdentification:
     """Everything the frequency-domain step produces (Figs. 8-13, eqs. 24-27).
 
     ``estimate`` is H_hat (r -> x); ``theoretical`` the linearised H(s) of
-    eq. 24; ``open_loop`` P_hat (eq. 26) and ``backout`` the physical
-    parameters (eq. 27) when the model has 3 poles and no zero; ``etfe`` the
-    empirical transfer function at the excited frequencies; ``validation`` the
-    comparison on a fresh excitation. When the estimation fails (``success``
-    False, ``message`` says why), ``validation`` and ``residuals`` are None.
+    eq. 24 (``linear`` the linearisation behind it); ``open_loop`` P_hat
+    (eq. 26) and ``backout`` the physical parameters (eq. 27) when the model
+    has 3 poles and no zero; ``etfe`` the empirical transfer function at the
+    excited frequencies; ``validation`` the comparison on a fresh excitation.
+    The curves of Figs. 11-12: ``estimate_output`` (H_hat's output on the
+    estimation data), ``theoretical_comparison`` (eq. 24's, its initial state
+    estimated) and ``bode``. When the estimation fails (``success`` False,
+    ``message`` says why), those and ``validation`` and ``residuals`` are None.
     """
 
     config: FrequencyExperiment
     params: ActuatorParams
-    excitation: object
+    linear: LinearModel
+    excitation: Excitation
     data: SimulationResult
-    estimate: object
+    estimate: TFEstimate
     theoretical: tuple[np.ndarray, np.ndarray]
     open_loop: tuple[np.ndarray, np.ndarray] | None
-    backout: object | None
-    etfe: object
-    residuals: object | None
-    validation_excitation: object
+    backout: BackoutResult | None
+    etfe: FrequencyResponseData
+    residuals: ResidualAnalysis | None
+    validation_excitation: Excitation
     validation_data: SimulationResult
-    validation: object | None
+    validation: CompareResult | None
+    estimate_output: np.ndarray | None
+    theoretical_comparison: CompareResult | None
+    bode: BodeData | None
     success: bool
     message: str
     timings: dict = field(default_factory=dict)
+
+    @property
+    def peak_speed(self) -> float:
+        """The largest piston speed during the experiment [m/s]."""
+        return float(np.abs(self.data.v).max())
 
     def to_dict(self) -> dict:
         e = self.estimate
@@ -507,7 +513,7 @@ def run_frequency_identification(params: ActuatorParams | None = None,
     validation_excitation = config.excitation(config.validation_seed if config.validation_seed is not None
                                               else excitation.seed + 1)
     validation_data = config.closed_loop(params, validation_excitation, cancel)
-    open_loop = back = validation = residuals = None
+    open_loop = back = validation = residuals = y_hat = theory = bode = None
     if est.success and np.all(np.isfinite(est.den)):
         # compare and the residuals simulate the estimate once each (as one
         # tfest residual): checks between them are enough
@@ -515,14 +521,19 @@ def run_frequency_identification(params: ActuatorParams | None = None,
         validation = compare(est.num, est.den, validation_data.r, validation_data.x, config.ts,
                              initial_condition=config.initial_condition, input_offset=config.input_offset)
         check(cancel)
-        residuals = residual_analysis(data.x - est.simulate(data.r, x0=est.x0, input_offset=est.input_offset), data.r)
+        y_hat = est.simulate(data.r, x0=est.x0, input_offset=est.input_offset)
+        residuals = residual_analysis(data.x - y_hat, data.r)
+        check(cancel)
+        theory = compare(*theoretical, data.r, data.x, config.ts, initial_condition="estimate")
+        bode = bode_data(est, theoretical, etfe, config.ts)
         check(cancel)
         if (config.n_poles, config.n_zeros) == (3, 0):
             open_loop = open_loop_from_closed(est.num, est.den, config.kp)
             back = backout(*open_loop, params, lin.op, std_h=est.param_std, kp=config.kp)
     return FrequencyIdentification(
-        config=config, params=params, excitation=excitation, data=data, estimate=est,
+        config=config, params=params, linear=lin, excitation=excitation, data=data, estimate=est,
         theoretical=theoretical, open_loop=open_loop, backout=back, etfe=etfe, residuals=residuals,
         validation_excitation=validation_excitation, validation_data=validation_data,
-        validation=validation, success=bool(est.success), message=est.message, timings=timings,
+        validation=validation, estimate_output=y_hat, theoretical_comparison=theory, bode=bode,
+        success=bool(est.success), message=est.message, timings=timings,
     )

@@ -25,13 +25,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._checks import positive_number
+from ._checks import not_allowed, positive_number
 from .params import ActuatorParams, ParameterError
 
-__all__ = ["OperatingPoint", "LinearModel", "operating_point", "linearize", "BRANCHES"]
+__all__ = ["OperatingPoint", "LinearModel", "operating_point", "linearize", "VALVE_BRANCHES", "PACKED_LINEAR",
+           "N_PACKED_LINEAR"]
 
 #: Branch names of the piecewise-linear model.
-BRANCHES = ("positive", "negative")
+#: The valve's two linearisations: u >= 0 ('positive') and u < 0 ('negative'), eq. 13.
+VALVE_BRANCHES = ("positive", "negative")
 
 
 @dataclass(frozen=True)
@@ -57,7 +59,7 @@ def operating_point(params: ActuatorParams, x_e: float = 0.0, p1_e: float | None
     """The working point of eq. 10.
 
     Any position is an equilibrium when u = 0 and the forces balance, so the
-    point is chosen: x_e = 0 (SPEC.md section 2) and p1_e = the initial
+    point is chosen: x_e = 0 (docs/model.md §3) and p1_e = the initial
     piston-chamber pressure p1_0 unless given; p2_e = (A1 p1_e - d0) / A2.
     """
     p1 = params.p1_0 if p1_e is None else float(p1_e)
@@ -67,8 +69,16 @@ def operating_point(params: ActuatorParams, x_e: float = 0.0, p1_e: float | None
         raise ParameterError("p1_e", p1, f"must lie within [pr, ps] = [{params.pr:.6g}, {params.ps:.6g}] Pa")
     p2 = (params.A1 * p1 - params.d0) / params.A2
     if not params.pr <= p2 <= params.ps:
-        raise ParameterError("p2_e", p2, f"the force balance (A1 p1_e - d0)/A2 must lie within [pr, ps] = [{params.pr:.6g}, {params.ps:.6g}] Pa")
+        raise ParameterError("p2_e", p2, "the force balance (A1 p1_e - d0)/A2 must lie within [pr, ps] = "
+                             f"[{params.pr:.6g}, {params.ps:.6g}] Pa")
     return OperatingPoint(x=float(x_e), v=0.0, p1=p1, p2=p2)
+
+
+#: Layout of :meth:`LinearModel.packed`, the vector the compiled integrator
+#: reads: A row by row, B for u >= 0, B for u < 0, E, the operating point's state.
+PACKED_LINEAR = {"A": slice(0, 16), "B_positive": slice(16, 20), "B_negative": slice(20, 24),
+                 "E": slice(24, 28), "state": slice(28, 32)}
+N_PACKED_LINEAR = 32
 
 
 @dataclass(frozen=True)
@@ -90,6 +100,16 @@ class LinearModel:
     B_positive: np.ndarray = field(repr=False)
     B_negative: np.ndarray = field(repr=False)
     E: np.ndarray = field(repr=False)
+
+    @property
+    def friction_damping(self) -> float:
+        """2 k_f Af / pi [N s/m]: the friction's slope at v = 0, part of l1 M (Table 2)."""
+        p = self.params
+        return 2.0 * p.k_f * p.Af / math.pi
+
+    def gain(self, branch: str = "positive") -> float:
+        """The numerator of P(s) (eq. 23) for a valve branch: l5 l2 + l6 l3."""
+        return float(self.tf_coeffs(branch)[0][-1])
 
     def B(self, branch: str = "positive") -> np.ndarray:
         """Input vector of a branch: 'positive' (u >= 0) or 'negative' (u < 0)."""
@@ -119,6 +139,32 @@ class LinearModel:
     def closed_loop_poles(self, kp: float, branch: str = "positive") -> np.ndarray:
         """Poles of H(s) for the proportional gain ``kp``."""
         return np.roots(self.closed_loop_coeffs(kp, branch)[1])
+
+    def packed(self) -> np.ndarray:
+        """The model as the float vector the compiled integrator reads (:data:`PACKED_LINEAR`)."""
+        return np.concatenate([self.A.ravel(), self.B_positive, self.B_negative, self.E, self.op.state])
+
+    def to_dict(self, kp: float = 10.0) -> dict:
+        """Everything of the linearisation as plain numbers (JSON-ready); H(s) for ``kp``."""
+        num, den = self.tf_coeffs()
+        cnum, cden = self.closed_loop_coeffs(kp)
+
+        def pairs(values):
+            return [[float(v.real), float(v.imag)] for v in values]
+
+        return {
+            "operating_point": self.op.to_dict(),
+            "lambdas": list(self.lambdas),
+            "lambdas_negative_branch": list(self.lambdas_negative),
+            "A": self.A.tolist(),
+            "B": self.B_positive.tolist(),
+            "B_negative_branch": self.B_negative.tolist(),
+            "E": self.E.tolist(),
+            "tf": {"num": num.tolist(), "den": den.tolist()},
+            "closed_loop_tf": {"num": cnum.tolist(), "den": cden.tolist(), "kp": kp},
+            "poles": pairs(self.poles()),
+            "closed_loop_poles": pairs(self.closed_loop_poles(kp)),
+        }
 
     # -- python-control interchange types --------------------------------------
     def tf(self, branch: str = "positive"):
@@ -190,5 +236,5 @@ def linearize(params: ActuatorParams, op: OperatingPoint | None = None) -> Linea
 
 
 def _check_branch(branch: str) -> None:
-    if branch not in BRANCHES:
-        raise ValueError(f"branch = {branch!r} is not allowed: use one of {', '.join(BRANCHES)}")
+    if branch not in VALVE_BRANCHES:
+        raise not_allowed("branch", branch, f"use one of {', '.join(VALVE_BRANCHES)}")

@@ -7,7 +7,7 @@ solver, the python-control peer in the benchmark) and compiled by numba
 
 States xi = [x, v, p1, p2] (SI units), input u [V], load disturbance d [N].
 
-Physical bounds are part of the model (SPEC.md section 1):
+Physical bounds are part of the model (docs/model.md §1):
 
 * the pressure drop under each square root is clipped at zero;
 * pr <= p1, p2 <= ps: at a bound a pressure does not move further outward;
@@ -32,13 +32,15 @@ import numpy as np
 
 from .params import ActuatorParams
 
-__all__ = ["pack_params", "derivatives", "project_state", "rhs", "PARAM_INDEX"]
+__all__ = ["pack_params", "derivatives", "project_state", "rhs", "PARAM_INDEX", "N_PACKED_PARAMS"]
 
 #: Layout of the packed parameter vector used by the compiled code.
 PARAM_INDEX = {
     "M": 0, "B": 1, "Af": 2, "beta_e": 3, "A1": 4, "A2": 5, "L0": 6, "Kq1": 7,
     "Kq2": 8, "ps": 9, "pr": 10, "k_f": 11, "x_max": 12, "d0": 13,
 }
+#: Length of the packed parameter vector.
+N_PACKED_PARAMS = len(PARAM_INDEX)
 
 
 def pack_params(params: ActuatorParams) -> np.ndarray:

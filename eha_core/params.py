@@ -1,7 +1,7 @@
 """Physical parameters of the actuator, their units, validation and derived values.
 
 The defaults are those of the paper (Tables 1 and 3); L0 and Kq1 = Kq2 are not
-printed there and are the values that reproduce eq. 23 (see SPEC.md, section 1).
+printed there and are the values that reproduce eq. 23 (docs/model.md §2).
 
 Examples
 --------
@@ -24,6 +24,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from ._checks import shown
 
 __all__ = [
     "ActuatorParams",
@@ -52,13 +54,7 @@ class ParameterError(ValueError):
         self.field = field
         self.value = value
         self.allowed = allowed
-        super().__init__(f"{field} = {_fmt(value)} is not allowed: {allowed}")
-
-
-def _fmt(value) -> str:
-    if isinstance(value, float) and math.isfinite(value):
-        return f"{value:.6g}"
-    return str(value)
+        super().__init__(f"{field} = {shown(value)} is not allowed: {allowed}")
 
 
 @dataclass(frozen=True)
@@ -94,6 +90,11 @@ FIELD_INFO: dict[str, FieldInfo] = {
 
 #: Names accepted by ``--param NAME=VALUE`` and by :meth:`ActuatorParams.replace`.
 PARAM_NAMES: tuple[str, ...] = tuple(FIELD_INFO)
+
+
+def _unit_and_meaning(name: str) -> str:
+    """``"kg (mass of the piston and load)"``: how a bound's message names the field."""
+    return f"{FIELD_INFO[name].unit} ({FIELD_INFO[name].description})"
 
 
 @dataclass(frozen=True)
@@ -138,20 +139,21 @@ class ActuatorParams:
             # store plain floats so that equal parameter sets hash equal
             object.__setattr__(self, f.name, float(value))
 
-        info = FIELD_INFO
         for name in ("M", "beta_e", "Dc", "dc", "L0", "Kq1", "Kq2", "ps"):
             if getattr(self, name) <= 0:
-                raise ParameterError(name, getattr(self, name), f"must be > 0 {info[name].unit} ({info[name].description})")
+                raise ParameterError(name, getattr(self, name), f"must be > 0 {_unit_and_meaning(name)}")
         for name in ("B", "Af", "k_f", "pr"):
             if getattr(self, name) < 0:
-                raise ParameterError(name, getattr(self, name), f"must be >= 0 {info[name].unit} ({info[name].description})")
+                raise ParameterError(name, getattr(self, name), f"must be >= 0 {_unit_and_meaning(name)}")
         if self.dc >= self.Dc:
             raise ParameterError("dc", self.dc, f"the rod diameter must be smaller than the bore Dc = {self.Dc:.6g} m")
         if self.pr >= self.ps:
-            raise ParameterError("pr", self.pr, f"the return pressure must be below the supply pressure ps = {self.ps:.6g} Pa")
+            raise ParameterError("pr", self.pr,
+                                 f"the return pressure must be below the supply pressure ps = {self.ps:.6g} Pa")
         x_max = self.x_max
         if abs(self.x0) > x_max:
-            raise ParameterError("x0", self.x0, f"must lie within the end stops [-{x_max:.6g}, {x_max:.6g}] m (|x0| <= 0.8 L0)")
+            raise ParameterError("x0", self.x0,
+                                 f"must lie within the end stops [-{x_max:.6g}, {x_max:.6g}] m (|x0| <= 0.8 L0)")
         if not self.pr <= self.p1_0 <= self.ps:
             raise ParameterError("p1_0", self.p1_0, f"must lie within [pr, ps] = [{self.pr:.6g}, {self.ps:.6g}] Pa")
         p2 = self.p2_init
@@ -208,7 +210,7 @@ class ActuatorParams:
         }
 
     # -- conversions ------------------------------------------------------
-    def replace(self, **changes) -> "ActuatorParams":
+    def replace(self, **changes) -> ActuatorParams:
         """A copy with some fields changed (validated again).
 
         >>> ActuatorParams().replace(M=5000.0).M
@@ -223,22 +225,16 @@ class ActuatorParams:
         """Field values by name (SI units)."""
         return dataclasses.asdict(self)
 
-    def as_vector(self) -> np.ndarray:
-        """Packed parameter vector for the compiled model (see :mod:`eha_core.model`)."""
-        from .model import pack_params
-
-        return pack_params(self)
-
 
 def parse_param_assignments(items, base: ActuatorParams | None = None) -> ActuatorParams:
     """Apply ``NAME=VALUE`` strings (the command line's ``--param``) to ``base``.
 
     >>> parse_param_assignments(["M=5000", "p1_0=10e6"]).M
     5000.0
-    >>> parse_param_assignments(["mass=1"])
+    >>> parse_param_assignments(["mass=1"])  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    eha_core.params.ParameterError: mass = 1 is not allowed: unknown parameter; known: M, B, Af, beta_e, Dc, dc, d0, L0, Kq1, Kq2, ps, pr, k_f, x0, v0, p1_0, p2_0
+    eha_core.params.ParameterError: mass = 1 is not allowed: unknown parameter; known: M, B, Af, beta_e, ..., p2_0
     """
     base = base if base is not None else ActuatorParams()
     changes: dict[str, float | None] = {}

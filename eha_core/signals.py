@@ -4,16 +4,24 @@ Every signal is a frozen dataclass, callable on an array of times (seconds) and
 returning an array of values; ``a + b`` builds a sum. They are hashable, so
 results computed from them can be cached.
 
-The command line writes signals as text (:func:`parse_signal`)::
+Signals written as text
+-----------------------
+The one grammar for inputs and disturbances, read by :func:`parse_signal` for
+the command line (``--u``, ``--d``, ``--disturbance``), the app's fields and
+the core's presets (:data:`SIGNAL_GRAMMAR` is this text)::
 
-    sine:AMP:FREQ_HZ[:PHASE_RAD]     AMP sin(2 pi FREQ_HZ t + PHASE_RAD)
+    sine:AMP[:FREQ_HZ[:PHASE_RAD]]   AMP sin(2 pi FREQ_HZ t + PHASE_RAD); 1 Hz if no frequency
     step:AMP[:T0]                    0 before T0, AMP after
     square:AMP:FREQ_HZ               +AMP for the first half period, -AMP after
     chirp:AMP:F0_HZ:F1_HZ[:T1]       linear sweep from F0 at t = 0 to F1 at t = T1
-    noise:SIGMA[:SEED[:HOLD_S]]      white Gaussian noise, held over each HOLD_S
+    noise:SIGMA[:SEED[:HOLD_S]]      white Gaussian noise, a new value every HOLD_S
+    white:SIGMA[:SEED[:HOLD_S]]      the same (the name of the paper's scenario)
     const:VALUE  (or just VALUE)     a constant
     none                             zero
     A+B                              the sum of two signals
+
+A noise without a seed or hold time takes the ones given to :func:`parse_signal`
+(the run's seed, and its sample interval: 1 ms by default).
 
 Examples
 --------
@@ -36,16 +44,26 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._checks import not_allowed, shown
+
 __all__ = [
     "Signal", "Constant", "Sine", "Step", "Square", "Chirp", "WhiteNoise",
-    "Sampled", "Sum", "ZERO", "parse_signal", "SignalSpecError", "SIGNAL_SYNTAX",
+    "Sampled", "Sum", "ZERO", "parse_signal", "SignalSpecError", "SIGNAL_SYNTAX", "SIGNAL_GRAMMAR",
 ]
 
 SIGNAL_SYNTAX = (
-    "sine:AMP:FREQ_HZ[:PHASE_RAD], step:AMP[:T0], square:AMP:FREQ_HZ, "
-    "chirp:AMP:F0_HZ:F1_HZ[:T1], noise:SIGMA[:SEED[:HOLD_S]], const:VALUE, none; "
+    "sine:AMP[:FREQ_HZ[:PHASE_RAD]], step:AMP[:T0], square:AMP:FREQ_HZ, "
+    "chirp:AMP:F0_HZ:F1_HZ[:T1], noise:SIGMA[:SEED[:HOLD_S]], white:SIGMA[...], const:VALUE, none; "
     "join with + for a sum"
 )
+
+
+#: The grammar of signals as text, for the command line's help.
+SIGNAL_GRAMMAR = """signals as text (inputs and disturbances), terms joined with '+':
+  sine:AMP[:FREQ_HZ[:PHASE_RAD]]   (1 Hz if no frequency)   step:AMP[:T0]   square:AMP:FREQ_HZ
+  chirp:AMP:F0_HZ:F1_HZ[:T1]   noise:SIGMA[:SEED[:HOLD_S]] (or white:...)   const:VALUE   none
+  e.g. "sine:5000:1+noise:100:7"; a noise without SEED takes --seed, without HOLD_S the sample interval
+"""
 
 
 class SignalSpecError(ValueError):
@@ -69,7 +87,7 @@ class Signal:
     def __call__(self, t) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def __add__(self, other: "Signal") -> "Signal":
+    def __add__(self, other: Signal) -> Signal:
         if not isinstance(other, Signal):
             return NotImplemented
         terms = (self.terms if isinstance(self, Sum) else (self,)) + (
@@ -152,6 +170,8 @@ class Step(Signal):
 
     @property
     def spec(self):
+        if self.initial:  # the grammar's step starts from 0: a constant carries the level before t0
+            return f"const:{_g(self.initial)}+step:{_g(self.amplitude - self.initial)}:{_g(self.t0)}"
         return f"step:{_g(self.amplitude)}" + (f":{_g(self.t0)}" if self.t0 else "")
 
     @property
@@ -174,7 +194,8 @@ class Square(Signal):
 
     @property
     def spec(self):
-        return f"square:{_g(self.amplitude)}:{_g(self.freq_hz)}"
+        s = f"square:{_g(self.amplitude)}:{_g(self.freq_hz)}"
+        return s + (f"+const:{_g(self.offset)}" if self.offset else "")
 
     @property
     def label(self):
@@ -276,7 +297,11 @@ class WhiteNoise(Signal):
 @dataclass(frozen=True, eq=False)
 class Sampled(Signal):
     """A sampled signal: values at times ``t``, held (``'zoh'``) or interpolated
-    (``'linear'``) in between; the last value holds after the end."""
+    (``'linear'``) in between; the last value holds after the end.
+
+    ``name`` is what the samples are called (``u``, ``d``, ``r``, ``data``): in
+    :attr:`spec`, and in the message that refuses bad values.
+    """
 
     t: np.ndarray
     values: np.ndarray
@@ -284,16 +309,24 @@ class Sampled(Signal):
     name: str = "data"
 
     def __post_init__(self):
+        # The values are named by ``name`` (what the caller calls the signal:
+        # u, d, r, data); samples are counted from 0, as numpy indexes them.
         t = np.asarray(self.t, dtype=float).ravel()
         v = np.asarray(self.values, dtype=float).ravel()
-        if t.size == 0 or t.size != v.size:
-            raise ValueError(f"Sampled: t and values must be non-empty and of equal length (got {t.size} and {v.size})")
-        if not np.all(np.isfinite(t)) or not np.all(np.isfinite(v)):
-            raise ValueError("Sampled: t and values must be finite numbers")
+        if t.size == 0:
+            raise not_allowed("t", t, "need at least one sample time")
+        if t.size != v.size:
+            raise not_allowed(self.name, v, f"{v.size} values for {t.size} times; give one value per time")
+        for label, arr in (("t", t), (self.name, v)):
+            if not np.all(np.isfinite(arr)):
+                k = int(np.argmin(np.isfinite(arr)))
+                raise not_allowed(label, arr, f"sample {k} is {arr[k]:g}; every sample must be a finite number")
         if t.size > 1 and np.any(np.diff(t) <= 0):
-            raise ValueError("Sampled: t must be strictly increasing")
+            k = int(np.argmax(np.diff(t) <= 0)) + 1
+            raise not_allowed("t", t, f"the times must increase strictly; sample {k} is {t[k]:g} "
+                                              f"after {t[k - 1]:g}")
         if self.hold not in ("zoh", "linear"):
-            raise ValueError(f"Sampled: hold = {self.hold!r} is not allowed: use 'zoh' or 'linear'")
+            raise not_allowed("hold", self.hold, "use zoh or linear")
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "values", v)
 
@@ -340,7 +373,7 @@ class Sum(Signal):
 
 _KINDS = {
     # kind: (constructor, names of the required fields, names of optional fields)
-    "sine": (Sine, ("amplitude", "freq_hz"), ("phase",)),
+    "sine": (Sine, ("amplitude",), ("freq_hz", "phase")),
     "step": (Step, ("amplitude",), ("t0",)),
     "square": (Square, ("amplitude", "freq_hz"), ()),
     "chirp": (Chirp, ("amplitude", "f0_hz", "f1_hz"), ("t1",)),
@@ -350,31 +383,38 @@ _KINDS = {
 }
 
 
-def parse_signal(text: str, name: str = "signal") -> Signal:
-    """Read a signal from its text form (see the module docstring).
+def parse_signal(text, name: str = "signal", *, seed: int = 0, hold_s: float = 1e-3) -> Signal:
+    """Read a signal from its text form (:data:`SIGNAL_GRAMMAR`); a Signal is returned as is.
 
-    ``name`` is used in error messages (e.g. ``"--u"``).
+    ``name`` is used in error messages (e.g. ``"--u"``); ``seed`` and
+    ``hold_s`` are those of a noise term that gives none.
 
     >>> parse_signal("noise:1000:3")
     WhiteNoise(sigma=1000.0, seed=3, hold_s=0.001)
+    >>> parse_signal("white:1000", seed=7)
+    WhiteNoise(sigma=1000.0, seed=7, hold_s=0.001)
+    >>> parse_signal("sine:5000")
+    Sine(amplitude=5000.0, freq_hz=1.0, phase=0.0, offset=0.0)
     >>> parse_signal("sine:two:2", name="--u")
     Traceback (most recent call last):
     ...
-    eha_core.signals.SignalSpecError: --u = 'sine:two:2' is not allowed: amplitude 'two' is not a number
+    eha_core.signals.SignalSpecError: --u = sine:two:2 is not allowed: amplitude two is not a number
     """
+    if isinstance(text, Signal):
+        return text
     if not isinstance(text, str) or not text.strip():
-        raise SignalSpecError(f"{name} = {text!r} is not allowed: expected {SIGNAL_SYNTAX}")
+        raise SignalSpecError(f"{name} = {shown(text)} is not allowed: expected {SIGNAL_SYNTAX}")
     # '+' joins terms, except inside a number's exponent (1e+3)
     parts = [p.strip() for p in re.split(r"(?<![eE])\+", text.strip())]
     total: Signal = ZERO
     for part in parts:
-        total = total + _parse_term(part, text, name)
+        total = total + _parse_term(part, text, name, {"seed": int(seed), "hold_s": float(hold_s)})
     return total
 
 
-def _parse_term(part: str, whole: str, name: str) -> Signal:
+def _parse_term(part: str, whole: str, name: str, defaults: dict) -> Signal:
     def fail(why: str) -> SignalSpecError:
-        return SignalSpecError(f"{name} = {whole!r} is not allowed: {why}")
+        return SignalSpecError(f"{name} = {shown(whole)} is not allowed: {why}")
 
     if part.lower() in ("none", "zero", "0"):
         return ZERO
@@ -385,28 +425,39 @@ def _parse_term(part: str, whole: str, name: str) -> Signal:
     kind, *args = [a.strip() for a in part.split(":")]
     kind = kind.lower()
     if kind not in _KINDS:
-        raise fail(f"unknown signal kind {kind!r}; use {SIGNAL_SYNTAX}")
+        raise fail(f"unknown signal kind {shown(kind)}; use {SIGNAL_SYNTAX}")
     ctor, required, optional = _KINDS[kind]
     if not len(required) <= len(args) <= len(required) + len(optional):
         usage = ":".join([kind] + [r.upper() for r in required] + [f"[{o.upper()}]" for o in optional])
-        raise fail(f"{kind} takes {usage}")
+        raise fail(f"{kind} takes {usage} ({len(args)} field{'s' if len(args) != 1 else ''} given)")
+    kwargs = _parse_fields(required + optional, args, fail)
+    if ctor is WhiteNoise:
+        kwargs = {**defaults, **kwargs}
+    if ctor is Sine:
+        kwargs.setdefault("freq_hz", 1.0)     # the paper's disturbance frequency
+    return ctor(**kwargs)
+
+
+def _parse_fields(names: tuple[str, ...], texts: list[str], fail) -> dict:
+    """The numbers of a term's fields, by name; ``fail(why)`` builds the error.
+
+    ``texts`` may be shorter than ``names`` (optional fields left out).
+    """
     kwargs = {}
-    for fname, text in zip(required + optional, args):
+    for fname, text in zip(names, texts, strict=False):
         try:
             value = float(text)
         except ValueError:
-            raise fail(f"{fname} {text!r} is not a number") from None
+            raise fail(f"{fname} {shown(text)} is not a number") from None
         if not math.isfinite(value):
-            raise fail(f"{fname} {text!r} is not a finite number")
+            raise fail(f"{fname} {text} is not a finite number")
         if fname == "seed":
             if value != int(value) or value < 0:
-                raise fail(f"seed {text!r} must be a non-negative integer")
+                raise fail(f"seed {text} is not a whole number >= 0")
             value = int(value)
+        if fname in ("freq_hz", "t1", "hold_s") and value <= 0:
+            raise fail(f"{fname} {text} must be > 0")
+        if fname in ("sigma", "f0_hz", "f1_hz") and value < 0:
+            raise fail(f"{fname} {text} must be >= 0")
         kwargs[fname] = value
-    for fname in ("freq_hz", "t1", "hold_s"):
-        if fname in kwargs and kwargs[fname] <= 0:
-            raise fail(f"{fname} must be > 0")
-    for fname in ("sigma", "f0_hz", "f1_hz"):
-        if fname in kwargs and kwargs[fname] < 0:
-            raise fail(f"{fname} must be >= 0")
-    return ctor(**kwargs)
+    return kwargs

@@ -29,21 +29,21 @@ Examples
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
 
 import numpy as np
 
-from ._checks import positive_number
+from ._checks import not_allowed, positive_number
 from .cancel import CancelToken
-from .linear import OperatingPoint, linearize
-from .model import pack_params
+from .linear import N_PACKED_LINEAR, VALVE_BRANCHES, OperatingPoint, linearize
+from .model import N_PACKED_PARAMS, pack_params
 from .params import ActuatorParams
 from .signals import ZERO, Constant, Sampled, Signal
 
 __all__ = [
     "SimulationResult", "simulate", "simulate_many", "simulate_closed_loop", "runs_to_pandas",
-    "simulation_cost", "SimulationCost", "DEFAULT_H_MAX", "MODELS", "BRANCHES", "CONTROLLERS", "CHUNK_STEPS",
+    "simulation_cost", "SimulationCost", "DEFAULT_H_MAX", "MODELS", "SIMULATION_BRANCHES", "CONTROLLERS", "CHUNK_STEPS",
 ]
 
 #: Largest integration step [s]. RK4 at 5e-4 s keeps the error near 2e-7 of
@@ -52,7 +52,9 @@ __all__ = [
 #: gives h lambda = 0.19, far inside RK4's stability region.
 DEFAULT_H_MAX = 5e-4
 MODELS = ("nonlinear", "linear")
-BRANCHES = ("switching", "positive", "negative")
+#: How a linearised run uses the valve's branches: switching with the sign of u
+#: (the paper's Fig. 3), or one of :data:`~eha_core.linear.VALVE_BRANCHES` throughout.
+SIMULATION_BRANCHES = ("switching", *VALVE_BRANCHES)
 CONTROLLERS = ("zoh", "continuous")
 #: Guards so that one request cannot exhaust a shared server.
 MAX_STEPS = 20_000_000
@@ -166,7 +168,7 @@ def _as_signal(obj, name: str, t_out: np.ndarray, hold: str = "linear") -> Signa
         return Constant(float(obj))
     arr = np.asarray(obj, dtype=float).ravel()
     if arr.size != t_out.size:
-        raise ValueError(f"{name}: {arr.size} samples given, but the run has {t_out.size} output samples "
+        raise not_allowed(name, arr, f"{arr.size} samples given, but the run has {t_out.size} output samples "
                          f"(t = 0, dt, ..., t_end); give one value per output sample")
     return Sampled(t_out, arr, hold=hold, name=name)
 
@@ -174,10 +176,10 @@ def _as_signal(obj, name: str, t_out: np.ndarray, hold: str = "linear") -> Signa
 def _sample(sig: Signal, name: str, t: np.ndarray) -> np.ndarray:
     vals = np.asarray(sig(t), dtype=float)
     if vals.shape != t.shape:
-        raise ValueError(f"{name}: the signal returned shape {vals.shape} for {t.shape} times")
+        raise not_allowed(name, sig, f"the signal returned shape {vals.shape} for {t.shape} times")
     if not np.all(np.isfinite(vals)):
         bad = t[~np.isfinite(vals)][0]
-        raise ValueError(f"{name}: the signal is not finite at t = {bad:g} s")
+        raise not_allowed(name, sig, f"the signal is not finite at t = {bad:g} s")
     return vals
 
 
@@ -206,16 +208,16 @@ def _grid(t_end, dt, h_max, ts=None):
     dt = positive_number("dt", dt, "must be a finite number of seconds > 0")
     h_max = positive_number("h_max", h_max, "must be a finite number of seconds > 0")
     if dt > t_end:
-        raise ValueError(f"dt = {dt:g} is not allowed: must not exceed t_end = {t_end:g} s")
+        raise not_allowed("dt", dt, f"must not exceed t_end = {t_end:g} s")
     n_out = t_end / dt
     if abs(n_out - round(n_out)) > 1e-6 * max(1.0, n_out):
-        raise ValueError(f"t_end = {t_end:g} is not allowed: must be a whole number of output intervals dt = {dt:g} s")
+        raise not_allowed("t_end", t_end, f"must be a whole number of output intervals dt = {dt:g} s")
     n_out = int(round(n_out))
     base = dt
     if ts is not None:
         ratio = max(dt, ts) / min(dt, ts)
         if abs(ratio - round(ratio)) > 1e-6 * ratio:
-            raise ValueError(f"ts = {ts:g} is not allowed: dt = {dt:g} and ts must be whole multiples of one another")
+            raise not_allowed("ts", ts, f"dt = {dt:g} and ts must be whole multiples of one another")
         base = min(dt, ts)
     per_base = max(1, math.ceil(base / h_max - 1e-9))
     h = base / per_base
@@ -223,9 +225,11 @@ def _grid(t_end, dt, h_max, ts=None):
     ctrl_every = int(round(ts / h)) if ts is not None else 1
     n_steps = n_out * sub
     if n_steps > MAX_STEPS:
-        raise ValueError(f"t_end = {t_end:g} is not allowed with h_max = {h_max:g}: {n_steps} steps exceed the limit {MAX_STEPS}")
+        raise not_allowed("t_end", t_end, f"{n_steps} integration steps (h_max = {h_max:g} s) exceed the limit "
+                                          f"{MAX_STEPS}; shorten the run")
     if n_out + 1 > MAX_OUTPUT_SAMPLES:
-        raise ValueError(f"dt = {dt:g} is not allowed for t_end = {t_end:g}: {n_out + 1} samples exceed the limit {MAX_OUTPUT_SAMPLES}")
+        raise not_allowed("dt", dt, f"{n_out + 1} output samples over t_end = {t_end:g} s exceed the limit "
+                                    f"{MAX_OUTPUT_SAMPLES}; use a larger dt")
     return h, sub, ctrl_every, n_steps, n_out + 1
 
 
@@ -233,9 +237,9 @@ def _mode(model: str, branch: str) -> int:
     from . import _kernels as K
 
     if model not in MODELS:
-        raise ValueError(f"model = {model!r} is not allowed: use one of {', '.join(MODELS)}")
-    if branch not in BRANCHES:
-        raise ValueError(f"branch = {branch!r} is not allowed: use one of {', '.join(BRANCHES)}")
+        raise not_allowed("model", model, f"use one of {', '.join(MODELS)}")
+    if branch not in SIMULATION_BRANCHES:
+        raise not_allowed("branch", branch, f"use one of {', '.join(SIMULATION_BRANCHES)}")
     if model == "nonlinear":
         return K.NONLINEAR
     return {"switching": K.LINEAR_SWITCHING, "positive": K.LINEAR_POSITIVE, "negative": K.LINEAR_NEGATIVE}[branch]
@@ -243,17 +247,17 @@ def _mode(model: str, branch: str) -> int:
 
 def _lin_vector(params: ActuatorParams, op: OperatingPoint | None, needed: bool) -> np.ndarray:
     if not needed:
-        return np.zeros(32)
-    lin = linearize(params, op)
-    return np.concatenate([lin.A.ravel(), lin.B_positive, lin.B_negative, lin.E, lin.op.state])
+        return np.zeros(N_PACKED_LINEAR)
+    return linearize(params, op).packed()
 
 
-def _initial(params: ActuatorParams, x0) -> np.ndarray:
-    if x0 is None:
+def _initial(params: ActuatorParams, initial_state) -> np.ndarray:
+    """The run's initial state: given ([x, v, p1, p2]) or the parameters' initial conditions."""
+    if initial_state is None:
         return params.initial_state
-    y0 = np.asarray(x0, dtype=float).ravel()
+    y0 = np.asarray(initial_state, dtype=float).ravel()
     if y0.size != 4 or not np.all(np.isfinite(y0)):
-        raise ValueError(f"x0 = {x0!r} is not allowed: give four finite numbers [x, v, p1, p2]")
+        raise not_allowed("initial_state", initial_state, "give four finite numbers [x, v, p1, p2]")
     return y0
 
 
@@ -261,7 +265,8 @@ def _model_label(model: str, branch: str) -> str:
     return model if model == "nonlinear" else ("linear" if branch == "switching" else f"linear-{branch}")
 
 
-def _finish(out, status, t, d_vals, params, model_label, label, r=None, controller="open-loop", kp=None, h=float("nan")):
+def _simulation_result(out, status, t, d_vals, params, model_label, label, r=None, controller="open-loop", kp=None,
+                       h=float("nan")):
     success = status < 0
     message = "ok"
     if not success:
@@ -430,7 +435,7 @@ def simulation_cost(t_end: float, dt: float, *, ts: float | None = None, h_max: 
     (40000, 20004)
     """
     if isinstance(n_runs, bool) or not isinstance(n_runs, (int, np.integer)) or n_runs < 1:
-        raise ValueError(f"n_runs = {n_runs!r} is not allowed: must be a whole number of runs >= 1")
+        raise not_allowed("n_runs", n_runs, "must be a whole number of runs >= 1")
     h, sub, ctrl_every, n_steps, n_out = _grid(t_end, dt, h_max, ts)
     chunk = min(n_steps, _chunk_length(n_steps, sub, ctrl_every))
     # one run's stage samples of two signals in a chunk (u and d, or d and r)
@@ -454,7 +459,7 @@ def simulation_cost(t_end: float, dt: float, *, ts: float | None = None, h_max: 
 
 def simulate(params: ActuatorParams | None = None, u=None, d=None, *, t_end: float = 5.0,
              dt: float = 1e-3, model: str = "nonlinear", branch: str = "switching",
-             x0=None, op: OperatingPoint | None = None, h_max: float = DEFAULT_H_MAX,
+             initial_state=None, op: OperatingPoint | None = None, h_max: float = DEFAULT_H_MAX,
              label: str = "", cancel: CancelToken | None = None) -> SimulationResult:
     """Open-loop run: valve command ``u(t)`` [V] and load disturbance ``d(t)`` [N].
 
@@ -471,7 +476,7 @@ def simulate(params: ActuatorParams | None = None, u=None, d=None, *, t_end: flo
     branch : {'switching', 'positive', 'negative'}
         Linear model only: switch l5, l6 with the sign of u (default, as the
         paper's Fig. 3), or keep one branch.
-    x0 : array of 4, optional
+    initial_state : array of 4, optional
         Initial state [x, v, p1, p2]; defaults to the parameters' initial conditions.
     op : OperatingPoint, optional
         Linearisation point (default :func:`eha_core.linear.operating_point`).
@@ -482,13 +487,13 @@ def simulate(params: ActuatorParams | None = None, u=None, d=None, *, t_end: flo
     """
     params = params if params is not None else ActuatorParams()
     return simulate_many([params], [u], [d], t_end=t_end, dt=dt, model=model, branch=branch,
-                         x0s=None if x0 is None else [x0], op=op, h_max=h_max,
+                         initial_states=None if initial_state is None else [initial_state], op=op, h_max=h_max,
                          labels=[label], cancel=cancel)[0]
 
 
 def simulate_many(params: ActuatorParams | Sequence[ActuatorParams] | None, us: Sequence, ds: Sequence | None = None,
                   *, t_end: float = 5.0, dt: float = 1e-3, model: str = "nonlinear",
-                  branch: str = "switching", x0s: Sequence | None = None,
+                  branch: str = "switching", initial_states: Sequence | None = None,
                   op: OperatingPoint | None = None, h_max: float = DEFAULT_H_MAX,
                   labels: Sequence[str] | None = None, cancel: CancelToken | None = None,
                   parallel: bool = True) -> list[SimulationResult]:
@@ -502,7 +507,7 @@ def simulate_many(params: ActuatorParams | Sequence[ActuatorParams] | None, us: 
         Each run's input and disturbance (see :func:`simulate`).
     t_end, dt, model, branch, op, h_max
         As for :func:`simulate`.
-    x0s : sequence of arrays of 4, optional
+    initial_states : sequence of arrays of 4, optional
         Each run's initial state.
     labels : sequence of str, optional
     cancel : eha_core.cancel.CancelToken, optional
@@ -529,13 +534,14 @@ def simulate_many(params: ActuatorParams | Sequence[ActuatorParams] | None, us: 
         return []
     ds = list(ds) if ds is not None else [None] * n
     if len(ds) != n:
-        raise ValueError(f"ds: {len(ds)} disturbances given for {n} inputs")
+        raise not_allowed("ds", ds, f"{len(ds)} disturbances given for {n} inputs; give one per input")
     if params is None or isinstance(params, ActuatorParams):
         params_list = [params or ActuatorParams()] * n
     else:
         params_list = list(params)
         if len(params_list) != n:
-            raise ValueError(f"params: {len(params_list)} parameter sets given for {n} runs")
+            raise not_allowed("params", params_list, f"{len(params_list)} parameter sets given for {n} runs; "
+                                                     "give one, or one per run")
     labels = list(labels) if labels is not None else [""] * n
     mode = _mode(model, branch)
     from . import _kernels as K
@@ -544,12 +550,12 @@ def simulate_many(params: ActuatorParams | Sequence[ActuatorParams] | None, us: 
     t = np.arange(n_out) * dt
 
     y0s = np.empty((n, 4))
-    prms = np.empty((n, 14))
-    lins = np.empty((n, 32))
+    prms = np.empty((n, N_PACKED_PARAMS))
+    lins = np.empty((n, N_PACKED_LINEAR))
     u_sigs, d_sigs, d_out = [], [], []
     for j in range(n):
         p = params_list[j]
-        y0s[j] = _initial(p, x0s[j] if x0s is not None else None)
+        y0s[j] = _initial(p, initial_states[j] if initial_states is not None else None)
         prms[j] = pack_params(p)
         lins[j] = _lin_vector(p, op, mode != K.NONLINEAR)
         u_sigs.append(_as_signal(us[j], "u", t))
@@ -564,14 +570,14 @@ def simulate_many(params: ActuatorParams | Sequence[ActuatorParams] | None, us: 
     outs, status = _integrate_chunked(n, y0s, h, n_steps, sub, prms, mode, lins, stages, K.OPEN_LOOP, 0.0, 1,
                                       0.0, n_out, cancel, parallel)
     name = _model_label(model, branch)
-    return [_finish(outs[j], int(status[j]), t, d_out[j], params_list[j], name, labels[j], h=h)
+    return [_simulation_result(outs[j], int(status[j]), t, d_out[j], params_list[j], name, labels[j], h=h)
             for j in range(n)]
 
 
 def simulate_closed_loop(params: ActuatorParams | None = None, r=None, *, kp: float = 10.0,
                          ts: float = 0.01, controller: str = "zoh", d=None,
                          t_end: float | None = None, dt: float | None = None,
-                         model: str = "nonlinear", branch: str = "switching", x0=None,
+                         model: str = "nonlinear", branch: str = "switching", initial_state=None,
                          op: OperatingPoint | None = None, u_limit: float | None = None,
                          h_max: float = DEFAULT_H_MAX, label: str = "",
                          cancel: CancelToken | None = None) -> SimulationResult:
@@ -602,14 +608,14 @@ def simulate_closed_loop(params: ActuatorParams | None = None, r=None, *, kp: fl
     kp = positive_number("kp", kp, "must be a finite gain > 0 V/m")
     ts = positive_number("ts", ts, "must be a finite sample time > 0 s")
     if controller not in CONTROLLERS:
-        raise ValueError(f"controller = {controller!r} is not allowed: use one of {', '.join(CONTROLLERS)}")
+        raise not_allowed("controller", controller, f"use one of {', '.join(CONTROLLERS)}")
     if u_limit is not None:
         u_limit = positive_number("u_limit", u_limit, "must be a finite voltage > 0, or None for no limit")
     if r is None:
-        raise ValueError("r: a reference signal is required")
+        raise not_allowed("r", r, "a reference signal is required")
     if t_end is None:
         if isinstance(r, Signal) or callable(r) or np.ndim(r) == 0:
-            raise ValueError("t_end: give the horizon when the reference is not an array of samples")
+            raise not_allowed("t_end", t_end, "give the horizon when the reference is not an array of samples")
         t_end = (np.asarray(r).size - 1) * ts
     dt = ts if dt is None else dt
     mode = _mode(model, branch)
@@ -626,9 +632,10 @@ def simulate_closed_loop(params: ActuatorParams | None = None, r=None, *, kp: fl
     def stages(_j, start, count):
         return no_u, _stage_samples(d_sig, "d", h, count, start), _stage_samples(r_sig, "r", h, count, start)
 
-    outs, status = _integrate_chunked(1, _initial(params, x0)[None, :], h, n_steps, sub, pack_params(params)[None, :],
-                                      mode, _lin_vector(params, op, mode != K.NONLINEAR)[None, :], stages,
+    y0 = _initial(params, initial_state)[None, :]
+    lin = _lin_vector(params, op, mode != K.NONLINEAR)[None, :]
+    outs, status = _integrate_chunked(1, y0, h, n_steps, sub, pack_params(params)[None, :], mode, lin, stages,
                                       K.ZOH if controller == "zoh" else K.CONTINUOUS, kp, ctrl_every,
                                       0.0 if u_limit is None else u_limit, n_out, cancel, False)
-    return _finish(outs[0], int(status[0]), t, _sample(d_sig, "d", t), params, _model_label(model, branch), label,
-                   r=_sample(r_sig, "r", t), controller=controller, kp=kp, h=h)
+    return _simulation_result(outs[0], int(status[0]), t, _sample(d_sig, "d", t), params, _model_label(model, branch),
+                              label, r=_sample(r_sig, "r", t), controller=controller, kp=kp, h=h)

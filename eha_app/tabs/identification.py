@@ -8,15 +8,23 @@ from dataclasses import dataclass
 import panel as pn
 
 from eha_core.experiments import (
-    LSE_INPUT, LSE_INPUT_RICH, LSE_INPUT_RICH_T_END, LSE_SCENARIOS, FrequencyExperiment, lse_data,
-    lse_resimulation, parse_disturbance, run_frequency_identification, run_lse_table,
+    LSE_INPUT,
+    LSE_INPUT_RICH,
+    LSE_INPUT_RICH_T_END,
+    LSE_SCENARIOS,
+    FrequencyExperiment,
+    lse_data,
+    lse_resimulation,
+    run_frequency_identification,
+    run_lse_table,
 )
+from eha_core.identify.disturbance import MAX_FREQ_HZ
 from eha_core.identify.lse import identify_lse
 from eha_core.params import ParameterError
 from eha_core.signals import SignalSpecError, parse_signal
 
 from .. import plots
-from ..form import Field, Form, Group, InputError, parse_fields
+from ..form import Field, Form, Group, parse_fields
 from ..limits import check_frequency, check_lse
 from ..state import AppState
 from ..tables import SCENARIOS, backout_html, freq_summary_html, lse_table_html, table4_html
@@ -58,14 +66,9 @@ class LseRequest:
     excitation: str = "paper"
 
     def disturbance(self):
+        """d(t): a scenario of Table 4, or the custom text in the signal grammar."""
         spec = self.custom if self.scenario == "custom" else LSE_SCENARIOS[self.scenario]
-        try:
-            return parse_disturbance(spec, seed=self.seed, dt=1e-3, name="custom d(t)")
-        except ValueError:
-            if self.scenario != "custom":
-                raise
-            # any signal the simulation tab understands, e.g. sine:500:2+noise:100:1
-            return parse_signal(spec, name="custom d(t)")
+        return parse_signal(spec, name="custom d(t)", seed=self.seed, hold_s=1e-3)
 
     def input_signal(self):
         return (LSE_INPUT, 5.0) if self.excitation == "paper" else (LSE_INPUT_RICH, LSE_INPUT_RICH_T_END)
@@ -89,11 +92,11 @@ def parse_lse(texts: dict) -> tuple[LseRequest, dict]:
     if "lse_freq" not in hidden and text:
         try:
             freq = float(text.replace(",", "."))
-            if not (math.isfinite(freq) and 0 < freq < 500):
+            if not (math.isfinite(freq) and 0 < freq < MAX_FREQ_HZ):
                 raise ValueError
         except ValueError:
-            errors["lse_freq"] = (f"harmonic frequency = {text} is not allowed: a number in (0, 500) Hz, "
-                                  f"or blank to estimate it")
+            errors["lse_freq"] = (f"harmonic frequency = {text} is not allowed: a number in (0, {MAX_FREQ_HZ:g}) "
+                                  f"Hz, or blank to estimate it")
             freq = None
     req = LseRequest(scenario=values.get("lse_scenario", "none"), custom=texts.get("lse_custom", ""),
                      model=values.get("lse_model", "constant"), frequency_hz=freq,
@@ -125,8 +128,8 @@ FREQ_FORM = (
     )),
     Group("Loop and model", (
         Field("freq_kp", "Kp", "number", unit="V/m", lo=0.01, hi=1000.0, short="Kp"),
-        Field("plant", "plant", "select", options=(("nonlinear", "nonlinear"), ("linear", "linearised")),
-              short="plant"),
+        Field("model", "model in the loop", "select", options=(("nonlinear", "nonlinear"), ("linear", "linearised")),
+              short="model", tip="the actuator's model the closed loop is simulated with"),
         Field("n_poles", "poles", "integer", lo=1, hi=6, short="poles"),
         Field("n_zeros", "zeros", "integer", lo=0, hi=5, short="zeros"),
         Field("initial_condition", "initial condition", "select", options=(("estimate", "estimate"), ("zero", "zero")),
@@ -137,7 +140,7 @@ FREQ_FORM = (
 )
 _FREQ_FIELDS = {f.name: f for g in FREQ_FORM for f in g.fields}
 _CONFIG_NAME = {"signal_type": "signal_type", "n_samples": "n_samples", "freq_seed": "seed", "ts": "ts",
-                "freq_kp": "kp", "plant": "plant", "n_poles": "n_poles", "n_zeros": "n_zeros",
+                "freq_kp": "kp", "model": "model", "n_poles": "n_poles", "n_zeros": "n_zeros",
                 "initial_condition": "initial_condition", "input_offset": "input_offset"}
 _DEFAULT_CONFIG = FrequencyExperiment()
 FREQ_DEFAULTS = {
@@ -146,7 +149,7 @@ FREQ_DEFAULTS = {
     "band_hi": f"{_DEFAULT_CONFIG.band[1]:g}", "range_lo": f"{_DEFAULT_CONFIG.range[0]:g}",
     "range_hi": f"{_DEFAULT_CONFIG.range[1]:g}", "n_sines": str(_DEFAULT_CONFIG.sinedata[0]),
     "n_trials": str(_DEFAULT_CONFIG.sinedata[1]), "grid_skip": str(_DEFAULT_CONFIG.sinedata[2]),
-    "ts": f"{_DEFAULT_CONFIG.ts:g}", "freq_kp": f"{_DEFAULT_CONFIG.kp:g}", "plant": _DEFAULT_CONFIG.plant,
+    "ts": f"{_DEFAULT_CONFIG.ts:g}", "freq_kp": f"{_DEFAULT_CONFIG.kp:g}", "model": _DEFAULT_CONFIG.model,
     "n_poles": str(_DEFAULT_CONFIG.n_poles), "n_zeros": str(_DEFAULT_CONFIG.n_zeros),
     "initial_condition": _DEFAULT_CONFIG.initial_condition, "input_offset": _DEFAULT_CONFIG.input_offset,
 }
@@ -178,7 +181,7 @@ def parse_freq(texts: dict) -> tuple[FrequencyExperiment | None, dict]:
             band=(values["band_lo"], values["band_hi"]), range=(values["range_lo"], values["range_hi"]),
             sinedata=(values.get("n_sines", d.sinedata[0]), values.get("n_trials", d.sinedata[1]),
                       values.get("grid_skip", d.sinedata[2])),
-            seed=values["freq_seed"], kp=values["freq_kp"], plant=values["plant"], n_poles=values["n_poles"],
+            seed=values["freq_seed"], kp=values["freq_kp"], model=values["model"], n_poles=values["n_poles"],
             n_zeros=values["n_zeros"], initial_condition=values["initial_condition"],
             input_offset=values["input_offset"])
     except (ValueError, TypeError) as exc:
@@ -321,8 +324,8 @@ class LeastSquaresPanel(pn.viewable.Viewer):
             "A<sub>f</sub> S(v) + d<sub>0</sub>, and dp<sub>1</sub>/dt = β<sub>e</sub> φ<sub>2</sub>. "
             "D<sub>c</sub>, d<sub>c</sub>, L<sub>0</sub>, K<sub>q</sub> are measured; 1 kHz sensors.</p>",
             sizing_mode="stretch_width")
-        return pn.Row(controls, pn.Column(explain, self.alert, self.area, self.table4_area, sizing_mode="stretch_width"),
-                      sizing_mode="stretch_width")
+        results = pn.Column(explain, self.alert, self.area, self.table4_area, sizing_mode="stretch_width")
+        return pn.Row(controls, results, sizing_mode="stretch_width")
 
 
 _FIGURES = (("Fig. 8 excitation", "excitation", plots.ExcitationFigure),
@@ -397,7 +400,7 @@ class FrequencyPanel(pn.viewable.Viewer):
         if key == "excitation":
             fig.update(*self.preview)
         elif key == "fit":
-            fig.update(self.view, self.result.config.plant if self.result is not None else "nonlinear")
+            fig.update(self.view, self.result.config.model if self.result is not None else "nonlinear")
         else:
             fig.update(self.view)
         if built:

@@ -15,7 +15,9 @@ from ..tables import derived_html
 
 __all__ = ["ParametersTab", "SCHEMATIC_PATH", "PARAMETER_FORM"]
 
-SCHEMATIC_PATH = Path(__file__).resolve().parents[2] / "assets" / "eha_schematic.svg"
+#: The actuator's schematic, shipped inside the package (package data): a
+#: regular, non-editable install must carry it too.
+SCHEMATIC_PATH = Path(__file__).resolve().parents[1] / "assets" / "eha_schematic.svg"
 
 _PLAIN = {"beta_e": "βe", "Af": "Af", "Dc": "Dc", "dc": "dc", "d0": "d0", "L0": "L0", "Kq1": "Kq1", "Kq2": "Kq2",
           "ps": "ps", "pr": "pr", "k_f": "kf", "x0": "x(0)", "v0": "v(0)", "p1_0": "p1(0)", "p2_0": "p2(0)"}
@@ -51,7 +53,10 @@ def default_texts() -> dict:
 @lru_cache(maxsize=1)
 def _schematic_svg() -> str:
     # read once per server process: every session shows the same picture
-    return SCHEMATIC_PATH.read_text(encoding="utf-8") if SCHEMATIC_PATH.exists() else ""
+    if not SCHEMATIC_PATH.exists():
+        return (f"<p class='eha-warn'>The schematic ({SCHEMATIC_PATH.name}) is missing from this installation: "
+                "reinstall the package.</p>")
+    return SCHEMATIC_PATH.read_text(encoding="utf-8")
 
 
 @lru_cache(maxsize=256)

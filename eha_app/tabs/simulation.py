@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import io
 import math
-from dataclasses import dataclass, fields as dc_fields, replace
+from dataclasses import dataclass, replace
+from dataclasses import fields as dc_fields
 from functools import lru_cache
 
 import panel as pn
@@ -266,7 +267,8 @@ class SimulationTab(pn.viewable.Viewer):
             self.notice.object = ('<span class="eha-warn">A parameter on the first tab is not valid: '
                                   'fix it to run the models.</span>')
         elif errors:
-            self.notice.object = f'<span class="eha-warn">Fix the input to run the models: {next(iter(errors.values()))}</span>'
+            first = next(iter(errors.values()))
+            self.notice.object = f'<span class="eha-warn">Fix the input to run the models: {first}</span>'
         self.notice.visible = not ok
 
     # -- events ------------------------------------------------------------------------

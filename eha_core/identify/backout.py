@@ -45,28 +45,31 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._checks import not_allowed
 from ..linear import OperatingPoint, operating_point
 from ..params import ActuatorParams
+from ._stats import Z95
 
 __all__ = ["BackoutResult", "open_loop_from_closed", "backout"]
-
-_Z95 = 1.959963984540054
 
 
 def open_loop_from_closed(num_h, den_h, kp: float) -> tuple[np.ndarray, np.ndarray]:
     """P = N / (Kp (D - N)) for H = N / D (eq. 26), monic denominator."""
+    # coefficients are shown in messages as lists (a few numbers, as typed)
     num_h = np.atleast_1d(np.asarray(num_h, dtype=float))
     den_h = np.atleast_1d(np.asarray(den_h, dtype=float))
     if not (math.isfinite(kp) and kp > 0):
-        raise ValueError(f"kp = {kp!r} is not allowed: must be a finite gain > 0")
+        raise not_allowed("kp", kp, "must be a finite gain > 0")
     if num_h.size > den_h.size:
-        raise ValueError("num_h: the closed loop must be proper (deg num <= deg den)")
+        raise not_allowed("num_h", num_h.tolist(), f"its degree {num_h.size - 1} exceeds the degree "
+                                                 f"{den_h.size - 1} of den_h: the closed loop must be proper")
     pad = np.zeros(den_h.size)
     pad[den_h.size - num_h.size:] = num_h
     den_p = den_h - pad
     lead = den_p[0]
     if lead == 0:
-        raise ValueError("H_hat has a feedthrough of 1: P = H / (Kp (1 - H)) is not proper")
+        raise not_allowed("num_h", num_h.tolist(), "with den_h it gives H_hat a feedthrough of 1, so "
+                                                 "P = H / (Kp (1 - H)) is not proper")
     return num_h / (kp * lead), den_p / lead
 
 
@@ -107,7 +110,7 @@ class BackoutResult:
         out = {}
         for name in ("damping", "beta_e_from_gain", "beta_e_from_stiffness"):
             v, s = getattr(self, name), getattr(self, name + "_std")
-            out[name] = (v - _Z95 * s, v + _Z95 * s)
+            out[name] = (v - Z95 * s, v + Z95 * s)
         return out
 
     def to_dict(self) -> dict:
@@ -151,8 +154,10 @@ def backout(num_p, den_p, params: ActuatorParams | None = None, op: OperatingPoi
     num_p = np.atleast_1d(np.asarray(num_p, dtype=float))
     den_p = np.atleast_1d(np.asarray(den_p, dtype=float))
     if den_p.size != 4 or num_p.size != 1:
-        raise ValueError(f"P_hat must be b / (s^3 + a1 s^2 + a2 s + a3) (3 poles, no zeros) to back out "
-                         f"the parameters; got {num_p.size - 1} zeros and {den_p.size - 1} poles")
+        name, value = ("den_p", den_p) if den_p.size != 4 else ("num_p", num_p)
+        raise not_allowed(name, value.tolist(), f"P_hat must be b / (s^3 + a1 s^2 + a2 s + a3) (3 poles, no zeros) "
+                                              f"to back out the parameters; it has {num_p.size - 1} zeros and "
+                                              f"{den_p.size - 1} poles")
     den_p = den_p / den_p[0]
     a1, a2, a3 = den_p[1:]
     b = num_p[-1] / 1.0

@@ -47,15 +47,41 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize, signal
 
+from .._checks import not_allowed, shown
 from ..cancel import CancelToken, check
 from ..params import ActuatorParams
+from ._stats import Z95
+from .disturbance import DISTURBANCE_MODELS
 
 __all__ = ["MeasuredData", "LSEResult", "identify_lse", "prefilter", "DISTURBANCE_MODELS"]
 
-DISTURBANCE_MODELS = ("constant", "harmonic")
 #: Cap on the fine grid (samples x upsampling factor) to bound memory.
 _MAX_FINE_SAMPLES = 2_000_000
-_Z95 = 1.959963984540054
+#: Fewest samples :class:`MeasuredData` accepts (the CSV reader asks as many).
+_MIN_ROWS = 50
+
+
+def _check_uniform(t: np.ndarray) -> None:
+    """Refuse times that do not increase uniformly, naming the first row that breaks it.
+
+    The criterion: every step > 0 and the steps' spread (max - min) at most
+    1e-6 times their mean. The row named is the first at which the steps so
+    far spread more than that.
+    """
+    dt = np.diff(t)
+    decreasing = np.flatnonzero(dt <= 0)
+    if decreasing.size:
+        k = int(decreasing[0]) + 2          # the row (from 1) of the later sample
+        raise not_allowed("t", t, f"the time does not increase at row {k} ({t[k - 1]:g} after "
+                                         f"{t[k - 2]:g}); the sampling must be uniform and increasing")
+    tol = 1e-6 * dt.mean()
+    if np.ptp(dt) > tol:
+        spread = np.maximum.accumulate(dt) - np.minimum.accumulate(dt)
+        i = int(np.flatnonzero(spread > tol)[0])
+        k = i + 2
+        raise not_allowed("t", t, f"the sampling is not uniform at row {k} (a step of {dt[i]:.6g} s "
+                                         f"after steps of {np.median(dt[:i]):.6g} s); resample the data "
+                                         "at a constant interval")
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,21 +102,24 @@ class MeasuredData:
     source: str = "data"
 
     def __post_init__(self):
+        # Rows are counted from 1, the first sample being row 1, as the CSV
+        # reader (eha_core.data) counts a file's data rows.
         names = ("t", "x", "v", "p1", "p2", "u")
         arrays = {}
         for n in names:
             a = np.asarray(getattr(self, n), dtype=float).ravel()
             if not np.all(np.isfinite(a)):
-                raise ValueError(f"{n}: the data contain non-finite values (first at row {int(np.argmin(np.isfinite(a)))})")
+                k = int(np.argmin(np.isfinite(a)))
+                raise not_allowed(n, a, f"row {k + 1} is {a[k]:g}; every value must be a finite number")
             arrays[n] = a
-        sizes = {a.size for a in arrays.values()}
-        if len(sizes) != 1:
-            raise ValueError(f"data: columns t, x, v, p1, p2, u must have equal lengths (got {[arrays[n].size for n in names]})")
-        if arrays["t"].size < 50:
-            raise ValueError(f"data: {arrays['t'].size} rows is too few; need at least 50 samples")
-        dt = np.diff(arrays["t"])
-        if np.any(dt <= 0) or np.ptp(dt) > 1e-6 * dt.mean():
-            raise ValueError("t: sampling must be uniform and increasing")
+        for n in names[1:]:
+            if arrays[n].size != arrays["t"].size:
+                raise not_allowed(n, arrays[n], f"it has {arrays[n].size} rows where t has {arrays['t'].size}; "
+                                                       "every column needs one value per time")
+        t = arrays["t"]
+        if t.size < _MIN_ROWS:
+            raise not_allowed("t", t, f"{t.size} rows of data; need at least {_MIN_ROWS}")
+        _check_uniform(t)
         for n in names:
             object.__setattr__(self, n, arrays[n])
 
@@ -100,38 +129,41 @@ class MeasuredData:
         return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
 
     @classmethod
-    def from_simulation(cls, res, source: str = "simulation") -> "MeasuredData":
+    def from_simulation(cls, res, source: str = "simulation") -> MeasuredData:
         return cls(res.t, res.x, res.v, res.p1, res.p2, res.u, source=source)
 
     @classmethod
-    def from_table(cls, table, source: str = "table") -> "MeasuredData":
+    def from_table(cls, table, source: str = "table") -> MeasuredData:
         """From a pandas DataFrame or a mapping with columns t, x, v, p1, p2, u."""
         missing = [c for c in ("t", "x", "v", "p1", "p2", "u") if c not in table]
         if missing:
-            raise ValueError(f"data: missing column(s) {', '.join(missing)}; need t, x, v, p1, p2, u")
+            have = ", ".join(str(c) for c in table) or "none"
+            raise not_allowed("table", f"a table with columns {have}",
+                              f"no column {', '.join(missing)}; need t, x, v, p1, p2, u")
         return cls(*(np.asarray(table[c], dtype=float) for c in ("t", "x", "v", "p1", "p2", "u")), source=source)
 
     @classmethod
-    def from_csv(cls, path) -> "MeasuredData":
-        import pandas as pd
+    def from_csv(cls, path, *, name: str = "--data") -> MeasuredData:
+        """From a CSV file with columns t, x, v, p1, p2, u (SI units), read by
+        :func:`eha_core.data.read_columns` (a bad cell is named by column and row)."""
+        from ..data import read_columns, sample_time
 
-        try:
-            table = pd.read_csv(path)
-        except (OSError, ValueError) as exc:
-            raise ValueError(f"data: cannot read {str(path)!r} as CSV ({exc})") from None
-        return cls.from_table(table, source=str(path))
+        cols = read_columns(path, ("t", "x", "v", "p1", "p2", "u"), name=name, min_rows=_MIN_ROWS)
+        sample_time(cols["t"], name=name, path=path)
+        return cls(*(cols[c] for c in ("t", "x", "v", "p1", "p2", "u")), source=str(path))
 
-    def with_noise(self, sigmas: dict[str, float], seed: int = 0) -> "MeasuredData":
+    def with_noise(self, sigmas: dict[str, float], seed: int = 0) -> MeasuredData:
         """Add white Gaussian measurement noise per sensor, e.g. {'v': 1e-4, 'p1': 1e4}."""
         rng = np.random.default_rng(seed)
         cols = {n: getattr(self, n) for n in ("x", "v", "p1", "p2")}
         for name, sigma in sigmas.items():
             if name not in cols:
-                raise ValueError(f"measurement noise: {name!r} is not a sensor; use x, v, p1, p2")
+                raise not_allowed(f"sigmas[{shown(name)}]", sigma, f"{shown(name)} is not a sensor; use x, v, p1, p2")
             if not (math.isfinite(sigma) and sigma >= 0):
-                raise ValueError(f"measurement noise: sigma of {name} = {sigma!r} is not allowed: must be >= 0")
+                raise not_allowed(f"sigmas[{name}]", sigma, "must be a standard deviation >= 0 (in the sensor's units)")
             cols[name] = cols[name] + sigma * rng.standard_normal(self.t.size)
-        return MeasuredData(self.t, cols["x"], cols["v"], cols["p1"], cols["p2"], self.u, source=self.source + " + noise")
+        return MeasuredData(self.t, cols["x"], cols["v"], cols["p1"], cols["p2"], self.u,
+                            source=self.source + " + noise")
 
 
 def prefilter(y: np.ndarray, ts: float, tau_f: float) -> tuple[np.ndarray, np.ndarray]:
@@ -246,7 +278,7 @@ def fine_grid_factor(n_samples: int) -> int:
     return max(1, min(16, _MAX_FINE_SAMPLES // max(int(n_samples), 1)))
 
 
-def _fine_grid(data: "MeasuredData", upsample: int):
+def _fine_grid(data: MeasuredData, upsample: int):
     """The measured signals on a grid ``upsample`` times finer (cubic splines).
 
     The regressors are nonlinear functions of the measurements (S(v) switches
@@ -321,7 +353,9 @@ def identify_lse(data: MeasuredData, params: ActuatorParams | None = None, *, ta
     skip_s : float, optional
         Initial stretch left out of the fit, default 5 tau_f (filter start-up).
     hac_lags : int, optional
-        Newey-West bandwidth in samples, default 20 tau_f / ts (coverage 0.95 for every parameter over 60 seeds under white force noise; 10 tau_f gives 0.92 for d0).
+        Newey-West bandwidth in samples, default 20 tau_f / ts (coverage 0.95
+        for every parameter over 60 seeds under white force noise; 10 tau_f
+        gives 0.92 for d0).
     interpolation : {'cubic', 'linear'}
         How the signals are taken between samples when filtering: cubic
         splines on a 16 times finer grid (default; see :func:`_fine_grid`), or
@@ -338,20 +372,22 @@ def identify_lse(data: MeasuredData, params: ActuatorParams | None = None, *, ta
     params = params if params is not None else ActuatorParams()
     nominal = nominal if nominal is not None else params
     if not (isinstance(tau_f, (int, float)) and math.isfinite(tau_f) and tau_f > 0):
-        raise ValueError(f"tau_f = {tau_f!r} is not allowed: must be a time constant > 0 s")
+        raise not_allowed("tau_f", tau_f, "must be a time constant > 0 s")
     if interpolation not in ("cubic", "linear"):
-        raise ValueError(f"interpolation = {interpolation!r} is not allowed: use 'cubic' or 'linear'")
+        raise not_allowed("interpolation", interpolation, "use cubic or linear")
     if disturbance_model not in DISTURBANCE_MODELS:
-        raise ValueError(f"disturbance_model = {disturbance_model!r} is not allowed: use one of {', '.join(DISTURBANCE_MODELS)}")
+        raise not_allowed("disturbance_model", disturbance_model, f"use one of {', '.join(DISTURBANCE_MODELS)}")
     if disturbance_freq_hz is not None and not (math.isfinite(disturbance_freq_hz) and disturbance_freq_hz > 0):
-        raise ValueError(f"disturbance_freq_hz = {disturbance_freq_hz!r} is not allowed: must be > 0 Hz, or None to estimate it")
+        raise not_allowed("disturbance_freq_hz", disturbance_freq_hz, "must be > 0 Hz, or None to estimate it")
     ts = data.ts
     if disturbance_freq_hz is not None and disturbance_freq_hz >= 0.5 / ts:
-        raise ValueError(f"disturbance_freq_hz = {disturbance_freq_hz:g} is not allowed: must be below the Nyquist frequency {0.5 / ts:g} Hz")
+        raise not_allowed("disturbance_freq_hz", disturbance_freq_hz,
+                          f"must be below the Nyquist frequency {0.5 / ts:g} Hz")
     skip_s = 5 * tau_f if skip_s is None else float(skip_s)
     keep = data.t - data.t[0] >= skip_s
     if keep.sum() < 20:
-        raise ValueError(f"skip_s = {skip_s:g} is not allowed: it leaves {int(keep.sum())} samples; the record is {data.t[-1] - data.t[0]:g} s")
+        raise not_allowed("skip_s", skip_s, f"it leaves {int(keep.sum())} samples of a record of "
+                                            f"{data.t[-1] - data.t[0]:g} s; need at least 20")
     lags = int(math.ceil(20 * tau_f / ts)) if hac_lags is None else int(hac_lags)
 
     p = params
@@ -392,13 +428,13 @@ def identify_lse(data: MeasuredData, params: ActuatorParams | None = None, *, ta
     Phi2 = phi2f[keep, None]
     theta2, e2, cov2_t, cov2_h, _, _ = _solve(Phi2, dp1f[keep], lags, cancel)
 
-    estimates = {n: float(th) for n, th in zip(names, theta1)}
+    estimates = {n: float(th) for n, th in zip(names, theta1, strict=True)}
     estimates["beta_e"] = float(theta2[0])
     se = {n: float(math.sqrt(max(cov1_h[i, i], 0.0))) for i, n in enumerate(names)}
     se["beta_e"] = float(math.sqrt(max(cov2_h[0, 0], 0.0)))
     se_t = {n: float(math.sqrt(max(cov1_t[i, i], 0.0))) for i, n in enumerate(names)}
     se_t["beta_e"] = float(math.sqrt(max(cov2_t[0, 0], 0.0)))
-    ci = {n: (estimates[n] - _Z95 * se[n], estimates[n] + _Z95 * se[n]) for n in estimates}
+    ci = {n: (estimates[n] - Z95 * se[n], estimates[n] + Z95 * se[n]) for n in estimates}
 
     success = rank == Phi1.shape[1]
     message = "ok" if success else (

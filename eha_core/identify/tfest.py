@@ -48,8 +48,9 @@ Two stages, as MATLAB does it:
 
 2. **Output-error refinement**: minimise ``||y - y_hat(theta)||^2`` where
    ``y_hat`` is the exact ZOH simulation of the continuous-time model
-   (:func:`eha_core.identify.validate.simulate_tf`'s machinery: matrix
-   exponential of the augmented state matrix, then ``scipy.signal.lfilter``),
+   (the machinery of :func:`eha_core.identify.validate.simulate_tf`, in
+   :mod:`eha_core.identify._ctmodels`: matrix exponential of the augmented
+   state matrix, then ``scipy.signal.lfilter``),
    with :func:`scipy.optimize.least_squares` (trust-region reflective,
    ``x_scale='jac'``). Coefficients such as 1, 430.1, 1.721e4, 2437 are
    optimised relative to their starting values (so every parameter is O(1));
@@ -75,26 +76,25 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from .._checks import positive_integer, positive_number
-from ..cancel import CancelToken, check
 import scipy.optimize
 import scipy.signal
 
-from eha_core.identify.validate import (
-    _as_signal,
-    _as_tf,
-    _as_ts,
-    _discretise,
-    _expm_balanced,
-    _fit_linear_terms,
-    _linear_columns,
-    _readonly,
-    _state_numerators,
+from .._checks import not_allowed, positive_integer, positive_number
+from ..cancel import CancelToken, check
+from ._ctmodels import (
     FrequencyResponseData,
-    fit_percent as _fit_percent,
+    as_pair,
+    as_tf,
+    as_ts,
+    discretise,
+    expm_balanced,
+    fit_linear_terms,
+    fit_percent,
     frequency_response,
+    linear_columns,
+    readonly,
     simulate_tf,
+    state_numerators,
 )
 
 __all__ = ["TFEstimate", "oe_fit", "tfest"]
@@ -131,7 +131,7 @@ class TFEstimate:
     noise_variance : float
         ``sum((y - y_hat)^2) / (N - n_params - n_x0)``.
     initial_condition : str
-        ``"zero"`` or ``"estimated"``.
+        ``"zero"`` or ``"estimate"`` (the option it was run with).
     x0 : numpy.ndarray or None
         Estimated initial state (observability canonical form, see
         :mod:`eha_core.identify.validate`; ``[y, y', y'']`` at t = 0 for an
@@ -202,6 +202,15 @@ class TFEstimate:
         """Roots of ``num`` (rad/s)."""
         return np.roots(self.num) if self.num.size > 1 else np.zeros(0)
 
+    def to_dict(self) -> dict:
+        """The estimate as plain numbers (JSON-ready)."""
+        return {"num": [float(c) for c in self.num], "den": [float(c) for c in self.den],
+                "fit_percent": float(self.fit_percent), "initial_condition": self.initial_condition,
+                "input_offset": None if self.input_offset is None else float(self.input_offset),
+                "param_std": None if self.param_std is None else [float(v) for v in self.param_std],
+                "success": bool(self.success), "message": self.message, "method": self.method,
+                "n_poles": int(self.n_poles), "n_zeros": int(self.n_zeros)}
+
     def simulate(self, u, ts=None, x0=None, input_offset=None) -> np.ndarray:
         """Exact ZOH response to ``u`` sampled at ``ts`` (default: ``self.ts``).
 
@@ -217,8 +226,7 @@ class TFEstimate:
             except (TypeError, ValueError):
                 offset = np.nan
             if not np.isfinite(offset):
-                raise ValueError(
-                    f"input_offset must be None or a finite number, got {input_offset!r}")
+                raise not_allowed("input_offset", input_offset, "must be None or a finite number (input units)")
             u = np.asarray(u, dtype=float) + offset
         return simulate_tf(self.num, self.den, u, self.ts if ts is None else ts, x0=x0)
 
@@ -232,43 +240,34 @@ class TFEstimate:
 # ---------------------------------------------------------------------------
 def _check_orders(n_poles, n_zeros) -> tuple[int, int]:
     if isinstance(n_poles, bool) or not isinstance(n_poles, (int, np.integer)) or n_poles < 1:
-        raise ValueError(f"n_poles must be an integer >= 1, got {n_poles!r}")
+        raise not_allowed("n_poles", n_poles, "must be a whole number >= 1")
     if isinstance(n_zeros, bool) or not isinstance(n_zeros, (int, np.integer)) or not (
         0 <= n_zeros <= n_poles - 1
     ):
-        raise ValueError(
-            f"n_zeros must be an integer in [0, n_poles - 1] = [0, {n_poles - 1}] "
-            f"(the model must be strictly proper), got {n_zeros!r}"
-        )
+        raise not_allowed("n_zeros", n_zeros, f"must be a whole number in [0, n_poles - 1] = [0, {n_poles - 1}] "
+                                              "(the model must be strictly proper)")
     return int(n_poles), int(n_zeros)
 
 
 def _check_data(u, y, ts, n_params: int, n_x0: int, n_offset: int = 0):
-    u_arr = _as_signal(u, "u")
-    y_arr = _as_signal(y, "y")
-    if u_arr.shape != y_arr.shape:
-        raise ValueError(f"y must have the same length as u ({u_arr.size}), got {y_arr.size}")
+    u_arr, y_arr = as_pair(u, y, ("u", "y"))
     needed = n_params + n_x0 + n_offset + 2
     if u_arr.size < needed:
         offset = f", {n_offset} input offset" if n_offset else ""
-        raise ValueError(
-            f"u has {u_arr.size} samples; this model needs at least {needed} "
-            f"({n_params} coefficients, {n_x0} initial states{offset}, 2 spare)"
-        )
-    return u_arr, y_arr, _as_ts(ts)
+        raise not_allowed("u", u_arr, f"it has {u_arr.size} samples; this model needs at least {needed} "
+                                             f"({n_params} coefficients, {n_x0} initial states{offset}, 2 spare)")
+    return u_arr, y_arr, as_ts(ts)
 
 
 def _check_initial_condition(initial_condition) -> bool:
     if not isinstance(initial_condition, str) or initial_condition not in _INITIAL_CONDITIONS:
-        raise ValueError(
-            f"initial_condition must be 'zero' or 'estimate', got {initial_condition!r}"
-        )
+        raise not_allowed("initial_condition", initial_condition, "use zero or estimate")
     return initial_condition == "estimate"
 
 
 def _check_input_offset(input_offset) -> bool:
     if not isinstance(input_offset, str) or input_offset not in _INPUT_OFFSETS:
-        raise ValueError(f"input_offset must be 'zero' or 'estimate', got {input_offset!r}")
+        raise not_allowed("input_offset", input_offset, "use zero or estimate")
     return input_offset == "estimate"
 
 
@@ -278,22 +277,20 @@ def _model_coefficients(model, n: int, m: int, name: str) -> np.ndarray:
         num, den = model.num, model.den
         if isinstance(num, list):  # control.TransferFunction: nested lists
             num, den = num[0][0], den[0][0]
+        names = (f"{name}.num", f"{name}.den")
     else:
         try:
             num, den = model
         except (TypeError, ValueError):
-            raise ValueError(
-                f"{name} must be a (num, den) pair or a transfer function, got {model!r}"
-            ) from None
-    try:
-        num_n, den_n = _as_tf(num, den)
-    except ValueError as exc:
-        raise ValueError(f"{name}: {exc}") from None
+            raise not_allowed(name, model, "must be a (num, den) pair or a transfer function") from None
+        names = (f"{name}[0]", f"{name}[1]")
+    num_n, den_n = as_tf(num, den, names)
     if den_n.size - 1 != n or num_n.size - 1 > m:
-        raise ValueError(
-            f"{name} must have {n} poles and at most {m} zeros (n_poles={n}, n_zeros={m}), "
-            f"got num degree {num_n.size - 1} and den degree {den_n.size - 1}"
-        )
+        # shown as [num, den], whatever held them (a pair, a transfer function)
+        given = [np.atleast_1d(np.asarray(num, dtype=float)), np.atleast_1d(np.asarray(den, dtype=float))]
+        raise not_allowed(name, given, f"must have {n} poles and at most {m} zeros (n_poles = {n}, "
+                                       f"n_zeros = {m}); it has {den_n.size - 1} poles and "
+                                       f"{num_n.size - 1} zeros")
     b = np.zeros(m + 1)
     b[m + 1 - num_n.size:] = num_n
     return np.concatenate([den_n[1:], b])
@@ -343,7 +340,7 @@ class _OutputError:
     def columns(self, theta: np.ndarray) -> np.ndarray:
         """The responses of the linear terms at ``theta``, shape ``(N, n_linear)``."""
         num, den = _split(theta, self.n)
-        return _linear_columns(_discretise(num, den, self.ts), self.u.size,
+        return linear_columns(discretise(num, den, self.ts), self.u.size,
                                offset=self.estimate_offset, x0=self.estimate_x0)
 
     def evaluate(self, theta: np.ndarray, linear: np.ndarray | None = None):
@@ -359,15 +356,15 @@ class _OutputError:
             return None, None
         try:
             with np.errstate(all="ignore"):
-                model = _discretise(num, den, self.ts)
+                model = discretise(num, den, self.ts)
                 residual = self.y - model.forced(self.u)
                 coef = None
                 if self.n_linear and np.all(np.isfinite(residual)):
-                    columns = _linear_columns(model, self.u.size, offset=self.estimate_offset,
+                    columns = linear_columns(model, self.u.size, offset=self.estimate_offset,
                                               x0=self.estimate_x0)
                     if not np.all(np.isfinite(columns)):
                         return None, None
-                    coef = _fit_linear_terms(columns, residual) if linear is None else linear
+                    coef = fit_linear_terms(columns, residual) if linear is None else linear
                     residual = residual - columns @ coef
         except (np.linalg.LinAlgError, ValueError):  # e.g. eigenvalues of an overflowed matrix
             return None, None
@@ -413,15 +410,15 @@ class _StateVariableFilter:
         block[:n, :n] = a_mat * ts
         block[n - 1, n] = ts
         block[n, n + 1] = 1.0
-        e = _expm_balanced(block)
+        e = expm_balanced(block)
         ad, g1, g2 = e[:n, :n], e[:n, n], e[:n, n + 1]
         self.den_z = np.real(np.poly(np.linalg.eigvals(ad)))
         ident = np.eye(n)
-        self.num_zoh = _state_numerators(ad, g1, self.den_z, ident, np.zeros(n))
-        self.num_foh = _state_numerators(ad, g1 - g2 + ad @ g2, self.den_z, ident, g2)
+        self.num_zoh = state_numerators(ad, g1, self.den_z, ident, np.zeros(n))
+        self.num_foh = state_numerators(ad, g1 - g2 + ad @ g2, self.den_z, ident, g2)
         # exact samples of the impulse responses of s^k / A_f, k < n: the
         # states' free response from x(0) = e_n (the input vector)
-        self.num_impulse = _state_numerators(ad, ad[:, -1], self.den_z, ident, ident[:, -1])
+        self.num_impulse = state_numerators(ad, ad[:, -1], self.den_z, ident, ident[:, -1])
 
     def impulse_responses(self, n_samples: int) -> np.ndarray:
         """Sampled impulse responses of ``s^k / A_f``, ``k = 0..n-1``, shape ``(N, n)``.
@@ -541,8 +538,9 @@ def _srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
     extra_coeffs = np.zeros(n_extra)
     best_theta, best_cost = theta, criterion.cost(theta)
     converged = False
-    iterations = 0
-    for iterations in range(1, max_iter + 1):
+    iterations = 0  # the count is returned, so it is kept outside the loop
+    for _ in range(max_iter):
+        iterations += 1
         # an iteration filters the data several times: as costly as a few
         # simulations of the model, so a cancel is looked at before each
         check(criterion.cancel)
@@ -685,19 +683,19 @@ def _oe_refine(criterion: _OutputError, theta0: np.ndarray, n: int, m: int,
 def _nan_estimate(n, m, ts, n_samples, estimate_x0, estimate_offset, message, nit, nfev):
     p = n + m + 1
     return TFEstimate(
-        num=_readonly(np.full(m + 1, np.nan)), den=_readonly(np.r_[1.0, np.full(n, np.nan)]),
+        num=readonly(np.full(m + 1, np.nan)), den=readonly(np.r_[1.0, np.full(n, np.nan)]),
         ts=ts, n_poles=n, n_zeros=m, fit_percent=np.nan, cost=np.nan, mse=np.nan,
-        noise_variance=np.nan, initial_condition="estimated" if estimate_x0 else "zero",
+        noise_variance=np.nan, initial_condition="estimate" if estimate_x0 else "zero",
         x0=None, input_offset=np.nan if estimate_offset else None,
         input_offset_std=np.nan if estimate_offset else None, success=False,
         message=message, method="none", nit_srivc=nit, nfev_oe=nfev,
-        param_std=_readonly(np.full(p, np.nan)), covariance=_readonly(np.full((p, p), np.nan)),
+        param_std=readonly(np.full(p, np.nan)), covariance=readonly(np.full((p, p), np.nan)),
         srivc_num=None, srivc_den=None, srivc_cost=np.nan, n_samples=n_samples,
     )
 
 
-def _finish(criterion, theta, n, m, ts, success, message, method, nit, srivc_theta,
-            srivc_cost) -> TFEstimate:
+def _estimate_result(criterion, theta, n, m, ts, success, message, method, nit, srivc_theta,
+                     srivc_cost) -> TFEstimate:
     """Assemble the result: fit, covariance, x0 and input offset at the final estimate."""
     nfev = criterion.nfev
     residual, linear = criterion.evaluate(theta)
@@ -723,17 +721,17 @@ def _finish(criterion, theta, n, m, ts, success, message, method, nit, srivc_the
     if srivc_theta is not None:
         srivc_num, srivc_den = _split(srivc_theta, n)
     return TFEstimate(
-        num=_readonly(num), den=_readonly(den), ts=ts, n_poles=n, n_zeros=m,
-        fit_percent=_fit_percent(criterion.y, y_hat), cost=0.5 * sse,
+        num=readonly(num), den=readonly(den), ts=ts, n_poles=n, n_zeros=m,
+        fit_percent=fit_percent(criterion.y, y_hat), cost=0.5 * sse,
         mse=sse / residual.size, noise_variance=variance,
-        initial_condition="estimated" if criterion.estimate_x0 else "zero",
-        x0=None if x0 is None else _readonly(x0), input_offset=offset,
+        initial_condition="estimate" if criterion.estimate_x0 else "zero",
+        x0=None if x0 is None else readonly(x0), input_offset=offset,
         input_offset_std=offset_std, success=bool(success), message=message,
         method=method, nit_srivc=nit, nfev_oe=nfev,
-        param_std=_readonly(np.sqrt(np.abs(np.diag(covariance)))),
-        covariance=_readonly(covariance),
-        srivc_num=None if srivc_num is None else _readonly(srivc_num),
-        srivc_den=None if srivc_den is None else _readonly(srivc_den),
+        param_std=readonly(np.sqrt(np.abs(np.diag(covariance)))),
+        covariance=readonly(covariance),
+        srivc_num=None if srivc_num is None else readonly(srivc_num),
+        srivc_den=None if srivc_den is None else readonly(srivc_den),
         srivc_cost=float(srivc_cost), n_samples=residual.size,
     )
 
@@ -831,7 +829,7 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
     tol = positive_number("tol", tol)
     max_nfev = 100 * (n + m + 1) if max_nfev is None else positive_integer("max_nfev", max_nfev)
     if not isinstance(refine, (bool, np.bool_)):
-        raise ValueError(f"refine must be True or False, got {refine!r}")
+        raise not_allowed("refine", refine, "must be True or False")
     n_refine = positive_integer("n_refine", n_refine)
     starts, start_names = [], []
     if init is not None:
@@ -846,7 +844,7 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
     criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_x0, estimate_offset, cancel)
     candidates = []
     nit_total = 0
-    for name, start in zip(start_names, starts):
+    for name, start in zip(start_names, starts, strict=True):
         try:
             theta, cost, nit, converged = _srivc(u_arr, y_arr, ts_f, n, m, start,
                                                  max_iter, tol, criterion)
@@ -868,9 +866,9 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
                  f"{srivc_nit} iterations from {start_name}")
     if not refine:
         criterion.nfev = 0
-        return _finish(criterion, srivc_theta, n, m, ts_f, srivc_converged,
-                       srivc_msg + "; output-error refinement skipped", "srivc",
-                       nit_total, srivc_theta, srivc_cost)
+        return _estimate_result(criterion, srivc_theta, n, m, ts_f, srivc_converged,
+                                srivc_msg + "; output-error refinement skipped", "srivc",
+                                nit_total, srivc_theta, srivc_cost)
     # The output-error criterion can have several minima (e.g. a slow drift of a
     # nonlinear plant mimicked by a slow pole, versus the plant's resonance):
     # refine the best distinct SRIVC candidates and keep the lowest cost.
@@ -885,17 +883,17 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
         if cost_oe <= srivc_cost:
             if cand is not best:
                 srivc_msg += f"; the output error was lowest from the SRIVC start {cand[3]}"
-            return _finish(criterion, theta_oe, n, m, ts_f, oe_success,
-                           f"{srivc_msg}; output error: {oe_msg}; kept the output-error estimate "
-                           f"(cost {cost_oe:.4g} <= SRIVC {srivc_cost:.4g})",
-                           "srivc+oe", nit_total, srivc_theta, srivc_cost)
+            return _estimate_result(criterion, theta_oe, n, m, ts_f, oe_success,
+                                    f"{srivc_msg}; output error: {oe_msg}; kept the output-error estimate "
+                                    f"(cost {cost_oe:.4g} <= SRIVC {srivc_cost:.4g})",
+                                    "srivc+oe", nit_total, srivc_theta, srivc_cost)
         oe_msg_last = oe_msg
     else:
         cost_oe, oe_msg_last = float("nan"), "no finite output-error cost"
-    return _finish(criterion, srivc_theta, n, m, ts_f, srivc_converged,
-                   f"{srivc_msg}; output error: {oe_msg_last}; kept the SRIVC estimate "
-                   f"(cost {srivc_cost:.4g} < output error {cost_oe:.4g})",
-                   "srivc", nit_total, srivc_theta, srivc_cost)
+    return _estimate_result(criterion, srivc_theta, n, m, ts_f, srivc_converged,
+                            f"{srivc_msg}; output error: {oe_msg_last}; kept the SRIVC estimate "
+                            f"(cost {srivc_cost:.4g} < output error {cost_oe:.4g})",
+                            "srivc", nit_total, srivc_theta, srivc_cost)
 
 
 def _distinct(candidates, k: int, n: int, m: int):
@@ -958,16 +956,17 @@ def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", input_offset="zero
     >>> np.round(est.num, 6), np.round(est.den, 6), est.method
     (array([3.]), array([1. , 1.5]), 'oe')
     """
-    num_n, den_n = _as_tf(num0, den0)
+    num_n, den_n = as_tf(num0, den0, ("num0", "den0"))
     n = den_n.size - 1
     m = max(num_n.size - 1, 0)
-    try:
-        n, m = _check_orders(n, m)
-    except ValueError as exc:
-        raise ValueError(
-            f"den0/num0: the start model must have >= 1 pole and fewer zeros than poles, "
-            f"got {num_n.size - 1} zeros and {den_n.size - 1} poles ({exc})"
-        ) from None
+    if n < 1:
+        raise not_allowed("den0", np.asarray(den0, dtype=float),
+                          "the start model needs at least 1 pole (den0 of degree >= 1)")
+    if m > n - 1:
+        raise not_allowed("num0", np.asarray(num0, dtype=float),
+                          f"the start model must have fewer zeros than poles (strictly proper); "
+                          f"num0 has {m} zeros and den0 {n} poles")
+    n, m = _check_orders(n, m)
     estimate_x0 = _check_initial_condition(initial_condition)
     estimate_offset = _check_input_offset(input_offset)
     u_arr, y_arr, ts_f = _check_data(u, y, ts, n + m + 1,
@@ -984,5 +983,5 @@ def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", input_offset="zero
     theta, cost, success, msg = _oe_refine(criterion, theta0, n, m, max_nfev, tol)
     if not np.isfinite(cost):
         theta = theta0
-    return _finish(criterion, theta, n, m, ts_f, success, f"output error: {msg}", "oe", 0,
-                   None, np.nan)
+    return _estimate_result(criterion, theta, n, m, ts_f, success, f"output error: {msg}", "oe", 0,
+                            None, np.nan)

@@ -55,7 +55,7 @@ def test_many_frequency_experiments_at_once_build_no_bokeh_model_and_all_succeed
     assert min(fits) > 90.0
     # each result shows on its own figures, built on the page's side
     figures = [plots.BodeFigure() for _ in outs]
-    for fig, (fi, view) in zip(figures, outs):
+    for fig, (fi, view) in zip(figures, outs, strict=True):
         fig.update(view)
         np.testing.assert_allclose(fig.points.data["w"], fi.etfe.w.astype(np.float32))
 

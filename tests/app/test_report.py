@@ -1,4 +1,4 @@
-"""`eha reproduce` on the reduced setting: every section, numbers equal to the core's."""
+"""`eha reproduce` on the quick setting: every section, numbers equal to the core's, sentences from the numbers."""
 
 import io
 import json
@@ -7,20 +7,21 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from eha_app.cli import main
 from eha_app.formatting import num_html
-from eha_app.report import SECTIONS, ReportSettings, build_report
-from eha_core.cli import main
+from eha_app.report import SECTIONS, build_report
 from eha_core.experiments import FrequencyExperiment, run_frequency_identification, run_lse_table, run_paper_cases
 from eha_core.params import ActuatorParams
+from eha_core.reproduction import ReproductionSettings
 
-SETTINGS = ReportSettings(seed=3, reduced=True)
+SETTINGS = ReproductionSettings(seed=3, quick=True)
 
 
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
     out = tmp_path_factory.mktemp("report")
     stream = io.StringIO()
-    result = build_report(out, seed=SETTINGS.seed, reduced=True, stream=stream)
+    result = build_report(out, seed=SETTINGS.seed, quick=True, stream=stream)
     return out, result, stream.getvalue()
 
 
@@ -32,7 +33,7 @@ def test_every_section_is_present(report):
     assert page.count('class="fig"') >= 12                      # Figs. 2, 3, 4-7, 8, 9, 11, 12, 13, residuals
     # self-contained: no script or stylesheet loaded from anywhere else
     assert "<script src=" not in page and "<link " not in page
-    assert "[7/7] done" in progress and "report written in" in progress
+    assert "[7/7] writing report.html" in progress and "report written in" in progress
     for name in ("numpy", "scipy", "control", "numba", "bokeh", "panel"):
         assert f"<td>{name}</td>" in page
     assert "Seed 3" in page
@@ -93,3 +94,17 @@ def test_reproduce_command_line_errors(capsys, tmp_path):
     assert main(["reproduce", "--out", str(afile)]) == 2
     assert "is not a folder" in capsys.readouterr().err
     assert main(["reproduce", "--seed", "-1", "--out", str(tmp_path / "r")]) == 2
+
+
+def test_sentences_follow_the_parameters_not_the_papers(tmp_path):
+    """Other parameters: the report's statements speak of them (no 1.1e9 or 1500 written in)."""
+    p = ActuatorParams(beta_e=0.9e9, B=1200.0)
+    result = build_report(tmp_path / "other", quick=True, params=p, stream=io.StringIO())
+    numbers = result.numbers
+    assert numbers["params"]["beta_e"] == 0.9e9 and numbers["params"]["B"] == 1200.0
+    joined = " ".join(numbers["differences_from_paper"])
+    stiffness = numbers["beta_e_stiffness"]
+    assert f"({100 * (stiffness / 0.9e9 - 1):+.2f} %)" in joined
+    assert f"{100 * numbers['b_se_default'] / 1200.0:.0f} %" in joined
+    page = result.path.read_text(encoding="utf-8")
+    assert "1.2·10<sup>3</sup>" in page or "1200" in page

@@ -42,8 +42,15 @@ def test_standard_errors_carry_over_linearly():
     assert lo < b.damping < hi
 
 
-def test_bad_shapes():
-    with pytest.raises(ValueError, match="3 poles"):
+def test_bad_shapes_name_the_argument_and_its_value():
+    with pytest.raises(ValueError, match=r"^num_p = \[1, 2\] is not allowed: P_hat must be .*\(3 poles, no zeros\)"
+                                         r".*it has 1 zeros and 3 poles"):
         backout([1.0, 2.0], [1.0, 2.0, 3.0, 4.0])
-    with pytest.raises(ValueError, match="kp"):
+    with pytest.raises(ValueError, match=r"^den_p = \[1, 2, 3\] is not allowed: .*it has 0 zeros and 2 poles"):
+        backout([1.0], [1.0, 2.0, 3.0])
+    with pytest.raises(ValueError, match=r"^kp = 0 is not allowed: must be a finite gain > 0"):
         open_loop_from_closed([1.0], [1.0, 1.0], kp=0.0)
+    with pytest.raises(ValueError, match=r"^num_h = \[1, 2, 3\] is not allowed: .*must be proper"):
+        open_loop_from_closed([1.0, 2.0, 3.0], [1.0, 1.0], kp=1.0)
+    with pytest.raises(ValueError, match=r"^num_h = \[1, 2\] is not allowed: .*feedthrough of 1"):
+        open_loop_from_closed([1.0, 2.0], [1.0, 1.0], kp=1.0)

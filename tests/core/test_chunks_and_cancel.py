@@ -104,7 +104,7 @@ def test_batches_in_chunks_are_bitwise_the_same(in_chunks, parallel):
     whole, chunked = in_chunks(lambda: simulate_many(None, us, ds, t_end=0.5, dt=2e-3, parallel=parallel),
                                0.5, 2e-3)
     for runs in chunked:
-        for a, b in zip(whole, runs):
+        for a, b in zip(whole, runs, strict=True):
             same(a, b)
 
 
@@ -153,7 +153,7 @@ def test_a_batch_with_a_failing_run_in_chunks(in_chunks, parallel):
                                0.5, 1e-3)
     assert [r.success for r in whole] == [True, False, True]
     for runs in chunked:
-        for a, b in zip(whole, runs):
+        for a, b in zip(whole, runs, strict=True):
             same(a, b)
 
 

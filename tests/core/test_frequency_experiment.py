@@ -1,4 +1,4 @@
-"""The paper's closed-loop experiment end to end (SPEC section 5)."""
+"""The paper's closed-loop experiment end to end (docs/model.md §4)."""
 
 import json
 
@@ -50,13 +50,13 @@ def test_the_input_offset_captures_the_valve_asymmetry(paper):
 
 
 def test_on_the_linearised_plant_the_s2_coefficient_is_the_linearised_one():
-    fi = run_frequency_identification(config=FrequencyExperiment(plant="linear"))
+    fi = run_frequency_identification(config=FrequencyExperiment(model="linear"))
     assert fi.estimate.den[1] == pytest.approx(430.1, rel=0.05)
 
 
 @pytest.mark.parametrize("kwargs, words", [
     ({"n_poles": 0}, "n_poles"), ({"n_zeros": 3}, "n_zeros"), ({"kp": -1.0}, "kp"),
-    ({"plant": "soft"}, "plant"), ({"initial_condition": "guess"}, "initial_condition"),
+    ({"model": "soft"}, "model = soft"), ({"initial_condition": "guess"}, "initial_condition"),
 ])
 def test_bad_configuration(kwargs, words):
     with pytest.raises(ValueError, match=words):

@@ -1,10 +1,11 @@
 import io
+import re
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from eha_core.experiments import LSE_SCENARIOS, lse_data, parse_disturbance, run_lse
+from eha_core.experiments import LSE_SCENARIOS, lse_data, run_lse
 from eha_core.identify.lse import MeasuredData, identify_lse, prefilter
 from eha_core.params import ActuatorParams
 from eha_core.signals import Sine, WhiteNoise
@@ -89,7 +90,8 @@ def test_prefilter_is_exact_for_ramps_and_its_derivative():
 def test_user_data_from_a_table_gives_the_same_estimates():
     data = lse_data(disturbance="sine:200")
     buf = io.StringIO()
-    pd.DataFrame({c: getattr(data, c) for c in ("t", "x", "v", "p1", "p2", "u")}).to_csv(buf, index=False, float_format="%.17g")
+    table = pd.DataFrame({c: getattr(data, c) for c in ("t", "x", "v", "p1", "p2", "u")})
+    table.to_csv(buf, index=False, float_format="%.17g")
     buf.seek(0)
     from_csv = MeasuredData.from_csv(buf)
     a, b = identify_lse(data), identify_lse(from_csv)
@@ -114,42 +116,69 @@ def test_no_motion_is_reported_not_raised():
     assert "linearly dependent" in res.message
 
 
-def test_scenarios_parse():
-    assert parse_disturbance("none").label == "0"
-    assert parse_disturbance("sine:200") == Sine(200.0, 1.0)
-    assert parse_disturbance("sine:200:3") == Sine(200.0, 3.0)
-    assert parse_disturbance("white:1000", seed=7, dt=1e-3) == WhiteNoise(1000.0, seed=7, hold_s=1e-3)
+def test_scenarios_are_written_in_the_signal_grammar():
+    from eha_core.signals import parse_signal
+
+    assert parse_signal(LSE_SCENARIOS["none"]).label == "0"
+    assert parse_signal(LSE_SCENARIOS["200 sin"]) == Sine(200.0, 1.0)
+    assert parse_signal("sine:200:3") == Sine(200.0, 3.0)
+    assert parse_signal(LSE_SCENARIOS["white noise"], seed=7, hold_s=1e-3) == WhiteNoise(1000.0, seed=7, hold_s=1e-3)
     for bad in ("sine", "sine:x", "white", "white:-1", "gust:3", "sine:1:0"):
-        with pytest.raises(ValueError, match="--disturbance"):
-            parse_disturbance(bad)
+        with pytest.raises(ValueError, match=f"^--disturbance = {re.escape(bad)} is not allowed: "):
+            parse_signal(bad, name="--disturbance")
 
 
 @pytest.mark.parametrize("kwargs, words", [
-    ({"tau_f": 0.0}, "tau_f"),
-    ({"disturbance_model": "cubic"}, "disturbance_model"),
-    ({"disturbance_freq_hz": -1.0}, "disturbance_freq_hz"),
-    ({"disturbance_freq_hz": 600.0}, "Nyquist"),
-    ({"skip_s": 10.0}, "skip_s"),
-    ({"interpolation": "sinc"}, "interpolation"),
+    ({"tau_f": 0.0}, r"^tau_f = 0 is not allowed: must be a time constant > 0 s"),
+    ({"disturbance_model": "cubic"}, r"^disturbance_model = cubic is not allowed: use one of constant, harmonic"),
+    ({"disturbance_freq_hz": -1.0}, r"^disturbance_freq_hz = -1 is not allowed: must be > 0 Hz"),
+    ({"disturbance_freq_hz": 600.0}, r"^disturbance_freq_hz = 600 is not allowed: must be below the Nyquist"),
+    ({"skip_s": 10.0}, r"^skip_s = 10 is not allowed: it leaves 0 samples"),
+    ({"interpolation": "sinc"}, r"^interpolation = sinc is not allowed: use cubic or linear"),
 ])
 def test_bad_arguments(kwargs, words):
     with pytest.raises(ValueError, match=words):
         identify_lse(lse_data(t_end=1.0), **kwargs)
 
 
-def test_bad_data():
+def test_bad_data_names_the_column_the_row_and_the_value():
     t = np.arange(100) * 1e-3
     z = np.zeros(100)
-    with pytest.raises(ValueError, match="uniform"):
+    # a jump of 10 ms at the 51st sample: rows are counted from 1, as in a CSV file
+    with pytest.raises(ValueError, match=r"^t = an array of shape \(100,\) is not allowed: "
+                                         r"the sampling is not uniform at row 51 \(a step of 0.011 s after steps "
+                                         r"of 0.001 s\)"):
         MeasuredData(np.r_[t[:50], t[50:] + 0.01], z, z, z, z, z)
-    with pytest.raises(ValueError, match="non-finite"):
+    with pytest.raises(ValueError, match=r"^t = an array of shape \(100,\) is not allowed: "
+                                         r"the time does not increase at row 3 \(0.001 after 0.001\)"):
+        MeasuredData(np.r_[t[:2], t[1:99]], z, z, z, z, z)
+    # a slow drift of the step trips the same criterion (spread > 1e-6 of the mean step)
+    drifting = np.cumsum(np.r_[0.0, 1e-3 * (1 + 1e-5 * np.arange(99))])
+    with pytest.raises(ValueError, match=r"^t = .* is not allowed: the sampling is not uniform at row \d+"):
+        MeasuredData(drifting, z, z, z, z, z)
+    MeasuredData(t * (1 + 1e-12), z, z, z, z, z)        # rounding-level differences are accepted
+    with pytest.raises(ValueError, match=r"^x = an array of shape \(100,\) is not allowed: row 100 is nan; "
+                                         r"every value must be a finite number"):
         MeasuredData(t, np.r_[z[:99], np.nan], z, z, z, z)
-    with pytest.raises(ValueError, match="equal lengths"):
+    with pytest.raises(ValueError, match=r"^p2 = .* is not allowed: row 1 is inf"):
+        MeasuredData(t, z, z, z, np.r_[np.inf, z[1:]], z)
+    with pytest.raises(ValueError, match=r"^x = an array of shape \(90,\) is not allowed: it has 90 rows where t "
+                                         r"has 100"):
         MeasuredData(t, z[:90], z, z, z, z)
-    with pytest.raises(ValueError, match="too few"):
+    with pytest.raises(ValueError, match=r"^t = an array of shape \(10,\) is not allowed: 10 rows of data; "
+                                         r"need at least 50"):
         MeasuredData(t[:10], z[:10], z[:10], z[:10], z[:10], z[:10])
-    with pytest.raises(ValueError, match="missing column"):
+    with pytest.raises(ValueError, match=r"^table = a table with columns t, x is not allowed: "
+                                         r"no column v, p1, p2, u; need t, x, v, p1, p2, u"):
         MeasuredData.from_table({"t": t, "x": z})
+
+
+def test_measurement_noise_refusals_name_the_sensor():
+    data = MeasuredData(np.arange(100) * 1e-3, *[np.zeros(100)] * 5)
+    with pytest.raises(ValueError, match=r"^sigmas\[q\] = 0.1 is not allowed: q is not a sensor"):
+        data.with_noise({"q": 0.1})
+    with pytest.raises(ValueError, match=r"^sigmas\[v\] = -1 is not allowed: must be a standard deviation >= 0"):
+        data.with_noise({"v": -1.0})
 
 
 def test_richer_excitation_narrows_B_under_white_noise():

@@ -114,7 +114,7 @@ def test_estimated_initial_condition_recovers_state():
     y = simulate_tf(H_NUM, H_DEN, u, TS, x0=x0)
     est = tfest(u, y, TS, initial_condition="estimate")
     assert est.success, est.message
-    assert est.initial_condition == "estimated"
+    assert est.initial_condition == "estimate"
     np.testing.assert_allclose(est.den, H_DEN, rtol=1e-4)
     np.testing.assert_allclose(est.num, H_NUM, rtol=1e-4)
     np.testing.assert_allclose(est.x0, x0, rtol=1e-4)
@@ -194,34 +194,61 @@ def test_unexciting_input_is_reported_not_raised():
 
 
 @pytest.mark.parametrize(
-    ("kwargs", "name"),
+    ("kwargs", "message"),
     [
-        ({"n_poles": 0}, "n_poles"),
-        ({"n_poles": 2, "n_zeros": 2}, "n_zeros"),
-        ({"n_zeros": -1}, "n_zeros"),
-        ({"ts": 0.0}, "ts"),
-        ({"initial_condition": "random"}, "initial_condition"),
-        ({"init": ([1.0], [1.0, 2.0])}, "init"),
-        ({"max_iter": 0}, "max_iter"),
-        ({"tol": -1.0}, "tol"),
-        ({"lambda_svf": -3.0}, "lambda_svf"),
+        ({"n_poles": 0}, r"n_poles = 0 is not allowed: must be a whole number >= 1"),
+        ({"n_poles": 2, "n_zeros": 2}, r"n_zeros = 2 is not allowed: .*\[0, 1\]"),
+        ({"n_zeros": -1}, r"n_zeros = -1 is not allowed: .*\[0, 2\]"),
+        ({"ts": 0.0}, r"ts = 0 is not allowed: must be a finite sample time > 0 s"),
+        ({"initial_condition": "random"}, r"initial_condition = random is not allowed: use zero or estimate"),
+        ({"init": ([1.0], [1.0, 2.0])},
+         r"init = \[\[1\], \[1, 2\]\] is not allowed: must have 3 poles and at most 0 zeros .*it has 1 poles"),
+        ({"init": ([1.0], [0.0])}, r"init\[1\] = \[0\] is not allowed: .*non-zero coefficient"),
+        ({"init": 5}, r"init = 5 is not allowed: must be a \(num, den\) pair or a transfer function"),
+        ({"max_iter": 0}, r"max_iter = 0 is not allowed"),
+        ({"tol": -1.0}, r"tol = -1 is not allowed"),
+        ({"lambda_svf": -3.0}, r"lambda_svf = -3 is not allowed"),
+        ({"refine": 1}, r"refine = 1 is not allowed: must be True or False"),
     ],
 )
-def test_bad_arguments_raise_value_error_naming_them(kwargs, name):
+def test_bad_arguments_raise_value_error_naming_them_and_their_value(kwargs, message):
     u = _binary_input(100)
     args = {"u": u, "y": u, "ts": TS, **kwargs}
-    with pytest.raises(ValueError, match=name):
+    with pytest.raises(ValueError, match="^" + message):
         tfest(**args)
 
 
-def test_bad_data_raise_value_error():
+def test_bad_data_raise_value_error_naming_them_and_their_value():
     u = _binary_input(100)
-    with pytest.raises(ValueError, match="y"):
+    with pytest.raises(ValueError, match=r"^y = an array of shape \(99,\) is not allowed: it has 99 samples "
+                                         r"where u has 100"):
         tfest(u, u[:-1], TS)
-    with pytest.raises(ValueError, match="u"):
+    with pytest.raises(ValueError, match=r"^u = \[.*\] is not allowed: it has 5 samples; this model needs at "
+                                         r"least 6"):
         tfest(u[:5], u[:5], TS)
-    with pytest.raises(ValueError, match="den0"):
+    with pytest.raises(ValueError, match=r"^y = an array of shape \(100,\) is not allowed: y\[3\] is nan"):
+        tfest(u, np.r_[u[:3], np.nan, u[4:]], TS)
+    with pytest.raises(ValueError, match=r"^num0 = \[1, 1\] is not allowed: the start model must have fewer "
+                                         r"zeros than poles"):
         oe_fit(u, u, TS, [1.0, 1.0], [1.0, 1.0])
+    with pytest.raises(ValueError, match=r"^den0 = \[2\] is not allowed: the start model needs at least 1 pole"):
+        oe_fit(u, u, TS, [1.0], [2.0])
+    with pytest.raises(ValueError, match=r"^num0 = \[1, 0, 0\] is not allowed: its degree 2 exceeds the degree 1 "
+                                         r"of den0"):
+        oe_fit(u, u, TS, [1.0, 0.0, 0.0], [1.0, 1.0])
+
+
+def test_tfest_and_validate_share_one_simulator_and_fit():
+    """The estimator's fit and compare's are computed by the same code."""
+    from eha_core.identify import _ctmodels, validate
+    from eha_core.identify import tfest as tfest_module
+
+    assert tfest_module.simulate_tf is validate.simulate_tf is _ctmodels.simulate_tf
+    assert tfest_module.fit_percent is validate.fit_percent is _ctmodels.fit_percent
+    u = _binary_input(300)
+    y = simulate_tf(H_NUM, H_DEN, u, TS) + 1e-3 * np.random.default_rng(5).standard_normal(300)
+    est = tfest(u, y, TS)
+    assert est.fit_percent == pytest.approx(validate.compare(est.num, est.den, u, y, TS).fit_percent, abs=1e-12)
 
 
 def test_tfest_is_fast():
@@ -351,12 +378,13 @@ def test_input_offset_is_fast():
     assert elapsed < 0.5, f"tfest with input offset took {elapsed:.3f} s for 1000 samples"
 
 
-@pytest.mark.parametrize("value", ["random", 0.5, None, True])
-def test_bad_input_offset_raises_value_error_naming_it(value):
+@pytest.mark.parametrize(("value", "typed"), [("random", "random"), (0.5, "0.5"), (None, "None"), (True, "True")])
+def test_bad_input_offset_raises_value_error_naming_it(value, typed):
     u = _binary_input(100)
-    with pytest.raises(ValueError, match="input_offset"):
+    message = f"^input_offset = {typed} is not allowed: use zero or estimate"
+    with pytest.raises(ValueError, match=message):
         tfest(u, u, TS, input_offset=value)
-    with pytest.raises(ValueError, match="input_offset"):
+    with pytest.raises(ValueError, match=message):
         oe_fit(u, u, TS, [1.0], [1.0, 1.0], input_offset=value)
 
 
@@ -365,5 +393,5 @@ def test_simulate_rejects_bad_input_offset():
     est = tfest(u, simulate_tf([20.0], [1.0, 6.0, 20.0], u, TS), TS, n_poles=2)
     assert est.input_offset is None
     np.testing.assert_allclose(est.simulate(u, input_offset=0.0), est.simulate(u))
-    with pytest.raises(ValueError, match="input_offset"):
+    with pytest.raises(ValueError, match=r"^input_offset = big is not allowed: must be None or a finite number"):
         est.simulate(u, input_offset="big")

@@ -63,17 +63,24 @@ def test_simulate_biproper_and_static_models():
     np.testing.assert_allclose(simulate_tf([6.0], [2.0], u, TS), 3.0 * u)
 
 
-def test_simulate_rejects_bad_arguments():
-    with pytest.raises(ValueError, match="ts"):
-        simulate_tf([1.0], [1.0, 1.0], np.ones(5), -0.1)
-    with pytest.raises(ValueError, match="num"):
-        simulate_tf([1.0, 0.0, 0.0], [1.0, 1.0], np.ones(5), TS)
-    with pytest.raises(ValueError, match="den"):
-        simulate_tf([1.0], [0.0, 0.0], np.ones(5), TS)
-    with pytest.raises(ValueError, match="x0"):
-        simulate_tf([1.0], [1.0, 1.0], np.ones(5), TS, x0=[1.0, 2.0])
-    with pytest.raises(ValueError, match="u"):
-        simulate_tf([1.0], [1.0, 1.0], [1.0, np.nan], TS)
+@pytest.mark.parametrize(("args", "kwargs", "message"), [
+    (([1.0], [1.0, 1.0], np.ones(5), -0.1), {}, r"ts = -0.1 is not allowed: must be a finite sample time > 0 s"),
+    (([1.0, 0.0, 0.0], [1.0, 1.0], np.ones(5), TS), {},
+     r"num = \[1, 0, 0\] is not allowed: its degree 2 exceeds the degree 1 of den"),
+    (([1.0], [0.0, 0.0], np.ones(5), TS), {}, r"den = \[0, 0\] is not allowed: .*non-zero coefficient"),
+    (([1.0], [1.0, np.inf], np.ones(5), TS), {}, r"den = \[1, inf\] is not allowed: .*finite coefficients"),
+    (([1.0], [1.0, 1.0], np.ones(5), TS), {"x0": [1.0, 2.0]},
+     r"x0 = \[1, 2\] is not allowed: must have shape \(1,\), one initial state per pole"),
+    (([1.0], [1.0, 1.0], [1.0, np.nan], TS), {}, r"u = \[1, nan\] is not allowed: u\[1\] is nan"),
+    (([1.0], [1.0, 1.0], np.r_[np.ones(20), np.inf], TS), {},
+     r"u = an array of shape \(21,\) is not allowed: u\[20\] is inf"),
+    (([1.0], [1.0, 1.0], 3.0, TS), {}, r"u = 3 is not allowed: must be an array of samples"),
+    (([1.0], [1.0, 1.0], [], TS), {}, r"u = \[\] is not allowed: must hold at least one sample"),
+    (([1.0], [1.0, 1.0], np.ones((3, 2)), TS), {}, r"u = an array of shape \(3, 2\) is not allowed: must be 1-D"),
+])
+def test_simulate_rejects_bad_arguments_naming_them_and_their_value(args, kwargs, message):
+    with pytest.raises(ValueError, match="^" + message):
+        simulate_tf(*args, **kwargs)
 
 
 # --- fit_percent and compare ---------------------------------------------------
@@ -91,7 +98,8 @@ def test_fit_percent_per_column():
     y = np.column_stack([[1.0, 3.0, 2.0, 6.0], [0.0, 1.0, 0.0, 1.0]])
     y_hat = np.column_stack([[1.0, 3.0, 2.0, 6.0], [0.5, 0.5, 0.5, 0.5]])
     np.testing.assert_allclose(fit_percent(y, y_hat), [100.0, 0.0], atol=1e-12)
-    with pytest.raises(ValueError, match="y_hat"):
+    with pytest.raises(ValueError, match=r"^y_hat = \[1, 3, 2, 6\] is not allowed: it has shape \(4,\); "
+                                         r"it must have the shape of y, \(4, 2\)"):
         fit_percent(y, y_hat[:, 0])
 
 
@@ -102,7 +110,7 @@ def test_compare_estimated_x0_recovers_state_and_beats_zero():
     zero = compare(H_NUM, H_DEN, u, y, TS)
     est = compare(H_NUM, H_DEN, u, y, TS, initial_condition="estimate")
     assert zero.initial_condition == "zero" and zero.x0 is None
-    assert est.initial_condition == "estimated"
+    assert est.initial_condition == "estimate"
     assert est.fit_percent >= zero.fit_percent
     assert zero.fit_percent < 99.0
     assert est.fit_percent == pytest.approx(100.0, abs=1e-8)
@@ -126,9 +134,12 @@ def test_compare_result_is_frozen_and_validates():
     res = compare([1.0], [1.0, 1.0], u, u, TS)
     with pytest.raises(dataclasses.FrozenInstanceError):
         res.fit_percent = 1.0
-    with pytest.raises(ValueError, match="initial_condition"):
+    with pytest.raises(ValueError, match=r"^initial_condition = guess is not allowed: use zero, estimate or"):
         compare([1.0], [1.0, 1.0], u, u, TS, initial_condition="guess")
-    with pytest.raises(ValueError, match="y"):
+    with pytest.raises(ValueError, match=r"^initial_condition = \[1, 2\] is not allowed: .*shape \(1,\)"):
+        compare([1.0], [1.0, 1.0], u, u, TS, initial_condition=[1.0, 2.0])
+    with pytest.raises(ValueError, match=r"^y = an array of shape \(49,\) is not allowed: it has 49 samples "
+                                         r"where u has 50"):
         compare([1.0], [1.0, 1.0], u, u[:-1], TS)
 
 
@@ -182,12 +193,15 @@ def test_etfe_periodic_explicit_frequencies_and_errors():
     num_z, den_z, _ = scipy.signal.cont2discrete(([20.0], [1.0, 6.0, 20.0]), TS)
     _, g = scipy.signal.freqz(num_z.ravel(), den_z, worN=[2 * np.pi * 5 / period])
     np.testing.assert_allclose(est.response, g, rtol=1e-6)
-    with pytest.raises(ValueError, match="period"):
+    with pytest.raises(ValueError, match=r"^period = 1 is not allowed: must be a whole number of samples in "
+                                         r"\[2, 1800\]"):
         etfe_periodic(u, y, 1, TS)
-    with pytest.raises(ValueError, match="drop_periods"):
+    with pytest.raises(ValueError, match=r"^drop_periods = 1 is not allowed: must be a whole number in \[0, 0\]"):
         etfe_periodic(u[:900], y[:900], period, TS, drop_periods=1)
-    with pytest.raises(ValueError, match="freqs"):
+    with pytest.raises(ValueError, match=r"^freqs = \[4\] is not allowed: .*rad/sample in \(0, pi\]"):
         etfe_periodic(u, y, period, TS, freqs=[4.0])
+    with pytest.raises(ValueError, match=r"^threshold = 1.5 is not allowed: .*\[0, 1\)"):
+        etfe_periodic(u, y, period, TS, threshold=1.5)
 
 
 # --- residual analysis -------------------------------------------------------------
@@ -216,10 +230,15 @@ def test_residual_analysis_coloured_and_correlated_fail():
 
 def test_residual_analysis_rejects_bad_arguments():
     e = np.ones(10)
-    with pytest.raises(ValueError, match="max_lag"):
+    with pytest.raises(ValueError, match=r"^max_lag = 10 is not allowed: must be a whole number in \[1, 9\]"):
         residual_analysis(e, e, max_lag=10)
-    with pytest.raises(ValueError, match="u"):
+    with pytest.raises(ValueError, match=r"^u = \[1, 1, 1, 1, 1\] is not allowed: it has 5 samples where e has 10"):
         residual_analysis(e, e[:5])
+    with pytest.raises(ValueError, match=r"^e = an array of shape \(10,\) is not allowed: it is constant, zero "
+                                         r"after removing its mean"):
+        residual_analysis(e, np.arange(10.0), max_lag=3, remove_mean=True)
+    with pytest.raises(ValueError, match=r"^u = an array of shape \(10,\) is not allowed: it is identically zero"):
+        residual_analysis(np.arange(10.0), np.zeros(10), max_lag=3)
 
 
 # --- compare with an input offset ---------------------------------------------------
@@ -259,8 +278,10 @@ def test_compare_with_given_input_offset():
     assert res.input_offset == pytest.approx(0.1, rel=1e-9)
 
 
-@pytest.mark.parametrize("value", ["guess", float("nan"), float("inf"), True, [0.1, 0.2]])
-def test_compare_rejects_bad_input_offset(value):
+@pytest.mark.parametrize(("value", "typed"), [("guess", "guess"), (float("nan"), "nan"), (float("inf"), "inf"),
+                                             (True, "True"), ([0.1, 0.2], r"\[0.1, 0.2\]")])
+def test_compare_rejects_bad_input_offset(value, typed):
     u = _binary_input(50)
-    with pytest.raises(ValueError, match="input_offset"):
+    with pytest.raises(ValueError, match=f"^input_offset = {typed} is not allowed: use zero, estimate, None or a "
+                                         "finite number"):
         compare([1.0], [1.0, 1.0], u, u, TS, input_offset=value)

@@ -16,6 +16,8 @@ def test_a_class_runs_every_step_at_once_without_an_error(serve):
     assert all(o.error is None for o in result.observer)
     log = server.log_text()
     assert "Traceback" not in log and "ERROR" not in log, log[-3000:]
+    # the teacher is told what is happening, then that the app is ready
+    assert "Preparing the simulation kernels" in log and f"Ready: http://127.0.0.1:{server.port}/eha" in log
 
 
 def test_clicking_the_experiment_four_times_and_many_experiments_at_once(serve):

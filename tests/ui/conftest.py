@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from pathlib import Path
 import urllib.request
+from pathlib import Path
 
 import pytest
 
@@ -30,7 +30,8 @@ def server():
     # the command a teacher runs (its settings for a class included)
     cmd = [str(Path(sys.executable).with_name("eha")), "serve", "--port", str(port), "--address", "127.0.0.1",
            "--allow-websocket-origin", f"127.0.0.1:{port}"]
-    log = open(ROOT / ".pytest_cache" / "ui_server.log", "w") if (ROOT / ".pytest_cache").exists() else subprocess.DEVNULL
+    cache = ROOT / ".pytest_cache"
+    log = open(cache / "ui_server.log", "w") if cache.exists() else subprocess.DEVNULL
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
     url = f"http://127.0.0.1:{port}/eha"
 

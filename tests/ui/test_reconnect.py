@@ -17,8 +17,6 @@ def test_a_restarted_server_is_announced_and_the_page_comes_back_with_the_studen
     page = context.new_page()
     console = []
     page.on("console", lambda m: console.append(f"{m.type}: {m.text}") if m.type in ("error", "warning") else None)
-    page.on("console", lambda m: print("CONSOLE", m.type, m.text[:150]))
-    page.on("request", lambda r: print("REQUEST", r.url[:120]) if "static" not in r.url and "blob" not in r.url else None)
     try:
         page.goto(server.url)
         page.wait_for_selector(".eha-field-M input", timeout=60_000)
@@ -35,14 +33,8 @@ def test_a_restarted_server_is_announced_and_the_page_comes_back_with_the_studen
 
         server = EhaServer(tmp_path, port=port)                   # the teacher restarts it
         # the page notices, reloads itself (a new document: no notice), and opens where the student was
-        page.wait_for_timeout(8000); print("OVERLAY", page.evaluate("() => Array.from(document.querySelectorAll('.eha-offline')).map(e => e.innerText)"))
         overlay.wait_for(state="detached", timeout=60_000)
-        try:
-            page.wait_for_selector(".eha-sim-info >> text=Case 1, Case 2, Case 3, Case 4", timeout=20_000)
-        except Exception:
-            page.screenshot(path="/tmp/recon_fail.png")
-            open("/tmp/recon_server.log", "w").write(server.log_text())
-            raise
+        page.wait_for_selector(".eha-sim-info >> text=Case 1, Case 2, Case 3, Case 4", timeout=20_000)
         page.locator(".bk-header .bk-tab", has_text="1. Parameters").first.click()
         page.wait_for_selector(".eha-field-M input")
         assert page.locator(".eha-field-M input").input_value() == "6000"

@@ -2,16 +2,15 @@
 
 import pytest
 
-from tests.ui.browser_helpers import IGNORED_CONSOLE
-
 from eha_app.report import build_report
+from tests.ui.browser_helpers import IGNORED_CONSOLE
 
 
 @pytest.fixture(scope="module")
 def report_path(tmp_path_factory):
     out = tmp_path_factory.mktemp("report_ui")
     with open(out / "progress.txt", "w") as progress:
-        return build_report(out, reduced=True, stream=progress).path
+        return build_report(out, quick=True, stream=progress).path
 
 
 def test_report_renders_offline(browser, report_path, tmp_path):

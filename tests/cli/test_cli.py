@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eha_core.cli import main
+from eha_app.cli import main
 from eha_core.experiments import PAPER_CASES
 from eha_core.simulate import simulate
 
@@ -62,9 +62,9 @@ def test_linearize_json(capsys):
     (["simulate", "--case", "1", "--param", "mass=1"], "mass"),
     (["simulate", "--case", "1", "--param", "M=abc"], "M = abc"),
     (["simulate", "--case", "1", "--param", "dc=0.2"], "dc = 0.2"),
-    (["simulate", "--case", "1", "--model", "cubic"], "model = 'cubic'"),
+    (["simulate", "--case", "1", "--model", "cubic"], "--model = cubic"),
     (["simulate", "--case", "1", "--dt", "0.003"], "dt = 0.003"),
-    (["simulate", "--u", "sine:a:2"], "--u = 'sine:a:2'"),
+    (["simulate", "--u", "sine:a:2"], "--u = sine:a:2"),
     (["simulate", "--d", "wobble:3"], "wobble"),
     (["simulate"], "--case or --u"),
     (["simulate", "--case", "1", "--t-end", "-3"], "t_end = -3"),
@@ -81,7 +81,7 @@ def test_bad_input_one_line_exit_2(capsys, argv, words):
 
 
 def test_installed_command_exit_code_and_stderr():
-    proc = subprocess.run([sys.executable, "-m", "eha_core.cli", "simulate", "--case", "5"],
+    proc = subprocess.run([sys.executable, "-m", "eha_app.cli", "simulate", "--case", "5"],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert proc.stderr.strip() == "eha: error: --case = 5 is not allowed: use one of 1, 2, 3, 4"
@@ -105,7 +105,8 @@ def test_idinput_csv_and_json_match_the_core(capsys):
 
 
 def test_identify_lse_json(capsys):
-    code, out, _ = run(capsys, "identify", "lse", "--disturbance", "sine:5000", "--disturbance-model", "harmonic", "--json")
+    code, out, _ = run(capsys, "identify", "lse", "--disturbance", "sine:5000", "--disturbance-model", "harmonic",
+                       "--json")
     assert code == 0
     data = json.loads(out)
     assert set(data) >= {"estimates", "std_errors", "ci95"}
@@ -155,14 +156,91 @@ def test_identify_tf_paper_experiment_json(capsys):
     (["idinput", "--n", "0"], "n"),
     (["idinput", "--n", "100", "--band", "0.6", "0.2"], "band"),
     (["identify"], "METHOD"),
-    (["identify", "lse", "--disturbance", "gust"], "--disturbance = 'gust'"),
+    (["identify", "lse", "--disturbance", "gust"], "--disturbance = gust"),
     (["identify", "lse", "--disturbance-model", "cubic"], "--disturbance-model"),
     (["identify", "lse", "--disturbance-model", "harmonic:x"], "--disturbance-model"),
     (["identify", "lse", "--data", "/nonexistent.csv"], "nonexistent"),
-    (["identify", "tf", "--np", "0"], "n_poles"),
-    (["identify", "tf", "--plant", "soft"], "plant"),
+    (["identify", "tf", "--np", "0"], "--np = 0"),
+    (["identify", "tf", "--model", "soft"], "--model = soft"),
     (["identify", "tf", "--data", "/nonexistent.csv"], "nonexistent"),
 ])
 def test_identification_bad_input(capsys, argv, words):
     code, out, err = run(capsys, *argv)
     assert code == 2 and err.count("\n") == 1 and words in err
+
+
+# -- what a newcomer hit -------------------------------------------------------------------
+
+def test_every_size_argument_has_a_limit(capsys):
+    code, _, err = run(capsys, "idinput", "--n", "1000000000000")
+    assert code == 2 and err == "eha: error: --n = 1000000000000 is not allowed: use 1 to 10000000 samples\n"
+    code, _, err = run(capsys, "idinput", "--type", "sine", "--n", "1000000", "--sinedata", "10", "500", "1")
+    assert code == 2 and "--sinedata NT = 500 is not allowed with --n 1000000" in err
+    code, _, err = run(capsys, "identify", "lse", "--t-end", "1e9")
+    assert code == 2 and "--t-end = 1e+09 is not allowed" in err
+    code, _, err = run(capsys, "identify", "tf", "--np", "40")
+    assert code == 2 and "--np = 40 is not allowed: use 1 to 8 poles" in err
+
+
+def test_an_output_that_cannot_be_written_is_refused_before_computing(capsys, monkeypatch):
+    import eha_core.simulate as sim
+
+    def never(*a, **k):
+        raise AssertionError("simulated although the output cannot be written")
+    monkeypatch.setattr(sim, "simulate", never)
+    code, out, err = run(capsys, "simulate", "--case", "1", "--out", "/nonexistent/dir/x.csv")
+    assert code == 2 and out == ""
+    assert err == "eha: error: --out = '/nonexistent/dir/x.csv' is not allowed: the folder '/nonexistent/dir' " \
+                  "does not exist\n"
+
+
+def test_a_notice_of_the_core_is_one_plain_line(capsys):
+    code, out, err = run(capsys, "idinput", "--type", "prbs", "--n", "127", "--band", "0", "0.5", "--json")
+    assert code == 0 and json.loads(out)["u"]
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("eha: note: idinput:")
+    assert "UserWarning" not in err and "warnings.warn" not in err
+
+
+def test_a_branch_with_the_nonlinear_model_is_refused(capsys):
+    code, _, err = run(capsys, "simulate", "--case", "1", "--branch", "positive")
+    assert code == 2 and "--branch = positive is not allowed with --model nonlinear" in err
+    code, out, _ = run(capsys, "simulate", "--case", "1", "--model", "linear", "--branch", "positive",
+                       "--t-end", "0.1")
+    assert code == 0 and len(out.splitlines()) == 102
+
+
+def test_a_bad_cell_is_named_by_file_column_and_row_in_both_identifications(capsys, tmp_path):
+    tf_file, lse_file = tmp_path / "tf.csv", tmp_path / "lse.csv"
+    tf_file.write_text("t,u,y\n0,1,0\n0.01,1,abc\n0.02,1,0.5\n")
+    code, _, err = run(capsys, "identify", "tf", "--data", str(tf_file))
+    assert code == 2
+    assert err == f"eha: error: --data = {str(tf_file)!r} is not allowed: column y, row 2 (line 3): 'abc' is not a " \
+                  f"number\n"
+    rows = "\n".join(f"{k * 1e-3},0,0,12e6,18e6,{'x' if k == 7 else 0}" for k in range(60))
+    lse_file.write_text("t,x,v,p1,p2,u\n" + rows + "\n")
+    code, _, err = run(capsys, "identify", "lse", "--data", str(lse_file))
+    assert code == 2
+    assert err == f"eha: error: --data = {str(lse_file)!r} is not allowed: column u, row 8 (line 9): 'x' is not a " \
+                  f"number\n"
+
+
+def test_a_port_in_use_is_refused_before_anything_starts(capsys):
+    import socket
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        code, out, err = run(capsys, "serve", "--port", str(port))
+    assert code == 2 and out == ""
+    assert err.startswith(f"eha: error: --port = {port} is not allowed: 127.0.0.1:{port} is in use")
+
+
+@pytest.mark.parametrize("argv", [["identify", "tf", "--np", "0"], ["identify", "lse", "--disturbance", "gust"],
+                                  ["identify", "tf", "--data", "/nonexistent.csv"]])
+def test_bad_identification_arguments_are_refused_before_the_estimators_load(argv):
+    code = (f"import sys; from eha_app.cli import main; code = main({argv!r}); "
+            "print(code, 'scipy' in sys.modules, 'numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.stdout.split() == ["2", "False", "False"], out.stderr

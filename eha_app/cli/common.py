@@ -1,0 +1,102 @@
+"""What every subcommand of ``eha`` shares: one-line errors, parameters, outputs.
+
+Every bad input ends with one line on stderr naming the option, the value as
+typed and what is allowed (``--n = 1e12 is not allowed: ...``), and exit code
+2; a notice (a warning of the core) is one plain line on stderr too. Checks run
+before anything heavy is imported or computed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+from eha_core.params import PARAM_NAMES
+
+__all__ = ["EXIT_USAGE", "UsageError", "Parser", "PARAM_HELP", "parse_params", "check_output_file",
+           "check_input_file", "check_range", "json_text", "tf_text"]
+
+EXIT_USAGE = 2
+
+
+class UsageError(Exception):
+    """Bad input on the command line (exit code 2, one line on stderr)."""
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse that reports errors as one line (no usage dump) and exit code 2."""
+
+    def error(self, message):
+        raise UsageError(f"{message} ({self.prog} --help tells more)")
+
+
+PARAM_HELP = ("set a parameter or initial condition (SI units), repeatable; NAME is one of "
+              + ", ".join(PARAM_NAMES) + ". p2_0=balance restores the force balance.")
+
+
+def parse_params(items):
+    """``--param NAME=VALUE`` assignments as an :class:`~eha_core.params.ActuatorParams`."""
+    from eha_core.params import parse_param_assignments
+
+    return parse_param_assignments(items)
+
+
+def check_range(option: str, value, lo, hi, unit: str = "") -> None:
+    """UsageError unless ``lo <= value <= hi`` (a size argument's limit)."""
+    if not lo <= value <= hi:
+        what = f"{lo:g}-{hi:g}" if isinstance(lo, float) or isinstance(hi, float) else f"{lo} to {hi}"
+        raise UsageError(f"{option} = {value} is not allowed: use {what}{' ' + unit if unit else ''}")
+
+
+def check_output_file(option: str, path: str | None) -> None:
+    """Before computing anything: can ``path`` be written?"""
+    if path is None:
+        return
+    p = Path(path)
+    if p.is_dir():
+        raise UsageError(f"{option} = {path!r} is not allowed: it is a folder; give a file name")
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise UsageError(f"{option} = {path!r} is not allowed: the folder {str(folder)!r} does not exist")
+    if not os.access(folder, os.W_OK) or (p.exists() and not os.access(p, os.W_OK)):
+        raise UsageError(f"{option} = {path!r} is not allowed: it cannot be written (permission denied)")
+
+
+def check_input_file(option: str, path: str | None) -> None:
+    """Before anything heavy: does ``path`` exist and can it be read?"""
+    if path is None:
+        return
+    p = Path(path)
+    if not p.exists():
+        raise UsageError(f"{option} = {path!r} is not allowed: no such file")
+    if p.is_dir() or not os.access(p, os.R_OK):
+        raise UsageError(f"{option} = {path!r} is not allowed: it is not a readable file")
+
+
+def json_text(data) -> str:
+    """JSON of results holding numpy values."""
+    from eha_app.formatting import json_default
+
+    return json.dumps(data, indent=2, default=json_default)
+
+
+def _poly_text(coeffs) -> str:
+    n = len(coeffs) - 1
+    text = ""
+    for i, c in enumerate(coeffs):
+        p = n - i
+        power = "" if p == 0 else (" s" if p == 1 else f" s^{p}")
+        mag = f"{abs(c):.4g}"
+        term = power.strip() if mag == "1" and p else mag + power
+        if not text:
+            text = ("-" if c < 0 else "") + term
+        else:
+            text += (" - " if c < 0 else " + ") + term
+    return text
+
+
+def tf_text(num, den, name: str) -> str:
+    """``name = (num) / (den)`` in plain text."""
+    return f"{name} = ({_poly_text(num)}) / ({_poly_text(den)})"

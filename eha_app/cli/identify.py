@@ -1,0 +1,182 @@
+"""``eha identify lse|tf``: least squares (eqs. 15-18) and transfer-function estimation (eqs. 19-27).
+
+The arguments are checked before the estimators (scipy) are imported: a typo
+is refused at once.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+from .common import PARAM_HELP, Parser, UsageError, check_input_file, json_text, parse_params, tf_text
+
+#: Poles of an estimated model at most (and zeros at most poles - 1).
+MAX_POLES = 8
+#: Length of a simulated least-squares record at most [s] (60 s is 60 000 samples).
+MAX_LSE_T_END = 600.0
+
+
+def add_parser(sub) -> None:
+    from eha_core.signals import SIGNAL_GRAMMAR
+
+    idf = sub.add_parser("identify", help="identification: least squares (lse) or transfer function (tf)")
+    idsub = idf.add_subparsers(dest="method", metavar="METHOD", parser_class=Parser)
+    idf.set_defaults(handler=_missing_method)
+    le = idsub.add_parser("lse", help="least squares for M, B, Af, d0, beta_e (eqs. 15-18)",
+                          description="Least-squares identification. Without --data the nonlinear model is "
+                                      "simulated with u = 6 sin(4 pi t) for 5 s at 1 kHz.",
+                          epilog=SIGNAL_GRAMMAR)
+    le.add_argument("--disturbance", default="none",
+                    help="load disturbance d(t) as signal text, e.g. none (default), sine:5000:1, white:1000")
+    le.add_argument("--disturbance-model", default="constant",
+                    help="constant (the paper's d0) or harmonic[:FREQ_HZ] (d0 + a sinusoid; frequency estimated "
+                         "if not given)")
+    le.add_argument("--seed", type=int, default=0, help="seed of a noise disturbance without one (default 0)")
+    le.add_argument("--u", help="excitation as signal text; default sine:6:2")
+    le.add_argument("--t-end", type=float, default=5.0,
+                    help=f"record length [s] (default 5, at most {MAX_LSE_T_END:g})")
+    le.add_argument("--tau-f", type=float, default=0.01, help="prefilter time constant [s] (default 0.01, eq. 17)")
+    le.add_argument("--data", help="identify from a CSV with columns t,x,v,p1,p2,u (SI units) instead of simulating")
+    le.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                    help="known/nominal parameters (Dc, dc, L0, Kq1, Kq2, ps, pr, k_f are taken as measured); "
+                         + PARAM_HELP)
+    le.add_argument("--json", action="store_true", help="print JSON (default: a table)")
+    le.set_defaults(handler=run_lse)
+
+    tf = idsub.add_parser("tf", help="continuous-time transfer function (like MATLAB tfest)",
+                          description="Transfer-function estimation. Without --data: the paper's closed-loop "
+                                      "experiment (idinput sine reference, Kp = 10 at Ts = 0.01 s, nonlinear plant).")
+    tf.add_argument("--data", help="CSV with columns t,u,y (uniformly sampled; u held between samples)")
+    tf.add_argument("--ts", type=float, help="sample time [s]; default from t in --data, or 0.01")
+    tf.add_argument("--np", dest="n_poles", type=int, default=3, help=f"number of poles, 1 to {MAX_POLES} (default 3)")
+    tf.add_argument("--nz", dest="n_zeros", type=int, default=0, help="number of zeros, 0 to np - 1 (default 0)")
+    tf.add_argument("--seed", type=int, default=0, help="seed of the idinput excitation (default 0)")
+    tf.add_argument("--kp", type=float, default=10.0, help="paper experiment: proportional gain (default 10)")
+    tf.add_argument("--model", default="nonlinear",
+                    help="paper experiment: the actuator's model in the loop, nonlinear (default) or linear")
+    tf.add_argument("--initial-condition", default=None,
+                    help="zero or estimate (default: estimate for the paper experiment, zero for --data)")
+    tf.add_argument("--input-offset", default=None,
+                    help="zero or estimate a constant input offset (default: estimate for the paper experiment, "
+                         "zero for --data)")
+    tf.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help=PARAM_HELP)
+    tf.add_argument("--json", action="store_true", help="print JSON (default: a summary)")
+    tf.set_defaults(handler=run_tf)
+
+
+def _missing_method(args) -> int:
+    raise UsageError("identify needs a METHOD: lse or tf (eha identify --help tells more)")
+
+
+def _positive(option: str, value: float, unit: str) -> None:
+    if not (math.isfinite(value) and value > 0):
+        raise UsageError(f"{option} = {value:g} is not allowed: use a number > 0 {unit}".rstrip())
+
+
+def run_lse(args) -> int:
+    from eha_core.identify.disturbance import parse_disturbance_model
+    from eha_core.signals import parse_signal
+
+    if args.seed < 0:
+        raise UsageError(f"--seed = {args.seed} is not allowed: use a whole number >= 0")
+    _positive("--tau-f", args.tau_f, "s")
+    if not (math.isfinite(args.t_end) and 0 < args.t_end <= MAX_LSE_T_END):
+        raise UsageError(f"--t-end = {args.t_end:g} is not allowed: use a record length in (0, {MAX_LSE_T_END:g}] s")
+    model, freq = parse_disturbance_model(args.disturbance_model, name="--disturbance-model")
+    d = parse_signal(args.disturbance, name="--disturbance", seed=args.seed)
+    u = parse_signal(args.u, name="--u") if args.u else None
+    check_input_file("--data", args.data)
+    params = parse_params(args.param)
+
+    from eha_core.experiments import LSE_INPUT, lse_data
+    from eha_core.identify.lse import MeasuredData, identify_lse
+
+    if args.data:
+        data = MeasuredData.from_csv(args.data, name="--data")
+        source = args.data
+    else:
+        u = u or LSE_INPUT
+        data = lse_data(params, d, u=u, t_end=args.t_end, seed=args.seed)
+        source = f"simulation: u = {u.label}, d = {d.label}"
+    res = identify_lse(data, params, tau_f=args.tau_f, disturbance_model=model, disturbance_freq_hz=freq)
+    out = res.to_dict()
+    out["source"] = source
+    if args.json:
+        print(json_text(out))
+        return 0 if res.success else 1
+    print(f"least squares ({source}), disturbance model: {res.disturbance_model}"
+          + (f" at {res.disturbance_freq_hz:.6g} Hz{' (estimated)' if res.freq_estimated else ''}"
+             if res.disturbance_freq_hz else ""))
+    print(f"{'':8s}{'nominal':>14s}{'estimate':>14s}{'rel. error':>12s}   95 % interval")
+    for k, v in res.estimates.items():
+        nom = res.nominal.get(k)
+        rel = res.rel_error.get(k)
+        lo, hi = res.ci95[k]
+        nominal = "" if nom is None else f"{nom:.6g}"
+        relative = "" if rel is None else f"{100 * rel:+.3f} %"
+        print(f"{k:8s}{nominal:>14s}{v:14.6g}{relative:>12s}   [{lo:.6g}, {hi:.6g}]")
+    if not res.success:
+        print(f"eha identify lse: warning: {res.message}", file=sys.stderr)
+    return 0 if res.success else 1
+
+
+def _choice(option: str, value, allowed) -> None:
+    if value is not None and value not in allowed:
+        raise UsageError(f"{option} = {value} is not allowed: use {' or '.join(allowed)}")
+
+
+def run_tf(args) -> int:
+    if not 1 <= args.n_poles <= MAX_POLES:
+        raise UsageError(f"--np = {args.n_poles} is not allowed: use 1 to {MAX_POLES} poles")
+    if not 0 <= args.n_zeros < args.n_poles:
+        raise UsageError(f"--nz = {args.n_zeros} is not allowed: use 0 to np - 1 = {args.n_poles - 1} zeros")
+    if args.ts is not None:
+        _positive("--ts", args.ts, "s")
+    _positive("--kp", args.kp, "V/m")
+    if args.seed < 0:
+        raise UsageError(f"--seed = {args.seed} is not allowed: use a whole number >= 0")
+    _choice("--model", args.model, ("nonlinear", "linear"))
+    _choice("--initial-condition", args.initial_condition, ("zero", "estimate"))
+    _choice("--input-offset", args.input_offset, ("zero", "estimate"))
+    check_input_file("--data", args.data)
+    params = parse_params(args.param)
+
+    if args.data:
+        from eha_core.data import read_columns, sample_time
+        from eha_core.identify.tfest import tfest
+
+        cols = read_columns(args.data, ("t", "u", "y"), name="--data", min_rows=args.n_poles + args.n_zeros + 3)
+        ts = args.ts if args.ts is not None else sample_time(cols["t"], name="--data", path=args.data)
+        est = tfest(cols["u"], cols["y"], ts, args.n_poles, args.n_zeros,
+                    initial_condition=args.initial_condition or "zero", input_offset=args.input_offset or "zero")
+        out = {**est.to_dict(), "ts": ts}
+        ok = est.success
+    else:
+        from eha_core.experiments import FrequencyExperiment, run_frequency_identification
+
+        cfg = FrequencyExperiment(seed=args.seed, kp=args.kp, model=args.model, n_poles=args.n_poles,
+                                  n_zeros=args.n_zeros, ts=args.ts or 0.01,
+                                  initial_condition=args.initial_condition or "estimate",
+                                  input_offset=args.input_offset or "estimate")
+        fi = run_frequency_identification(params, cfg)
+        out = fi.to_dict()
+        ok = fi.success
+    if args.json:
+        print(json_text(out))
+        return 0 if ok else 1
+    print(tf_text(out["num"], out["den"], "H_hat(s)" if not args.data else "G(s)"))
+    print(f"fit {out['fit_percent']:.2f} % (initial condition {out['initial_condition']})")
+    if "open_loop" in out:
+        print(tf_text(out["open_loop"]["num"], out["open_loop"]["den"], "P_hat(s)"))
+        b = out["backout"]
+        print(f"B + 2 k_f Af / pi = {b['damping_B_plus_2kfAf_over_pi']:.4g} N s/m "
+              f"(linearised: {b['damping_nominal']:.4g})")
+        print(f"beta_e from the gain = {b['beta_e_from_gain']:.4g} Pa, from the s coefficient = "
+              f"{b['beta_e_from_stiffness']:.4g} Pa (nominal {b['beta_e_nominal']:.4g})")
+        if out.get("validation_fit_percent") is not None:
+            print(f"validation fit on a fresh excitation (seed {out['validation_seed']}): "
+                  f"{out['validation_fit_percent']:.2f} %")
+    if not ok:
+        print(f"eha identify tf: warning: {out['message']}", file=sys.stderr)
+    return 0 if ok else 1

@@ -1,0 +1,163 @@
+"""``eha serve``: the classroom web app, in one or several processes, or behind nginx."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import socket
+import sys
+import threading
+import time
+import urllib.request
+
+from .common import UsageError
+
+
+def add_parser(sub) -> None:
+    sv = sub.add_parser("serve", help="serve the classroom web app (one app and state per browser session)",
+                        description="Serve the app (Panel, from its entry point eha_app/eha.py). Each browser "
+                                    "session gets its own app and state. For a classroom, use --address 0.0.0.0 "
+                                    "and give the students the printed network URL.")
+    sv.add_argument("--port", type=int, default=5006, help="port (default 5006)")
+    sv.add_argument("--address", default="127.0.0.1",
+                    help="address to listen on (default 127.0.0.1; 0.0.0.0 for every network interface)")
+    sv.add_argument("--num-procs", type=int, default=1,
+                    help="server processes sharing the port (default 1; see the README for sizing a class)")
+    sv.add_argument("--workers", type=int, default=None,
+                    help="computation threads per process (default: the cores divided by --num-procs)")
+    sv.add_argument("--allow-websocket-origin", action="append", default=None, metavar="HOST[:PORT]",
+                    help="hosts allowed to connect (default: this machine's names; '*' when listening on 0.0.0.0)")
+    sv.add_argument("--behind-proxy", action="store_true",
+                    help="trust X-Forwarded-* headers from a reverse proxy such as nginx")
+    sv.add_argument("--nginx-config", type=int, default=None, metavar="N",
+                    help="print an nginx configuration for N eha serve processes on ports PORT+1..PORT+N behind "
+                         "nginx listening on PORT, with the commands that start them, and exit")
+    sv.add_argument("--show", action="store_true", help="open the app in a browser")
+    sv.add_argument("--share-port", action="store_true", help=argparse.SUPPRESS)
+    sv.set_defaults(handler=run)
+
+
+def _cores() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def lan_address() -> str | None:
+    """This machine's address on the local network (no packet is sent)."""
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            sock.connect(("10.255.255.255", 1))
+            return sock.getsockname()[0]
+    except OSError:
+        return None
+
+
+def check_port_free(address: str, port: int) -> None:
+    """Refuse a port another program listens on, before anything starts."""
+    family = socket.AF_INET6 if ":" in address else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((address, port))
+        except OSError as exc:
+            raise UsageError(f"--port = {port} is not allowed: {address}:{port} is in use "
+                             f"({exc.strerror}; another eha serve?); choose another port") from None
+
+
+def _validate(args) -> None:
+    if not 1 <= args.port <= 65535:
+        raise UsageError(f"--port = {args.port} is not allowed: use 1-65535")
+    if not 1 <= args.num_procs <= 64:
+        raise UsageError(f"--num-procs = {args.num_procs} is not allowed: use 1 to 64")
+    if args.workers is not None and not 1 <= args.workers <= 256:
+        raise UsageError(f"--workers = {args.workers} is not allowed: use 1 to 256")
+
+
+def _announce_when_ready(url: str) -> None:
+    """Print once the app answers (its first page also prepares the session students will reuse)."""
+    def wait():
+        deadline = time.monotonic() + 600
+        while time.monotonic() < deadline:
+            try:
+                with urllib.request.urlopen(url, timeout=30) as r:
+                    if r.status == 200:
+                        print(f"Ready: {url}", flush=True)
+                        return
+            except OSError:
+                time.sleep(0.5)
+    threading.Thread(target=wait, daemon=True).start()
+
+
+def run(args) -> int:
+    _validate(args)
+    if args.nginx_config is not None:
+        return _print_nginx_config(args)
+    from eha_app.serving import ENTRY_POINT, serve_argv
+
+    if not ENTRY_POINT.exists():
+        raise UsageError(f"the app entry point {ENTRY_POINT} is missing: reinstall the package")
+    if not args.share_port:
+        check_port_free(args.address, args.port)
+    argv = serve_argv(port=args.port, address=args.address, num_procs=1,
+                      allow_websocket_origin=args.allow_websocket_origin, show=args.show and args.num_procs == 1,
+                      behind_proxy=args.behind_proxy)
+    os.environ["EHA_WORKERS"] = str(args.workers or os.environ.get("EHA_WORKERS") or max(1, _cores() // args.num_procs))
+    host = "localhost" if args.address in ("127.0.0.1", "localhost", "0.0.0.0", "::") else args.address
+    url = f"http://{host}:{args.port}/eha"
+    if not args.share_port:
+        print(f"EHA app: {url}", flush=True)
+        if args.address in ("0.0.0.0", "::"):
+            lan = lan_address()
+            if lan:
+                print(f"for the class (same network): http://{lan}:{args.port}/eha", flush=True)
+        print("Preparing the simulation kernels (the first start after an install compiles them, "
+              "about 30 s)...", flush=True)
+        from eha_app.app import warm_up
+
+        warm_up()         # compiled once here; the server processes load the compiled code from disk
+        print("Starting the server. Ctrl+C stops it.", flush=True)
+        _announce_when_ready(f"http://127.0.0.1:{args.port}/eha" if args.address in ("0.0.0.0", "::")
+                             else f"http://{args.address}:{args.port}/eha")
+    if args.num_procs > 1:
+        from eha_app.serving import supervise
+
+        # N independent processes on one port (SO_REUSEPORT): the kernel spreads
+        # the students evenly, where Bokeh's own forked processes did not
+        child = [sys.executable, "-m", "eha_app.cli", "serve", "--port", str(args.port), "--address", args.address,
+                 "--num-procs", "1", "--share-port", "--workers", os.environ["EHA_WORKERS"]]
+        for origin in args.allow_websocket_origin or ():
+            child += ["--allow-websocket-origin", origin]
+        if args.behind_proxy:
+            child.append("--behind-proxy")
+        if args.show:
+            import webbrowser
+
+            threading.Timer(8.0, webbrowser.open, args=(url,)).start()
+        return supervise(child, args.num_procs)
+    if args.share_port:
+        from eha_app.serving import share_port
+
+        share_port()
+    from panel.command import main as panel_main
+
+    sys.argv = argv
+    panel_main()
+    return 0
+
+
+def _print_nginx_config(args) -> int:
+    from eha_app.serving import nginx_config
+
+    n = args.nginx_config
+    if not 1 <= n <= 64:
+        raise UsageError(f"--nginx-config = {n} is not allowed: use 1-64 processes")
+    if not 1 <= args.port <= 65535 - n:
+        raise UsageError(f"--port = {args.port} is not allowed: use 1-{65535 - n} (the processes take the next ports)")
+    backends = [f"127.0.0.1:{args.port + k}" for k in range(1, n + 1)]
+    print(nginx_config(backends, listen=str(args.port)))
+    origin = f"{lan_address() or 'localhost'}:{args.port}"
+    print("# Start the app processes (each on its own port, all on this machine):")
+    for k in range(1, n + 1):
+        print(f"#   eha serve --port {args.port + k} --behind-proxy --workers {max(1, _cores() // n)} "
+              f"--allow-websocket-origin {origin} &")
+    print(f"# then put this file in /etc/nginx/conf.d/ and reload nginx; students open http://{origin}/eha")
+    return 0
