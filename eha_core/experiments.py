@@ -521,7 +521,7 @@ def run_frequency_identification(params: ActuatorParams | None = None,
         validation = compare(est.num, est.den, validation_data.r, validation_data.x, config.ts,
                              initial_condition=config.initial_condition, input_offset=config.input_offset)
         check(cancel)
-        y_hat = est.simulate(data.r, x0=est.x0, input_offset=est.input_offset)
+        y_hat = est.simulate(data.r, initial_state=est.initial_state, input_offset=est.input_offset)
         residuals = residual_analysis(data.x - y_hat, data.r)
         check(cancel)
         theory = compare(*theoretical, data.r, data.x, config.ts, initial_condition="estimate")

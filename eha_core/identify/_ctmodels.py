@@ -298,7 +298,7 @@ class DiscreteModel:
         return scipy.signal.lfilter(self.num_z, self.den_z, u)
 
     def free_basis(self, n_samples: int) -> np.ndarray:
-        """``O[k, i] = C Ad^k e_i``: the free response is ``O @ x0``."""
+        """``O[k, i] = C Ad^k e_i``: the free response is ``O @ initial_state``."""
         n = self.order
         obs = np.empty((n + 1, n))
         row = self.c.copy()
@@ -330,17 +330,17 @@ def discretise(num: np.ndarray, den: np.ndarray, ts: float) -> DiscreteModel:
 
 
 def linear_columns(model: DiscreteModel, n_samples: int, *, offset: bool,
-                   x0: bool) -> np.ndarray:
+                   initial_state: bool) -> np.ndarray:
     """Responses that enter the output linearly: ``[step, free basis]``.
 
     Column 0 (with ``offset``) is the ZOH-exact unit-step response, the
-    response to a unit input offset; then (with ``x0``) the ``n`` columns of
+    response to a unit input offset; then (with ``initial_state``) the ``n`` columns of
     :meth:`DiscreteModel.free_basis`. Shape ``(n_samples, k)``.
     """
     cols = []
     if offset:
         cols.append(model.forced(np.ones(n_samples))[:, None])
-    if x0 and model.order:
+    if initial_state and model.order:
         cols.append(model.free_basis(n_samples))
     return np.hstack(cols) if cols else np.zeros((n_samples, 0))
 
@@ -361,7 +361,7 @@ def fit_linear_terms(columns: np.ndarray, residual: np.ndarray) -> np.ndarray:
     return coef / norms
 
 
-def simulate_tf(num, den, u, ts, x0=None) -> np.ndarray:
+def simulate_tf(num, den, u, ts, initial_state=None) -> np.ndarray:
     """Exact zero-order-hold response of a continuous-time transfer function.
 
     The input is held constant between samples (ZOH), so the sampled output
@@ -377,7 +377,7 @@ def simulate_tf(num, den, u, ts, x0=None) -> np.ndarray:
         Input samples ``u[k] = u(k ts)``, held over ``[k ts, (k+1) ts)``.
     ts : float
         Sampling time in seconds.
-    x0 : array_like, shape (n,), optional
+    initial_state : array_like, shape (n,), optional
         Initial state of the observability canonical form (see
         :mod:`eha_core.identify.validate`; for ``b / A(s)`` it is
         ``[y, y', ...]`` at t = 0). Default: zero.
@@ -393,21 +393,21 @@ def simulate_tf(num, den, u, ts, x0=None) -> np.ndarray:
     >>> y = simulate_tf([2.0], [1.0, 2.0], np.ones(4), ts=0.5)
     >>> np.allclose(y, 1.0 - np.exp(-2.0 * 0.5 * np.arange(4)))
     True
-    >>> simulate_tf([1.0], [1.0, 0.0], np.zeros(3), ts=0.1, x0=[2.0])
+    >>> simulate_tf([1.0], [1.0, 0.0], np.zeros(3), ts=0.1, initial_state=[2.0])
     array([2., 2., 2.])
     """
     num_n, den_n = as_tf(num, den)
     u_arr = as_samples(u, "u")
     model = discretise(num_n, den_n, as_ts(ts))
     y = model.forced(u_arr)
-    if x0 is not None:
-        x0_arr = np.atleast_1d(np.asarray(x0, dtype=float))
-        if x0_arr.shape != (model.order,):
-            raise not_allowed("x0", x0_arr,
+    if initial_state is not None:
+        state_arr = np.atleast_1d(np.asarray(initial_state, dtype=float))
+        if state_arr.shape != (model.order,):
+            raise not_allowed("initial_state", state_arr,
                               f"must have shape ({model.order},), one initial state per pole; "
-                              f"it has shape {x0_arr.shape}")
+                              f"it has shape {state_arr.shape}")
         if model.order:
-            y = y + model.free_basis(u_arr.size) @ x0_arr
+            y = y + model.free_basis(u_arr.size) @ state_arr
     return y
 
 

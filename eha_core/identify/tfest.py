@@ -66,7 +66,7 @@ Two stages, as MATLAB does it:
 Several SRIVC starts can converge to different models (the output-error
 criterion may have several minima); the best ``n_refine`` distinct ones are
 refined. The better of the two stages, by cost, is returned, and ``method``
-says which. The reported ``x0`` and ``input_offset`` are the least-squares
+says which. The reported ``initial_state`` and ``input_offset`` are the least-squares
 ones for the returned coefficients. Only numpy and scipy are imported at
 module import; ``TFEstimate.tf`` imports python-control lazily.
 """
@@ -129,10 +129,10 @@ class TFEstimate:
     mse : float
         ``sum((y - y_hat)^2) / N`` (MATLAB's ``Report.Fit.MSE``).
     noise_variance : float
-        ``sum((y - y_hat)^2) / (N - n_params - n_x0)``.
+        ``sum((y - y_hat)^2) / (N - n_params - n_initial)``.
     initial_condition : str
         ``"zero"`` or ``"estimate"`` (the option it was run with).
-    x0 : numpy.ndarray or None
+    initial_state : numpy.ndarray or None
         Estimated initial state (observability canonical form, see
         :mod:`eha_core.identify.validate`; ``[y, y', y'']`` at t = 0 for an
         all-pole model), or None for zero.
@@ -172,7 +172,7 @@ class TFEstimate:
     mse: float
     noise_variance: float
     initial_condition: str
-    x0: np.ndarray | None
+    initial_state: np.ndarray | None
     input_offset: float | None
     input_offset_std: float | None
     success: bool
@@ -211,10 +211,10 @@ class TFEstimate:
                 "success": bool(self.success), "message": self.message, "method": self.method,
                 "n_poles": int(self.n_poles), "n_zeros": int(self.n_zeros)}
 
-    def simulate(self, u, ts=None, x0=None, input_offset=None) -> np.ndarray:
+    def simulate(self, u, ts=None, initial_state=None, input_offset=None) -> np.ndarray:
         """Exact ZOH response to ``u`` sampled at ``ts`` (default: ``self.ts``).
 
-        ``x0`` is an initial state (e.g. ``self.x0``); default zero.
+        ``initial_state`` is an initial state (e.g. ``self.initial_state``); default zero.
         ``input_offset`` is a constant added to ``u`` (input units, e.g.
         ``self.input_offset``); default none. The offset estimated on one
         record usually does not carry over to a new data set, which needs its
@@ -228,7 +228,7 @@ class TFEstimate:
             if not np.isfinite(offset):
                 raise not_allowed("input_offset", input_offset, "must be None or a finite number (input units)")
             u = np.asarray(u, dtype=float) + offset
-        return simulate_tf(self.num, self.den, u, self.ts if ts is None else ts, x0=x0)
+        return simulate_tf(self.num, self.den, u, self.ts if ts is None else ts, initial_state=initial_state)
 
     def frequency_response(self, w) -> FrequencyResponseData:
         """Bode data of the estimate at ``w`` rad/s."""
@@ -249,13 +249,13 @@ def _check_orders(n_poles, n_zeros) -> tuple[int, int]:
     return int(n_poles), int(n_zeros)
 
 
-def _check_data(u, y, ts, n_params: int, n_x0: int, n_offset: int = 0):
+def _check_data(u, y, ts, n_params: int, n_initial: int, n_offset: int = 0):
     u_arr, y_arr = as_pair(u, y, ("u", "y"))
-    needed = n_params + n_x0 + n_offset + 2
+    needed = n_params + n_initial + n_offset + 2
     if u_arr.size < needed:
         offset = f", {n_offset} input offset" if n_offset else ""
         raise not_allowed("u", u_arr, f"it has {u_arr.size} samples; this model needs at least {needed} "
-                                             f"({n_params} coefficients, {n_x0} initial states{offset}, 2 spare)")
+                                             f"({n_params} coefficients, {n_initial} initial states{offset}, 2 spare)")
     return u_arr, y_arr, as_ts(ts)
 
 
@@ -309,15 +309,15 @@ class _OutputError:
 
     The terms that enter ``y_hat`` linearly, the response ``c G(s) 1(t)`` to a
     constant input offset (with ``estimate_offset``) and the free response to
-    the initial state (with ``estimate_x0``), are eliminated by linear least
+    the initial state (with ``estimate_initial_state``), are eliminated by linear least
     squares in every evaluation (variable projection). Their coefficients,
-    ``[c, x0...]`` in that order, are the ``linear`` vector.
+    ``[c, initial_state...]`` in that order, are the ``linear`` vector.
     """
 
-    def __init__(self, u: np.ndarray, y: np.ndarray, ts: float, n: int, estimate_x0: bool,
+    def __init__(self, u: np.ndarray, y: np.ndarray, ts: float, n: int, estimate_initial_state: bool,
                  estimate_offset: bool = False, cancel: CancelToken | None = None):
         self.u, self.y, self.ts, self.n = u, y, ts, n
-        self.estimate_x0 = estimate_x0
+        self.estimate_initial_state = estimate_initial_state
         self.estimate_offset = estimate_offset
         self.nfev = 0
         # checked at every evaluation (each residual of the output-error stage,
@@ -327,21 +327,21 @@ class _OutputError:
 
     @property
     def n_linear(self) -> int:
-        return int(self.estimate_offset) + (self.n if self.estimate_x0 else 0)
+        return int(self.estimate_offset) + (self.n if self.estimate_initial_state else 0)
 
     def split_linear(self, linear):
-        """``(x0, offset)`` from the ``linear`` coefficients (None when not estimated)."""
+        """``(initial_state, offset)`` from the ``linear`` coefficients (None when not estimated)."""
         if linear is None:
             return None, None
         offset = float(linear[0]) if self.estimate_offset else None
-        x0 = linear[int(self.estimate_offset):] if self.estimate_x0 else None
-        return x0, offset
+        initial_state = linear[int(self.estimate_offset):] if self.estimate_initial_state else None
+        return initial_state, offset
 
     def columns(self, theta: np.ndarray) -> np.ndarray:
         """The responses of the linear terms at ``theta``, shape ``(N, n_linear)``."""
         num, den = _split(theta, self.n)
         return linear_columns(discretise(num, den, self.ts), self.u.size,
-                               offset=self.estimate_offset, x0=self.estimate_x0)
+                               offset=self.estimate_offset, initial_state=self.estimate_initial_state)
 
     def evaluate(self, theta: np.ndarray, linear: np.ndarray | None = None):
         """``(residual, linear)``; residual is None if the simulation is not finite.
@@ -361,7 +361,7 @@ class _OutputError:
                 coef = None
                 if self.n_linear and np.all(np.isfinite(residual)):
                     columns = linear_columns(model, self.u.size, offset=self.estimate_offset,
-                                              x0=self.estimate_x0)
+                                              initial_state=self.estimate_initial_state)
                     if not np.all(np.isfinite(columns)):
                         return None, None
                     coef = fit_linear_terms(columns, residual) if linear is None else linear
@@ -488,7 +488,7 @@ def _offset_regressor(sf: np.ndarray, num: np.ndarray | None, m: int, ic: bool) 
 def _srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
     """SRIVC iterations from ``start`` = ("lambda", value) or ("model", theta).
 
-    With ``criterion.estimate_x0`` the ``n`` initial-condition regressors of
+    With ``criterion.estimate_initial_state`` the ``n`` initial-condition regressors of
     :meth:`_StateVariableFilter.impulse_responses` join the regression (they
     are noise-free, so they are their own instruments) and the auxiliary model
     includes the estimated initial-condition response.
@@ -508,7 +508,7 @@ def _srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
     check(criterion.cancel)
     kind, value = start
     n_theta = n + m + 1
-    ic = criterion.estimate_x0
+    ic = criterion.estimate_initial_state
     oc = criterion.estimate_offset
     n_extra = int(oc) + (n if ic else 0)
     # u, plus a unit step when the offset is estimated: both piecewise constant
@@ -680,13 +680,13 @@ def _oe_refine(criterion: _OutputError, theta0: np.ndarray, n: int, m: int,
     return res.x * scale, float(res.cost), bool(res.success), res.message
 
 
-def _nan_estimate(n, m, ts, n_samples, estimate_x0, estimate_offset, message, nit, nfev):
+def _nan_estimate(n, m, ts, n_samples, estimate_initial_state, estimate_offset, message, nit, nfev):
     p = n + m + 1
     return TFEstimate(
         num=readonly(np.full(m + 1, np.nan)), den=readonly(np.r_[1.0, np.full(n, np.nan)]),
         ts=ts, n_poles=n, n_zeros=m, fit_percent=np.nan, cost=np.nan, mse=np.nan,
-        noise_variance=np.nan, initial_condition="estimate" if estimate_x0 else "zero",
-        x0=None, input_offset=np.nan if estimate_offset else None,
+        noise_variance=np.nan, initial_condition="estimate" if estimate_initial_state else "zero",
+        initial_state=None, input_offset=np.nan if estimate_offset else None,
         input_offset_std=np.nan if estimate_offset else None, success=False,
         message=message, method="none", nit_srivc=nit, nfev_oe=nfev,
         param_std=readonly(np.full(p, np.nan)), covariance=readonly(np.full((p, p), np.nan)),
@@ -696,16 +696,16 @@ def _nan_estimate(n, m, ts, n_samples, estimate_x0, estimate_offset, message, ni
 
 def _estimate_result(criterion, theta, n, m, ts, success, message, method, nit, srivc_theta,
                      srivc_cost) -> TFEstimate:
-    """Assemble the result: fit, covariance, x0 and input offset at the final estimate."""
+    """Assemble the result: fit, covariance, initial_state and input offset at the final estimate."""
     nfev = criterion.nfev
     residual, linear = criterion.evaluate(theta)
     if residual is None:
-        return _nan_estimate(n, m, ts, criterion.y.size, criterion.estimate_x0,
+        return _nan_estimate(n, m, ts, criterion.y.size, criterion.estimate_initial_state,
                              criterion.estimate_offset,
                              message + "; the final model cannot be simulated", nit, nfev)
     covariance, variance, cov_linear = _covariance(
         criterion, theta, _parameter_scale(theta, n, m), residual, linear)
-    x0, offset = criterion.split_linear(linear)
+    initial_state, offset = criterion.split_linear(linear)
     offset_std = None
     if criterion.estimate_offset:
         offset_std = float(np.sqrt(abs(cov_linear[0, 0])))
@@ -724,8 +724,8 @@ def _estimate_result(criterion, theta, n, m, ts, success, message, method, nit, 
         num=readonly(num), den=readonly(den), ts=ts, n_poles=n, n_zeros=m,
         fit_percent=fit_percent(criterion.y, y_hat), cost=0.5 * sse,
         mse=sse / residual.size, noise_variance=variance,
-        initial_condition="estimate" if criterion.estimate_x0 else "zero",
-        x0=None if x0 is None else readonly(x0), input_offset=offset,
+        initial_condition="estimate" if criterion.estimate_initial_state else "zero",
+        initial_state=None if initial_state is None else readonly(initial_state), input_offset=offset,
         input_offset_std=offset_std, success=bool(success), message=message,
         method=method, nit_srivc=nit, nfev_oe=nfev,
         param_std=readonly(np.sqrt(np.abs(np.diag(covariance)))),
@@ -761,7 +761,7 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
     initial_condition : {"zero", "estimate"}
         ``"zero"``: the system starts at rest. ``"estimate"``: the initial
         state is estimated together with the coefficients (reported in
-        ``x0``) and used for ``fit_percent``.
+        ``initial_state``) and used for ``fit_percent``.
     input_offset : {"zero", "estimate"}
         ``"estimate"``: the model is ``y = G(s) (u + c)`` with a constant input
         offset ``c`` (input units, from the first sample on), estimated in both
@@ -821,10 +821,10 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
     100.0
     """
     n, m = _check_orders(n_poles, n_zeros)
-    estimate_x0 = _check_initial_condition(initial_condition)
+    estimate_initial_state = _check_initial_condition(initial_condition)
     estimate_offset = _check_input_offset(input_offset)
     u_arr, y_arr, ts_f = _check_data(u, y, ts, n + m + 1,
-                                     n if estimate_x0 else 0, int(estimate_offset))
+                                     n if estimate_initial_state else 0, int(estimate_offset))
     max_iter = positive_integer("max_iter", max_iter)
     tol = positive_number("tol", tol)
     max_nfev = 100 * (n + m + 1) if max_nfev is None else positive_integer("max_nfev", max_nfev)
@@ -841,7 +841,7 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
         lambdas = _default_lambdas(u_arr.size, ts_f)
     starts += [("lambda", lam) for lam in lambdas]
     start_names += [f"lambda = {lam:.4g} rad/s" for lam in lambdas]
-    criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_x0, estimate_offset, cancel)
+    criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_initial_state, estimate_offset, cancel)
     candidates = []
     nit_total = 0
     for name, start in zip(start_names, starts, strict=True):
@@ -855,7 +855,7 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
             candidates.append((theta, cost, converged, name, nit))
     if not candidates:
         return _nan_estimate(
-            n, m, ts_f, u_arr.size, estimate_x0, estimate_offset,
+            n, m, ts_f, u_arr.size, estimate_initial_state, estimate_offset,
             "SRIVC failed from every start (singular instrument matrix or unstable "
             "simulation): is the input exciting enough?", nit_total, 0,
         )
@@ -967,17 +967,17 @@ def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", input_offset="zero
                           f"the start model must have fewer zeros than poles (strictly proper); "
                           f"num0 has {m} zeros and den0 {n} poles")
     n, m = _check_orders(n, m)
-    estimate_x0 = _check_initial_condition(initial_condition)
+    estimate_initial_state = _check_initial_condition(initial_condition)
     estimate_offset = _check_input_offset(input_offset)
     u_arr, y_arr, ts_f = _check_data(u, y, ts, n + m + 1,
-                                     n if estimate_x0 else 0, int(estimate_offset))
+                                     n if estimate_initial_state else 0, int(estimate_offset))
     tol = positive_number("tol", tol)
     max_nfev = 100 * (n + m + 1) if max_nfev is None else positive_integer("max_nfev", max_nfev)
     theta0 = _model_coefficients((num_n, den_n), n, m, "num0/den0")
-    criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_x0, estimate_offset, cancel)
+    criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_initial_state, estimate_offset, cancel)
     cost0 = criterion.cost(theta0)
     if not np.isfinite(cost0):
-        return _nan_estimate(n, m, ts_f, u_arr.size, estimate_x0, estimate_offset,
+        return _nan_estimate(n, m, ts_f, u_arr.size, estimate_initial_state, estimate_offset,
                              "the start model cannot be simulated on this record", 0,
                              criterion.nfev)
     theta, cost, success, msg = _oe_refine(criterion, theta0, n, m, max_nfev, tol)

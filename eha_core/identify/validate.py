@@ -9,11 +9,11 @@ by :func:`compare` are computed by the same code. They are public here.
 
 State convention
 ----------------
-Initial states ``x0`` refer to the *observability canonical form* of
+Initial states (``initial_state``) refer to the *observability canonical form* of
 ``G(s) = num(s) / den(s)`` (Kailath): ``x_1 = y - h_0 u`` and
 ``x_{i+1} = x_i' - h_i u``, where ``h_k`` are the Markov parameters of the
 expansion ``G(s) = sum_k h_k s^-k``. For a strictly proper model
-``x0[0] = y(0)``; for an all-pole model ``b / A(s)`` the state is simply
+``initial_state[0] = y(0)``; for an all-pole model ``b / A(s)`` the state is simply
 ``[y, y', ..., y^(n-1)]`` at ``t = 0`` (position, velocity, acceleration for
 the actuator's third-order model).
 
@@ -22,7 +22,7 @@ Input offset
 A model may carry a constant input offset ``c`` (in input units, like MATLAB's
 ``InputOffset``): ``y = G(s) (u + c)``, the offset applied from ``t = 0`` on.
 Its response ``c G(s) 1(t)`` is linear in ``c``, as the free response is in
-``x0``, so both are estimated together by linear least squares
+``initial_state``, so both are estimated together by linear least squares
 (:func:`eha_core.identify._ctmodels.fit_linear_terms`, shared with
 :mod:`eha_core.identify.tfest`).
 
@@ -79,7 +79,7 @@ class CompareResult:
         ``100 (1 - ||y - y_hat|| / ||y - mean(y)||)``.
     initial_condition : str
         ``"zero"``, ``"estimate"`` (least squares) or ``"given"``.
-    x0 : numpy.ndarray or None
+    initial_state : numpy.ndarray or None
         Initial state used (observability canonical form); None when zero.
     input_offset : float or None
         Constant input offset ``c`` used, in input units (``y_hat`` is the
@@ -89,7 +89,7 @@ class CompareResult:
     y_hat: np.ndarray
     fit_percent: float
     initial_condition: str
-    x0: np.ndarray | None
+    initial_state: np.ndarray | None
     input_offset: float | None = None
 
 
@@ -142,11 +142,11 @@ def compare(num, den, u, y, ts, initial_condition="zero", input_offset="zero") -
     --------
     >>> import numpy as np
     >>> u = np.ones(50)
-    >>> y = simulate_tf([1.0], [1.0, 1.0], u, 0.1, x0=[0.5])
+    >>> y = simulate_tf([1.0], [1.0, 1.0], u, 0.1, initial_state=[0.5])
     >>> compare([1.0], [1.0, 1.0], u, y, 0.1).fit_percent < 90
     True
     >>> res = compare([1.0], [1.0, 1.0], u, y, 0.1, initial_condition="estimate")
-    >>> round(res.fit_percent, 6), np.round(res.x0, 6)
+    >>> round(res.fit_percent, 6), np.round(res.initial_state, 6)
     (100.0, array([0.5]))
     >>> y = simulate_tf([1.0], [1.0, 1.0], u - 0.2, 0.1)  # an offset of -0.2 on u
     >>> res = compare([1.0], [1.0, 1.0], u, y, 0.1, input_offset="estimate")
@@ -157,43 +157,44 @@ def compare(num, den, u, y, ts, initial_condition="zero", input_offset="zero") -
     u_arr, y_arr = as_pair(u, y, ("u", "y"))
     estimate_offset, offset = _check_compare_offset(input_offset)
     model = discretise(num_n, den_n, as_ts(ts))
-    x0 = None
-    estimate_x0 = False
+    initial_state = None
+    estimate_initial_state = False
     allowed = f"use zero, estimate or an array of shape ({model.order},), one initial state per pole"
     if isinstance(initial_condition, str):
         if initial_condition == "estimate":
             label = "estimate"
-            estimate_x0 = model.order > 0
+            estimate_initial_state = model.order > 0
         elif initial_condition == "zero":
             label = "zero"
         else:
             raise not_allowed("initial_condition", initial_condition, allowed)
     else:
         try:
-            x0 = np.atleast_1d(np.asarray(initial_condition, dtype=float))
+            initial_state = np.atleast_1d(np.asarray(initial_condition, dtype=float))
         except (TypeError, ValueError):
             raise not_allowed("initial_condition", initial_condition, allowed) from None
-        if x0.shape != (model.order,):
-            raise not_allowed("initial_condition", x0, f"{allowed}; this array has shape {x0.shape}")
+        if initial_state.shape != (model.order,):
+            raise not_allowed("initial_condition", initial_state,
+                              f"{allowed}; this array has shape {initial_state.shape}")
         label = "given"
     y_hat = model.forced(u_arr if offset is None else u_arr + offset)
-    if x0 is not None:
-        y_hat = y_hat + model.free_basis(u_arr.size) @ x0
-    if estimate_offset or estimate_x0:
+    if initial_state is not None:
+        y_hat = y_hat + model.free_basis(u_arr.size) @ initial_state
+    if estimate_offset or estimate_initial_state:
         # the offset's and the initial state's responses are linear: one
         # least-squares problem for both
-        columns = linear_columns(model, u_arr.size, offset=estimate_offset, x0=estimate_x0)
+        columns = linear_columns(model, u_arr.size, offset=estimate_offset, initial_state=estimate_initial_state)
         coef = fit_linear_terms(columns, y_arr - y_hat)
         y_hat = y_hat + columns @ coef
         if estimate_offset:
             offset = float(coef[0])
-        if estimate_x0:
-            x0 = coef[int(estimate_offset):]
+        if estimate_initial_state:
+            initial_state = coef[int(estimate_offset):]
     return CompareResult(
         y_hat=readonly(y_hat),
         fit_percent=fit_percent(y_arr, y_hat),
         initial_condition=label,
-        x0=None if x0 is None else readonly(x0),
+        initial_state=None if initial_state is None else readonly(initial_state),
         input_offset=offset,
     )
 

@@ -53,7 +53,7 @@ def test_recovers_third_order_with_pole_beyond_nyquist(make_input):
     assert est.fit_percent == pytest.approx(100.0, abs=1e-4)
     assert est.method in ("srivc+oe", "srivc")
     assert est.nit_srivc > 0 and est.nfev_oe > 0
-    assert est.initial_condition == "zero" and est.x0 is None
+    assert est.initial_condition == "zero" and est.initial_state is None
     assert np.min(est.poles().real) == pytest.approx(-385.47, rel=1e-4)
 
 
@@ -110,14 +110,14 @@ def test_tf_property_returns_control_transfer_function():
 # --- initial conditions -------------------------------------------------------------
 def test_estimated_initial_condition_recovers_state():
     u = _binary_input(1000, seed=4)
-    x0 = np.array([0.3, -2.0, 10.0])  # y(0), y'(0), y''(0)
-    y = simulate_tf(H_NUM, H_DEN, u, TS, x0=x0)
+    initial_state = np.array([0.3, -2.0, 10.0])  # y(0), y'(0), y''(0)
+    y = simulate_tf(H_NUM, H_DEN, u, TS, initial_state=initial_state)
     est = tfest(u, y, TS, initial_condition="estimate")
     assert est.success, est.message
     assert est.initial_condition == "estimate"
     np.testing.assert_allclose(est.den, H_DEN, rtol=1e-4)
     np.testing.assert_allclose(est.num, H_NUM, rtol=1e-4)
-    np.testing.assert_allclose(est.x0, x0, rtol=1e-4)
+    np.testing.assert_allclose(est.initial_state, initial_state, rtol=1e-4)
     assert est.fit_percent == pytest.approx(100.0, abs=1e-4)
     # ignoring the initial state cannot explain these data as well
     zero = tfest(u, y, TS, initial_condition="zero")
@@ -178,11 +178,11 @@ def test_oe_fit_from_perturbed_start_matches_tfest():
 
 def test_oe_fit_estimates_initial_state():
     u = _binary_input(600, seed=6)
-    x0 = np.array([1.0, -0.5])
-    y = simulate_tf(Z_NUM, Z_DEN, u, TS, x0=x0)
+    initial_state = np.array([1.0, -0.5])
+    y = simulate_tf(Z_NUM, Z_DEN, u, TS, initial_state=initial_state)
     est = oe_fit(u, y, TS, [2.0, 4.0], [1.0, 1.0, 3.0], initial_condition="estimate")
     np.testing.assert_allclose(_theta(est.num, est.den), _theta(Z_NUM, Z_DEN), rtol=1e-4)
-    np.testing.assert_allclose(est.x0, x0, rtol=1e-4, atol=1e-8)
+    np.testing.assert_allclose(est.initial_state, initial_state, rtol=1e-4, atol=1e-8)
 
 
 # --- failures are data, bad arguments are errors -------------------------------------
@@ -289,26 +289,26 @@ _OFFSET_CASES = {
 
 
 def _offset_data(case, initial_condition):
-    num, den, n, m, u, c, x0 = _OFFSET_CASES[case]
-    x0 = x0 if initial_condition == "estimate" else None
-    return num, den, n, m, u, c, x0, simulate_tf(num, den, u + c, TS, x0=x0)
+    num, den, n, m, u, c, initial_state = _OFFSET_CASES[case]
+    initial_state = initial_state if initial_condition == "estimate" else None
+    return num, den, n, m, u, c, initial_state, simulate_tf(num, den, u + c, TS, initial_state=initial_state)
 
 
 @pytest.mark.parametrize("initial_condition", ["zero", "estimate"])
 @pytest.mark.parametrize("case", list(_OFFSET_CASES))
 def test_estimated_input_offset_recovers_noiseless_model(case, initial_condition):
-    num, den, n, m, u, c, x0, y = _offset_data(case, initial_condition)
+    num, den, n, m, u, c, initial_state, y = _offset_data(case, initial_condition)
     est = tfest(u, y, TS, n, m, initial_condition=initial_condition, input_offset="estimate")
     assert est.success, est.message
     np.testing.assert_allclose(_theta(est.num, est.den), _theta(num, den), rtol=1e-8)
     assert est.input_offset == pytest.approx(c, rel=1e-8)
     assert est.fit_percent == pytest.approx(100.0, abs=1e-6)
-    if x0 is not None:
-        np.testing.assert_allclose(est.x0, x0, rtol=1e-6)
+    if initial_state is not None:
+        np.testing.assert_allclose(est.initial_state, initial_state, rtol=1e-6)
     assert "input offset estimated" in est.message
     assert np.isfinite(est.input_offset_std) and est.input_offset_std >= 0.0
     # the offset is part of the model: simulating with it reproduces the data
-    np.testing.assert_allclose(est.simulate(u, x0=est.x0, input_offset=est.input_offset), y,
+    np.testing.assert_allclose(est.simulate(u, initial_state=est.initial_state, input_offset=est.input_offset), y,
                                atol=1e-7 * np.abs(y).max())
     # a model without the offset cannot explain the same data as well
     plain = tfest(u, y, TS, n, m, initial_condition=initial_condition)
@@ -321,7 +321,7 @@ def test_estimated_input_offset_recovers_noiseless_model(case, initial_condition
 def test_srivc_alone_with_input_offset_recovers_noiseless_model(case, initial_condition):
     # no output-error stage: this checks the offset regressor of SRIVC itself
     # (with a zero initial state and a zero, the B_hat-weighted step regressor)
-    num, den, n, m, u, c, x0, y = _offset_data(case, initial_condition)
+    num, den, n, m, u, c, initial_state, y = _offset_data(case, initial_condition)
     est = tfest(u, y, TS, n, m, initial_condition=initial_condition, input_offset="estimate",
                 refine=False)
     assert est.method == "srivc" and est.nfev_oe == 0
@@ -332,20 +332,20 @@ def test_srivc_alone_with_input_offset_recovers_noiseless_model(case, initial_co
 
 def test_oe_fit_estimates_input_offset_and_state():
     u = _binary_input(600, seed=6)
-    x0 = np.array([1.0, -0.5])
-    y = simulate_tf(Z_NUM, Z_DEN, u - 0.25, TS, x0=x0)
+    initial_state = np.array([1.0, -0.5])
+    y = simulate_tf(Z_NUM, Z_DEN, u - 0.25, TS, initial_state=initial_state)
     est = oe_fit(u, y, TS, [2.0, 4.0], [1.0, 1.0, 3.0], initial_condition="estimate",
                  input_offset="estimate")
     assert est.method == "oe" and est.success, est.message
     np.testing.assert_allclose(_theta(est.num, est.den), _theta(Z_NUM, Z_DEN), rtol=1e-8)
     assert est.input_offset == pytest.approx(-0.25, rel=1e-8)
-    np.testing.assert_allclose(est.x0, x0, rtol=1e-6)
+    np.testing.assert_allclose(est.initial_state, initial_state, rtol=1e-6)
 
 
 def test_input_offset_of_an_integrating_model():
     # the offset's response is a ramp: large next to the free response
     u = _binary_input(1000, seed=2)
-    y = simulate_tf(P_NUM, P_DEN, u + 0.05, TS, x0=[0.1, 0.2, -3.0])
+    y = simulate_tf(P_NUM, P_DEN, u + 0.05, TS, initial_state=[0.1, 0.2, -3.0])
     est = tfest(u, y, TS, initial_condition="estimate", input_offset="estimate")
     assert est.success, est.message
     np.testing.assert_allclose(est.den[:3], P_DEN[:3], rtol=1e-8)

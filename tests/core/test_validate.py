@@ -48,10 +48,10 @@ def test_simulate_integrator_ramp():
 
 
 def test_simulate_x0_is_output_and_derivatives_for_all_pole_model():
-    x0 = np.array([0.5, -3.0, 40.0])  # y(0), y'(0), y''(0)
+    initial_state = np.array([0.5, -3.0, 40.0])  # y(0), y'(0), y''(0)
     companion = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [-2437.0, -1.721e4, -430.1]])
-    expected = [(scipy.linalg.expm(companion * TS * k) @ x0)[0] for k in range(30)]
-    y = simulate_tf(H_NUM, H_DEN, np.zeros(30), TS, x0=x0)
+    expected = [(scipy.linalg.expm(companion * TS * k) @ initial_state)[0] for k in range(30)]
+    y = simulate_tf(H_NUM, H_DEN, np.zeros(30), TS, initial_state=initial_state)
     np.testing.assert_allclose(y, expected, rtol=1e-10, atol=1e-13)
 
 
@@ -69,8 +69,8 @@ def test_simulate_biproper_and_static_models():
      r"num = \[1, 0, 0\] is not allowed: its degree 2 exceeds the degree 1 of den"),
     (([1.0], [0.0, 0.0], np.ones(5), TS), {}, r"den = \[0, 0\] is not allowed: .*non-zero coefficient"),
     (([1.0], [1.0, np.inf], np.ones(5), TS), {}, r"den = \[1, inf\] is not allowed: .*finite coefficients"),
-    (([1.0], [1.0, 1.0], np.ones(5), TS), {"x0": [1.0, 2.0]},
-     r"x0 = \[1, 2\] is not allowed: must have shape \(1,\), one initial state per pole"),
+    (([1.0], [1.0, 1.0], np.ones(5), TS), {"initial_state": [1.0, 2.0]},
+     r"initial_state = \[1, 2\] is not allowed: must have shape \(1,\), one initial state per pole"),
     (([1.0], [1.0, 1.0], [1.0, np.nan], TS), {}, r"u = \[1, nan\] is not allowed: u\[1\] is nan"),
     (([1.0], [1.0, 1.0], np.r_[np.ones(20), np.inf], TS), {},
      r"u = an array of shape \(21,\) is not allowed: u\[20\] is inf"),
@@ -105,17 +105,17 @@ def test_fit_percent_per_column():
 
 def test_compare_estimated_x0_recovers_state_and_beats_zero():
     u = _binary_input(600)
-    x0 = np.array([0.2, 1.5, -30.0])
-    y = simulate_tf(H_NUM, H_DEN, u, TS, x0=x0)
+    initial_state = np.array([0.2, 1.5, -30.0])
+    y = simulate_tf(H_NUM, H_DEN, u, TS, initial_state=initial_state)
     zero = compare(H_NUM, H_DEN, u, y, TS)
     est = compare(H_NUM, H_DEN, u, y, TS, initial_condition="estimate")
-    assert zero.initial_condition == "zero" and zero.x0 is None
+    assert zero.initial_condition == "zero" and zero.initial_state is None
     assert est.initial_condition == "estimate"
     assert est.fit_percent >= zero.fit_percent
     assert zero.fit_percent < 99.0
     assert est.fit_percent == pytest.approx(100.0, abs=1e-8)
-    np.testing.assert_allclose(est.x0, x0, rtol=1e-6)
-    given = compare(H_NUM, H_DEN, u, y, TS, initial_condition=x0)
+    np.testing.assert_allclose(est.initial_state, initial_state, rtol=1e-6)
+    given = compare(H_NUM, H_DEN, u, y, TS, initial_condition=initial_state)
     assert given.initial_condition == "given"
     np.testing.assert_allclose(given.y_hat, y, atol=1e-12)
 
@@ -245,14 +245,14 @@ def test_residual_analysis_rejects_bad_arguments():
 @pytest.mark.parametrize("initial_condition", ["zero", "estimate"])
 def test_compare_estimates_input_offset(initial_condition):
     u = _binary_input(600, seed=2)
-    x0 = np.array([0.2, 1.5, -30.0]) if initial_condition == "estimate" else None
-    y = simulate_tf(H_NUM, H_DEN, u - 0.35, TS, x0=x0)
+    initial_state = np.array([0.2, 1.5, -30.0]) if initial_condition == "estimate" else None
+    y = simulate_tf(H_NUM, H_DEN, u - 0.35, TS, initial_state=initial_state)
     res = compare(H_NUM, H_DEN, u, y, TS, initial_condition=initial_condition,
                   input_offset="estimate")
     assert res.input_offset == pytest.approx(-0.35, rel=1e-8)
     assert res.fit_percent == pytest.approx(100.0, abs=1e-8)
-    if x0 is not None:  # estimated jointly with the offset
-        np.testing.assert_allclose(res.x0, x0, rtol=1e-6)
+    if initial_state is not None:  # estimated jointly with the offset
+        np.testing.assert_allclose(res.initial_state, initial_state, rtol=1e-6)
     # without the offset the same model fits these data much worse
     plain = compare(H_NUM, H_DEN, u, y, TS, initial_condition=initial_condition)
     assert plain.input_offset is None
@@ -270,9 +270,9 @@ def test_compare_with_given_input_offset():
     zero = compare([20.0], [1.0, 6.0, 20.0], u, y, TS)
     assert none.input_offset is None and none.fit_percent == zero.fit_percent < 99.0
     # a given initial state and an estimated offset
-    x0 = np.array([0.3, -1.0])
-    y = simulate_tf([20.0], [1.0, 6.0, 20.0], u + 0.1, TS, x0=x0)
-    res = compare([20.0], [1.0, 6.0, 20.0], u, y, TS, initial_condition=x0,
+    initial_state = np.array([0.3, -1.0])
+    y = simulate_tf([20.0], [1.0, 6.0, 20.0], u + 0.1, TS, initial_state=initial_state)
+    res = compare([20.0], [1.0, 6.0, 20.0], u, y, TS, initial_condition=initial_state,
                   input_offset="estimate")
     assert res.initial_condition == "given"
     assert res.input_offset == pytest.approx(0.1, rel=1e-9)
