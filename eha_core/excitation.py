@@ -1,4 +1,4 @@
-"""Excitation signals compatible with MATLAB's ``idinput`` (SPEC.md, section 5.1).
+"""Excitation signals compatible with MATLAB's ``idinput`` (docs/model.md, section 4).
 
 :func:`idinput` generates random Gaussian ('rgs'), random binary ('rbs'),
 pseudo-random binary ('prbs') and sum-of-sinusoids ('sine') signals with

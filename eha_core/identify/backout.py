@@ -24,7 +24,7 @@ velocity swings through |v| >> 1/k_f = 1.1 mm/s, where S(v) = (2/pi) atan(k_f v)
 is saturated: the friction then acts as a nearly constant force +-Af, which
 adds almost no damping to the oscillation. What the data see is roughly B plus
 the friction's average slope over the velocities reached, an order of magnitude
-or two below the slope at zero (SPEC.md section 5; the paper: 11.12).
+or two below the slope at zero (docs/model.md, section 4; the paper: 11.12).
 
 Examples
 --------

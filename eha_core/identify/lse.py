@@ -1,6 +1,6 @@
 """Least-squares identification of M, B, Af, d0 and beta_e (eqs. 15-18).
 
-Two linear-in-parameter forms of the model (SPEC.md section 4):
+Two linear-in-parameter forms of the model (docs/model.md, section 4):
 
     y1 = A1 p1 - A2 p2 = M dv/dt + B v + Af S(v) + d          (eq. 15a)
     y2 = dp1/dt = beta_e phi2,

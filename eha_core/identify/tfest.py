@@ -1,6 +1,6 @@
 """Continuous-time transfer-function estimation from sampled data (like MATLAB ``tfest``).
 
-Model (SPEC section 5.3)::
+Model (docs/model.md, section 4)::
 
     G(s) = (b_0 s^nz + ... + b_nz) / (s^np + a_1 s^(np-1) + ... + a_np),  nz < np
 
