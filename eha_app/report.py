@@ -219,7 +219,7 @@ def differences_from_paper(n: dict) -> list[str]:
 
 # -- the report ---------------------------------------------------------------------------
 
-def build_report(out_dir: str | Path, *, seed: int = 0, quick: bool = False,
+def build_report(out_dir: str | Path, *, seed: int = 0,
                  params: ActuatorParams | None = None, progress: Callable | None = None,
                  stream=None, started: float | None = None) -> ReportResult:
     """Have the core compute everything, then write ``out_dir/report.html`` and ``out_dir/data/``.
@@ -233,7 +233,7 @@ def build_report(out_dir: str | Path, *, seed: int = 0, quick: bool = False,
     data_dir = out / "data"
     data_dir.mkdir(parents=True, exist_ok=True)
     step = progress if progress is not None else _Progress(len(REPRODUCTION_STEPS) + 3, stream, started)
-    r = reproduce(params, seed=seed, quick=quick, progress=step)
+    r = reproduce(params, seed=seed, progress=step)
     numbers = {**r.numbers(), "versions": versions(), "generated": _dt.datetime.now().isoformat(timespec="seconds")}
 
     step("figures and tables")
@@ -363,7 +363,6 @@ def _page(r, numbers, params_html, lse_html, freq_html, diff_table, diff_items, 
     xvp = "x, v, p<sub>1</sub>, p<sub>2</sub> against t"
     vers = numbers["versions"]
     version_rows = [[k, html.escape(v)] for k, v in vers.items()]
-    reduced = " (quick setting: shorter records)" if settings.quick else ""
     toc = "".join(f'<a href="#{sid}">{t}</a>' for sid, t in (
         ("parameters", "Parameters"), ("fig2", "Fig. 2"), ("fig3", "Fig. 3"), ("figs4-7", "Figs. 4-7"),
         ("tables3-4", "Tables 3-4"), ("figs8-13", "Figs. 8-13"), ("differences", "Differences"),
@@ -383,8 +382,8 @@ def _page(r, numbers, params_html, lse_html, freq_html, diff_table, diff_items, 
                  "<ol>" + "".join(f"<li>{item}</li>" for item in diff_items) + "</ol>"),
         _section("versions", "Software versions and settings",
                  table_html(["", "version"], version_rows)
-                 + f"<p>Seed {settings.seed}{reduced}. Generated {numbers['generated']} by "
-                   f"<code>eha reproduce --seed {settings.seed}{' --quick' if settings.quick else ''}</code>. "
+                 + f"<p>Seed {settings.seed}. Generated {numbers['generated']} by "
+                   f"<code>eha reproduce --seed {settings.seed}</code>. "
                    "The data behind every figure and table: <code>data/*.csv</code>; "
                    "every number: <code>data/results.json</code>.</p>"),
     ])
@@ -409,7 +408,7 @@ li {{ margin-bottom: 8px; }}
 <header><h1>Modeling and identification of an electro-hydraulic actuator: the paper's results, reproduced</h1>
 <p>Every figure and table of <i>Modeling and System Identification of Hydraulic-electric Actuator: a GUI
 application for illustration</i>, regenerated with this project and set beside the paper's printed numbers.
-Seed {settings.seed}{reduced}; eha {html.escape(vers.get('eha', '?'))}.</p>
+Seed {settings.seed}; eha {html.escape(vers.get('eha', '?'))}.</p>
 <nav>{toc}</nav></header>
 {body}
 {script}

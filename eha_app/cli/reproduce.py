@@ -14,9 +14,6 @@ def add_parser(sub) -> None:
                                     "the data behind it in OUT/data/ (CSV, and results.json with every number).")
     rp.add_argument("--out", default="eha-report", help="output folder (default ./eha-report)")
     rp.add_argument("--seed", type=int, default=0, help="seed of every random signal (default 0)")
-    rp.add_argument("--quick", action="store_true",
-                    help="shorter records (2 s, 400 samples): checks a setup, not the paper's numbers; "
-                         "it saves about 10 %% of the time, most of which is drawing the figures")
     rp.set_defaults(handler=run)
 
 
@@ -33,6 +30,6 @@ def run(args) -> int:
         raise UsageError(f"--out = {args.out!r} is not allowed: {exc.strerror}") from None
     from eha_app.report import build_report
 
-    result = build_report(out, seed=args.seed, quick=args.quick, started=t0)
+    result = build_report(out, seed=args.seed, started=t0)
     print(result.path)
     return 0

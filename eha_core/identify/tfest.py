@@ -271,6 +271,18 @@ def _check_input_offset(input_offset) -> bool:
     return input_offset == "estimate"
 
 
+def _checked_problem(u, y, ts, n_poles, n_zeros, initial_condition, input_offset, tol, max_nfev):
+    """The arguments :func:`tfest` and :func:`oe_fit` share, checked: ``(n, m, u, y, ts,
+    estimate_initial_state, estimate_offset, tol, max_nfev)``."""
+    n, m = _check_orders(n_poles, n_zeros)
+    estimate_initial_state = _check_initial_condition(initial_condition)
+    estimate_offset = _check_input_offset(input_offset)
+    u_arr, y_arr, ts_f = _check_data(u, y, ts, n + m + 1, n if estimate_initial_state else 0, int(estimate_offset))
+    tol = positive_number("tol", tol)
+    max_nfev = 100 * (n + m + 1) if max_nfev is None else positive_integer("max_nfev", max_nfev)
+    return n, m, u_arr, y_arr, ts_f, estimate_initial_state, estimate_offset, tol, max_nfev
+
+
 def _model_coefficients(model, n: int, m: int, name: str) -> np.ndarray:
     """``theta = [a_1..a_n, b_0..b_m]`` from ``(num, den)`` or an object with them."""
     if hasattr(model, "num") and hasattr(model, "den"):
@@ -820,14 +832,9 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
     >>> round(est.fit_percent, 4)
     100.0
     """
-    n, m = _check_orders(n_poles, n_zeros)
-    estimate_initial_state = _check_initial_condition(initial_condition)
-    estimate_offset = _check_input_offset(input_offset)
-    u_arr, y_arr, ts_f = _check_data(u, y, ts, n + m + 1,
-                                     n if estimate_initial_state else 0, int(estimate_offset))
+    n, m, u_arr, y_arr, ts_f, estimate_initial_state, estimate_offset, tol, max_nfev = _checked_problem(
+        u, y, ts, n_poles, n_zeros, initial_condition, input_offset, tol, max_nfev)
     max_iter = positive_integer("max_iter", max_iter)
-    tol = positive_number("tol", tol)
-    max_nfev = 100 * (n + m + 1) if max_nfev is None else positive_integer("max_nfev", max_nfev)
     if not isinstance(refine, (bool, np.bool_)):
         raise not_allowed("refine", refine, "must be True or False")
     n_refine = positive_integer("n_refine", n_refine)
@@ -966,13 +973,8 @@ def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", input_offset="zero
         raise not_allowed("num0", np.asarray(num0, dtype=float),
                           f"the start model must have fewer zeros than poles (strictly proper); "
                           f"num0 has {m} zeros and den0 {n} poles")
-    n, m = _check_orders(n, m)
-    estimate_initial_state = _check_initial_condition(initial_condition)
-    estimate_offset = _check_input_offset(input_offset)
-    u_arr, y_arr, ts_f = _check_data(u, y, ts, n + m + 1,
-                                     n if estimate_initial_state else 0, int(estimate_offset))
-    tol = positive_number("tol", tol)
-    max_nfev = 100 * (n + m + 1) if max_nfev is None else positive_integer("max_nfev", max_nfev)
+    n, m, u_arr, y_arr, ts_f, estimate_initial_state, estimate_offset, tol, max_nfev = _checked_problem(
+        u, y, ts, n, m, initial_condition, input_offset, tol, max_nfev)
     theta0 = _model_coefficients((num_n, den_n), n, m, "num0/den0")
     criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_initial_state, estimate_offset, cancel)
     cost0 = criterion.cost(theta0)

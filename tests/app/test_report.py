@@ -1,4 +1,4 @@
-"""`eha reproduce` on the quick setting: every section, numbers equal to the core's, sentences from the numbers."""
+"""`eha reproduce`: every section, numbers equal to the core's, sentences from the numbers."""
 
 import io
 import json
@@ -14,14 +14,14 @@ from eha_core.experiments import FrequencyExperiment, run_frequency_identificati
 from eha_core.params import ActuatorParams
 from eha_core.reproduction import ReproductionSettings
 
-SETTINGS = ReproductionSettings(seed=3, quick=True)
+SETTINGS = ReproductionSettings(seed=3)
 
 
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
     out = tmp_path_factory.mktemp("report")
     stream = io.StringIO()
-    result = build_report(out, seed=SETTINGS.seed, quick=True, stream=stream)
+    result = build_report(out, seed=SETTINGS.seed, stream=stream)
     return out, result, stream.getvalue()
 
 
@@ -99,7 +99,7 @@ def test_reproduce_command_line_errors(capsys, tmp_path):
 def test_sentences_follow_the_parameters_not_the_papers(tmp_path):
     """Other parameters: the report's statements speak of them (no 1.1e9 or 1500 written in)."""
     p = ActuatorParams(beta_e=0.9e9, B=1200.0)
-    result = build_report(tmp_path / "other", quick=True, params=p, stream=io.StringIO())
+    result = build_report(tmp_path / "other", params=p, stream=io.StringIO())
     numbers = result.numbers
     assert numbers["params"]["beta_e"] == 0.9e9 and numbers["params"]["B"] == 1200.0
     joined = " ".join(numbers["differences_from_paper"])

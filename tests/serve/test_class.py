@@ -53,16 +53,22 @@ def test_clicking_the_experiment_four_times_and_many_experiments_at_once(serve):
     assert "has no attribute 'update'" not in log
 
 
+async def _ask_for_a_long_run(server, name: str) -> Student:
+    """A student who opens the page and asks for a frequency experiment of N × Ts = 20000 × 0.5 s."""
+    s = Student(server.url, name=name, timeout=60)
+    await s.open()
+    await s.show_frequency()
+    form = s.form("eha-freq-form")
+    await s.set_property(form, "values", {**form.get("values"), "n_samples": "20000", "ts": "0.5"})
+    await s.click(s.button("Run experiment and estimate"))
+    return s
+
+
 def test_a_request_beyond_the_limits_gets_a_message_not_a_run(serve):
     server = serve()
 
     async def scenario():
-        s = Student(server.url, name="heavy", timeout=60)
-        await s.open()
-        await s.show_frequency()
-        form = s.form("eha-freq-form")
-        await s.set_property(form, "values", {**form.get("values"), "n_samples": "20000", "ts": "0.5"})
-        await s.click(s.button("Run experiment and estimate"))
+        s = await _ask_for_a_long_run(server, "heavy")
         alert = s.pane("eha-freq-alert")
         text = await s.wait_for(lambda: alert.get("visible") and alert.text(), 30, "the limit's message")
         await s.close()
@@ -77,12 +83,7 @@ def test_a_page_closed_while_its_run_computes_holds_up_nobody(serve, monkeypatch
     server = serve()
 
     async def scenario():
-        leaver = Student(server.url, name="leaver", timeout=60)
-        await leaver.open()
-        await leaver.show_frequency()
-        form = leaver.form("eha-freq-form")
-        await leaver.set_property(form, "values", {**form.get("values"), "n_samples": "20000", "ts": "0.5"})
-        await leaver.click(leaver.button("Run experiment and estimate"))
+        leaver = await _ask_for_a_long_run(server, "leaver")
         await asyncio.sleep(0.2)
         await leaver.close()                          # the tab is closed mid-run
         stayer = Student(server.url, name="stayer", timeout=60)

@@ -10,7 +10,7 @@ from tests.ui.browser_helpers import IGNORED_CONSOLE
 def report_path(tmp_path_factory):
     out = tmp_path_factory.mktemp("report_ui")
     with open(out / "progress.txt", "w") as progress:
-        return build_report(out, quick=True, stream=progress).path
+        return build_report(out, stream=progress).path
 
 
 def test_report_renders_offline(browser, report_path, tmp_path):
