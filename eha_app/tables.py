@@ -32,6 +32,10 @@ CSS = """
 h4 { margin: 12px 0 4px 0; }
 .eha-note { color: #555; font-size: 12px; }
 .eha-table4 td { vertical-align: top; }
+.eha-out-of-date { opacity: 0.4; filter: grayscale(0.7); }
+.eha-updating { box-shadow: -3px 0 0 0 #8ab4f8; }
+.eha-stale-note { background: #fff4e5; border-left: 4px solid #e08a00; color: #5a3b00; font-size: 13px;
+                  padding: 2px 8px; }
 """
 
 SCENARIOS = {"none": "d = 0", "200 sin": "d = 200 sin(2πt)", "5000 sin": "d = 5000 sin(2πt)",

@@ -42,7 +42,7 @@ from .params import ActuatorParams
 from .signals import ZERO, Constant, Sampled, Signal
 
 __all__ = [
-    "SimulationResult", "simulate", "simulate_many", "simulate_closed_loop", "runs_to_pandas",
+    "SimulationResult", "RangeExcursion", "simulate", "simulate_many", "simulate_closed_loop", "runs_to_pandas",
     "simulation_cost", "SimulationCost", "DEFAULT_H_MAX", "MODELS", "SIMULATION_BRANCHES", "CONTROLLERS", "CHUNK_STEPS",
 ]
 
@@ -114,6 +114,40 @@ class SimulationResult:
         """Write the CSV (header t,x,v,p1,p2,u,d[,r]); returns text when no path."""
         kwargs.setdefault("float_format", "%.10g")
         return self.to_pandas().to_csv(path_or_buf, index=False, **kwargs)
+
+    def beyond_physical_range(self) -> tuple[RangeExcursion, ...]:
+        """Where the run leaves what the actuator can physically do.
+
+        The nonlinear model is held within its bounds (the end stops ±0.8 L0,
+        pressures in [pr, ps]); the linearised one (eqs. 20-24) is not, and
+        far from its operating point it reaches pressures below the tank's or
+        above the supply's and positions beyond the end stops: its results
+        there mean nothing physically. Empty when the run stays within them.
+        """
+        p = self.params
+        checks = (("x", self.x, -p.x_max, p.x_max), ("p1", self.p1, p.pr, p.ps), ("p2", self.p2, p.pr, p.ps))
+        out = []
+        for name, values, lo, hi in checks:
+            finite = values[np.isfinite(values)]
+            if finite.size == 0:
+                continue
+            vmin, vmax = float(finite.min()), float(finite.max())
+            tol = 1e-9 * max(abs(lo), abs(hi), 1.0)
+            if vmin < lo - tol:
+                out.append(RangeExcursion(name, vmin, lo, "below"))
+            if vmax > hi + tol:
+                out.append(RangeExcursion(name, vmax, hi, "above"))
+        return tuple(out)
+
+
+@dataclass(frozen=True)
+class RangeExcursion:
+    """A state beyond its physical bound: ``extreme`` (SI) past ``bound``, ``side`` 'below' or 'above'."""
+
+    state: str
+    extreme: float
+    bound: float
+    side: str
 
 
 def runs_to_pandas(results):

@@ -17,6 +17,7 @@ from eha_core.signals import ZERO, Chirp, Sine, Square, Step, WhiteNoise
 from eha_core.simulate import runs_to_pandas, simulate_many
 
 from ..form import Field, Form, Group, InputError, parse_fields
+from ..freshness import ResultView
 from ..limits import check_simulation
 from ..plots import TimeSeriesGrid
 from ..state import AppState
@@ -27,6 +28,11 @@ __all__ = ["SimulationTab", "SimulationRequest", "SIMULATION_FORM", "build_input
 MODEL_CHOICES = {"nonlinear": ("nonlinear",), "linear": ("linear",), "both": ("nonlinear", "linear")}
 MAX_T_END = 60.0
 DT = 1e-3
+#: Runs up to this many simulated seconds in all (runs x horizon) are re-run as the
+#: student types: the four paper cases with both models (40 s) take about 9 ms, two
+#: 20 s runs about 10 ms. Longer ones wait for the Run button; their plots are
+#: marked out of date meanwhile.
+AUTO_RUN_MAX_SECONDS = 40.0
 
 
 @dataclass(frozen=True)
@@ -148,6 +154,31 @@ def _paper_figure_2(params):
     return tuple(run_paper_cases(params, "nonlinear"))
 
 
+_STATE_WORDS = {"x": ("x", "mm", 1e3), "p1": ("p<sub>1</sub>", "MPa", 1e-6), "p2": ("p<sub>2</sub>", "MPa", 1e-6)}
+_BOUND_WORDS = {("x", "above"): "the end stop", ("x", "below"): "the end stop",
+                ("p1", "below"): "the tank pressure", ("p2", "below"): "the tank pressure",
+                ("p1", "above"): "the supply pressure", ("p2", "above"): "the supply pressure"}
+
+
+def beyond_range_html(results) -> str:
+    """A warning for each run that leaves the actuator's physical range (the linearised model can)."""
+    lines = []
+    for r in results:
+        parts = []
+        for e in r.beyond_physical_range():
+            name, unit, scale = _STATE_WORDS[e.state]
+            parts.append(f"{name} reaches {e.extreme * scale:.4g} {unit}, {e.side} {_BOUND_WORDS[(e.state, e.side)]} "
+                         f"({e.bound * scale:.4g} {unit})")
+        if parts:
+            lines.append(f"{r.label} ({r.model}): " + "; ".join(parts))
+    if not lines:
+        return ""
+    return ("<div class='eha-warn eha-beyond-range'>Beyond the physical range — these results mean nothing "
+            "physically: " + " · ".join(lines) + ". The linearised model holds only near its operating point "
+            "(eq. 10); the real actuator stops at the end stops and its pressures stay between tank and "
+            "supply.</div>")
+
+
 def results_csv(results) -> str:
     """All runs in one table: run, model, t, x, v, p1, p2, u, d (SI units)."""
     return runs_to_pandas(results).to_csv(index=False, float_format="%.10g")
@@ -166,6 +197,7 @@ class SimulationTab(pn.viewable.Viewer):
         self.last_model = "nonlinear"
         self.last_elapsed_s = float("nan")
         self.run_count = 0
+        self._pending_key = None            # the inputs of the run on its way, if any
         # The plots are built in a second step (their half of the tab's cost), so
         # that a server building thirty tabs serves other messages in between.
         self.grid: TimeSeriesGrid | None = None
@@ -174,6 +206,8 @@ class SimulationTab(pn.viewable.Viewer):
         # would touch the raw Bokeh model outside the document lock
         self.plot_area = pn.Column(pn.pane.HTML("<p class='eha-note'>Drawing the paper's Fig. 2…</p>"),
                                    sizing_mode="stretch_width", css_classes=["eha-sim-plots"], min_height=580)
+        self.view = ResultView("simulation", self.plot_area,
+                               run_hint="Press a Run button: runs this long are not re-run on every change.")
         self.notice = pn.pane.HTML("", visible=False, sizing_mode="stretch_width", css_classes=["eha-sim-notice"])
         self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
                                    css_classes=["eha-sim-alert"])
@@ -209,6 +243,7 @@ class SimulationTab(pn.viewable.Viewer):
         if restored:
             self.preset = "custom"       # the student had been editing inputs
         state.param.watch(self._update_enabled, "valid")
+        state.param.watch(self._inputs_changed, ["params", "valid"])
         self._update_enabled()
         apply_locked(self._build_plots)
 
@@ -222,6 +257,7 @@ class SimulationTab(pn.viewable.Viewer):
         self.info = Div(text="Choose a case or an input, then run a model.", sizing_mode="stretch_width",
                         css_classes=["eha-sim-info"])
         self._show(list(_paper_figure_2(self.state.params)), None)
+        self.view.shown(self.key("nonlinear", "all"))
         self.plot_area.objects = [pn.pane.Bokeh(bokeh_column(self.info, self.grid.layout, sizing_mode="stretch_width"),
                                                 sizing_mode="stretch_width", min_height=580)]
 
@@ -233,10 +269,40 @@ class SimulationTab(pn.viewable.Viewer):
         """Type into the form (tests, presets): values as text or numbers."""
         self.form.set_values(**texts)
 
+    def key(self, model: str, preset=None):
+        """What a run of ``model`` with the current inputs is computed from (None if they are not valid)."""
+        preset = self.preset if preset is None else preset
+        req, errors = parse_request(self.form.values, preset)
+        if errors or not self.state.valid:
+            return None
+        if preset == "all":             # the four cases ignore the form's inputs
+            return self.state.params, "all", model
+        return self.state.params, req, model
+
     def _typed(self, event) -> None:
-        if not getattr(self, "_applying_preset", False) and self.preset != "custom":
+        if getattr(self, "_applying_preset", False):
+            return                        # the preset's own run follows
+        if self.preset != "custom":
             self.preset = "custom"        # editing an input leaves the preset
         self._update_enabled()
+        self._inputs_changed()
+
+    def _inputs_changed(self, *_events) -> None:
+        """Re-run what is on screen with the new inputs when that is quick, else mark it out of date."""
+        key = self.key(self.last_model)
+        if key is not None and key == self._pending_key:
+            return                          # a run with these inputs is on its way
+        if key is None or key == self.view.computed_from:
+            why = ("a parameter on tab 1 is not valid" if not self.state.valid else
+                   "an input is not valid")
+            self.view.inputs_changed(key, why=why)
+            return
+        req, _ = self.request()
+        labels, _, _, t_end = build_inputs(req)
+        quick = len(labels) * len(MODEL_CHOICES[self.last_model]) * t_end <= AUTO_RUN_MAX_SECONDS
+        job = self.run(self.last_model, auto=True) if quick else None
+        self.view.inputs_changed(key, updating=job is not None,
+                                 why="the inputs changed since this run")
 
     def _apply_preset(self, preset) -> None:
         """Show a paper case in the form (or mark 'all four')."""
@@ -291,11 +357,16 @@ class SimulationTab(pn.viewable.Viewer):
             raise InputError(next(iter(errors)), next(iter(errors.values())))
         return compute_runs(self.state.params, req, model, cancel)
 
-    def run(self, model: str):
-        """Queue a run of ``model`` ('nonlinear', 'linear' or 'both'); returns the job."""
+    def run(self, model: str, *, auto: bool = False):
+        """Queue a run of ``model`` ('nonlinear', 'linear' or 'both'); returns the job.
+
+        ``auto``: started by a change of the inputs, not a click: no loading
+        indicator or queue note (the view's outline says it is updating).
+        """
         req, errors = self.request()
         if not self.state.valid or errors:
             return None
+        key = self.key(model)
         self.last_model = model
         self.alert.visible = False
         labels, _, _, t_end = build_inputs(req)
@@ -308,11 +379,28 @@ class SimulationTab(pn.viewable.Viewer):
         params = self.state.params
 
         def fail(message):
+            self._pending_key = None
             self.alert.object = f"The simulation failed: {message}"
             self.alert.visible = True
+            self.view.inputs_changed(self.key(self.last_model), why="the last run failed")
 
+        def show(results, job):
+            self._pending_key = None
+            self._show(results, job)
+            self.view.shown(key)
+            self._inputs_changed_since(key)
+
+        if not auto:
+            self.view.inputs_changed(key, updating=True)
+        self._pending_key = key
         return self.runner.run(f"simulation ({model})", lambda token: compute_runs(params, req, model, token),
-                               self._show, fail=fail, busy=[self.plot_area], note=self._note)
+                               show, fail=fail, busy=[] if auto else [self.plot_area],
+                               note=(lambda _text: None) if auto else self._note)
+
+    def _inputs_changed_since(self, key) -> None:
+        # inputs typed while the run computed: mark (or re-run) again
+        if self.key(self.last_model) != key:
+            self._inputs_changed()
 
     def _note(self, text: str) -> None:
         self.queue_note.object = text
@@ -331,7 +419,8 @@ class SimulationTab(pn.viewable.Viewer):
         if job is not None and job.wait_s > 0.05:
             timing += f" (of which {job.wait_s:.1f} s waiting for the server)"
         self.info.text = (f"<b>{what}</b> — {models} model, {results[0].t[-1]:g} s{timing}. "
-                          f"<span class='eha-run-count' style='color:#999'>run {self.run_count}</span>")
+                          f"<span class='eha-run-count' style='color:#999'>run {self.run_count}</span>"
+                          + beyond_range_html(results))
         self.results = list(results)
         self.last_elapsed_s = elapsed
         failed = [r for r in results if not r.success]
@@ -349,5 +438,5 @@ class SimulationTab(pn.viewable.Viewer):
                             pn.FlexBox(*self.preset_buttons), width=280)
         runs = pn.Column(*self.run_buttons.values(), self.download, self.queue_note, width=280)
         side = pn.Column(presets, runs, self.form, width=290)
-        main = pn.Column(self.notice, self.alert, self.plot_area, sizing_mode="stretch_width")
+        main = pn.Column(self.notice, self.alert, self.view.banner, self.plot_area, sizing_mode="stretch_width")
         return pn.Row(side, main, sizing_mode="stretch_width")

@@ -226,3 +226,17 @@ def test_closed_loop_bad_arguments():
         simulate_closed_loop(P, Sine(0.01, 1.0))
     with pytest.raises(ValueError, match="ts"):
         simulate_closed_loop(P, Sine(0.01, 1.0), ts=0.003, dt=0.002, t_end=1.0)
+
+
+def test_the_linearised_model_driven_beyond_its_range_says_where():
+    """A 6 V step: the linearised model passes the end stop and reaches negative pressures, the nonlinear one not."""
+    from eha_core.signals import Step
+
+    P = ActuatorParams()
+    lin = simulate(P, u=Step(6.0), t_end=5.0, model="linear")
+    found = {(e.state, e.side): e for e in lin.beyond_physical_range()}
+    assert set(found) >= {("x", "above"), ("p1", "below")}
+    assert found[("x", "above")].bound == P.x_max and found[("x", "above")].extreme > P.x_max
+    assert found[("p1", "below")].extreme == lin.p1.min() < P.pr
+    assert simulate(P, u=Step(6.0), t_end=5.0, model="nonlinear").beyond_physical_range() == ()
+    assert simulate(P, u=Step(0.5), t_end=0.2, model="linear").beyond_physical_range() == ()

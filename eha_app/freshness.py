@@ -1,0 +1,98 @@
+"""Every result on screen is either computed from the current inputs or marked out of date.
+
+A :class:`ResultView` wraps one result area of a tab (plots, a table, a
+summary) and remembers the inputs its content was computed from, as a
+hashable *key*. When an input changes, the tab computes the key of what the
+inputs now say and calls :meth:`ResultView.inputs_changed`: a view whose key
+differs is marked, in the page, either *updating* (a run with the new inputs
+is on its way: it is re-run automatically) or *stale* (out of date: the
+student has to run it again, the run being too long to start on every
+keystroke). :meth:`ResultView.shown` records the key of freshly drawn content.
+
+The mark is a class on the view's container (``eha-current``, ``eha-updating``,
+``eha-out-of-date``; styled in :data:`eha_app.tables.CSS`: an updating view is
+outlined, a stale one dimmed) and, for a stale one, a line of text above it
+(:attr:`ResultView.banner`) that says why and what to do. Both are Panel objects of the
+session's own document, changed from the session's callbacks.
+
+Examples
+--------
+>>> import panel as pn
+>>> view = ResultView("demo", pn.Column())
+>>> view.status
+'empty'
+>>> view.shown(("M", 4000.0))
+>>> view.inputs_changed(("M", 6000.0), why="M changed on tab 1")
+>>> view.status, "eha-out-of-date" in view.container.css_classes
+('stale', True)
+>>> view.inputs_changed(("M", 4000.0))
+>>> view.status
+'current'
+"""
+
+from __future__ import annotations
+
+import html
+from collections.abc import Hashable
+
+import panel as pn
+
+__all__ = ["ResultView", "STATUS_CLASSES"]
+
+#: the container's class for each status
+STATUS_CLASSES = {"empty": "eha-empty", "current": "eha-current", "updating": "eha-updating",
+                  "stale": "eha-out-of-date"}
+
+
+class ResultView:
+    """One result area and the key of the inputs it shows."""
+
+    def __init__(self, name: str, container: pn.layout.ListLike, *, run_hint: str = "Run it again to update."):
+        self.name = name
+        self.container = container
+        self.run_hint = run_hint
+        self.computed_from: Hashable | None = None
+        self.status = "empty"
+        self.banner = pn.pane.HTML("", visible=False, sizing_mode="stretch_width",
+                                   css_classes=["eha-stale-note", f"eha-stale-note-{name}"], margin=(0, 5))
+        self._set_classes()
+
+    # -- what the tab says --------------------------------------------------------------
+    def shown(self, key: Hashable) -> None:
+        """The view now shows results computed from ``key``."""
+        self.computed_from = key
+        self._set("current", "")
+
+    def inputs_changed(self, key: Hashable | None, *, updating: bool = False, why: str = "") -> None:
+        """The inputs now say ``key`` (None: they are not valid). ``updating``: a run with
+        them is queued and will call :meth:`shown`."""
+        if self.computed_from is None:
+            return
+        if key is not None and key == self.computed_from:
+            self._set("current", "")
+        elif updating:
+            # no line of text: during a slider drag it would come and go with every run and
+            # move the plots; the container's outline says it (eha-updating)
+            self._set("updating", "")
+        else:
+            reason = why or "the inputs changed since this run"
+            self._set("stale", f"Out of date: {reason}. {self.run_hint}")
+
+    @property
+    def is_current(self) -> bool:
+        return self.status == "current"
+
+    # -- the page ------------------------------------------------------------------------
+    def _set(self, status: str, text: str) -> None:
+        changed = status != self.status
+        self.status = status
+        if changed:
+            self._set_classes()
+        if self.banner.object != text or self.banner.visible != bool(text):
+            self.banner.object = (f"<span class='eha-stale-text'>{html.escape(text)}</span>" if text else "")
+            self.banner.visible = bool(text)
+
+    def _set_classes(self) -> None:
+        keep = [c for c in self.container.css_classes if c not in STATUS_CLASSES.values()
+                and not c.startswith("eha-view")]
+        self.container.css_classes = [*keep, "eha-view", f"eha-view-{self.name}", STATUS_CLASSES[self.status]]
