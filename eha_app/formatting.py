@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-__all__ = ["num_html", "poly_html", "tf_html", "poles_html", "table_html", "json_default"]
+__all__ = ["num_html", "pct_text", "poly_html", "tf_html", "poles_html", "table_html", "json_default"]
 
 
 def num_html(x: float, digits: int = 4) -> str:
@@ -18,6 +18,18 @@ def num_html(x: float, digits: int = 4) -> str:
         return f"{x:.{digits}g}"
     mant = x / 10**exp
     return f"{mant:.{digits - 1}f}".rstrip("0").rstrip(".") + f"·10<sup>{exp}</sup>"
+
+
+def pct_text(fraction: float, digits: int = 2) -> str:
+    """A relative difference as a signed percentage; one that rounds to zero is "+0.00 %", never "−0.00 %".
+
+    >>> pct_text(-0.000001, 3), pct_text(0.1234), pct_text(-0.5, 0)
+    ('+0.000 %', '+12.34 %', '-50 %')
+    """
+    text = f"{100 * fraction:+.{digits}f}"
+    if float(text) == 0:
+        text = "+" + text[1:]
+    return text + " %"
 
 
 def poly_html(coeffs, var: str = "s") -> str:

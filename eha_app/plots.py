@@ -515,7 +515,9 @@ class LseFitFigure:
         self.measured.data = {"t": _f32(view.t), "x": _f32(view.x_mm), "p1": _f32(view.p1_mpa)}
         if view.resim_t is None:
             self.resim.data = {k: _f32([]) for k in ("t", "x", "p1")}
-            _set_legend_label(self.resim_item, "no re-simulation: the estimate is not physical")
+            # no curve, so no legend entry: the note under the table says why
+            self.resim_item.visible = False
         else:
             self.resim.data = {"t": _f32(view.resim_t), "x": _f32(view.resim_x_mm), "p1": _f32(view.resim_p1_mpa)}
             _set_legend_label(self.resim_item, "re-simulated with the estimates")
+            self.resim_item.visible = True

@@ -10,9 +10,11 @@ from eha_core.experiments import PAPER_EQ25, PAPER_EQ26, PAPER_FIT_PERCENT, PAPE
 from eha_core.linear import linearize
 from eha_core.params import ActuatorParams
 
-from .formatting import num_html, poles_html, table_html, tf_html
+from .formatting import num_html, pct_text, poles_html, table_html, tf_html
+from .glossary import term
 
-__all__ = ["CSS", "SCENARIOS", "derived_html", "lse_table_html", "table4_html", "freq_summary_html", "backout_html"]
+__all__ = ["CSS", "SCENARIOS", "derived_html", "lse_table_html", "table4_html", "freq_summary_html", "backout_html",
+           "estimate_alert", "estimation_sentences"]
 
 #: Styles of the formulas and tables (the app's page and the report).
 CSS = """
@@ -34,6 +36,7 @@ h4 { margin: 12px 0 4px 0; }
 .eha-table4 td { vertical-align: top; }
 .eha-out-of-date { opacity: 0.4; filter: grayscale(0.7); }
 .eha-updating { box-shadow: -3px 0 0 0 #8ab4f8; }
+abbr.eha-term { text-decoration: underline dotted; cursor: help; }
 .eha-stale-note { background: #fff4e5; border-left: 4px solid #e08a00; color: #5a3b00; font-size: 13px;
                   padding: 2px 8px; }
 """
@@ -72,7 +75,10 @@ def derived_html(params: ActuatorParams, kp: float = 10.0, *, stale: bool = Fals
     a = p.a
     a_rows = [[f"a<sub>{k[1:]}</sub>", num_html(v)] for k, v in a.items()]
     half = (len(a_rows) + 1) // 2
-    a_table = table_html(["", "Table 1"], a_rows[:half]) + table_html(["", "Table 1"], a_rows[half:])
+    keys = list(a)
+    a_table = "".join(
+        table_html(["", f"a<sub>{part[0][1:]}</sub>…a<sub>{part[-1][1:]}</sub> (Table 1)"], rows)
+        for part, rows in ((keys[:half], a_rows[:half]), (keys[half:], a_rows[half:])))
     P = tf_html("P(s) = X(s)/U(s)", num, den, "eq. 21/23, u ≥ 0")
     H = tf_html(f"H(s), K<sub>p</sub> = {kp:g}", cnum, cden, "eq. 22/24")
     poles = (f"<p>Poles of P(s): {poles_html(lin.poles())} rad/s<br>"
@@ -102,9 +108,9 @@ def lse_table_html(res, scenario: str | None) -> str:
         p = paper.get(k)
         p_txt = "" if p is None else _num(p)
         if p is not None and nom:
-            p_txt += f" ({100 * (p / nom - 1):+.2f} %)"
+            p_txt += f" ({pct_text(p / nom - 1)})"
         rows.append([f"{_NAMES.get(k, k)} [{_UNITS.get(k, '')}]", "" if nom is None else _num(nom), _num(v),
-                     "" if rel is None else f"{100 * rel:+.3f} %",
+                     "" if rel is None else pct_text(rel, 3),
                      f"[{_num(lo)}, {_num(hi)}] {covers}", p_txt])
     header = ["parameter", "nominal", "estimate", "rel. error", "95 % interval (covers nominal?)",
               "paper (Table 3/4)" if paper else "paper"]
@@ -114,7 +120,7 @@ def lse_table_html(res, scenario: str | None) -> str:
     note = (f"<p class='eha-note'>Disturbance model: {res.disturbance_model}"
             + (f", frequency {res.disturbance_freq_hz:.6g} Hz ({'estimated' if res.freq_estimated else 'given'})"
                if res.disturbance_freq_hz else "")
-            + f". Intervals: Newey-West over {res.hac_lags} lags (the prefilter colours the residual; "
+            + f". Intervals: {term('Newey-West')} over {res.hac_lags} lags (the prefilter colours the residual; "
               f"textbook intervals are up to {narrower:.1f}× narrower)."
             + (" Without noise the intervals shrink to the regressors' numerical error (~0.003 %), so ✗ may mark "
                "a miss by that much." if noiseless else "") + "</p>")
@@ -145,10 +151,10 @@ def table4_html(by_model: dict) -> str:
                 mark = "✓" if lo <= nom <= hi else "✗"
                 short = {"constant": "const.", "harmonic": "harm."}[m]
                 lines.append(f"<span class='eha-t4-{m}'>{short}: <b>{_num(v)}</b>"
-                             + (f" ({100 * rel:+.2f} %)" if rel is not None else "")
+                             + (f" ({pct_text(rel)})" if rel is not None else "")
                              + f"<br><small>[{_num(lo)}, {_num(hi)}] {mark}</small></span>")
             p = PAPER_TABLE4[scen][k]
-            prel = f" ({100 * (p / nom - 1):+.2f} %)" if nom else ""
+            prel = f" ({pct_text(p / nom - 1)})" if nom else ""
             lines.append(f"<span class='eha-t4-paper'>paper: {_num(p)}{prel}</span>")
             row.append("<br>".join(lines))
         rows.append(row)
@@ -159,15 +165,50 @@ def table4_html(by_model: dict) -> str:
     return table_html(header, rows, cls="eha-table eha-table4") + note
 
 
+def estimate_alert(e) -> str:
+    """A warning when the estimate cannot describe the stable loop (empty when it can)."""
+    if not e.success or not np.all(np.isfinite(e.den)):
+        return ("The estimation did not converge: no estimate to show. Try the default structure "
+                "(3 poles, no zero) or a longer record.")
+    unstable = e.poles()[e.poles().real > 0]
+    if unstable.size:
+        worst = unstable[np.argmax(unstable.real)]
+        return (f"This estimate is unstable: it has {unstable.size} pole{'s' if unstable.size > 1 else ''} in the "
+                f"right half-plane (the largest real part is {worst.real:+.3g} rad/s), so it cannot describe the "
+                f"stable closed loop even though its fit on this record is {e.fit_percent:.1f} %. "
+                f"Try fewer poles or zeros.")
+    return ""
+
+
+def estimation_sentences(e) -> str:
+    """How the estimate was obtained, in sentences (from the estimate's own fields)."""
+    srivc = term("SRIVC")
+    oe = term("output error")
+    if e.method == "srivc+oe":
+        how = (f"{srivc} gave a start ({e.nit_srivc} iterations), refined by {oe} ({e.nfev_oe} evaluations); "
+               "the refined estimate is kept.")
+    elif e.method == "srivc":
+        how = (f"{srivc} ({e.nit_srivc} iterations); the {oe} refinement did not lower the error, "
+               f"so the {srivc} estimate is kept.")
+    else:
+        how = f"{oe} from the given start model ({e.nfev_oe} evaluations)."
+    ic = ("Its initial state was estimated with it" if e.initial_condition == "estimate"
+          else "It starts from a zero initial state")
+    offset = ("" if e.input_offset is None else
+              f", and a constant {term('input offset', 'offset of r')} of {e.input_offset:.3g} m "
+              "(it stands for the valve's different gains for u ≥ 0 and u < 0)")
+    return f"<p class='eha-note'>{how} {ic}{offset}.</p>"
+
+
 def freq_summary_html(fi) -> str:
     e = fi.estimate
     if not e.success or not np.all(np.isfinite(e.den)):
-        return f"<div class='eha-warn'>The estimation failed: {e.message}</div>"
+        return f"<div class='eha-warn'>{estimate_alert(e)}</div>"
     theo_num, theo_den = fi.theoretical
-    parts = [tf_html("Ĥ(s)", e.num, e.den, f"estimated; fit {e.fit_percent:.2f} % "
-                     f"(initial condition: {e.initial_condition}"
-                     + (f", input offset {e.input_offset:.4g}" if e.input_offset is not None else "") + ")"),
-             tf_html("H(s)", theo_num, theo_den, f"linearised at v = 0, eq. 24, K<sub>p</sub> = {fi.config.kp:g}"),
+    plant = "nonlinear" if fi.config.model == "nonlinear" else "linearised"
+    parts = [tf_html("Ĥ(s)", e.num, e.den, f"estimated from the {plant} model's data; "
+                     f"{term('fit', f'fit {e.fit_percent:.2f} %')}"),
+             tf_html("H(s)", theo_num, theo_den, f"linearised at v = 0, eq. 24, K<sub>p</sub> = {fi.config.kp:g} V/m"),
              tf_html("Ĥ<sub>paper</sub>(s)", PAPER_EQ25[0], PAPER_EQ25[1], f"eq. 25, fit {PAPER_FIT_PERCENT} %")]
     if fi.validation is not None:
         parts.append(f"<p>Validation on a fresh excitation (seed {fi.validation_excitation.seed}): "
@@ -175,8 +216,42 @@ def freq_summary_html(fi) -> str:
     if fi.open_loop is not None:
         parts.append(tf_html("P̂(s)", *fi.open_loop, "eq. 26: Ĥ / (K<sub>p</sub>(1 − Ĥ))"))
         parts.append(tf_html("P̂<sub>paper</sub>(s)", PAPER_EQ26[0], PAPER_EQ26[1], "eq. 26 of the paper"))
-    parts.append(f"<p class='eha-note'>{e.message}</p>")
+    parts.append(estimation_sentences(e))
     return "".join(parts)
+
+
+def _s2_sentence(fi, b, lin) -> str:
+    """Why λ̂1 is where it is, said only as far as this run backs it."""
+    ratio = b.l1 / lin.lambdas[0]
+    l1 = f"The estimated s² coefficient λ̂<sub>1</sub> = {b.l1:.4g}"
+    where = f"{pct_text(ratio - 1, 1)} from the linearised {lin.lambdas[0]:.4g}"
+    slope = (f"λ<sub>1</sub> holds the friction's slope at v = 0, 2k<sub>f</sub>A<sub>f</sub>/π = "
+             f"{num_html(lin.friction_damping)} N s/m")
+    if fi.config.model == "linear":
+        return (f"{l1} is {where}: {slope}, and in the linearised plant the friction keeps that slope at "
+                "every speed, so its data carry it and the estimate finds it.")
+    saturated = fi.peak_speed * fi.params.k_f > 3.0
+    if ratio < 0.5 and saturated:
+        return (f"{l1} lies far below the linearised {lin.lambdas[0]:.4g} ({pct_text(ratio - 1, 0)}): {slope}, "
+                f"but during this experiment the piston moved at up to {fi.peak_speed * 1e3:.0f} mm/s, far beyond "
+                f"1/k<sub>f</sub> = {1e3 / fi.params.k_f:.2f} mm/s, where S(v) = (2/π) atan(k<sub>f</sub>v) "
+                "saturates: the friction acts as a nearly constant force ±A<sub>f</sub>, which adds almost no "
+                "damping to the oscillation. (The paper's Ĥ has 11.12.)")
+    return (f"{l1} is {where}; {slope}, and the piston moved at up to {fi.peak_speed * 1e3:.0f} mm/s "
+            f"(1/k<sub>f</sub> = {1e3 / fi.params.k_f:.2f} mm/s).")
+
+
+def _gain_sentence(b, lin) -> str:
+    g_pos, g_neg = lin.gain("positive"), lin.gain("negative")
+    rel = b.rel_errors()["beta_e_from_gain"]
+    text = ("β<sub>e</sub> from the s coefficient depends on the chamber stiffness only. "
+            f"β<sub>e</sub> from the gain uses the u ≥ 0 valve branch of eq. 13 (gain {g_pos:.4g})")
+    if abs(g_neg / g_pos - 1) > 0.01:
+        text += (f", but u = K<sub>p</sub>(r − x) changes sign all the time and the u &lt; 0 branch has gain "
+                 f"{g_neg:.4g} ({pct_text(g_neg / g_pos - 1, 0)}): the data see a blend")
+        if rel < -0.05:
+            text += f", so this route comes out low ({pct_text(rel, 1)})"
+    return text + ". (The paper reported 1.1793·10<sup>9</sup>.)"
 
 
 def backout_html(fi) -> str:
@@ -190,28 +265,12 @@ def backout_html(fi) -> str:
         v, nom = getattr(b, key), (b.damping_nominal if key == "damping" else b.beta_e_nominal)
         lo, hi = ci[key]
         interval = "" if math.isnan(lo) else f"[{_num(lo)}, {_num(hi)}]"
-        return [name, _num(nom), _num(v), f"{100 * rel[key]:+.2f} %", interval, unit]
+        return [name, _num(nom), _num(v), pct_text(rel[key]), interval, unit]
 
     rows = [row("B + 2k<sub>f</sub>A<sub>f</sub>/π = λ̂<sub>1</sub> M (eq. 27a)", "damping", "N s/m"),
             row("β<sub>e</sub> from the gain (eq. 27e-f)", "beta_e_from_gain", "Pa"),
             row("β<sub>e</sub> from the s coefficient (eq. 27b-d)", "beta_e_from_stiffness", "Pa")]
     table = table_html(["quantity", "nominal / linearised", "backed out", "difference", "95 % interval", "unit"], rows)
     lin = fi.linear
-    explain = (
-        f"<p class='eha-note'>The estimated s² coefficient λ̂<sub>1</sub> = {b.l1:.4g} lies far below the linearised "
-        f"{lin.lambdas[0]:.4g}: λ<sub>1</sub> holds the friction's slope at v = 0, "
-        f"2k<sub>f</sub>A<sub>f</sub>/π = {lin.friction_damping:.4g} N s/m, but during the "
-        f"experiment the piston moves at up to {fi.peak_speed * 1e3:.0f} mm/s, far beyond "
-        f"1/k<sub>f</sub> = {1e3 / fi.params.k_f:.2f} mm/s where S(v) = (2/π) atan(k<sub>f</sub>v) saturates: the "
-        f"friction acts as a nearly constant force ±A<sub>f</sub>, which adds almost no damping to the oscillation. "
-        f"The paper found 11.12.</p>")
-    g_pos, g_neg = lin.gain("positive"), lin.gain("negative")
-    explain += (
-        f"<p class='eha-note'>β<sub>e</sub> from the s coefficient depends on the chamber stiffness only. "
-        f"β<sub>e</sub> from the gain uses the u ≥ 0 valve branch of eq. 13 (gain {g_pos:.4g}), "
-        f"but u = K<sub>p</sub>(r − x) changes sign all the time and the u &lt; 0 branch has gain {g_neg:.4g} "
-        f"({100 * (g_neg / g_pos - 1):+.0f} %): the data see a blend, so this route comes out low. "
-        f"The paper reported 1.1793·10<sup>9</sup>.</p>")
-    return table + explain
-
-
+    return (table + f"<p class='eha-note eha-s2-explain'>{_s2_sentence(fi, b, lin)}</p>"
+            f"<p class='eha-note'>{_gain_sentence(b, lin)}</p>")

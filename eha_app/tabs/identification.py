@@ -25,9 +25,11 @@ from eha_core.signals import SignalSpecError, parse_signal
 
 from .. import plots
 from ..form import Field, Form, Group, parse_fields
+from ..freshness import ResultView
+from ..glossary import term
 from ..limits import check_frequency, check_lse
 from ..state import AppState
-from ..tables import SCENARIOS, backout_html, freq_summary_html, lse_table_html, table4_html
+from ..tables import SCENARIOS, backout_html, estimate_alert, freq_summary_html, lse_table_html, table4_html
 from ..tasks import SessionRunner, apply_locked, frozen_models
 
 __all__ = ["IdentificationTab", "LseRequest", "LSE_FORM", "FREQ_FORM", "parse_lse", "parse_freq"]
@@ -127,7 +129,6 @@ FREQ_FORM = (
         Field("ts", "Ts", "number", unit="s", lo=1e-4, hi=1.0, short="Ts", tip="sample time of the controller"),
     )),
     Group("Loop and model", (
-        Field("freq_kp", "Kp", "number", unit="V/m", lo=0.01, hi=1000.0, short="Kp"),
         Field("model", "model in the loop", "select", options=(("nonlinear", "nonlinear"), ("linear", "linearised")),
               short="model", tip="the actuator's model the closed loop is simulated with"),
         Field("n_poles", "poles", "integer", lo=1, hi=6, short="poles"),
@@ -140,7 +141,7 @@ FREQ_FORM = (
 )
 _FREQ_FIELDS = {f.name: f for g in FREQ_FORM for f in g.fields}
 _CONFIG_NAME = {"signal_type": "signal_type", "n_samples": "n_samples", "freq_seed": "seed", "ts": "ts",
-                "freq_kp": "kp", "model": "model", "n_poles": "n_poles", "n_zeros": "n_zeros",
+                "model": "model", "n_poles": "n_poles", "n_zeros": "n_zeros",
                 "initial_condition": "initial_condition", "input_offset": "input_offset"}
 _DEFAULT_CONFIG = FrequencyExperiment()
 FREQ_DEFAULTS = {
@@ -149,7 +150,7 @@ FREQ_DEFAULTS = {
     "band_hi": f"{_DEFAULT_CONFIG.band[1]:g}", "range_lo": f"{_DEFAULT_CONFIG.range[0]:g}",
     "range_hi": f"{_DEFAULT_CONFIG.range[1]:g}", "n_sines": str(_DEFAULT_CONFIG.sinedata[0]),
     "n_trials": str(_DEFAULT_CONFIG.sinedata[1]), "grid_skip": str(_DEFAULT_CONFIG.sinedata[2]),
-    "ts": f"{_DEFAULT_CONFIG.ts:g}", "freq_kp": f"{_DEFAULT_CONFIG.kp:g}", "model": _DEFAULT_CONFIG.model,
+    "ts": f"{_DEFAULT_CONFIG.ts:g}", "model": _DEFAULT_CONFIG.model,
     "n_poles": str(_DEFAULT_CONFIG.n_poles), "n_zeros": str(_DEFAULT_CONFIG.n_zeros),
     "initial_condition": _DEFAULT_CONFIG.initial_condition, "input_offset": _DEFAULT_CONFIG.input_offset,
 }
@@ -168,8 +169,11 @@ def _field_of_message(message: str) -> str | None:
     return {"band": "band_lo", "range": "range_lo", "sinedata": "n_sines"}.get(head)
 
 
-def parse_freq(texts: dict) -> tuple[FrequencyExperiment | None, dict]:
-    """The experiment the form describes (None if invalid), and a message per invalid field ("" for the rest)."""
+def parse_freq(texts: dict, kp: float = _DEFAULT_CONFIG.kp) -> tuple[FrequencyExperiment | None, dict]:
+    """The experiment the form describes (None if invalid), and a message per invalid field ("" for the rest).
+
+    ``kp`` is the controller gain: tab 1's, the one H(s) is shown with everywhere.
+    """
     hidden = set(freq_hidden(texts))
     values, errors = parse_fields(_FREQ_FIELDS.values(), texts, skip=hidden)
     if errors:
@@ -181,7 +185,7 @@ def parse_freq(texts: dict) -> tuple[FrequencyExperiment | None, dict]:
             band=(values["band_lo"], values["band_hi"]), range=(values["range_lo"], values["range_hi"]),
             sinedata=(values.get("n_sines", d.sinedata[0]), values.get("n_trials", d.sinedata[1]),
                       values.get("grid_skip", d.sinedata[2])),
-            seed=values["freq_seed"], kp=values["freq_kp"], model=values["model"], n_poles=values["n_poles"],
+            seed=values["freq_seed"], kp=kp, model=values["model"], n_poles=values["n_poles"],
             n_zeros=values["n_zeros"], initial_condition=values["initial_condition"],
             input_offset=values["input_offset"])
     except (ValueError, TypeError) as exc:
@@ -215,6 +219,9 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         self.area = pn.Column(self.table, self.plot, sizing_mode="stretch_width")
         self.table4 = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-table4-pane"])
         self.table4_area = pn.Column(self.table4, sizing_mode="stretch_width")
+        self.view = ResultView("lse", self.area, run_hint="Press “Run least squares” to update it.")
+        self.table4_view = ResultView("table4", self.table4_area,
+                                      run_hint="Press “Run all four scenarios” to update it.")
         self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
                                    css_classes=["eha-lse-alert"])
         self.notice = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-lse-notice"])
@@ -227,10 +234,26 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         self.button.on_click(lambda _e: self.run())
         self.all_button.on_click(lambda _e: self.run_all())
         state.param.watch(self._update_enabled, "valid")
+        state.param.watch(self._inputs_changed, ["params", "valid"])
         self._update_enabled()
 
     def request(self) -> tuple[LseRequest, dict]:
         return parse_lse(self.form.values)
+
+    def key(self):
+        """What a least-squares run with the current inputs is computed from (None if they are not valid)."""
+        req, errors = self.request()
+        return None if errors or not self.state.valid else (self.state.params, req)
+
+    def table4_key(self):
+        _, errors = self.request()
+        return None if "lse_seed" in errors or not self.state.valid else (self.state.params,
+                                                                          self.form.values.get("lse_seed"))
+
+    def _inputs_changed(self, *_events) -> None:
+        why = "a parameter on tab 1 is not valid" if not self.state.valid else ""
+        self.view.inputs_changed(self.key(), why=why)
+        self.table4_view.inputs_changed(self.table4_key(), why=why)
 
     def _update_enabled(self, *_events) -> None:
         _, errors = self.request()
@@ -240,11 +263,13 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         self.button.disabled = not ok or bool(errors)
         self.all_button.disabled = not ok or "lse_seed" in errors
         if not ok:
-            self.notice.object = ('<span class="eha-warn">A parameter on the first tab is not valid: '
+            self.notice.object = ('<span class="eha-warn">The buttons are off: a parameter on tab 1 is not valid; '
                                   'fix it to run the identification.</span>')
         elif errors:
-            self.notice.object = f'<span class="eha-warn">Fix the input to run: {next(iter(errors.values()))}</span>'
+            self.notice.object = ('<span class="eha-warn">“Run least squares” is off until this input is fixed: '
+                                  f'{next(iter(errors.values()))}</span>')
         self.notice.visible = not ok or bool(errors)
+        self._inputs_changed()
 
     def _fail(self, message: str) -> None:
         self.alert.object = f"The identification failed: {message}"
@@ -266,6 +291,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
             self._fail(str(exc))
             return None
         params = self.state.params
+        key = self.key()
         scenario = req.scenario if req.excitation == "paper" else None
 
         def compute(token):
@@ -294,6 +320,8 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                 self.plot.objects = [pn.pane.Bokeh(self.figure.layout)]
             else:
                 self.figure.update(view)
+            self.view.shown(key)
+            self._inputs_changed()          # typed while it computed
 
         return self.runner.run("least squares", compute, show, fail=self._fail, busy=[self.area], note=self._note)
 
@@ -304,6 +332,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         self.alert.visible = False
         params = self.state.params
         seed = int(self.form.values.get("lse_seed", "0"))
+        key = self.table4_key()
 
         def compute(token):
             return {m: run_lse_table(params, disturbance_model=m, seed=seed, cancel=token)
@@ -313,6 +342,8 @@ class LeastSquaresPanel(pn.viewable.Viewer):
             self.all_results = results
             self.table4.object = (f"<h4>Table 4: four scenarios, both disturbance models, beside the paper "
                                   f"({job.run_s * 1e3:.0f} ms)</h4>" + table4_html(results))
+            self.table4_view.shown(key)
+            self._inputs_changed()
 
         return self.runner.run("Table 4", compute, show, fail=self._fail, busy=[self.table4_area], note=self._note)
 
@@ -321,10 +352,12 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         explain = pn.pane.HTML(
             "<p class='eha-note'>Least squares on eq. 15 filtered by H(s) = 1/(0.01 s + 1) (eqs. 16-18): "
             "y<sub>1</sub> = A<sub>1</sub>p<sub>1</sub> − A<sub>2</sub>p<sub>2</sub> = M dv/dt + B v + "
-            "A<sub>f</sub> S(v) + d<sub>0</sub>, and dp<sub>1</sub>/dt = β<sub>e</sub> φ<sub>2</sub>. "
+            "A<sub>f</sub> S(v) + d<sub>0</sub>, and dp<sub>1</sub>/dt = β<sub>e</sub> φ<sub>2</sub>: each "
+            f"unknown multiplies a {term('regressor')} formed from the measurements. "
             "D<sub>c</sub>, d<sub>c</sub>, L<sub>0</sub>, K<sub>q</sub> are measured; 1 kHz sensors.</p>",
             sizing_mode="stretch_width")
-        results = pn.Column(explain, self.alert, self.area, self.table4_area, sizing_mode="stretch_width")
+        results = pn.Column(explain, self.alert, self.view.banner, self.area, self.table4_view.banner,
+                            self.table4_area, sizing_mode="stretch_width")
         return pn.Row(controls, results, sizing_mode="stretch_width")
 
 
@@ -365,7 +398,10 @@ class FrequencyPanel(pn.viewable.Viewer):
         self.backout = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-backout"])
         self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
                                    css_classes=["eha-freq-alert"])
-        self.area = pn.Column(self.summary, self.backout, sizing_mode="stretch_width")
+        self.unstable = pn.pane.Alert("", alert_type="warning", visible=False, sizing_mode="stretch_width",
+                                      css_classes=["eha-freq-unstable"])
+        self.area = pn.Column(self.unstable, self.summary, self.backout, sizing_mode="stretch_width")
+        self.kp_note = pn.pane.HTML("", width=260, css_classes=["eha-freq-kp"], margin=(0, 10))
         self.config_errors: dict = {}
         self.excitation_errors: dict = {}
         self.figures: dict[str, object] = {}
@@ -373,12 +409,43 @@ class FrequencyPanel(pn.viewable.Viewer):
             "<p class='eha-note'>" + ("Computing the excitation…" if key == "excitation" else
                                       "Run the experiment to see this figure.") + "</p>"),
             min_height=260, sizing_mode="stretch_width") for _, key, _ in _FIGURES}
-        self.figure_tabs = pn.Tabs(*((title, self._slots[key]) for title, key, _ in _FIGURES), dynamic=False,
+        hint = "Press “Run experiment and estimate” to update it."
+        # Fig. 8 follows the settings by itself (a preview); the others come from the experiment
+        self.views = {key: ResultView(f"freq-{key}", self._slots[key], run_hint=hint) for _, key, _ in _FIGURES}
+        self.views["summary"] = ResultView("freq-summary", self.area, run_hint=hint)
+        self.figure_tabs = pn.Tabs(*((title, pn.Column(self.views[key].banner, self._slots[key],
+                                                       sizing_mode="stretch_width"))
+                                     for title, key, _ in _FIGURES), dynamic=False,
                                    sizing_mode="stretch_width", css_classes=["eha-freq-figures"])
         self._shown = {"excitation"}
         self.figure_tabs.param.watch(self._on_figure_tab, "active")
         state.param.watch(self._update_enabled, "valid")
+        state.param.watch(self._on_config, ["params", "kp", "valid"])
         self._on_config()
+
+    def config(self):
+        """The experiment the form and tab 1's Kp describe (None if invalid), and the messages."""
+        return parse_freq(self.form.values, self.state.kp)
+
+    def key(self, cfg=None):
+        """What the experiment's results are computed from (None if the inputs are not valid)."""
+        cfg = cfg if cfg is not None else self.config()[0]
+        return None if cfg is None or not self.state.valid else (self.state.params, cfg)
+
+    @staticmethod
+    def excitation_key(cfg):
+        return None if cfg is None else (cfg.signal_type, cfg.n_samples, cfg.seed, cfg.band, cfg.range,
+                                         cfg.sinedata, cfg.ts)
+
+    def _mark(self, cfg, *, preview_queued: bool) -> None:
+        """Mark every view of this panel against the current inputs."""
+        why = "a parameter on tab 1 is not valid" if not self.state.valid else ""
+        key = self.key(cfg)
+        for name, view in self.views.items():
+            if name == "excitation":
+                view.inputs_changed(self.excitation_key(cfg), updating=preview_queued, why=why)
+            else:
+                view.inputs_changed(key, why=why)
 
     # A figure is built when it is first shown with data to draw; afterwards
     # only its data change.
@@ -419,18 +486,27 @@ class FrequencyPanel(pn.viewable.Viewer):
         self.error.visible = bool(self.error.object)
 
     def _on_config(self, *_events) -> None:
-        cfg, errors = parse_freq(self.form.values)
+        cfg, errors = self.config()
         self.config_errors = errors
         self.form.hidden = freq_hidden(self.form.values)
+        self.kp_note.object = (f"<span class='eha-note'>Controller gain K<sub>p</sub> = {self.state.kp:g} V/m, "
+                               "set on tab 1 (the same K<sub>p</sub> as tab 1's H(s)).</span>")
         if cfg is None:
+            self._mark(None, preview_queued=False)
             self._update_enabled()
             return
         ts = cfg.ts
+        exc_key = self.excitation_key(cfg)
+        if exc_key == self.views["excitation"].computed_from:
+            self._mark(cfg, preview_queued=False)
+            self._update_enabled()
+            return
 
         def show(out, _job):
             self.excitation_errors = {}
             self.preview = out
             self._draw("excitation")
+            self.views["excitation"].shown(exc_key)
             self._update_enabled()
 
         def fail(message):
@@ -439,6 +515,7 @@ class FrequencyPanel(pn.viewable.Viewer):
             self._update_enabled()
 
         self._update_enabled()
+        self._mark(cfg, preview_queued=True)
         self.preview_runner.run("excitation preview", lambda token: plots.excitation_view(cfg.excitation(), ts),
                                 show, fail=fail)
 
@@ -451,7 +528,7 @@ class FrequencyPanel(pn.viewable.Viewer):
         self.queue_note.visible = bool(text)
 
     def run(self):
-        cfg, errors = parse_freq(self.form.values)
+        cfg, errors = self.config()
         if cfg is None or not self.state.valid or self.excitation_errors:
             return None
         self.alert.visible = False
@@ -461,6 +538,7 @@ class FrequencyPanel(pn.viewable.Viewer):
             self._fail(str(exc))
             return None
         params = self.state.params
+        run_key = (params, cfg)
 
         def compute(token):
             fi = run_frequency_identification(params, cfg, cancel=token)
@@ -477,16 +555,23 @@ class FrequencyPanel(pn.viewable.Viewer):
                       + ".</p>")
             self.summary.object = freq_summary_html(fi) + timing
             self.backout.object = "<h4>Backed-out parameters (eq. 27)</h4>" + backout_html(fi)
+            alert = estimate_alert(fi.estimate)
+            self.unstable.object = alert
+            self.unstable.visible = bool(alert)
             for _, key, _ in _FIGURES:
                 self._draw(key)
+            for name, view in self.views.items():
+                view.shown(self.excitation_key(cfg) if name == "excitation" else run_key)
+            self._mark(self.config()[0], preview_queued=False)      # typed while it computed
 
         return self.runner.run("frequency experiment", compute, show, fail=self._fail, busy=[self.area],
                                note=self._note)
 
     def __panel__(self):
-        config = pn.Column(self.form, self.error, self.button, self.queue_note, width=280)
-        return pn.Row(config, pn.Column(self.alert, self.figure_tabs, self.area, sizing_mode="stretch_width"),
-                      sizing_mode="stretch_width")
+        config = pn.Column(self.kp_note, self.form, self.error, self.button, self.queue_note, width=280)
+        results = pn.Column(self.alert, self.figure_tabs, self.views["summary"].banner, self.area,
+                            sizing_mode="stretch_width")
+        return pn.Row(config, results, sizing_mode="stretch_width")
 
 
 class IdentificationTab(pn.viewable.Viewer):

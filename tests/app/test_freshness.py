@@ -66,3 +66,114 @@ def test_linearised_model_beyond_its_range_is_flagged_in_the_status_line():
     assert "Beyond the physical range" in tab.info.text and "below the tank pressure" in tab.info.text
     tab.run("nonlinear")
     assert "Beyond the physical range" not in tab.info.text
+
+
+def all_views(tab3):
+    panel = tab3.frequency_panel()
+    return [tab3.lse.view, tab3.lse.table4_view, *panel.views.values()]
+
+
+def test_identification_views_are_marked_when_parameters_change():
+    from eha_app.tabs.identification import IdentificationTab
+
+    s = AppState()
+    tab = IdentificationTab(s)
+    tab.lse.run()
+    tab.lse.run_all()
+    panel = tab.frequency_panel()
+    panel.run()
+    for view in all_views(tab):
+        assert view.status == "current", view.name
+    s.set_text("M", "6000")
+    for view in all_views(tab):
+        if view.name == "freq-excitation":           # Fig. 8 does not depend on M
+            assert view.status == "current"
+        else:
+            assert view.status == "stale" and "Out of date" in view.banner.object, view.name
+    assert "nominal" in tab.lse.table.object and "4000" in tab.lse.table.object   # the old table, marked
+    tab.lse.run()
+    assert tab.lse.view.status == "current" and tab.lse.result.nominal["M"] == 6000.0
+    assert tab.lse.table4_view.status == "stale"
+    s.set_text("M", "4000")                          # back to what Table 4 and the experiment were run with
+    assert tab.lse.table4_view.status == "current" and panel.views["bode"].status == "current"
+    assert tab.lse.view.status == "stale"
+
+
+def test_frequency_settings_mark_the_experiment_and_update_fig8():
+    from eha_app.tabs.identification import IdentificationTab
+
+    s = AppState()
+    tab = IdentificationTab(s)
+    panel = tab.frequency_panel()
+    panel.run()
+    type_into(panel.form, signal_type="prbs", model="linear")
+    exc = panel.views["excitation"]
+    assert exc.status == "current" and exc.computed_from[0] == "prbs"          # the preview ran
+    for name in ("data", "fit", "bode", "validation", "residuals", "summary"):
+        assert panel.views[name].status == "stale", name
+        assert panel.views[name].computed_from[1].signal_type == "sine"
+    panel.run()
+    assert all(v.status == "current" for v in panel.views.values())
+
+
+def test_one_kp_everywhere():
+    from eha_app.tabs.identification import IdentificationTab
+    from eha_app.tabs.parameters import ParametersTab
+
+    s = AppState()
+    tab1, tab3 = ParametersTab(s), IdentificationTab(s)
+    panel = tab3.frequency_panel()
+    panel.run()
+    s.set_text("kp", "20")
+    assert "K<sub>p</sub> = 20" in panel.kp_note.object
+    assert panel.views["summary"].status == "stale"
+    panel.run()
+    assert panel.result.config.kp == 20.0
+    assert "K<sub>p</sub> = 20 V/m" in panel.summary.object
+    assert "20" in tab1.derived.object
+
+
+def test_an_unstable_estimate_is_an_alert_and_messages_are_sentences():
+    from eha_app.tabs.identification import IdentificationTab
+
+    s = AppState()
+    panel = IdentificationTab(s).frequency_panel()
+    type_into(panel.form, n_poles="6", n_zeros="5")
+    panel.run()
+    assert panel.unstable.visible and "unstable" in panel.unstable.object
+    assert "termination condition" not in panel.summary.object and "`" not in panel.summary.object
+    type_into(panel.form, n_poles="3", n_zeros="0")
+    panel.run()
+    assert not panel.unstable.visible
+
+
+def test_explanations_follow_the_run():
+    """Linear plant and prbs: λ̂1 is near 430.1, and the text must not say it lies far below."""
+    from eha_app.tabs.identification import IdentificationTab
+
+    s = AppState()
+    panel = IdentificationTab(s).frequency_panel()
+    type_into(panel.form, model="linear", signal_type="prbs")
+    panel.run()
+    text = panel.backout.object
+    assert "far below" not in text and "saturates" not in text and "linearised plant" in text
+    type_into(panel.form, model="nonlinear", signal_type="sine")
+    panel.run()
+    assert "far below" in panel.backout.object and "saturates" in panel.backout.object
+    assert "from the nonlinear model's data" in panel.summary.object
+
+
+def test_lse_without_resimulation_draws_no_resimulated_curve():
+    """Under 5000 sin with the constant model B < 0: no re-simulation, so no line or legend claims one."""
+    from eha_app.tabs.identification import IdentificationTab
+
+    s = AppState()
+    lse = IdentificationTab(s).lse
+    type_into(lse.form, lse_scenario="5000 sin", lse_model="constant")
+    lse.run()
+    assert lse.result.estimates["B"] < 0                 # seed 0: B = -1574 N s/m
+    assert "No re-simulation" in lse.table.object
+    assert len(lse.figure.resim.data["t"]) == 0 and not lse.figure.resim_item.visible
+    type_into(lse.form, lse_scenario="none")
+    lse.run()
+    assert len(lse.figure.resim.data["t"]) > 0 and lse.figure.resim_item.visible
