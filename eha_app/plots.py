@@ -100,6 +100,13 @@ def _escape(text: str) -> str:
 
 
 def _figure(**kwargs):
+    # a figure takes the width of its column (no horizontal scrolling on a narrow
+    # screen); ``width`` is the share it starts from, kept as its minimum's guide
+    width = kwargs.pop("width", None)
+    if "sizing_mode" not in kwargs:
+        kwargs["sizing_mode"] = "stretch_width"
+        if width is not None:
+            kwargs["min_width"] = min(width, 280)
     kwargs.setdefault("tools", _TOOLS)
     kwargs.setdefault("active_scroll", None)
     kwargs.setdefault("output_backend", "canvas")
@@ -331,7 +338,7 @@ class ClosedLoopFigure:
                 fig.line("t", key, source=self.source, color=color)
             self.figs.append(fig)
         _lean(*self.figs)
-        self.layout = row(*self.figs)
+        self.layout = row(*self.figs, sizing_mode="stretch_width")
 
     def update(self, view: FrequencyView) -> None:
         t, r, x, u = decimate(view.t, view.r, view.x_mm, view.u)
@@ -388,7 +395,7 @@ class BodeFigure:
                                           LegendItem(label="ETFE of the data (ZOH)", renderers=[r3])],
                                    location="bottom_left"))
         _lean(self.mag, self.phase)
-        self.layout = column(self.mag, self.phase)
+        self.layout = column(self.mag, self.phase, sizing_mode="stretch_width")
 
     def update(self, view: FrequencyView) -> None:
         if not view.fit_ok:
@@ -446,7 +453,7 @@ class ResidualFigure:
             self.bands.append(band)
             self.figs.append(fig)
         _lean(*self.figs)
-        self.layout = row(*self.figs)
+        self.layout = row(*self.figs, sizing_mode="stretch_width")
 
     def update(self, view: FrequencyView) -> None:
         if not view.fit_ok:
@@ -509,7 +516,7 @@ class LseFitFigure:
         self.left.add_layout(Legend(items=[LegendItem(label="measured", renderers=[m0]), self.resim_item],
                                     location="top_left"))
         _lean(self.left, self.right)
-        self.layout = row(self.left, self.right)
+        self.layout = row(self.left, self.right, sizing_mode="stretch_width")
 
     def update(self, view: LseView) -> None:
         self.measured.data = {"t": _f32(view.t), "x": _f32(view.x_mm), "p1": _f32(view.p1_mpa)}

@@ -26,7 +26,8 @@ from eha_core.signals import SignalSpecError, parse_signal
 from .. import plots
 from ..form import Field, Form, Group, parse_fields
 from ..freshness import ResultView
-from ..glossary import term
+from ..glossary import GLOSSARY, term
+from ..layout import side_by_side
 from ..limits import check_frequency, check_lse
 from ..state import AppState
 from ..tables import SCENARIOS, backout_html, estimate_alert, freq_summary_html, lse_table_html, table4_html
@@ -116,7 +117,8 @@ def parse_lse(texts: dict) -> tuple[LseRequest, dict]:
 FREQ_FORM = (
     Group("Excitation (idinput)", (
         Field("signal_type", "idinput type", "select",
-              options=(("sine", "sine"), ("rgs", "rgs"), ("rbs", "rbs"), ("prbs", "prbs")), short="idinput type"),
+              options=(("sine", "sine"), ("rgs", "rgs"), ("rbs", "rbs"), ("prbs", "prbs")), short="idinput type",
+              tip=GLOSSARY["idinput"]),
         Field("n_samples", "samples N", "integer", lo=20, hi=20000, short="N"),
         Field("freq_seed", "seed", "integer", lo=0, hi=10**6, short="seed"),
         Field("band_lo", "band low", "number", unit="× Nyquist", lo=0.0, hi=1.0, short="band low"),
@@ -126,17 +128,18 @@ FREQ_FORM = (
         Field("n_sines", "sinusoids", "integer", lo=1, hi=5000, short="sinusoids"),
         Field("n_trials", "trials", "integer", lo=1, hi=500, short="trials"),
         Field("grid_skip", "grid skip", "integer", lo=1, hi=100, short="grid skip"),
-        Field("ts", "Ts", "number", unit="s", lo=1e-4, hi=1.0, short="Ts", tip="sample time of the controller"),
+        Field("ts", "Ts", "number", unit="s", lo=1e-4, hi=1.0, short="Ts",
+              tip="sample time of the controller; its output is held between samples (ZOH: " + GLOSSARY["ZOH"] + ")"),
     )),
     Group("Loop and model", (
         Field("model", "model in the loop", "select", options=(("nonlinear", "nonlinear"), ("linear", "linearised")),
               short="model", tip="the actuator's model the closed loop is simulated with"),
-        Field("n_poles", "poles", "integer", lo=1, hi=6, short="poles"),
-        Field("n_zeros", "zeros", "integer", lo=0, hi=5, short="zeros"),
+        Field("n_poles", "poles", "integer", lo=1, hi=6, short="poles", tip="poles: " + GLOSSARY["poles"]),
+        Field("n_zeros", "zeros", "integer", lo=0, hi=5, short="zeros", tip="zeros: " + GLOSSARY["zeros"]),
         Field("initial_condition", "initial condition", "select", options=(("estimate", "estimate"), ("zero", "zero")),
-              short="initial condition"),
+              short="initial condition", tip=GLOSSARY["initial condition"]),
         Field("input_offset", "input offset", "select", options=(("estimate", "estimate"), ("zero", "zero")),
-              short="input offset"),
+              short="input offset", tip=GLOSSARY["input offset"]),
     )),
 )
 _FREQ_FIELDS = {f.name: f for g in FREQ_FORM for f in g.fields}
@@ -317,7 +320,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
             if self.figure is None:
                 self.figure = plots.LseFitFigure()
                 self.figure.update(view)
-                self.plot.objects = [pn.pane.Bokeh(self.figure.layout)]
+                self.plot.objects = [pn.pane.Bokeh(self.figure.layout, sizing_mode="stretch_width")]
             else:
                 self.figure.update(view)
             self.view.shown(key)
@@ -357,8 +360,8 @@ class LeastSquaresPanel(pn.viewable.Viewer):
             "D<sub>c</sub>, d<sub>c</sub>, L<sub>0</sub>, K<sub>q</sub> are measured; 1 kHz sensors.</p>",
             sizing_mode="stretch_width")
         results = pn.Column(explain, self.alert, self.view.banner, self.area, self.table4_view.banner,
-                            self.table4_area, sizing_mode="stretch_width")
-        return pn.Row(controls, results, sizing_mode="stretch_width")
+                            self.table4_area, sizing_mode="stretch_width", min_width=440)
+        return side_by_side(controls, results)
 
 
 _FIGURES = (("Fig. 8 excitation", "excitation", plots.ExcitationFigure),
@@ -471,7 +474,7 @@ class FrequencyPanel(pn.viewable.Viewer):
         else:
             fig.update(self.view)
         if built:
-            self._slots[key].objects = [pn.pane.Bokeh(fig.layout)]
+            self._slots[key].objects = [pn.pane.Bokeh(fig.layout, sizing_mode="stretch_width")]
 
     def _update_enabled(self, *_events) -> None:
         errors = {**self.config_errors, **self.excitation_errors}
@@ -570,8 +573,8 @@ class FrequencyPanel(pn.viewable.Viewer):
     def __panel__(self):
         config = pn.Column(self.kp_note, self.form, self.error, self.button, self.queue_note, width=280)
         results = pn.Column(self.alert, self.figure_tabs, self.views["summary"].banner, self.area,
-                            sizing_mode="stretch_width")
-        return pn.Row(config, results, sizing_mode="stretch_width")
+                            sizing_mode="stretch_width", min_width=440)
+        return side_by_side(config, results)
 
 
 class IdentificationTab(pn.viewable.Viewer):

@@ -18,6 +18,7 @@ from eha_core.simulate import runs_to_pandas, simulate_many
 
 from ..form import Field, Form, Group, InputError, parse_fields
 from ..freshness import ResultView
+from ..layout import side_by_side
 from ..limits import check_simulation
 from ..plots import TimeSeriesGrid
 from ..state import AppState
@@ -438,5 +439,6 @@ class SimulationTab(pn.viewable.Viewer):
                             pn.FlexBox(*self.preset_buttons), width=280)
         runs = pn.Column(*self.run_buttons.values(), self.download, self.queue_note, width=280)
         side = pn.Column(presets, runs, self.form, width=290)
-        main = pn.Column(self.notice, self.alert, self.view.banner, self.plot_area, sizing_mode="stretch_width")
-        return pn.Row(side, main, sizing_mode="stretch_width")
+        main = pn.Column(self.notice, self.alert, self.view.banner, self.plot_area, sizing_mode="stretch_width",
+                         min_width=440)
+        return side_by_side(side, main)
