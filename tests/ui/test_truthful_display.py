@@ -1,0 +1,99 @@
+"""What a student sees is true: after an input change every result view shows results of the current
+inputs or is visibly marked out of date; the page fits 800 px; a dragged slider moves the plots."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.ui.browser_helpers import text_of, wait_until
+
+#: every result view of the app, by the name its container carries (eha-view-NAME)
+TAB3_VIEWS = ("lse", "table4", "freq-excitation", "freq-data", "freq-fit", "freq-bode", "freq-validation",
+              "freq-residuals", "freq-summary")
+
+JS_VIEWS = """() => {
+  const out = {};
+  const walk = (root) => {
+    for (const el of root.querySelectorAll('*')) {
+      for (const c of el.classList) {
+        if (c.startsWith('eha-view-')) {
+          const status = ['eha-current', 'eha-updating', 'eha-out-of-date', 'eha-empty']
+            .find(s => el.classList.contains(s));
+          const style = getComputedStyle(el);
+          out[c.slice(9)] = {status, opacity: parseFloat(style.opacity), shadow: style.boxShadow};
+        }
+      }
+      if (el.shadowRoot) walk(el.shadowRoot);
+    }
+  };
+  walk(document);
+  return out;
+}"""
+
+
+def views(page) -> dict:
+    return page.evaluate(JS_VIEWS)
+
+
+def banner(page, name: str) -> str:
+    return text_of(page, f".eha-stale-note-{name}")
+
+
+def test_every_view_is_current_or_marked_after_an_input_change(new_session):
+    s = new_session()
+    page = s.page
+    s.tab("3. Identification")
+    page.get_by_role("button", name="Run least squares").click()
+    page.locator(".eha-lse-table table").wait_for(state="visible", timeout=60_000)
+    page.get_by_role("button", name="Run all four scenarios (Table 4)").click()
+    page.locator(".eha-table4-pane table").wait_for(state="visible", timeout=60_000)
+    page.locator(".bk-tab", has_text="Frequency domain").first.click()
+    page.get_by_role("button", name="Run experiment and estimate").click()
+    page.wait_for_selector(".eha-freq-summary >> text=Validation on a fresh excitation", timeout=60_000)
+    wait_until(lambda: all(views(page).get(v, {}).get("status") == "eha-current" for v in TAB3_VIEWS),
+               message="every view of tab 3 current after its runs")
+
+    s.tab("1. Parameters")
+    page.locator(".eha-field-M input").fill("6000")
+    wait_until(lambda: "286.7" in text_of(page, ".eha-derived"), message="tab 1 follows M")
+    s.tab("3. Identification")
+    expected_stale = [v for v in TAB3_VIEWS if v != "freq-excitation"]     # Fig. 8 does not depend on M
+    got = wait_until(lambda: (lambda v: v if all(v[n]["status"] == "eha-out-of-date" for n in expected_stale)
+                              else None)(views(page)), message="tab 3's results marked out of date")
+    for name in expected_stale:
+        assert got[name]["opacity"] < 0.6, (name, got[name])                # dimmed: visible to a student
+    assert got["freq-excitation"]["status"] == "eha-current"
+    assert "Out of date" in banner(page, "lse") and "Run least squares" in banner(page, "lse")
+    assert "Out of date" in banner(page, "freq-summary")
+
+    s.tab("2. Simulation")                          # built now, from M = 6000: current
+    page.wait_for_selector(".eha-sim-info >> text=nonlinear model")
+    assert views(page)["simulation"]["status"] == "eha-current"
+    page.locator(".eha-field-u_amplitude input[type=text]").fill("3")
+    wait_until(lambda: "3 sin(4πt)" in text_of(page, ".eha-sim-info") and
+               views(page)["simulation"]["status"] == "eha-current", message="tab 2 re-run with u = 3 sin(4πt)")
+    page.locator(".eha-field-t_end input").fill("50")           # one run of 50 s: beyond the automatic re-run
+    page.get_by_role("button", name="Compare both").click()     # 2 runs x 50 s
+    wait_until(lambda: "50 s" in text_of(page, ".eha-sim-info"), timeout=60, message="the 50 s comparison")
+    page.locator(".eha-field-u_amplitude input[type=text]").fill("4")
+    wait_until(lambda: views(page)["simulation"]["status"] == "eha-out-of-date", message="long run marked")
+    assert "Press a Run button" in banner(page, "simulation")
+    assert "3 sin(4πt)" in text_of(page, ".eha-sim-info")     # the old run, marked, not relabelled
+
+
+@pytest.mark.parametrize("width", [800, 1366, 1920])
+def test_nothing_needs_horizontal_scrolling(browser, server, width):
+    context = browser.new_context(viewport={"width": width, "height": 1080 if width == 1920 else 768})
+    page = context.new_page()
+    try:
+        page.goto(server)
+        page.wait_for_selector(".eha-field-M input", timeout=60_000)
+        for name in ("1. Parameters", "2. Simulation", "3. Identification"):
+            page.locator(".bk-header .bk-tab", has_text=name).first.click()
+            wait_until(lambda: page.evaluate("() => document.documentElement.scrollWidth") <= width,
+                       timeout=10, message=f"{name} within {width} px")
+        page.locator(".bk-tab", has_text="Frequency domain").first.click()
+        page.wait_for_selector(".eha-freq-form")
+        assert page.evaluate("() => document.documentElement.scrollWidth") <= width
+    finally:
+        context.close()
