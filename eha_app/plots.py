@@ -118,6 +118,14 @@ def _figure(**kwargs):
     return fig
 
 
+def _legend_above(fig, items) -> Legend:
+    """A horizontal legend above the plot area: never over the data."""
+    legend = Legend(items=items, orientation="horizontal", location="top_left", click_policy="none",
+                    margin=0, padding=2, spacing=14, border_line_alpha=0, background_fill_alpha=0)
+    fig.add_layout(legend, "above")
+    return legend
+
+
 def legend_html(results) -> str:
     """A one-line legend: a swatch per run label, solid = nonlinear, dashed = linearised."""
     keys: dict[str, int] = {}
@@ -358,7 +366,7 @@ class FitFigure:
         self.items = [LegendItem(label="measured (nonlinear model in the loop)", renderers=[r0]),
                       LegendItem(label="estimated H(s)", renderers=[r1]),
                       LegendItem(label="linearised H(s), eq. 24", renderers=[r2])]
-        self.fig.add_layout(Legend(items=self.items, location="top_left"))
+        _legend_above(self.fig, self.items)
         _lean(self.fig)
         self.layout = self.fig
 
@@ -390,10 +398,9 @@ class BodeFigure:
         self.phase.line("w", "est_deg", source=self.curves, color=CASE_COLORS[1], line_width=2)
         self.phase.line("w", "th_deg", source=self.curves, color=CASE_COLORS[2], line_dash="dashed")
         self.phase.scatter("w", "deg", source=self.points, color="#333333", size=4)
-        self.mag.add_layout(Legend(items=[LegendItem(label="estimated H(s)", renderers=[r1]),
-                                          LegendItem(label="linearised H(s), eq. 24", renderers=[r2]),
-                                          LegendItem(label="ETFE of the data (ZOH)", renderers=[r3])],
-                                   location="bottom_left"))
+        _legend_above(self.mag, [LegendItem(label="estimated H(s)", renderers=[r1]),
+                                 LegendItem(label="linearised H(s), eq. 24", renderers=[r2]),
+                                 LegendItem(label="ETFE of the data (ZOH)", renderers=[r3])])
         _lean(self.mag, self.phase)
         self.layout = column(self.mag, self.phase, sizing_mode="stretch_width")
 
@@ -418,7 +425,7 @@ class ValidationFigure:
         r1 = self.fig.line("t", "est", source=self.source, color=CASE_COLORS[1], line_dash="dashed")
         self.items = [LegendItem(label="measured (fresh excitation)", renderers=[r0]),
                       LegendItem(label="estimated H(s)", renderers=[r1])]
-        self.fig.add_layout(Legend(items=self.items, location="top_left"))
+        _legend_above(self.fig, self.items)
         _lean(self.fig)
         self.layout = self.fig
 
@@ -513,8 +520,7 @@ class LseFitFigure:
         ]
         self.right.line("t", "p1", source=self.measured, color="#333333", line_width=2)
         self.resim_item = LegendItem(label="re-simulated with the estimates", renderers=[self.resim_renderers[0]])
-        self.left.add_layout(Legend(items=[LegendItem(label="measured", renderers=[m0]), self.resim_item],
-                                    location="top_left"))
+        _legend_above(self.left, [LegendItem(label="measured", renderers=[m0]), self.resim_item])
         _lean(self.left, self.right)
         self.layout = row(self.left, self.right, sizing_mode="stretch_width")
 
