@@ -182,6 +182,15 @@ class TimeSeriesGrid:
             fig.renderers.append(r)
             self.figures.append(fig)
             self.renderers.append(r)
+        # the physical bounds (end stops; tank and supply pressures), drawn only when a
+        # run passes them: the linearised model can, and its results there mean nothing
+        self.bounds = {}
+        for fig, (field, _, _) in zip(self.figures, STATE_PANELS, strict=True):
+            for side in ("below", "above"):
+                span = Span(location=0.0, dimension="width", line_color="#b00020", line_dash="dashed",
+                            line_width=1.5, visible=False)
+                fig.add_layout(span)
+                self.bounds[(field, side)] = span
         self.grid = gridplot([self.figures[:2], self.figures[2:]], sizing_mode="stretch_width", merge_tools=True,
                              toolbar_location="right")
         self.layout = column(self.legend, self.grid, sizing_mode="stretch_width")
@@ -223,6 +232,16 @@ class TimeSeriesGrid:
         self._signature = signature
         self.source.data = self._columns(results)
         self.legend.text = legend_html(results)
+        passed = {}
+        for r in results:
+            for e in r.beyond_physical_range():
+                passed[(e.state, e.side)] = e.bound
+        scales = {field: scale for field, _, scale in STATE_PANELS}
+        for (field, side), span in self.bounds.items():
+            bound = passed.get((field, side))
+            if bound is not None:
+                span.location = bound * scales[field]
+            span.visible = bound is not None
 
 
 # -- frequency-domain identification (Figs. 8-13) ----------------------------------------

@@ -64,8 +64,11 @@ def test_linearised_model_beyond_its_range_is_flagged_in_the_status_line():
     type_into(tab.form, u_kind="step", u_amplitude="6", u_t0="0")
     tab.run("linear")
     assert "Beyond the physical range" in tab.info.text and "below the tank pressure" in tab.info.text
+    shown = {k: s.location for k, s in tab.grid.bounds.items() if s.visible}      # on the plot too
+    assert shown[("x", "above")] == tab.state.params.x_max * 1e3 and shown[("p1", "below")] == 0.0
     tab.run("nonlinear")
     assert "Beyond the physical range" not in tab.info.text
+    assert not any(s.visible for s in tab.grid.bounds.values())
 
 
 def all_views(tab3):
