@@ -37,6 +37,11 @@ class InputError(ValueError):
         super().__init__(message)
 
 
+def _plain(x: float | None) -> str:
+    """A bound as a student types it: 1000000, not 1e+06."""
+    return "" if x is None else f"{x:.12g}"
+
+
 @dataclass(frozen=True)
 class Field:
     """One input: how it is drawn and how its text is read.
@@ -77,12 +82,13 @@ class Field:
     def _range_text(self) -> str:
         unit = f" {self.unit}" if self.unit else ""
         left = "(" if self.lo_open else "["
+        lo, hi = (_plain(x) for x in (self.lo, self.hi))
         if self.lo is not None and self.hi is not None:
-            return f"must lie in {left}{self.lo:g}, {self.hi:g}]{unit}"
+            return f"must lie in {left}{lo}, {hi}]{unit}"
         if self.lo is not None:
-            return f"must be {'>' if self.lo_open else '>='} {self.lo:g}{unit}"
+            return f"must be {'>' if self.lo_open else '>='} {lo}{unit}"
         if self.hi is not None:
-            return f"must be <= {self.hi:g}{unit}"
+            return f"must be <= {hi}{unit}"
         return f"must be a number{(' in ' + self.unit) if self.unit else ''}"
 
     def parse(self, text: str):
@@ -98,13 +104,16 @@ class Field:
             return raw.strip()
         s = raw.strip().replace(",", ".")
         what = "a whole number" if self.kind == "integer" else "a number"
+        if self.lo is None and self.hi is None:
+            what += f" in {self.unit}" if self.unit else ""
+        else:
+            what += f"; {self._range_text()}"
         try:
             value = float(s)
         except ValueError:
-            raise InputError(self.name, f"{self.display} = {shown} is not allowed: enter {what}; "
-                                        f"{self._range_text()}") from None
+            raise InputError(self.name, f"{self.display} = {shown} is not allowed: enter {what}") from None
         if not math.isfinite(value):
-            raise InputError(self.name, f"{self.display} = {shown} is not allowed: {self._range_text()}")
+            raise InputError(self.name, f"{self.display} = {shown} is not allowed: enter {what}")
         if self.kind == "integer":
             if value != int(value):
                 raise InputError(self.name, f"{self.display} = {shown} is not allowed: enter a whole number; "
@@ -264,10 +273,7 @@ export function render({ model, el }) {
         if (f.placeholder) { input.placeholder = f.placeholder }
         input.addEventListener('input', () => {
           send(f.name, input.value)
-          if (slider !== null) {
-            const v = parseFloat(input.value.replace(',', '.'))
-            if (Number.isFinite(v)) { slider.value = String(v) }
-          }
+          if (slider !== null) { follow(slider, f, input.value) }
         })
       }
       input.id = id
@@ -295,13 +301,21 @@ export function render({ model, el }) {
       error.setAttribute('role', 'alert')
       wrap.append(error)
       box.append(wrap)
-      fields[f.name] = { wrap, input, slider, error }
+      fields[f.name] = { wrap, input, slider, error, spec: f }
       groupOf[f.name] = box
     }
     root.append(box)
   }
   el.append(root)
 
+  // A slider shows the typed value only when it can: the browser would clamp
+  // 99 to a 0-10 slider's 10 and show a value nobody typed. Out of its range
+  // (or not a number) the slider stays put and the server's message says why.
+  function follow(slider, f, text) {
+    const s = String(text).trim().replace(',', '.')
+    const v = Number(s)
+    if (s !== '' && Number.isFinite(v) && v >= f.lo && v <= f.hi) { slider.value = String(v) }
+  }
   function send(name, text) {
     model.values = { ...model.values, [name]: text }
     syncUrl()
@@ -329,10 +343,7 @@ export function render({ model, el }) {
       const text = model.values[name]
       if (text === undefined || text === null) { continue }
       if (f.input !== active && f.input.value !== String(text)) { f.input.value = String(text) }
-      if (f.slider !== null) {
-        const v = parseFloat(String(text).replace(',', '.'))
-        if (Number.isFinite(v)) { f.slider.value = String(v) }
-      }
+      if (f.slider !== null) { follow(f.slider, f.spec, text) }
     }
   }
   function showErrors() {

@@ -2,8 +2,14 @@
 
 One :class:`AppState` per browser session (``create_app`` builds a new one),
 so students never see each other's values. The numbers are entered as text in
-display units (MPa, mm, GPa...) and parsed here, so that a typo gets a message
-naming the field, the value and what is allowed, shown beside the widget.
+display units (MPa, mm, GPa...) and checked here in those units, so that a
+typo gets a message beside the widget that reads like the form: the field's
+label, the value as typed with its display unit, and what is allowed.
+
+A rule that ties fields together (dc < Dc, pr < ps, |x(0)| <= 0.8 L0, p1(0)
+and p2(0) within [pr, ps], the force balance of the linearised model's
+operating point) puts its message on the field the student typed last among
+those it ties, and names the others with their values.
 
 Examples
 --------
@@ -11,10 +17,13 @@ Examples
 >>> s = AppState()
 >>> s.set_text("M", "-5")
 >>> s.valid, s.errors["M"]
-(False, 'M = -5 is not allowed: must be > 0 kg (load mass)')
+(False, 'M = -5 kg is not allowed: must be > 0 kg (load mass)')
 >>> s.set_text("M", "5000")
 >>> s.valid, s.params.M
 (True, 5000.0)
+>>> s.set_text("ps", "10")
+>>> s.errors["ps"]
+'ps = 10 MPa is not allowed: the supply pressure must be at least the initial piston-chamber pressure p1(0) = 12 MPa'
 """
 
 from __future__ import annotations
@@ -23,9 +32,25 @@ import math
 
 import param
 
-from eha_core.params import FIELD_INFO, PARAM_NAMES, ActuatorParams, ParameterError
+from eha_core.linear import operating_point
+from eha_core.params import (
+    FIELD_INFO,
+    NON_NEGATIVE_FIELDS,
+    PARAM_NAMES,
+    POSITIVE_FIELDS,
+    ActuatorParams,
+    ParameterError,
+)
 
-__all__ = ["AppState", "display_text", "parse_display"]
+__all__ = ["AppState", "FIELD_LABELS", "display_text", "parse_display", "cross_field_errors"]
+
+#: The names tab 1's form shows, which its messages use too.
+FIELD_LABELS = {"M": "M", "B": "B", "Af": "Af", "beta_e": "βe", "Dc": "Dc", "dc": "dc", "d0": "d0", "L0": "L0",
+                "Kq1": "Kq1", "Kq2": "Kq2", "ps": "ps", "pr": "pr", "k_f": "kf", "x0": "x(0)", "v0": "v(0)",
+                "p1_0": "p1(0)", "p2_0": "p2(0)", "kp": "Kp"}
+KP_UNIT = "V/m"
+# the linearised model's rod-chamber pressure at its operating point (eq. 10)
+_BALANCE = "(A1 p1(0) − d0)/A2"
 
 
 def display_text(name: str, value_si: float | None) -> str:
@@ -55,6 +80,182 @@ def parse_display(name: str, text: str) -> float | None:
     return value * info.display_scale
 
 
+# -- messages in display units ------------------------------------------------------------------
+
+def _unit(name: str) -> str:
+    return KP_UNIT if name == "kp" else FIELD_INFO[name].display_unit
+
+
+def _quantity(number: str, name: str) -> str:
+    """``"130 mm"``; a unit that starts with a factor reads ``"3 × 1e-8 m³/(s V √Pa)"``."""
+    unit = _unit(name)
+    return f"{number} × {unit}" if unit[:1].isdigit() else f"{number} {unit}"
+
+
+def _refusal(name: str, value: str, what: str) -> str:
+    """The project's one form of a message, with the label the form shows."""
+    return f"{FIELD_LABELS.get(name, name)} = {value} is not allowed: {what}"
+
+
+def _bound(name: str, relation: str, description: str) -> str:
+    """``"must be > 0 mm (cylinder bore diameter)"`` (no unit after a bare 0 when it starts with a factor)."""
+    unit = _unit(name)
+    zero = "0" if unit[:1].isdigit() else f"0 {unit}"
+    return f"must be {relation} {zero} ({description})"
+
+
+class _Named:
+    """How messages name fields: their labels and their values as typed, in display units."""
+
+    def __init__(self, texts: dict):
+        self.texts = texts
+
+    def typed(self, name: str) -> str:
+        """``"130 mm"``: the value of a field as typed, with its unit."""
+        return _quantity(str(self.texts.get(name, "")).strip(), name)
+
+    def ref(self, name: str) -> str:
+        """``"Dc = 120 mm"``."""
+        return f"{FIELD_LABELS[name]} = {self.typed(name)}"
+
+    def value(self, name: str, value_si: float) -> str:
+        """A computed value in the display unit of ``name`` (four significant digits)."""
+        return _quantity(f"{value_si / FIELD_INFO[name].display_scale:.4g}", name)
+
+    def pressures(self) -> str:
+        """``"[pr, ps] = [0, 32] MPa"``."""
+        pr, ps = (str(self.texts.get(n, "")).strip() for n in ("pr", "ps"))
+        return f"[pr, ps] = [{pr}, {ps}] {FIELD_INFO['ps'].display_unit}"
+
+
+def _within_pressures(v: dict, n: _Named, pressure: float, what: str, own: dict) -> dict | None:
+    """A pressure's rule pr <= pressure <= ps: None when it holds, else the messages by field."""
+    if v["pr"] <= pressure <= v["ps"]:
+        return None
+    out = dict(own)
+    if pressure > v["ps"]:
+        out["ps"] = f"the supply pressure must be at least {what}"
+    if pressure < v["pr"]:
+        out["pr"] = f"the return pressure must be at most {what}"
+    return out
+
+
+def _force_balance(v: dict, n: _Named) -> dict | None:
+    """(A1 p1(0) − d0)/A2 within [pr, ps]: the initial p2 (p2(0) blank) and the linearisation's operating point."""
+    a1 = math.pi * v["Dc"] ** 2 / 4.0
+    a2 = math.pi * (v["Dc"] ** 2 - v["dc"] ** 2) / 4.0
+    p2 = (a1 * v["p1_0"] - v["d0"]) / a2
+    if v["pr"] <= p2 <= v["ps"]:
+        return None
+    side = f"above the supply pressure {n.ref('ps')}" if p2 > v["ps"] else \
+        f"below the return pressure {n.ref('pr')}"
+    value = f"{_BALANCE} = {n.value('p2_0', p2)}"
+    if v["p2_0"] is None:
+        what = f"the initial rod-chamber pressure p2(0) = {value} (force balance)"
+        change = (f"the force balance then gives the initial rod-chamber pressure p2(0) = {value}, {side}; "
+                  "change p1(0) or d0, or type p2(0)")
+    else:
+        what = f"the rod-chamber pressure of the linearised model's operating point, {value}"
+        change = (f"the linearised model's operating point (eq. 10) then has the rod-chamber pressure {value}, "
+                  f"{side}; change p1(0) or d0")
+    return _within_pressures(v, n, p2, what, {name: change for name in ("p1_0", "d0", "Dc", "dc")})
+
+
+def _rules(v: dict, n: _Named) -> list[dict]:
+    """The broken rules among those that tie fields together (ActuatorParams and the operating point).
+
+    Each is ``{field: what to say on it}`` for every field it may be put on, its own field first.
+    """
+    broken = []
+    if v["dc"] >= v["Dc"]:
+        broken.append({"dc": f"the rod diameter must be smaller than the bore {n.ref('Dc')}",
+                       "Dc": f"the bore must be larger than the rod diameter {n.ref('dc')}"})
+    if v["pr"] >= v["ps"]:
+        broken.append({"pr": f"the return pressure must be below the supply pressure {n.ref('ps')}",
+                       "ps": f"the supply pressure must be above the return pressure {n.ref('pr')}"})
+    x_max = 0.8 * v["L0"]
+    if abs(v["x0"]) > x_max:
+        stops = f"±0.8 L0 = ±{n.value('x0', x_max)}"
+        broken.append({"x0": f"the initial position must lie within the end stops {stops} ({n.ref('L0')})",
+                       "L0": f"the end stops {stops} must hold the initial position {n.ref('x0')}"})
+    broken.append(_within_pressures(
+        v, n, v["p1_0"], f"the initial piston-chamber pressure {n.ref('p1_0')}",
+        {"p1_0": f"the initial piston-chamber pressure must lie within {n.pressures()}"}))
+    if v["p2_0"] is not None:
+        broken.append(_within_pressures(
+            v, n, v["p2_0"], f"the initial rod-chamber pressure {n.ref('p2_0')}",
+            {"p2_0": f"the initial rod-chamber pressure must lie within {n.pressures()}"}))
+    if v["dc"] < v["Dc"]:                  # else there is no rod-side area to balance with
+        broken.append(_force_balance(v, n))
+    return [b for b in broken if b]
+
+
+def cross_field_errors(values: dict, texts: dict, typed=()) -> dict[str, str]:
+    """Messages of the broken rules that tie fields together, by the field each is put on.
+
+    ``values`` are the fields in SI (each valid on its own), ``texts`` as typed
+    (display units), ``typed`` the field names in the order they were typed: a
+    message goes on the field typed last among those its rule ties, else on the
+    rule's own field (the one :class:`ActuatorParams` names; p1(0) for the
+    force balance, whose p2(0) box is blank).
+    """
+    n = _Named(texts)
+    recency = {name: i for i, name in enumerate(typed)}
+    errors: dict[str, str] = {}
+    for rule in _rules(values, n):
+        target = max(rule, key=lambda name: recency.get(name, -1))
+        if target not in errors:
+            errors[target] = _refusal(target, n.typed(target), rule[target])
+    return errors
+
+
+def _field_errors(texts: dict) -> tuple[dict, dict]:
+    """Each field on its own: (SI values of those that are valid, messages of the others)."""
+    values, errors = {}, {}
+    for name in PARAM_NAMES:
+        try:
+            value = parse_display(name, texts.get(name, ""))
+        except ParameterError as exc:
+            errors[name] = _refusal(name, str(exc.value).strip() or "(empty)", exc.allowed)
+            continue
+        relation = ">" if name in POSITIVE_FIELDS else ">=" if name in NON_NEGATIVE_FIELDS else None
+        if relation is not None and not (value > 0 if relation == ">" else value >= 0):
+            typed = _quantity(str(texts[name]).strip(), name)
+            errors[name] = _refusal(name, typed, _bound(name, relation, FIELD_INFO[name].description))
+            continue
+        values[name] = value
+    return values, errors
+
+
+def _kp_error(text: str) -> tuple[float | None, str | None]:
+    raw = (text or "").strip()
+    if raw == "":
+        return None, _refusal("kp", "(empty)", f"enter a number in {KP_UNIT}")
+    try:
+        kp = float(raw.replace(",", "."))
+    except ValueError:
+        return None, _refusal("kp", raw, f"must be a number in {KP_UNIT}, > 0")
+    if not math.isfinite(kp):
+        return None, _refusal("kp", raw, f"must be a finite number in {KP_UNIT}")
+    if kp <= 0:
+        return None, _refusal("kp", _quantity(raw, "kp"), f"must be > 0 {KP_UNIT} (proportional gain)")
+    return kp, None
+
+
+# where a core message the app's rules missed is shown: the operating point's names are the initial state's
+_CORE_FIELD = {"x_e": "x0", "p1_e": "p1_0", "p2_e": "p1_0"}
+
+
+def _build(values: dict) -> tuple[ActuatorParams | None, dict]:
+    """The parameter set, checked by the core too (its message, in SI, only if the app's rules missed one)."""
+    try:
+        params = ActuatorParams(**values)
+        operating_point(params)         # the linearised model the first tab shows needs one
+    except ParameterError as exc:
+        return None, {_CORE_FIELD.get(exc.field, exc.field): str(exc)}
+    return params, {}
+
+
 class AppState(param.Parameterized):
     """State of one session. The tabs read and write it; the core computes."""
 
@@ -67,6 +268,8 @@ class AppState(param.Parameterized):
     revision = param.Integer(default=0, doc="bumped whenever the valid parameters change")
 
     def __init__(self, **kwargs):
+        # the fields in the order they were last typed (the last typed last)
+        self._typed: list[str] = []
         super().__init__(**kwargs)
         self.reset_defaults()
 
@@ -74,6 +277,7 @@ class AppState(param.Parameterized):
     def reset_defaults(self) -> None:
         """Back to the paper's parameters (docs/model.md §2)."""
         defaults = ActuatorParams()
+        self._typed = []
         self.kp_text = "10"
         self.kp = 10.0
         self.texts = {n: display_text(n, getattr(defaults, n)) for n in PARAM_NAMES}
@@ -87,33 +291,25 @@ class AppState(param.Parameterized):
             self.texts = {**self.texts, name: text}
         else:
             raise KeyError(name)
+        self._typed = [n for n in self._typed if n != name] + [name]
         self._revalidate()
 
     def _revalidate(self) -> None:
-        errors: dict[str, str] = {}
-        values: dict[str, float | None] = {}
-        for name in PARAM_NAMES:
-            try:
-                values[name] = parse_display(name, self.texts.get(name, ""))
-            except ParameterError as exc:
-                errors[name] = str(exc)
-        kp = None
-        try:
-            kp = float(self.kp_text.strip().replace(",", "."))
-            if not math.isfinite(kp) or kp <= 0:
-                raise ValueError
-        except ValueError:
-            errors["kp"] = f"Kp = {self.kp_text.strip() or '(empty)'} is not allowed: must be a number > 0 V/m"
+        values, errors = _field_errors(self.texts)
+        kp, kp_error = _kp_error(self.kp_text)
+        if kp_error:
+            errors["kp"] = kp_error
         new_params = None
-        if not any(n in errors for n in PARAM_NAMES):
-            try:
-                new_params = ActuatorParams(**values)
-            except ParameterError as exc:
-                errors[exc.field] = str(exc)
+        if len(values) == len(PARAM_NAMES):
+            rules = cross_field_errors(values, self.texts, self._typed)
+            errors.update(rules)
+            if not rules:
+                new_params, core = _build(values)
+                errors.update(core)
         with param.parameterized.batch_call_watchers(self):
             self.errors = errors
             self.valid = not errors
-            if kp is not None and "kp" not in errors:
+            if kp is not None:
                 self.kp = kp
             if new_params is not None and new_params != self.params:
                 self.params = new_params

@@ -33,6 +33,8 @@ __all__ = [
     "FieldInfo",
     "FIELD_INFO",
     "PARAM_NAMES",
+    "POSITIVE_FIELDS",
+    "NON_NEGATIVE_FIELDS",
     "parse_param_assignments",
 ]
 
@@ -91,6 +93,11 @@ FIELD_INFO: dict[str, FieldInfo] = {
 #: Names accepted by ``--param NAME=VALUE`` and by :meth:`ActuatorParams.replace`.
 PARAM_NAMES: tuple[str, ...] = tuple(FIELD_INFO)
 
+#: Fields that must be > 0, and fields that must be >= 0. The other rules
+#: (:meth:`ActuatorParams.__post_init__`) each tie two fields or more together.
+POSITIVE_FIELDS: tuple[str, ...] = ("M", "beta_e", "Dc", "dc", "L0", "Kq1", "Kq2", "ps")
+NON_NEGATIVE_FIELDS: tuple[str, ...] = ("B", "Af", "k_f", "pr")
+
 
 def _unit_and_meaning(name: str) -> str:
     """``"kg (mass of the piston and load)"``: how a bound's message names the field."""
@@ -139,10 +146,10 @@ class ActuatorParams:
             # store plain floats so that equal parameter sets hash equal
             object.__setattr__(self, f.name, float(value))
 
-        for name in ("M", "beta_e", "Dc", "dc", "L0", "Kq1", "Kq2", "ps"):
+        for name in POSITIVE_FIELDS:
             if getattr(self, name) <= 0:
                 raise ParameterError(name, getattr(self, name), f"must be > 0 {_unit_and_meaning(name)}")
-        for name in ("B", "Af", "k_f", "pr"):
+        for name in NON_NEGATIVE_FIELDS:
             if getattr(self, name) < 0:
                 raise ParameterError(name, getattr(self, name), f"must be >= 0 {_unit_and_meaning(name)}")
         if self.dc >= self.Dc:

@@ -10,7 +10,8 @@ import panel as pn
 from eha_core.params import FIELD_INFO, PARAM_NAMES
 
 from ..form import Field, Form, Group
-from ..state import AppState
+from ..layout import side_by_side
+from ..state import FIELD_LABELS, AppState
 from ..tables import derived_html
 
 __all__ = ["ParametersTab", "SCHEMATIC_PATH", "PARAMETER_FORM"]
@@ -19,8 +20,8 @@ __all__ = ["ParametersTab", "SCHEMATIC_PATH", "PARAMETER_FORM"]
 #: regular, non-editable install must carry it too.
 SCHEMATIC_PATH = Path(__file__).resolve().parents[1] / "assets" / "eha_schematic.svg"
 
-_PLAIN = {"beta_e": "βe", "Af": "Af", "Dc": "Dc", "dc": "dc", "d0": "d0", "L0": "L0", "Kq1": "Kq1", "Kq2": "Kq2",
-          "ps": "ps", "pr": "pr", "k_f": "kf", "x0": "x(0)", "v0": "v(0)", "p1_0": "p1(0)", "p2_0": "p2(0)"}
+#: the labels, one list for the form and its messages (AppState words them)
+_PLAIN = FIELD_LABELS
 
 
 def _field(name: str) -> Field:
@@ -112,4 +113,4 @@ class ParametersTab(pn.viewable.Viewer):
         schematic = pn.pane.HTML(svg, width=520, css_classes=["eha-schematic"]) if svg else pn.pane.HTML("")
         picture = pn.Column(self.status, schematic, width=540)
         derived = pn.Column(self.derived, sizing_mode="stretch_width", min_width=420)
-        return pn.Row(inputs, picture, derived, sizing_mode="stretch_width")
+        return side_by_side(inputs, picture, derived)

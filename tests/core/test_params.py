@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 
 from eha_core.model import pack_params, rhs
-from eha_core.params import ActuatorParams, ParameterError, parse_param_assignments
+from eha_core.params import (
+    NON_NEGATIVE_FIELDS,
+    PARAM_NAMES,
+    POSITIVE_FIELDS,
+    ActuatorParams,
+    ParameterError,
+    parse_param_assignments,
+)
 
 
 def test_defaults_and_derived_areas():
@@ -64,6 +71,20 @@ def test_validation_names_field_value_and_range(changes, field, words):
     assert err.field == field
     assert str(err).startswith(f"{field} = ")
     assert words in str(err)
+
+
+def test_the_one_field_bounds_are_the_ones_the_constants_list():
+    """POSITIVE_FIELDS and NON_NEGATIVE_FIELDS (the app checks them in display units) are what the core checks."""
+    assert set(POSITIVE_FIELDS) | set(NON_NEGATIVE_FIELDS) <= set(PARAM_NAMES)
+    for name in POSITIVE_FIELDS:
+        with pytest.raises(ParameterError, match=r"must be > 0") as info:
+            ActuatorParams(**{name: 0.0})
+        assert info.value.field == name
+    for name in NON_NEGATIVE_FIELDS:
+        with pytest.raises(ParameterError, match=r"must be >= 0") as info:
+            ActuatorParams(**{name: -1e-9})
+        assert info.value.field == name
+        assert getattr(ActuatorParams(**{name: 0.0}), name) == 0.0
 
 
 def test_replace_rejects_unknown_names():

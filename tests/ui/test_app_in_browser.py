@@ -66,7 +66,7 @@ def test_an_invalid_value_shows_its_message_and_blocks_runs(session):
     page.locator(".eha-field-dc input").fill("150")
     error = page.locator(".eha-error-dc")
     error.wait_for(state="visible")
-    assert "dc = 0.15 is not allowed" in text_of(page, ".eha-error-dc")
+    assert "dc = 150 mm is not allowed" in text_of(page, ".eha-error-dc")
     session.tab("2. Simulation")
     assert page.get_by_role("button", name="Run nonlinear").is_disabled()
     session.tab("1. Parameters")
