@@ -27,6 +27,7 @@ from .simulate import MODELS, SimulationResult, simulate, simulate_many
 if TYPE_CHECKING:  # the estimators load scipy: imported when an experiment runs
     from .excitation import Excitation
     from .identify.backout import BackoutResult
+    from .identify.spectral import DataFrequencyResponse
     from .identify.tfest import TFEstimate
     from .identify.validate import CompareResult, FrequencyResponseData, ResidualAnalysis
     from .linear import LinearModel
@@ -252,10 +253,12 @@ def lse_cost(t_end: float = 5.0, dt: float = 1e-3, *, resimulation: bool = False
 # -- frequency-domain identification (section III-B, eqs. 19-27, Figs. 8-13) ----------
 
 #: Peak memory of run_frequency_identification's estimation per sample
-#: [bytes]: tfest's filtered regressors, instruments and Jacobian, with the
-#: records held meanwhile (tracemalloc: 3.1-3.2 kB per sample at N = 1000,
-#: 4000 and 20000, Ts = 0.01 and 0.5 s).
-FREQUENCY_BYTES_PER_SAMPLE = 3300
+#: [bytes]: tfest's filtered regressors, instruments and Jacobian
+#: (tracemalloc: 540-550 B per sample at N = 1000, 4000 and 20000, Ts = 0.01
+#: and 0.5 s); the data's frequency response after it needs less (60-760 B
+#: per sample, eha_core.identify.spectral). The former 3.2 kB per sample was
+#: the ETFE's matrix of exp(-j w t) at 100 frequencies, no longer formed.
+FREQUENCY_BYTES_PER_SAMPLE = 600
 #: The first record's arrays (t, x, v, p1, p2, u, d, r and the excitation),
 #: held while the validation run is simulated [bytes per sample].
 FREQUENCY_RECORD_BYTES_PER_SAMPLE = 100
@@ -375,25 +378,78 @@ class FrequencyExperiment:
 @dataclass(frozen=True, eq=False)
 class BodeData:
     """Fig. 12: the estimate's and eq. 24's frequency responses on a grid up to
-    the Nyquist frequency, and the ETFE's phase drawn on the estimate's branch
-    (an ETFE phase is known modulo 360 degrees)."""
+    the Nyquist frequency, and the data's frequency response as drawn.
+
+    The data's points (``data_w``, ``data_magnitude_db``, ``data_phase_deg``)
+    are an ETFE or a spectral estimate (``data_method``, ``"etfe"`` or
+    ``"spa"``; ``data_description`` says which and why, in one sentence);
+    their phase is drawn on the estimate's branch (a measured phase is known
+    modulo 360 degrees). ``data_lower_db`` and ``data_upper_db`` bound the
+    spectral estimate's magnitude (its confidence band, 95 % by default);
+    None for the ETFE. ``data_band`` is (w_lo, w_hi) [rad/s], the range the
+    points cover. The points estimate the sampled-data system, the ZOH
+    equivalent of the plant at the experiment's Ts: near the Nyquist
+    frequency they fall below a continuous-time H(j w).
+
+    ``etfe_phase_deg`` is ``data_phase_deg`` under its former name.
+    """
 
     w: np.ndarray
     estimate: FrequencyResponseData
     theoretical: FrequencyResponseData
-    etfe_phase_deg: np.ndarray
+    data_w: np.ndarray
+    data_magnitude_db: np.ndarray
+    data_phase_deg: np.ndarray
+    data_lower_db: np.ndarray | None
+    data_upper_db: np.ndarray | None
+    data_method: str
+    data_description: str
+    data_band: tuple[float, float]
+
+    @property
+    def etfe_phase_deg(self) -> np.ndarray:
+        """Former name of ``data_phase_deg``."""
+        return self.data_phase_deg
 
 
-def bode_data(estimate: TFEstimate, theoretical, etfe: FrequencyResponseData, ts: float,
+def bode_data(estimate: TFEstimate, theoretical, data: DataFrequencyResponse, ts: float,
               n_points: int = 400) -> BodeData:
-    """The curves of Fig. 12 from 0.01 rad/s to the Nyquist frequency pi/ts."""
+    """The curves of Fig. 12 from 0.01 rad/s to the Nyquist frequency pi/ts.
+
+    ``data`` is the data's frequency response
+    (:func:`~eha_core.identify.spectral.data_frequency_response`).
+    """
+    from .identify._ctmodels import readonly
     from .identify.validate import frequency_response
 
     w = np.logspace(-2, np.log10(np.pi / ts), n_points)
-    model_phase = estimate.frequency_response(etfe.w).phase_deg
-    etfe_phase = model_phase + (np.asarray(etfe.phase_deg) - model_phase + 180.0) % 360.0 - 180.0
+    model_phase = estimate.frequency_response(data.w).phase_deg
+    data_phase = model_phase + (np.asarray(data.phase_deg) - model_phase + 180.0) % 360.0 - 180.0
     return BodeData(w=w, estimate=estimate.frequency_response(w), theoretical=frequency_response(*theoretical, w),
-                    etfe_phase_deg=etfe_phase)
+                    data_w=data.w, data_magnitude_db=data.magnitude_db, data_phase_deg=readonly(data_phase),
+                    data_lower_db=data.lower_db, data_upper_db=data.upper_db, data_method=data.method,
+                    data_description=data.description, data_band=data.band)
+
+
+def _design_period(excitation: Excitation) -> int | None:
+    """The excitation's period by design [samples], for the choice of ETFE or spectral estimate.
+
+    'sine': idinput's period P (its sinusoids lie on the grid 2 pi k / P).
+    'prbs': the maximum-length sequence's, clock x (2**order - 1); when
+    idinput returned the first P samples of a longer sequence (one period
+    asked, P not of that form; see :mod:`eha_core.excitation`), that longer
+    sequence's, which the record then does not fill. 'rgs' and 'rbs' are
+    random: None, and only a repetition in the signal makes them periodic.
+    """
+    if excitation.type == "sine":
+        return excitation.period
+    if excitation.type == "prbs" and excitation.clock_period:
+        lengths = [excitation.clock_period * (2**order - 1) for order in range(3, 19)]
+        if excitation.period in lengths:
+            return excitation.period
+        longer = [n for n in lengths if n > excitation.period]
+        return longer[0] if longer else None
+    return None
 
 
 @dataclass(frozen=True, eq=False)
@@ -403,8 +459,13 @@ class FrequencyIdentification:
     ``estimate`` is H_hat (r -> x); ``theoretical`` the linearised H(s) of
     eq. 24 (``linear`` the linearisation behind it); ``open_loop`` P_hat
     (eq. 26) and ``backout`` the physical parameters (eq. 27) when the model
-    has 3 poles and no zero; ``etfe`` the empirical transfer function at the
-    excited frequencies; ``validation`` the comparison on a fresh excitation.
+    has 3 poles and no zero; ``data_response`` the data's frequency response
+    (:func:`~eha_core.identify.spectral.data_frequency_response`: the ETFE
+    when the record is a whole number of periods of the excitation, the
+    'sine' default, or a prbs of 2**k - 1 samples; a spectral estimate with a
+    confidence band otherwise), also readable as ``etfe`` (its
+    :class:`FrequencyResponseData`, the former field); ``validation`` the
+    comparison on a fresh excitation.
     The curves of Figs. 11-12: ``estimate_output`` (H_hat's output on the
     estimation data), ``theoretical_comparison`` (eq. 24's, its initial state
     estimated) and ``bode``. When the estimation fails (``success`` False,
@@ -420,7 +481,7 @@ class FrequencyIdentification:
     theoretical: tuple[np.ndarray, np.ndarray]
     open_loop: tuple[np.ndarray, np.ndarray] | None
     backout: BackoutResult | None
-    etfe: FrequencyResponseData
+    data_response: DataFrequencyResponse
     residuals: ResidualAnalysis | None
     validation_excitation: Excitation
     validation_data: SimulationResult
@@ -431,6 +492,14 @@ class FrequencyIdentification:
     success: bool
     message: str
     timings: dict = field(default_factory=dict)
+
+    @property
+    def etfe(self) -> FrequencyResponseData:
+        """The data's frequency response (``data_response.response``) under its former name.
+
+        An ETFE or a spectral estimate, as ``data_response.method`` says.
+        """
+        return self.data_response.response
 
     @property
     def peak_speed(self) -> float:
@@ -448,6 +517,8 @@ class FrequencyIdentification:
             "theoretical": {"num": list(map(float, self.theoretical[0])), "den": list(map(float, self.theoretical[1]))},
             "validation_fit_percent": None if self.validation is None else float(self.validation.fit_percent),
             "paper": {"num": list(PAPER_EQ25[0]), "den": list(PAPER_EQ25[1]), "fit_percent": PAPER_FIT_PERCENT},
+            "data_response": {"method": self.data_response.method, "description": self.data_response.description,
+                              "band_rad_s": list(map(float, self.data_response.band))},
             "seed": self.config.seed, "validation_seed": self.validation_excitation.seed,
             "timings_s": self.timings,
         }
@@ -466,7 +537,9 @@ def run_frequency_identification(params: ActuatorParams | None = None,
     1. excitation (Fig. 8) and closed-loop data (Fig. 9);
     2. H_hat by :func:`~eha_core.identify.tfest.tfest`, started also from the
        linearised H(s) (Fig. 11 shows its fit);
-    3. Bode data: H_hat, the theoretical H(s), the ETFE (Fig. 12);
+    3. Bode data: H_hat, the theoretical H(s), the data's frequency response
+       (Fig. 12): the ETFE over whole periods of the excitation, else a
+       spectral estimate (:mod:`eha_core.identify.spectral`);
     4. validation on a fresh excitation (Fig. 13) and residual analysis;
     5. P_hat (eq. 26) and the back-out of B + 2 k_f Af / pi and beta_e (eq. 27).
 
@@ -481,8 +554,9 @@ def run_frequency_identification(params: ActuatorParams | None = None,
     :meth:`FrequencyExperiment.cost` estimates the cost beforehand.
     """
     from .identify.backout import backout, open_loop_from_closed
+    from .identify.spectral import data_frequency_response
     from .identify.tfest import tfest
-    from .identify.validate import compare, etfe_periodic, residual_analysis
+    from .identify.validate import compare, residual_analysis
     from .linear import linearize
 
     params = params if params is not None else ActuatorParams()
@@ -507,7 +581,8 @@ def run_frequency_identification(params: ActuatorParams | None = None,
 
     check(cancel)
     freqs = excitation.freqs if excitation.freqs.size else None
-    etfe = etfe_periodic(data.r, data.x, config.n_samples, config.ts, freqs=freqs)
+    data_response = data_frequency_response(data.r, data.x, config.ts, period=_design_period(excitation),
+                                            freqs=freqs, band=config.band)
 
     check(cancel)
     validation_excitation = config.excitation(config.validation_seed if config.validation_seed is not None
@@ -525,14 +600,14 @@ def run_frequency_identification(params: ActuatorParams | None = None,
         residuals = residual_analysis(data.x - y_hat, data.r)
         check(cancel)
         theory = compare(*theoretical, data.r, data.x, config.ts, initial_condition="estimate")
-        bode = bode_data(est, theoretical, etfe, config.ts)
+        bode = bode_data(est, theoretical, data_response, config.ts)
         check(cancel)
         if (config.n_poles, config.n_zeros) == (3, 0):
             open_loop = open_loop_from_closed(est.num, est.den, config.kp)
             back = backout(*open_loop, params, lin.op, std_h=est.param_std, kp=config.kp)
     return FrequencyIdentification(
         config=config, params=params, linear=lin, excitation=excitation, data=data, estimate=est,
-        theoretical=theoretical, open_loop=open_loop, backout=back, etfe=etfe, residuals=residuals,
+        theoretical=theoretical, open_loop=open_loop, backout=back, data_response=data_response, residuals=residuals,
         validation_excitation=validation_excitation, validation_data=validation_data,
         validation=validation, estimate_output=y_hat, theoretical_comparison=theory, bode=bode,
         success=bool(est.success), message=est.message, timings=timings,
