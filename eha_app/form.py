@@ -218,6 +218,9 @@ class Form(JSComponent):
 export function render({ model, el }) {
   const root = document.createElement('div')
   root.className = 'eha-form'
+  // a dragged slider sends at most one value per DRAG_MS: about 16 a second
+  const DRAG_MS = 60
+  let dragged = null
   const fields = {}
   const groupOf = {}
   for (const group of model.spec) {
@@ -286,8 +289,31 @@ export function render({ model, el }) {
         slider.step = String(f.step)
         slider.setAttribute('aria-label', f.label)
         const s = slider
-        s.addEventListener('input', () => { input.value = s.value })
-        s.addEventListener('change', () => { input.value = s.value; send(f.name, s.value) })
+        // while dragged, the value goes to the server at most every DRAG_MS (the plots
+        // follow the slider); the address is written once, when it is let go
+        let last = 0
+        let pending = null
+        s.addEventListener('pointerdown', () => { dragged = s })
+        s.addEventListener('pointerup', () => { dragged = null })
+        s.addEventListener('pointercancel', () => { dragged = null })
+        s.addEventListener('input', () => {
+          input.value = s.value
+          const now = performance.now()
+          if (pending !== null) { clearTimeout(pending); pending = null }
+          if (now - last >= DRAG_MS) {
+            last = now
+            send(f.name, s.value, false)
+          } else {
+            pending = setTimeout(() => { pending = null; last = performance.now(); send(f.name, s.value, false) },
+                                 DRAG_MS - (now - last))
+          }
+        })
+        s.addEventListener('change', () => {
+          dragged = null
+          if (pending !== null) { clearTimeout(pending); pending = null }
+          input.value = s.value
+          send(f.name, s.value)
+        })
         const row = document.createElement('div')
         row.className = 'eha-slider-row'
         row.append(s, input)
@@ -316,9 +342,10 @@ export function render({ model, el }) {
     const v = Number(s)
     if (s !== '' && Number.isFinite(v) && v >= f.lo && v <= f.hi) { slider.value = String(v) }
   }
-  function send(name, text) {
+  function send(name, text, url = true) {
+    if (model.values[name] === text) { if (url) { syncUrl() } return }
     model.values = { ...model.values, [name]: text }
-    syncUrl()
+    if (url) { syncUrl() }
   }
   function syncUrl() {
     const defaults = model.url_defaults
@@ -343,7 +370,9 @@ export function render({ model, el }) {
       const text = model.values[name]
       if (text === undefined || text === null) { continue }
       if (f.input !== active && f.input.value !== String(text)) { f.input.value = String(text) }
-      if (f.slider !== null) { follow(f.slider, f.spec, text) }
+      // a slider under the student's pointer is theirs: setting its value (even to the
+      // same one) would end the drag in Chromium
+      if (f.slider !== null && f.slider !== dragged) { follow(f.slider, f.spec, text) }
     }
   }
   function showErrors() {

@@ -44,13 +44,42 @@ STATUS_CLASSES = {"empty": "eha-empty", "current": "eha-current", "updating": "e
                   "stale": "eha-out-of-date"}
 
 
+def _what_changed(old, new) -> str:
+    """What differs between two keys, for a student: the parameters of tab 1 by name
+    ("tab 1 changed since this run (M 4000 → 6000 kg)"), else the settings."""
+    from eha_core.params import FIELD_INFO, ActuatorParams
+
+    from .state import FIELD_LABELS
+
+    def params_of(key):
+        return key[0] if isinstance(key, tuple) and key and isinstance(key[0], ActuatorParams) else None
+
+    before, after = params_of(old), params_of(new)
+    if before is None or after is None or before == after:
+        return "the settings changed since this run"
+    changed = [n for n in FIELD_INFO if getattr(before, n) != getattr(after, n)]
+    parts = []
+    for n in changed[:3]:
+        info = FIELD_INFO[n]
+        a, b = getattr(before, n), getattr(after, n)
+        a_text, b_text = (("force balance" if v is None else f"{v / info.display_scale:.6g}") for v in (a, b))
+        parts.append(f"{FIELD_LABELS.get(n, n)} {a_text} → {b_text} {info.display_unit}")
+    more = f" and {len(changed) - 3} more" if len(changed) > 3 else ""
+    return f"tab 1 changed since this run ({', '.join(parts)}{more})"
+
+
 class ResultView:
     """One result area and the key of the inputs it shows."""
 
-    def __init__(self, name: str, container: pn.layout.ListLike, *, run_hint: str = "Run it again to update."):
+    def __init__(self, name: str, container: pn.layout.ListLike, *, run_hint: str = "Run it again to update.",
+                 updating_marker=None):
         self.name = name
         self.container = container
         self.run_hint = run_hint
+        # A view re-run while a slider is dragged says "updating" through
+        # ``updating_marker(bool)`` (e.g. a word in its status line) instead of a class:
+        # a class change re-lays out the tab, and Chromium then ends the drag.
+        self.updating_marker = updating_marker
         self.computed_from: Hashable | None = None
         self.status = "empty"
         self.banner = pn.pane.HTML("", visible=False, sizing_mode="stretch_width",
@@ -65,17 +94,18 @@ class ResultView:
 
     def inputs_changed(self, key: Hashable | None, *, updating: bool = False, why: str = "") -> None:
         """The inputs now say ``key`` (None: they are not valid). ``updating``: a run with
-        them is queued and will call :meth:`shown`."""
+        them is queued and will call :meth:`shown`. ``why``: what changed, for the
+        out-of-date line (default: the parameters that differ, or the settings)."""
         if self.computed_from is None:
             return
         if key is not None and key == self.computed_from:
             self._set("current", "")
         elif updating:
             # no line of text: during a slider drag it would come and go with every run and
-            # move the plots; the container's outline says it (eha-updating)
+            # move the plots; the container's outline (or the marker) says it
             self._set("updating", "")
         else:
-            reason = why or "the inputs changed since this run"
+            reason = why or _what_changed(self.computed_from, key)
             self._set("stale", f"Out of date: {reason}. {self.run_hint}")
 
     @property
@@ -84,15 +114,22 @@ class ResultView:
 
     # -- the page ------------------------------------------------------------------------
     def _set(self, status: str, text: str) -> None:
-        changed = status != self.status
+        was = self.status
         self.status = status
-        if changed:
+        if self.updating_marker is not None and (status == "updating") != (was == "updating"):
+            self.updating_marker(status == "updating")
+        if status != was:
             self._set_classes()
         if self.banner.object != text or self.banner.visible != bool(text):
             self.banner.object = (f"<span class='eha-stale-text'>{html.escape(text)}</span>" if text else "")
             self.banner.visible = bool(text)
 
     def _set_classes(self) -> None:
+        status = self.status
+        if status == "updating" and self.updating_marker is not None:
+            status = "current"          # the marker says it; the classes stay (see __init__)
         keep = [c for c in self.container.css_classes if c not in STATUS_CLASSES.values()
                 and not c.startswith("eha-view")]
-        self.container.css_classes = [*keep, "eha-view", f"eha-view-{self.name}", STATUS_CLASSES[self.status]]
+        classes = [*keep, "eha-view", f"eha-view-{self.name}", STATUS_CLASSES[status]]
+        if classes != list(self.container.css_classes):
+            self.container.css_classes = classes

@@ -24,6 +24,7 @@ to process, for every student, on its one event loop.
 
 from __future__ import annotations
 
+import html
 from dataclasses import dataclass
 
 import numpy as np
@@ -231,7 +232,9 @@ class TimeSeriesGrid:
                 fig.y_range = DataRange1d(syncable=False)
         self._signature = signature
         self.source.data = self._columns(results)
-        self.legend.text = legend_html(results)
+        legend = legend_html(results)
+        if legend != self.legend.text:      # a new text re-lays out the grid in the browser
+            self.legend.text = legend
         passed = {}
         for r in results:
             for e in r.beyond_physical_range():
@@ -267,9 +270,13 @@ class FrequencyView:
     est_deg: np.ndarray | None = None
     theory_db: np.ndarray | None = None
     theory_deg: np.ndarray | None = None
-    etfe_w: np.ndarray | None = None
-    etfe_db: np.ndarray | None = None
-    etfe_deg: np.ndarray | None = None
+    data_w: np.ndarray | None = None
+    data_db: np.ndarray | None = None
+    data_deg: np.ndarray | None = None
+    data_lower_db: np.ndarray | None = None       # the spectral estimate's 95 % band (None for an ETFE)
+    data_upper_db: np.ndarray | None = None
+    data_label: str = ""
+    data_description: str = ""
     validation_t: np.ndarray | None = None
     validation_x_mm: np.ndarray | None = None
     validation_y_mm: np.ndarray | None = None
@@ -282,6 +289,17 @@ class FrequencyView:
     band: float = float("nan")
     whiteness_title: str = ""
     independence_title: str = ""
+
+
+def _band_edge(edge, magnitude_db, side: int):
+    """A band edge drawable on a dB axis: where the band reaches zero magnitude (−inf dB)
+    the edge is drawn 40 dB below the estimate, the axis's useful depth."""
+    if edge is None:
+        return None
+    edge = np.array(edge, dtype=float)
+    bad = ~np.isfinite(edge)
+    edge[bad] = np.asarray(magnitude_db, dtype=float)[bad] + side * 40.0
+    return edge
 
 
 def excitation_view(excitation, ts: float) -> tuple[np.ndarray, np.ndarray, str]:
@@ -308,7 +326,12 @@ def frequency_view(fi) -> FrequencyView:
         theory_label=f"linearised H(s), eq. 24: fit {theo.fit_percent:.1f} %",
         w=bode.w, est_db=bode.estimate.magnitude_db, est_deg=bode.estimate.phase_deg,
         theory_db=bode.theoretical.magnitude_db, theory_deg=bode.theoretical.phase_deg,
-        etfe_w=np.asarray(fi.etfe.w), etfe_db=np.asarray(fi.etfe.magnitude_db), etfe_deg=bode.etfe_phase_deg,
+        data_w=np.asarray(bode.data_w), data_db=np.asarray(bode.data_magnitude_db), data_deg=bode.data_phase_deg,
+        data_lower_db=_band_edge(bode.data_lower_db, bode.data_magnitude_db, -1),
+        data_upper_db=_band_edge(bode.data_upper_db, bode.data_magnitude_db, +1),
+        data_label=("ETFE of the sampled (ZOH) data" if bode.data_method == "etfe"
+                    else "spectral estimate of the sampled (ZOH) data, 95 % band"),
+        data_description=bode.data_description,
         validation_t=vd.t, validation_x_mm=vd.x * 1e3, validation_y_mm=v.y_hat * 1e3,
         validation_label=f"estimated H(s): fit {v.fit_percent:.1f} %",
         validation_title=f"Validation on a new excitation (seed {fi.validation_excitation.seed})",
@@ -401,11 +424,13 @@ class FitFigure:
 
 
 class BodeFigure:
-    """Bode diagram: estimate, theoretical H(s) of eq. 24, ETFE points (Fig. 12)."""
+    """Bode diagram (Fig. 12): the estimate, the theoretical H(s) of eq. 24, and the data's
+    frequency response as the core chose it (ETFE or spectral estimate with its band), named so."""
 
     def __init__(self, *, height: int = 240, width: int = FIGURE_WIDTH):
         self.curves = ColumnDataSource(data={k: _f32([]) for k in ("w", "est_db", "est_deg", "th_db", "th_deg")})
         self.points = ColumnDataSource(data={k: _f32([]) for k in ("w", "db", "deg")})
+        self.band = ColumnDataSource(data={k: _f32([]) for k in ("w", "lo", "hi")})
         x_range = DataRange1d()
         self.mag = _figure(width=width, height=height, x_axis_type="log", x_range=x_range,
                            x_axis_label="ω [rad/s]", y_axis_label="magnitude [dB]", title="Bode diagram")
@@ -413,24 +438,37 @@ class BodeFigure:
                              x_axis_label="ω [rad/s]", y_axis_label="phase [deg]")
         r1 = self.mag.line("w", "est_db", source=self.curves, color=CASE_COLORS[1], line_width=2)
         r2 = self.mag.line("w", "th_db", source=self.curves, color=CASE_COLORS[2], line_dash="dashed")
+        r4 = self.mag.varea("w", "lo", "hi", source=self.band, fill_color="#333333", fill_alpha=0.12)
         r3 = self.mag.scatter("w", "db", source=self.points, color="#333333", size=4)
         self.phase.line("w", "est_deg", source=self.curves, color=CASE_COLORS[1], line_width=2)
         self.phase.line("w", "th_deg", source=self.curves, color=CASE_COLORS[2], line_dash="dashed")
         self.phase.scatter("w", "deg", source=self.points, color="#333333", size=4)
+        self.data_item = LegendItem(label="the data", renderers=[r3, r4])
         _legend_above(self.mag, [LegendItem(label="estimated H(s)", renderers=[r1]),
-                                 LegendItem(label="linearised H(s), eq. 24", renderers=[r2]),
-                                 LegendItem(label="ETFE of the data (ZOH)", renderers=[r3])])
+                                 LegendItem(label="linearised H(s), eq. 24", renderers=[r2]), self.data_item])
+        self.note = Div(text="", sizing_mode="stretch_width", css_classes=["eha-bode-note"],
+                        styles={"font-size": "12px", "color": "#555"})
         _lean(self.mag, self.phase)
-        self.layout = column(self.mag, self.phase, sizing_mode="stretch_width")
+        self.layout = column(self.mag, self.phase, self.note, sizing_mode="stretch_width")
 
     def update(self, view: FrequencyView) -> None:
         if not view.fit_ok:
             self.curves.data = {k: _f32([]) for k in self.curves.data}
             self.points.data = {k: _f32([]) for k in self.points.data}
+            self.band.data = {k: _f32([]) for k in self.band.data}
+            self.note.text = ""
             return
         self.curves.data = {"w": _f32(view.w), "est_db": _f32(view.est_db), "est_deg": _f32(view.est_deg),
                             "th_db": _f32(view.theory_db), "th_deg": _f32(view.theory_deg)}
-        self.points.data = {"w": _f32(view.etfe_w), "db": _f32(view.etfe_db), "deg": _f32(view.etfe_deg)}
+        self.points.data = {"w": _f32(view.data_w), "db": _f32(view.data_db), "deg": _f32(view.data_deg)}
+        if view.data_lower_db is None:
+            self.band.data = {k: _f32([]) for k in self.band.data}
+        else:
+            self.band.data = {"w": _f32(view.data_w), "lo": _f32(view.data_lower_db), "hi": _f32(view.data_upper_db)}
+        _set_legend_label(self.data_item, view.data_label)
+        self.note.text = (f"{html.escape(view.data_description)} The points describe the sampled loop "
+                          "(controller output held between samples: ZOH), which lies up to a few dB below the "
+                          "continuous H(jω) near the Nyquist frequency.")
 
 
 class ValidationFigure:

@@ -309,8 +309,11 @@ def _write_freq_data(data_dir: Path, fi) -> None:
     pd.DataFrame({"freq_rad_per_sample": np.ravel(fi.excitation.freqs)}).to_csv(
         data_dir / "fig8_frequencies.csv", index=False, float_format="%.10g")
     fi.data.to_csv(data_dir / "fig9_closed_loop.csv")
-    pd.DataFrame({"w_rad_s": fi.etfe.w, "etfe_db": fi.etfe.magnitude_db, "etfe_deg": fi.etfe.phase_deg}).to_csv(
-        data_dir / "fig12_etfe.csv", index=False, float_format="%.10g")
+    dr = fi.data_response
+    data_cols = {"w_rad_s": dr.w, "magnitude_db": dr.magnitude_db, "phase_deg": dr.phase_deg}
+    if dr.lower_db is not None:
+        data_cols.update(band_lower_db=dr.lower_db, band_upper_db=dr.upper_db)
+    pd.DataFrame(data_cols).to_csv(data_dir / f"fig12_data_{dr.method}.csv", index=False, float_format="%.10g")
     if fi.bode is not None:
         b = fi.bode
         pd.DataFrame({"w_rad_s": b.w, "estimate_db": b.estimate.magnitude_db, "estimate_deg": b.estimate.phase_deg,

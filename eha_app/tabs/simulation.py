@@ -207,7 +207,7 @@ class SimulationTab(pn.viewable.Viewer):
         # would touch the raw Bokeh model outside the document lock
         self.plot_area = pn.Column(pn.pane.HTML("<p class='eha-note'>Drawing the paper's Fig. 2…</p>"),
                                    sizing_mode="stretch_width", css_classes=["eha-sim-plots"], min_height=580)
-        self.view = ResultView("simulation", self.plot_area,
+        self.view = ResultView("simulation", self.plot_area, updating_marker=self._mark_updating,
                                run_hint="Press a Run button: runs this long are not re-run on every change.")
         self.notice = pn.pane.HTML("", visible=False, sizing_mode="stretch_width", css_classes=["eha-sim-notice"])
         self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
@@ -302,8 +302,7 @@ class SimulationTab(pn.viewable.Viewer):
         labels, _, _, t_end = build_inputs(req)
         quick = len(labels) * len(MODEL_CHOICES[self.last_model]) * t_end <= AUTO_RUN_MAX_SECONDS
         job = self.run(self.last_model, auto=True) if quick else None
-        self.view.inputs_changed(key, updating=job is not None,
-                                 why="the inputs changed since this run")
+        self.view.inputs_changed(key, updating=job is not None)
 
     def _apply_preset(self, preset) -> None:
         """Show a paper case in the form (or mark 'all four')."""
@@ -397,6 +396,15 @@ class SimulationTab(pn.viewable.Viewer):
         return self.runner.run(f"simulation ({model})", lambda token: compute_runs(params, req, model, token),
                                show, fail=fail, busy=[] if auto else [self.plot_area],
                                note=(lambda _text: None) if auto else self._note)
+
+    _UPDATING = "<span class='eha-sim-updating' style='color:#1a56c4'>⟳ updating to the new inputs… </span>"
+
+    def _mark_updating(self, on: bool) -> None:
+        """The status line says the plots are being re-run (see ResultView)."""
+        if self.info is None:
+            return
+        text = self.info.text.replace(self._UPDATING, "")
+        self.info.text = self._UPDATING + text if on else text
 
     def _inputs_changed_since(self, key) -> None:
         # inputs typed while the run computed: mark (or re-run) again

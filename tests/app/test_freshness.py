@@ -16,8 +16,10 @@ def assert_true_to_inputs(view, key):
     else:
         assert view.status in ("updating", "stale"), view.status
         assert view.computed_from != key
-        mark = "eha-updating" if view.status == "updating" else "eha-out-of-date"
-        assert mark in view.container.css_classes
+        if view.status == "stale":
+            assert "eha-out-of-date" in view.container.css_classes and view.banner.visible
+        elif view.updating_marker is None:
+            assert "eha-updating" in view.container.css_classes
 
 
 def test_simulation_reruns_as_the_student_types():
@@ -180,3 +182,39 @@ def test_lse_without_resimulation_draws_no_resimulated_curve():
     type_into(lse.form, lse_scenario="none")
     lse.run()
     assert len(lse.figure.resim.data["t"]) > 0 and lse.figure.resim_item.visible
+
+
+def test_while_a_rerun_is_on_its_way_the_status_line_says_so():
+    from eha_app.freshness import ResultView
+
+    s = AppState()
+    tab = SimulationTab(s)
+    key = tab.view.computed_from
+    tab.view.inputs_changed(("other",), updating=True)           # what a queued automatic run does
+    assert tab.view.status == "updating" and "updating to the new inputs" in tab.info.text
+    assert "eha-current" in tab.plot_area.css_classes            # no class change: a drag goes on
+    tab.view.shown(key)
+    assert "updating" not in tab.info.text
+    plain = ResultView("plain", tab.plot_area.__class__())
+    plain.shown(1)
+    plain.inputs_changed(2, updating=True)
+    assert "eha-updating" in plain.container.css_classes
+
+
+def test_the_bode_plot_says_which_estimate_of_the_data_it_draws():
+    from eha_app.tabs.identification import IdentificationTab
+
+    s = AppState()
+    panel = IdentificationTab(s).frequency_panel()
+    panel.figure_tabs.active = 3                      # Fig. 12 shown: its figure is built
+    panel.run()
+    bode = panel.figures["bode"]
+    assert bode.data_item.label["value"].startswith("ETFE") and len(bode.band.data["w"]) == 0
+    assert "whole period" in bode.note.text
+    type_into(panel.form, signal_type="prbs", model="linear")
+    panel.run()
+    assert bode.data_item.label["value"].startswith("spectral estimate") and len(bode.band.data["w"]) > 10
+    assert "not a whole number of periods" in bode.note.text
+    import numpy as np
+    assert np.all(bode.band.data["lo"] <= bode.points.data["db"] + 1e-3)
+    assert np.all(bode.band.data["hi"] >= bode.points.data["db"] - 1e-3)

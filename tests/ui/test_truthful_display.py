@@ -97,3 +97,54 @@ def test_nothing_needs_horizontal_scrolling(browser, server, width):
         assert page.evaluate("() => document.documentElement.scrollWidth") <= width
     finally:
         context.close()
+
+
+JS_COUNT_RUNS = """() => {
+  const find = (root) => {
+    for (const el of root.querySelectorAll('*')) {
+      if (el.classList.contains('eha-run-count')) return el;
+      if (el.shadowRoot) { const f = find(el.shadowRoot); if (f) return f; }
+    }
+    return null;
+  };
+  window.__ehaUpdates = [];
+  let last = null;
+  window.__ehaWatch = setInterval(() => {
+    const el = find(document);
+    const text = el ? el.textContent : null;
+    if (text !== last) { window.__ehaUpdates.push([performance.now(), text]); last = text; }
+  }, 5);
+}"""
+
+
+def test_dragging_an_amplitude_slider_moves_the_plots(new_session, record_property):
+    """At least 10 plot updates per second while the slider is dragged, counted in the page."""
+    s = new_session()
+    page = s.page
+    s.tab("2. Simulation")
+    page.wait_for_selector(".eha-run-count")
+    page.locator(".eha-field-u_amplitude input[type=text]").fill("5")   # one run, a custom input
+    page.wait_for_selector(".eha-sim-info >> text=5 sin(4πt)")
+    page.evaluate(JS_COUNT_RUNS)
+    slider = page.locator(".eha-field-u_amplitude input[type=range]")
+    box = slider.bounding_box()
+    y = box["y"] + box["height"] / 2
+    left, right = box["x"] + 3, box["x"] + box["width"] - 3
+    page.mouse.move(left, y)
+    page.mouse.down()
+    t0 = page.evaluate("() => performance.now()")
+    steps = 60
+    for i in range(steps + 1):              # a student's drag across the range in about 3 s
+        page.mouse.move(left + (right - left) * i / steps, y)
+        page.wait_for_timeout(50)
+    t1 = page.evaluate("() => performance.now()")
+    page.mouse.up()
+    # the last value arrives: amplitude 10 V
+    page.wait_for_selector(".eha-sim-info >> text=10 sin(4πt)", timeout=30_000)
+    updates = page.evaluate("() => { clearInterval(window.__ehaWatch); return window.__ehaUpdates }")
+    during = [u for u in updates[1:] if t0 <= u[0] <= t1 + 100]
+    rate = len(during) / ((t1 - t0) / 1000)
+    record_property("slider_updates_per_second", rate)
+    print(f"\nslider drag over {(t1 - t0) / 1000:.2f} s: {len(during)} plot updates, {rate:.1f} per second")
+    assert rate >= 10, (rate, updates[:5])
+    assert s.page.locator(".eha-field-u_amplitude input[type=text]").input_value() == "10"
