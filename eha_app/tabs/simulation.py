@@ -9,7 +9,6 @@ from dataclasses import fields as dc_fields
 from functools import lru_cache
 
 import panel as pn
-from bokeh.layouts import column as bokeh_column
 from bokeh.models import Div
 
 from eha_core.experiments import PAPER_CASES, run_paper_cases
@@ -253,14 +252,17 @@ class SimulationTab(pn.viewable.Viewer):
         if self.grid is not None:
             return
         self.grid = TimeSeriesGrid()
-        # the status line is a Bokeh Div in the grid's layout, changed after the data
-        # in the same locked callback: the browser never shows a status ahead of its plots
+        # The status line is a Bokeh Div changed after the data in the same locked
+        # callback (one message): the browser never shows a status ahead of its plots.
+        # It is a root of its own, not in the grid's layout: a new text would make the
+        # browser lay the four figures out again (about 50 ms a run, which halved the
+        # updates per second of a dragged slider).
         self.info = Div(text="Choose a case or an input, then run a model.", sizing_mode="stretch_width",
                         css_classes=["eha-sim-info"])
         self._show(list(_paper_figure_2(self.state.params)), None)
         self.view.shown(self.key("nonlinear", "all"))
-        self.plot_area.objects = [pn.pane.Bokeh(bokeh_column(self.info, self.grid.layout, sizing_mode="stretch_width"),
-                                                sizing_mode="stretch_width", min_height=580)]
+        self.plot_area.objects = [pn.pane.Bokeh(self.info, sizing_mode="stretch_width"),
+                                  pn.pane.Bokeh(self.grid.layout, sizing_mode="stretch_width", min_height=540)]
 
     # -- inputs ------------------------------------------------------------------------
     def request(self) -> tuple[SimulationRequest, dict]:
