@@ -44,6 +44,8 @@ from bokeh.models import (
 )
 from bokeh.plotting import figure
 
+from .glossary import term
+
 __all__ = [
     "STATE_PANELS", "CASE_COLORS", "FIGURE_WIDTH", "MAX_POINTS", "decimate", "style_for", "legend_html",
     "TimeSeriesGrid", "ExcitationFigure", "ClosedLoopFigure", "FitFigure", "BodeFigure", "ValidationFigure",
@@ -510,9 +512,13 @@ class BodeFigure:
         else:
             self.band.data = {"w": _f32(view.data_w), "lo": _f32(view.data_lower_db), "hi": _f32(view.data_upper_db)}
         _set_legend_label(self.data_item, view.data_label)
-        self.note.text = (f"{html.escape(view.data_description)} The points describe the sampled loop "
-                          "(controller output held between samples: ZOH), which lies up to a few dB below the "
-                          "continuous H(jω) near the Nyquist frequency.")
+        description = html.escape(view.data_description)
+        for word, shown in (("ETFE", "ETFE"), ("spectral estimate", "Spectral estimate")):
+            if description.startswith(shown):
+                description = term(word, shown) + description[len(shown):]
+        self.note.text = (f"{description} The points describe the sampled loop "
+                          f"(controller output held between samples: {term('ZOH')}), which lies up to a few dB "
+                          "below the continuous H(jω) near the Nyquist frequency.")
 
 
 class ValidationFigure:
