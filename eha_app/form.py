@@ -218,8 +218,8 @@ class Form(JSComponent):
 export function render({ model, el }) {
   const root = document.createElement('div')
   root.className = 'eha-form'
-  // a dragged slider sends at most one value per DRAG_MS: about 16 a second
-  const DRAG_MS = 60
+  // a dragged slider sends at most one value per DRAG_MS: 25 a second
+  const DRAG_MS = 40
   let dragged = null
   const fields = {}
   const groupOf = {}

@@ -154,6 +154,12 @@ def legend_html(results) -> str:
 
 # -- open-loop runs (Figs. 2-7) ---------------------------------------------------------
 
+def _same(a, b) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return np.shape(a) == np.shape(b) and np.array_equal(a, b)
+    return a == b
+
+
 def nice_range(lo: float, hi: float, current: tuple[float, float] | None = None) -> tuple[float, float]:
     """An axis range holding [lo, hi], its ends on round values (multiples of 1, 2 or 5 × 10^k).
 
@@ -277,7 +283,14 @@ class TimeSeriesGrid:
             new = nice_range(lo, hi, None if fresh else now)
             if new != now:
                 fig.y_range.update(start=new[0], end=new[1])
-        self.source.data = columns
+        if fresh:
+            self.source.data = columns
+        else:   # the same curves: send only the columns that changed (the times, colours and labels did not)
+            old = self.source.data
+            changed = {k: v for k, v in columns.items()
+                       if len(v) != len(old[k]) or any(not _same(a, b) for a, b in zip(v, old[k], strict=True))}
+            if changed:
+                self.source.data.update(changed)
         legend = legend_html(results)
         if legend != self.legend.text:      # a new text re-lays out the grid in the browser
             self.legend.text = legend
