@@ -8,8 +8,11 @@ opening the page together would otherwise all pay at once).
 
 from __future__ import annotations
 
+import html
 import logging
+import os
 from collections.abc import Callable
+from functools import lru_cache
 
 import panel as pn
 
@@ -91,6 +94,55 @@ class LazyTabs:
         return self.built.get(index)
 
 
+@lru_cache(maxsize=4)
+def _exercise_at(path: str, mtime: float):
+    from eha_core.exercise import Exercise
+
+    from .handins import HandIns
+
+    return Exercise.load(path), HandIns(path)
+
+
+def current_exercise():
+    """The exercise this server runs (``eha serve --exercise FILE`` sets EHA_EXERCISE), as
+    ``(Exercise, HandIns)``, or None. Read by the server only: nothing of it goes to a page
+    but its title and the names of the hidden parameters."""
+    path = os.environ.get("EHA_EXERCISE", "").strip()
+    if not path:
+        return None
+    return _exercise_at(path, os.path.getmtime(path))
+
+
+class ExerciseGate:
+    """The first screen of an exercise: the student's name or id, then their actuator."""
+
+    def __init__(self, exercise, handins, state: AppState, on_start: Callable[[], None]):
+        self.exercise, self.handins, self.state, self.on_start = exercise, handins, state, on_start
+        hidden = ", ".join(exercise.hide)
+        self.intro = pn.pane.HTML(
+            f"<h3>{html.escape(exercise.title)}</h3><p>Your actuator is your own: its {hidden} are hidden and "
+            f"differ from the paper's by up to ±{100 * exercise.vary:g} %. Simulate it, identify it (tab 3) and hand "
+            f"in your estimates; an estimate within ±{100 * exercise.tolerance:g} % counts. The same name or id "
+            "always gives the same actuator.</p>", sizing_mode="stretch_width")
+        self.student_id = pn.widgets.TextInput(label="Your name or student id", placeholder="e.g. s1234567",
+                                               width=300, css_classes=["eha-student-id"])
+        self.button = pn.widgets.Button(label="Start", color="primary", width=120, css_classes=["eha-start"])
+        self.message = pn.pane.HTML("", css_classes=["eha-error", "eha-error-student"],
+                                    styles={"color": "#b00020", "font-size": "12px"})
+        self.button.on_click(lambda _e: self.start())
+        self.layout = pn.Column(self.intro, self.student_id, self.button, self.message, margin=(10, 20),
+                                width=620, css_classes=["eha-gate"])
+
+    def start(self) -> None:
+        try:
+            self.state.start_exercise(self.exercise, self.student_id.value_input or self.student_id.value,
+                                      handins=self.handins)
+        except ValueError as exc:
+            self.message.object = html.escape(" ".join(str(exc).split()))
+            return
+        self.on_start()
+
+
 def create_app(state: AppState | None = None, *, query: dict | None = None, runner: SessionRunner | None = None):
     """The whole page for one session.
 
@@ -104,6 +156,9 @@ def create_app(state: AppState | None = None, *, query: dict | None = None, runn
     _session_style()
     query = {str(k): str(v) for k, v in (query or {}).items()}
     state = state if state is not None else AppState()
+    exercise = current_exercise()
+    if exercise is not None and not state.student:
+        return _exercise_page(state, exercise, query, runner)
     for name in (*PARAM_NAMES, "kp"):
         if name in query:
             state.set_text(name, query[name])
@@ -122,10 +177,12 @@ def create_app(state: AppState | None = None, *, query: dict | None = None, runn
         pn.state.onload(lambda: apply_locked(lambda: lazy.build(first)))
     else:
         lazy.build(first)
+    who = (f'<span class="eha-student" style="color:#1a56c4">{html.escape(state.exercise.title)} — '
+           f'{html.escape(state.student)}</span>' if state.student else "")
     header = pn.pane.HTML(
-        '<div style="display:flex;align-items:baseline;gap:16px">'
+        '<div style="display:flex;align-items:baseline;gap:16px;flex-wrap:wrap">'
         '<h2 style="margin:4px 0">Electro-hydraulic actuator: modeling and identification</h2>'
-        '<span style="color:#666">a single-rod cylinder driven by a proportional valve</span></div>',
+        f'<span style="color:#666">a single-rod cylinder driven by a proportional valve</span>{who}</div>',
         sizing_mode="stretch_width")
     page = pn.Column(ConnectionWatch(), header, lazy.tabs, sizing_mode="stretch_width", margin=(0, 10))
     page.eha_state = state
@@ -140,4 +197,23 @@ def create_app(state: AppState | None = None, *, query: dict | None = None, runn
             if jobs:
                 log.info("a page was closed: cancelled %s", ", ".join(j.label for j in jobs))
         pn.state.on_session_destroyed(closed)
+    return page
+
+
+def _exercise_page(state: AppState, exercise, query: dict, runner):
+    """An exercise's page: the gate, replaced by the app once the student has given an id."""
+    ex, handins = exercise
+    page = pn.Column(sizing_mode="stretch_width")
+
+    def start() -> None:
+        app = create_app(state, query={k: v for k, v in query.items() if k not in ex.hide}, runner=runner)
+        page.objects = [app]
+        page.eha_state, page.eha_tabs = app.eha_state, app.eha_tabs
+        page.eha_lazy, page.eha_runner = app.eha_lazy, app.eha_runner
+        if served_document() is not None:
+            apply_locked(lambda: app.eha_lazy.build(app.eha_tabs.active))
+
+    gate = ExerciseGate(ex, handins, state, start)
+    page.objects = [gate.layout]
+    page.eha_state, page.eha_gate = state, gate
     return page

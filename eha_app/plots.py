@@ -24,6 +24,7 @@ to process, for every student, on its one event loop.
 
 from __future__ import annotations
 
+import dataclasses
 import html
 from dataclasses import dataclass
 
@@ -368,18 +369,21 @@ def excitation_view(excitation, ts: float) -> tuple[np.ndarray, np.ndarray, str]
     return t, np.asarray(excitation.u), title
 
 
-def frequency_view(fi) -> FrequencyView:
+def frequency_view(fi, hidden=()) -> FrequencyView:
     """What Figs. 8-13 draw, in display units, from a
-    :class:`~eha_core.experiments.FrequencyIdentification` (the core computed every curve)."""
+    :class:`~eha_core.experiments.FrequencyIdentification` (the core computed every curve).
+
+    ``hidden``: an exercise's hidden parameters: eq. 24's curves, computed from them, are left out.
+    """
     et, er, etitle = excitation_view(fi.excitation, fi.config.ts)
     d = fi.data
     base = dict(excitation_t=et, excitation_r=er, excitation_title=etitle, t=d.t, r=d.r, x_mm=d.x * 1e3, u=d.u)
     if fi.validation is None or fi.bode is None:
-        return FrequencyView(fit_ok=False, **base)
+        view = FrequencyView(fit_ok=False, **base)
     e, theo, bode = fi.estimate, fi.theoretical_comparison, fi.bode
     vd, v = fi.validation_data, fi.validation
     ra = fi.residuals
-    return FrequencyView(
+    view = FrequencyView(
         **base, fit_ok=True, y_hat_mm=fi.estimate_output * 1e3, y_theory_mm=theo.y_hat * 1e3,
         fit_label=f"estimated H(s): fit {e.fit_percent:.1f} %",
         theory_label=f"linearised H(s), eq. 24: fit {theo.fit_percent:.1f} %",
@@ -401,6 +405,12 @@ def frequency_view(fi) -> FrequencyView:
         independence_title=(f"Cross-correlation r → residual "
                             f"({'inside' if ra.independence_ok else 'outside'} the 99 % band)"),
     )
+    if hidden:
+        nan = np.full_like
+        view = dataclasses.replace(
+            view, y_theory_mm=nan(view.y_theory_mm, np.nan), theory_db=nan(view.theory_db, np.nan),
+            theory_deg=nan(view.theory_deg, np.nan), theory_label="linearised H(s), eq. 24: hidden in this exercise")
+    return view
 
 
 def _set_legend_label(item: LegendItem, text: str) -> None:

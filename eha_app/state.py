@@ -209,10 +209,13 @@ def cross_field_errors(values: dict, texts: dict, typed=()) -> dict[str, str]:
     return errors
 
 
-def _field_errors(texts: dict) -> tuple[dict, dict]:
-    """Each field on its own: (SI values of those that are valid, messages of the others)."""
-    values, errors = {}, {}
+def _field_errors(texts: dict, secret: dict | None = None) -> tuple[dict, dict]:
+    """Each field on its own: (SI values of those that are valid, messages of the others).
+    ``secret``: the hidden parameters' values (an exercise), taken as they are."""
+    values, errors = dict(secret or {}), {}
     for name in PARAM_NAMES:
+        if name in values:
+            continue
         try:
             value = parse_display(name, texts.get(name, ""))
         except ParameterError as exc:
@@ -266,6 +269,12 @@ class AppState(param.Parameterized):
     kp = param.Number(default=10.0, doc="proportional gain for H(s) [V/m]")
     kp_text = param.String(default="10")
     revision = param.Integer(default=0, doc="bumped whenever the valid parameters change")
+    # An exercise (eha serve --exercise): the student's id, and the values of the hidden
+    # parameters, which the server uses and never sends (their texts read "hidden").
+    student = param.String(default="", doc="the student's normalised id in an exercise")
+    secret = param.Dict(default={}, doc="hidden parameters' SI values: used, never shown")
+    exercise = param.Parameter(default=None, doc="the eha_core.exercise.Exercise being run, if any")
+    handins = param.Parameter(default=None, doc="where the exercise's hand-ins go (eha_app.handins.HandIns)")
 
     def __init__(self, **kwargs):
         # the fields in the order they were last typed (the last typed last)
@@ -274,17 +283,37 @@ class AppState(param.Parameterized):
         self.reset_defaults()
 
     # -- inputs ------------------------------------------------------------------
+    @property
+    def hidden(self) -> tuple[str, ...]:
+        """The parameters an exercise hides (none outside one)."""
+        return tuple(self.secret)
+
+    def start_exercise(self, exercise, student_id: str, handins=None) -> None:
+        """Run ``exercise`` as ``student_id``: their actuator, its hidden values kept here."""
+        from eha_core.exercise import normalize_id
+
+        student = normalize_id(student_id)
+        actuator = exercise.student_params(student)
+        self.exercise = exercise
+        self.handins = handins
+        self.student = student
+        self.secret = {n: getattr(actuator, n) for n in exercise.hide}
+        self.reset_defaults()
+
     def reset_defaults(self) -> None:
-        """Back to the paper's parameters (docs/model.md §2)."""
+        """Back to the paper's parameters (docs/model.md §2); an exercise's hidden ones stay."""
         defaults = ActuatorParams()
         self._typed = []
         self.kp_text = "10"
         self.kp = 10.0
-        self.texts = {n: display_text(n, getattr(defaults, n)) for n in PARAM_NAMES}
+        self.texts = {n: "hidden" if n in self.secret else display_text(n, getattr(defaults, n))
+                      for n in PARAM_NAMES}
         self._revalidate()
 
     def set_text(self, name: str, text: str) -> None:
         """Record what was typed into a field and revalidate everything."""
+        if name in self.secret:
+            return                          # a hidden parameter is not the student's to set
         if name == "kp":
             self.kp_text = text
         elif name in FIELD_INFO:
@@ -295,7 +324,7 @@ class AppState(param.Parameterized):
         self._revalidate()
 
     def _revalidate(self) -> None:
-        values, errors = _field_errors(self.texts)
+        values, errors = _field_errors(self.texts, self.secret)
         kp, kp_error = _kp_error(self.kp_text)
         if kp_error:
             errors["kp"] = kp_error

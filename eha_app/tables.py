@@ -48,8 +48,18 @@ _NAMES = {"M": "M", "B": "B", "Af": "A<sub>f</sub>", "d0": "d<sub>0</sub>", "d_s
           "d_cos": "d<sub>cos</sub>", "beta_e": "β<sub>e</sub>"}
 
 
-def derived_html(params: ActuatorParams, kp: float = 10.0, *, stale: bool = False) -> str:
-    """Tables 1-2 and the transfer functions of eqs. 21-24 for a parameter set."""
+def hidden_note(hidden) -> str:
+    names = ", ".join(_NAMES.get(n, n) for n in hidden)
+    return (f"<p class='eha-note eha-hidden-note'>Hidden in this exercise: {names}. Everything computed from them "
+            "(λ<sub>1</sub>…λ<sub>6</sub>, a<sub>1</sub>…a<sub>10</sub>, P(s), H(s), the nominal values) is hidden "
+            "too: find them by identification (tab 3) and hand them in.</p>")
+
+
+def derived_html(params: ActuatorParams, kp: float = 10.0, *, stale: bool = False, hidden=()) -> str:
+    """Tables 1-2 and the transfer functions of eqs. 21-24 for a parameter set.
+
+    ``hidden``: an exercise's hidden parameters; only what does not depend on them is shown.
+    """
     p = params
     lin = linearize(p)
     op = lin.op
@@ -64,6 +74,8 @@ def derived_html(params: ActuatorParams, kp: float = 10.0, *, stale: bool = Fals
         ["operating point (eq. 10)", f"x = {op.x * 1e3:.3g} mm, v = 0, p<sub>1</sub> = {op.p1 / 1e6:.4g} MPa, "
                                       f"p<sub>2</sub> = {op.p2 / 1e6:.5g} MPa, u = 0"],
     ])
+    if hidden:
+        return f'{stale}<h4>Geometry and operating point</h4>{geometry}{hidden_note(hidden)}'
     lam_rows = []
     formulas = ["(B + 2k<sub>f</sub>A<sub>f</sub>/π)/M", "A<sub>1</sub>/M", "A<sub>2</sub>/M",
                 "β<sub>e</sub>/L<sub>0</sub>",
@@ -94,8 +106,14 @@ def _num(v: float) -> str:
     return num_html(v, 5) if v != 0 else "0"
 
 
-def lse_table_html(res, scenario: str | None) -> str:
-    """Estimates against nominal values, with 95 % intervals and the paper's number."""
+def lse_table_html(res, scenario: str | None, hidden=()) -> str:
+    """Estimates against nominal values, with 95 % intervals and the paper's number.
+
+    ``hidden``: an exercise's hidden parameters: their nominal value, error and
+    coverage are not shown (nor is the paper's column).
+    """
+    if hidden:
+        return _lse_exercise_html(res, hidden)
     paper = PAPER_TABLE4.get(scenario, {}) if scenario else {}
     if scenario == "none":
         paper = {**paper, "beta_e": PAPER_TABLE3_BETA_E}
@@ -125,6 +143,18 @@ def lse_table_html(res, scenario: str | None) -> str:
             + (" Without noise the intervals shrink to the regressors' numerical error (~0.003 %), so ✗ may mark "
                "a miss by that much." if noiseless else "") + "</p>")
     return table_html(header, rows) + note
+
+
+def _lse_exercise_html(res, hidden) -> str:
+    rows = []
+    for k, v in res.estimates.items():
+        lo, hi = res.ci95[k]
+        nom = None if k in hidden else res.nominal.get(k)
+        rows.append([f"{_NAMES.get(k, k)} [{_UNITS.get(k, '')}]", "hidden" if k in hidden else _num(nom),
+                     _num(v), f"[{_num(lo)}, {_num(hi)}]"])
+    note = (f"<p class='eha-note'>Disturbance model: {res.disturbance_model}. Intervals: {term('Newey-West')} over "
+            f"{res.hac_lags} lags. Hand in the estimates of the hidden parameters below.</p>")
+    return table_html(["parameter", "known value", "estimate", "95 % interval"], rows) + note
 
 
 def table4_html(by_model: dict) -> str:
@@ -200,16 +230,19 @@ def estimation_sentences(e) -> str:
     return f"<p class='eha-note'>{how} {ic}{offset}.</p>"
 
 
-def freq_summary_html(fi) -> str:
+def freq_summary_html(fi, hidden=()) -> str:
+    """Ĥ(s) beside eq. 24's H(s) and the paper's; without H(s) when an exercise hides parameters."""
     e = fi.estimate
     if not e.success or not np.all(np.isfinite(e.den)):
         return f"<div class='eha-warn'>{estimate_alert(e)}</div>"
     theo_num, theo_den = fi.theoretical
     plant = "nonlinear" if fi.config.model == "nonlinear" else "linearised"
     parts = [tf_html("Ĥ(s)", e.num, e.den, f"estimated from the {plant} model's data; "
-                     f"{term('fit', f'fit {e.fit_percent:.2f} %')}"),
-             tf_html("H(s)", theo_num, theo_den, f"linearised at v = 0, eq. 24, K<sub>p</sub> = {fi.config.kp:g} V/m"),
-             tf_html("Ĥ<sub>paper</sub>(s)", PAPER_EQ25[0], PAPER_EQ25[1], f"eq. 25, fit {PAPER_FIT_PERCENT} %")]
+                     f"{term('fit', f'fit {e.fit_percent:.2f} %')}")]
+    if not hidden:
+        parts.append(tf_html("H(s)", theo_num, theo_den,
+                             f"linearised at v = 0, eq. 24, K<sub>p</sub> = {fi.config.kp:g} V/m"))
+    parts.append(tf_html("Ĥ<sub>paper</sub>(s)", PAPER_EQ25[0], PAPER_EQ25[1], f"eq. 25, fit {PAPER_FIT_PERCENT} %"))
     if fi.validation is not None:
         parts.append(f"<p>Validation on a fresh excitation (seed {fi.validation_excitation.seed}): "
                      f"fit <b>{fi.validation.fit_percent:.2f} %</b>.</p>")
@@ -254,12 +287,24 @@ def _gain_sentence(b, lin) -> str:
     return text + ". (The paper reported 1.1793·10<sup>9</sup>.)"
 
 
-def backout_html(fi) -> str:
+def backout_html(fi, hidden=()) -> str:
     b = fi.backout
     if b is None:
         return "<p>The back-out needs a model with 3 poles and no zero.</p>"
     ci = b.ci95()
     rel = b.rel_errors()
+    if "M" in hidden:   # eq. 27 multiplies by M: with the true M the result would give it away
+        return ("<p class='eha-note'>The back-out (eq. 27) multiplies by M, which is hidden in this exercise: "
+                "use your least-squares estimate of M with λ̂<sub>1</sub>, λ̂<sub>2</sub> of Ĥ(s) by hand.</p>"
+                + hidden_note(hidden))
+    if hidden:        # an exercise: the backed-out values and intervals, nothing about the truth
+        rows = []
+        for name, key, unit in (("B + 2k<sub>f</sub>A<sub>f</sub>/π = λ̂<sub>1</sub> M (eq. 27a)", "damping", "N s/m"),
+                                ("β<sub>e</sub> from the gain (eq. 27e-f)", "beta_e_from_gain", "Pa"),
+                                ("β<sub>e</sub> from the s coefficient (eq. 27b-d)", "beta_e_from_stiffness", "Pa")):
+            lo, hi = ci[key]
+            rows.append([name, _num(getattr(b, key)), "" if math.isnan(lo) else f"[{_num(lo)}, {_num(hi)}]", unit])
+        return table_html(["quantity", "backed out", "95 % interval", "unit"], rows) + hidden_note(hidden)
 
     def row(name, key, unit):
         v, nom = getattr(b, key), (b.damping_nominal if key == "damping" else b.beta_e_nominal)

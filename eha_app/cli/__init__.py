@@ -2,7 +2,7 @@
 
 An interface layer on top of the core and the app, like the app itself: one
 module per subcommand (``simulate``, ``linearize``, ``idinput``, ``identify``,
-``reproduce``, ``serve``), each with ``add_parser`` and its handler, sharing
+``reproduce``, ``serve``, ``exercise``), each with ``add_parser`` and its handler, sharing
 :mod:`eha_app.cli.common`. Heavy modules are imported inside the handlers, so
 that ``eha --help`` and a refused argument are quick.
 
@@ -19,7 +19,7 @@ import warnings
 from eha_core.data import DataError
 from eha_core.params import ParameterError
 
-from . import identify, idinput, linearize, reproduce, serve, simulate
+from . import exercise, identify, idinput, linearize, reproduce, serve, simulate
 from .common import EXIT_USAGE, Parser, UsageError
 
 __all__ = ["main", "build_parser", "EXIT_USAGE", "UsageError"]
@@ -29,7 +29,7 @@ def build_parser() -> Parser:
     parser = Parser(prog="eha", description="Electro-hydraulic actuator: simulation, identification and the "
                                             "classroom app.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
-    for module in (simulate, linearize, idinput, identify, reproduce, serve):
+    for module in (simulate, linearize, idinput, identify, reproduce, serve, exercise):
         module.add_parser(sub)
     return parser
 

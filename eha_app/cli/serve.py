@@ -32,6 +32,8 @@ def add_parser(sub) -> None:
     sv.add_argument("--nginx-config", type=int, default=None, metavar="N",
                     help="print an nginx configuration for N eha serve processes on ports PORT+1..PORT+N behind "
                          "nginx listening on PORT, with the commands that start them, and exit")
+    sv.add_argument("--exercise", metavar="FILE", help="run a class exercise (made by `eha exercise new`): each "
+                    "student enters an id and gets an actuator of their own, with the exercise's parameters hidden")
     sv.add_argument("--show", action="store_true", help="open the app in a browser")
     sv.add_argument("--share-port", action="store_true", help=argparse.SUPPRESS)
     sv.set_defaults(handler=run)
@@ -91,6 +93,17 @@ def run(args) -> int:
     _validate(args)
     if args.nginx_config is not None:
         return _print_nginx_config(args)
+    if args.exercise:
+        from eha_core.exercise import Exercise
+
+        from .common import check_input_file
+
+        check_input_file("--exercise", args.exercise)
+        exercise = Exercise.load(args.exercise)          # refused now, with its message, if it is not one
+        os.environ["EHA_EXERCISE"] = os.path.abspath(args.exercise)
+        if not args.share_port:
+            print(f"Exercise {exercise.title!r}: hides {', '.join(exercise.hide)}; hand-ins go to "
+                  f"{args.exercise.rsplit('.', 1)[0]}.handins.sqlite", flush=True)
     from eha_app.serving import ENTRY_POINT, serve_argv
 
     if not ENTRY_POINT.exists():
@@ -128,6 +141,8 @@ def run(args) -> int:
             child += ["--allow-websocket-origin", origin]
         if args.behind_proxy:
             child.append("--behind-proxy")
+        if args.exercise:
+            child += ["--exercise", os.environ["EHA_EXERCISE"]]
         if args.show:
             import webbrowser
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import math
 from dataclasses import dataclass
 
@@ -35,6 +36,7 @@ from ..tasks import SessionRunner, apply_locked, frozen_models
 
 __all__ = ["IdentificationTab", "LseRequest", "LSE_FORM", "FREQ_FORM", "parse_lse", "parse_freq"]
 
+_NAMES_HTML = {"M": "M", "B": "B", "Af": "A<sub>f</sub>", "beta_e": "β<sub>e</sub>"}
 EXCITATIONS = {"paper": "u = 6 sin(4πt), 5 s (default)",
                "rich": "u = 8 sin(4πt) + 4 sin(10πt), 20 s (narrows B)"}
 
@@ -236,6 +238,13 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                                             css_classes=["eha-run-table4"])
         self.button.on_click(lambda _e: self.run())
         self.all_button.on_click(lambda _e: self.run_all())
+        # an exercise: hand in the hidden parameters' estimates (Table 4 would show the truth)
+        self.all_button.visible = not state.hidden
+        self.handin_button = pn.widgets.Button(label="Hand in these estimates", color="warning", width=260,
+                                               css_classes=["eha-handin"], visible=bool(state.hidden), disabled=True,
+                                               description="run the least squares first")
+        self.handin_button.on_click(lambda _e: self.hand_in())
+        self.verdict = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-verdict"])
         state.param.watch(self._update_enabled, "valid")
         state.param.watch(self._inputs_changed, ["params", "valid"])
         self._update_enabled()
@@ -316,7 +325,9 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                     + (f" (and {job.wait_s:.1f} s waiting for the server)" if job.wait_s > 0.05 else "")
                     + f". {resim_error}</p>")
             warn = "" if res.success else f"<div class='eha-warn'>{res.message}</div>"
-            self.table.object = warn + lse_table_html(res, scenario if scenario != "custom" else None) + note
+            self.table.object = warn + lse_table_html(res, scenario if scenario != "custom" else None,
+                                                      hidden=self.state.hidden) + note
+            self.handin_button.disabled = not self.state.hidden
             if self.figure is None:
                 self.figure = plots.LseFitFigure()
                 self.figure.update(view)
@@ -350,8 +361,37 @@ class LeastSquaresPanel(pn.viewable.Viewer):
 
         return self.runner.run("Table 4", compute, show, fail=self._fail, busy=[self.table4_area], note=self._note)
 
+    def hand_in(self):
+        """Hand in the last estimates of the exercise's hidden parameters; show the verdicts (never the truth)."""
+        s = self.state
+        if self.result is None or not s.hidden:
+            return None
+        estimates = {n: float(self.result.estimates[n]) for n in s.hidden}
+        exercise, student, store = s.exercise, s.student, s.handins
+
+        def compute(_token):
+            verdicts = exercise.verdicts(student, estimates)
+            store.add(student, estimates, verdicts)
+            return verdicts, len([h for h in store.all() if h.student == student])
+
+        def show(out, _job):
+            verdicts, count = out
+            tol = f"±{100 * exercise.tolerance:g} %"
+            items = "".join(f"<li>{_NAMES_HTML.get(n, n)} = {estimates[n]:.5g}: "
+                            + (f"<span class='eha-ok'>within {tol} ✓</span>" if ok else
+                               f"<span class='eha-warn'>not within {tol} ✗</span>") + "</li>"
+                            for n, ok in verdicts.items())
+            score = sum(verdicts.values())
+            self.verdict.object = (f"<div class='eha-verdict-box'><b>Handed in</b> (hand-in {count} of "
+                                   f"{html.escape(student)}): {score} of {len(verdicts)} within tolerance."
+                                   f"<ul>{items}</ul></div>")
+            self.verdict.visible = True
+
+        return self.runner.run("hand-in", compute, show, fail=self._fail, note=self._note)
+
     def __panel__(self):
-        controls = pn.Column(self.form, self.notice, self.button, self.all_button, self.queue_note, width=280)
+        controls = pn.Column(self.form, self.notice, self.button, self.all_button, self.handin_button, self.verdict,
+                             self.queue_note, width=280)
         explain = pn.pane.HTML(
             "<p class='eha-note'>Least squares on eq. 15 filtered by H(s) = 1/(0.01 s + 1) (eqs. 16-18): "
             "y<sub>1</sub> = A<sub>1</sub>p<sub>1</sub> − A<sub>2</sub>p<sub>2</sub> = M dv/dt + B v + "
@@ -543,9 +583,11 @@ class FrequencyPanel(pn.viewable.Viewer):
         params = self.state.params
         run_key = (params, cfg)
 
+        hidden = self.state.hidden
+
         def compute(token):
             fi = run_frequency_identification(params, cfg, cancel=token)
-            return fi, plots.frequency_view(fi)
+            return fi, plots.frequency_view(fi, hidden)
 
         def show(out, job):
             fi, view = out
@@ -556,8 +598,8 @@ class FrequencyPanel(pn.viewable.Viewer):
                       f"(estimation alone {fi.timings.get('tfest', float('nan')):.2f} s)"
                       + (f", after {job.wait_s:.1f} s waiting for the server" if job.wait_s > 0.05 else "")
                       + ".</p>")
-            self.summary.object = freq_summary_html(fi) + timing
-            self.backout.object = "<h4>Backed-out parameters (eq. 27)</h4>" + backout_html(fi)
+            self.summary.object = freq_summary_html(fi, hidden) + timing
+            self.backout.object = "<h4>Backed-out parameters (eq. 27)</h4>" + backout_html(fi, hidden)
             alert = estimate_alert(fi.estimate)
             self.unstable.object = alert
             self.unstable.visible = bool(alert)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from functools import lru_cache
 from pathlib import Path
 
@@ -61,10 +62,16 @@ def _schematic_svg() -> str:
 
 
 @lru_cache(maxsize=256)
-def _derived(params, kp: float, stale: bool) -> str:
+def _derived(params, kp: float, stale: bool, hidden: tuple = ()) -> str:
     # a pure function of hashable inputs: the page of every student who has
     # not changed a value yet is the same, computed once per server process
-    return derived_html(params, kp, stale=stale)
+    return derived_html(params, kp, stale=stale, hidden=hidden)
+
+
+def form_groups(hidden=()) -> list[Group]:
+    """Tab 1's groups without an exercise's hidden parameters (they are not the student's to see)."""
+    return [dataclasses.replace(g, fields=tuple(f for f in g.fields if f.name not in hidden))
+            for g in PARAMETER_FORM]
 
 
 class ParametersTab(pn.viewable.Viewer):
@@ -73,7 +80,7 @@ class ParametersTab(pn.viewable.Viewer):
     def __init__(self, state: AppState, **kwargs):
         super().__init__(**kwargs)
         self.state = state
-        self.form = Form(spec=[g.to_spec() for g in PARAMETER_FORM], values=self._texts(), width=250,
+        self.form = Form(spec=[g.to_spec() for g in form_groups(state.hidden)], values=self._texts(), width=250,
                          url_defaults=default_texts(), css_classes=["eha-param-form"], margin=(5, 10))
         self.form.param.watch(self._typed, "values")
         self.reset_button = pn.widgets.Button(label="Reset to paper defaults", color="default", width=250)
@@ -84,7 +91,8 @@ class ParametersTab(pn.viewable.Viewer):
         self._on_state()
 
     def _texts(self) -> dict:
-        return {**self.state.texts, "kp": self.state.kp_text}
+        return {**{k: v for k, v in self.state.texts.items() if k not in self.state.hidden},
+                "kp": self.state.kp_text}
 
     def _typed(self, event) -> None:
         old = event.old or {}
@@ -105,7 +113,7 @@ class ParametersTab(pn.viewable.Viewer):
         else:
             first = next(iter(s.errors.values()))
             self.status.object = f'<div class="eha-warn">Fix the highlighted input to enable the runs: {first}</div>'
-        self.derived.object = _derived(s.params, s.kp, not s.valid)
+        self.derived.object = _derived(s.params, s.kp, not s.valid, s.hidden)
 
     def __panel__(self):
         inputs = pn.Column(self.reset_button, self.form, width=270)
