@@ -244,3 +244,28 @@ def test_bad_identification_arguments_are_refused_before_the_estimators_load(arg
             "print(code, 'scipy' in sys.modules, 'numba' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.stdout.split() == ["2", "False", "False"], out.stderr
+
+
+def test_exercise_commands(capsys, tmp_path):
+    path = str(tmp_path / "class.json")
+    assert main(["exercise", "new", "--hide", "M,B", "--vary", "20%", "--tolerance", "5%", "--out", path]) == 0
+    assert "hides M, B" in capsys.readouterr().out
+    assert main(["exercise", "new", "--hide", "M", "--out", path]) == 2          # would change every actuator
+    assert "it exists" in capsys.readouterr().err
+    assert main(["exercise", "new", "--hide", "M,x0", "--out", str(tmp_path / "b.json")]) == 2
+    assert "--hide = M,x0 is not allowed: x0 cannot be hidden" in capsys.readouterr().err
+    assert main(["exercise", "new", "--hide", "M", "--vary", "lots", "--out", str(tmp_path / "c.json")]) == 2
+    assert "--vary = lots is not allowed" in capsys.readouterr().err
+    assert main(["exercise", "reveal", path, "--student", " Ada "]) == 0
+    out = capsys.readouterr().out
+    from eha_core.exercise import Exercise
+
+    truth = Exercise.load(path).student_params("ada")
+    assert f"M = {truth.M:.6g} kg" in out and f"B = {truth.B:.6g} N s/m" in out
+    assert main(["exercise", "results", path]) == 0
+    assert "0 students handed in" in capsys.readouterr().out
+    assert main(["exercise", "results", str(tmp_path / "nothere.json")]) == 2
+    (tmp_path / "bad.json").write_text("{}")
+    assert main(["exercise", "results", str(tmp_path / "bad.json")]) == 2
+    assert "not an exercise file" in capsys.readouterr().err
+    assert main(["serve", "--exercise", str(tmp_path / "bad.json")]) == 2

@@ -1,0 +1,182 @@
+"""A class exercise in real browsers: the secret never reaches a page; three students hand in; a restart keeps it."""
+
+from __future__ import annotations
+
+import subprocess
+import threading
+
+from eha_core.exercise import Exercise
+from tests.serve.conftest import EHA, EhaServer, free_port
+from tests.ui.browser_helpers import text_of
+
+HIDE = ("M", "B", "Af", "beta_e")
+DISPLAY_SCALE = {"M": 1.0, "B": 1.0, "Af": 1.0, "beta_e": 1e9}
+
+
+def make_exercise(tmp_path) -> tuple[Exercise, str]:
+    path = tmp_path / "class.json"
+    out = subprocess.run([str(EHA), "exercise", "new", "--hide", ",".join(HIDE), "--vary", "25%",
+                          "--tolerance", "5%", "--title", "Lab 3", "--out", str(path)],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    return Exercise.load(path), str(path)
+
+
+def formats(value: float, scale: float) -> set[str]:
+    """The ways a page could write ``value``: full precision and rounded, in SI and display units.
+
+    Seven or more significant digits: an estimate of the student's own, shown to them
+    on purpose, agrees with the truth to about 5 digits and may legitimately appear."""
+    out = set()
+    for v in (value, value / scale):
+        out |= {repr(v), str(v), f"{v:.17g}", f"{v:.15g}", f"{v:.12g}", f"{v:.10g}", f"{v:.9g}", f"{v:.8g}",
+                f"{v:.7g}", f"{v:.7e}", f"{v:.8e}"}
+    return {s for s in out if len(s.replace("-", "").replace(".", "").replace("e+", "").lstrip("0")) >= 7}
+
+
+def rounded(value: float, scale: float) -> set[str]:
+    """Four to six significant digits, as tables and messages write numbers (SI and display units)."""
+    from eha_app.tables import _num
+
+    out = set()
+    for v in (value, value / scale):
+        out |= {f"{v:.4g}", f"{v:.5g}", f"{v:.6g}", _num(v)}
+    return {s for s in out if len(s.replace("-", "").replace(".", "").lstrip("0")) >= 4}
+
+
+def the_students_own_numbers(truth) -> set[str]:
+    """What the page legitimately shows: the student's own least-squares estimates and intervals
+    (noise-free, they agree with the truth to about five digits), as the app writes them."""
+    from eha_app.tables import _num
+    from eha_core.experiments import lse_data
+    from eha_core.identify.lse import identify_lse
+
+    res = identify_lse(lse_data(truth, "none"), truth)
+    out = set()
+    for n in HIDE:
+        for v in (res.estimates[n], *res.ci95[n]):
+            out |= {_num(v), f"{v:.5g}", f"{v:.4g}", f"{v:.6g}"}
+    return out
+
+
+def student_session(browser, url, student_id, frames=None):
+    context = browser.new_context(viewport={"width": 1366, "height": 900}, accept_downloads=True)
+    page = context.new_page()
+    if frames is not None:
+        page.on("websocket", lambda ws: ws.on("framereceived", lambda payload: frames.append(payload)))
+    page.goto(url)
+    page.wait_for_selector(".eha-student-id input", timeout=60_000)
+    page.locator(".eha-student-id input").fill(student_id)
+    page.get_by_role("button", name="Start").click()
+    page.wait_for_selector(".eha-field-dc input", timeout=60_000)
+    return context, page
+
+
+def identify_and_hand_in(page):
+    page.locator(".bk-header .bk-tab", has_text="3. Identification").first.click()
+    page.get_by_role("button", name="Run least squares").click()
+    page.locator(".eha-lse-table table").wait_for(state="visible", timeout=90_000)
+    page.get_by_role("button", name="Hand in these estimates").click()
+    page.wait_for_selector(".eha-verdict >> text=Handed in", timeout=60_000)
+    return text_of(page, ".eha-verdict")
+
+
+def test_the_secret_never_reaches_a_students_browser(browser, tmp_path):
+    """Every page, websocket message and download of a student who runs everything: no hidden value.
+
+    Checked at 7 or more significant digits everywhere, and at 4 to 6 digits once the
+    student's own estimates are taken out (noise-free, they equal the truth to about 5
+    digits: what the student found by identification is theirs to see).
+    """
+    ex, path = make_exercise(tmp_path)
+    truth = ex.student_params("s42")
+    server = EhaServer(tmp_path, "--exercise", path)
+    frames: list = []
+    context, page = student_session(browser, server.url, "S42", frames)
+    try:
+        pages = [page.content()]
+        page.locator(".bk-header .bk-tab", has_text="2. Simulation").first.click()
+        page.get_by_role("button", name="Compare both").click()
+        page.wait_for_selector(".eha-sim-info >> text=nonlinear and linear", timeout=60_000)
+        with page.expect_download() as download:
+            page.get_by_role("button", name="Download CSV").click()
+        csv_text = open(download.value.path(), encoding="utf-8").read()
+        verdict = identify_and_hand_in(page)
+        assert "within tolerance" in verdict
+        page.locator(".bk-tab", has_text="Frequency domain").first.click()
+        page.get_by_role("button", name="Run experiment and estimate").click()
+        page.wait_for_selector(".eha-freq-summary >> text=Validation on a fresh excitation", timeout=90_000)
+        for fig in ("Fig. 11 fit", "Fig. 12 Bode", "Fig. 13 validation"):
+            page.locator(".bk-tab", has_text=fig).first.click()
+        page.locator(".bk-header .bk-tab", has_text="1. Parameters").first.click()
+        page.wait_for_selector(".eha-hidden-note")
+        pages.append(page.content())
+        texts = pages + [csv_text] + [f if isinstance(f, str) else f.decode("latin-1") for f in frames]
+        blob = "\n".join(texts)
+        assert len(frames) > 20 and "s42" in blob                  # the capture saw the session
+        assert ex.secret not in blob and "secret" not in blob.lower()
+        leaks = {n: s for n in HIDE for s in formats(getattr(truth, n), DISPLAY_SCALE[n]) if s in blob}
+        assert not leaks, leaks
+        # rounded to 4-6 digits too, once the student's own estimates are taken out of the text
+        own = sorted(the_students_own_numbers(truth), key=len, reverse=True)
+        for number in own:
+            blob = blob.replace(number, "·")
+        leaks = {n: s for n in HIDE for s in rounded(getattr(truth, n), DISPLAY_SCALE[n]) if s in blob}
+        assert not leaks, leaks
+    finally:
+        context.close()
+        server.stop()
+
+
+def test_a_class_hands_in_and_the_results_survive_a_restart(browser, tmp_path):
+    ex, path = make_exercise(tmp_path)
+    port = free_port()
+    server = EhaServer(tmp_path, "--exercise", path, port=port)
+    ids = ["ada", "bob", "cy"]
+    results, errors = {}, []
+
+    def run_student(sid):
+        # each student a browser of their own, in a thread of its own (Playwright's sync API
+        # is one browser per thread): three pages on the server at the same time
+        from playwright.sync_api import sync_playwright
+
+        from tests.ui.browser_helpers import CHROMIUM_ARGS, _chromium
+
+        with sync_playwright() as p:
+            b = p.chromium.launch(executable_path=_chromium(), args=CHROMIUM_ARGS)
+            try:
+                context, page = student_session(b, server.url, sid)
+                results[sid] = identify_and_hand_in(page)
+                context.close()
+            except Exception as exc:  # noqa: BLE001 - reported below
+                errors.append(f"{sid}: {exc}")
+            finally:
+                b.close()
+
+    threads = [threading.Thread(target=run_student, args=(sid,)) for sid in ids]
+    try:
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(timeout=300)
+        assert not errors, errors
+        assert all("4 of 4 within tolerance" in results[sid] for sid in ids), results
+        table = subprocess.run([str(EHA), "exercise", "results", path], capture_output=True, text=True, timeout=60)
+        assert table.returncode == 0, table.stderr
+        for sid in ids:
+            line = next(ln for ln in table.stdout.splitlines() if ln.startswith(sid + " "))
+            assert line.split()[-5:] == ["yes", "yes", "yes", "yes", "1.00"], line
+        server.stop()
+        server = EhaServer(tmp_path, "--exercise", path, port=port)           # the teacher restarts it
+        again = subprocess.run([str(EHA), "exercise", "results", path, "--csv", str(tmp_path / "r.csv")],
+                               capture_output=True, text=True, timeout=60)
+        assert "3 students handed in" in again.stdout
+        csv_rows = (tmp_path / "r.csv").read_text().splitlines()
+        assert len(csv_rows) == 4 and csv_rows[0].startswith("student,last hand-in")
+        context, page = student_session(browser, server.url, "Ada")         # and Ada hands in once more
+        try:
+            assert "hand-in 2 of ada" in identify_and_hand_in(page)
+        finally:
+            context.close()
+    finally:
+        server.stop()
