@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import csv
 import html
+import io
+import json
 import math
 from dataclasses import dataclass
 
@@ -35,6 +38,16 @@ from ..tables import SCENARIOS, backout_html, estimate_alert, freq_summary_html,
 from ..tasks import SessionRunner, apply_locked, frozen_models
 
 __all__ = ["IdentificationTab", "LseRequest", "LSE_FORM", "FREQ_FORM", "parse_lse", "parse_freq"]
+
+#: The columns the least squares need from a data file (eqs. 15-18).
+LSE_COLUMNS = ("t", "x", "v", "p1", "p2", "u")
+#: An upload larger than this is refused (a 10 minute record at 1 kHz is about 2 MB of CSV).
+MAX_UPLOAD_BYTES = 20e6
+
+
+def res_source(panel) -> str:
+    return panel.last_data.source if panel.last_data is not None else ""
+
 
 _NAMES_HTML = {"M": "M", "B": "B", "Af": "A<sub>f</sub>", "beta_e": "β<sub>e</sub>"}
 EXCITATIONS = {"paper": "u = 6 sin(4πt), 5 s (default)",
@@ -245,6 +258,34 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                                                description="run the least squares first")
         self.handin_button.on_click(lambda _e: self.hand_in())
         self.verdict = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-verdict"])
+        # the student's own data (CSV or .mat), instead of the simulated sensors
+        self.own_data = None                # MeasuredData of an upload, when one is in use
+        self.own_data_key = None
+        self.last_data = None               # the data behind the table and the plot (for downloads)
+        self._upload = None
+        self.upload = pn.widgets.FileInput(accept=".csv,.mat", width=260, css_classes=["eha-lse-upload"],
+                                           multiple=False)
+        self.upload.param.watch(self._uploaded, "value")
+        self.upload_note = pn.pane.HTML(
+            "<span class='eha-note'>Or use your own measurements: a CSV or MATLAB .mat file with columns "
+            "t, x, v, p1, p2, u (SI, or units in the header such as <code>p1[MPa]</code>).</span>",
+            width=270, css_classes=["eha-lse-upload-note"])
+        self.mapping = pn.Column(visible=False, width=270, css_classes=["eha-lse-mapping"])
+        self.simulated_button = pn.widgets.Button(label="Back to simulated data", width=260, visible=False,
+                                                  css_classes=["eha-lse-simulated"])
+        self.simulated_button.on_click(lambda _e: self.use_simulated())
+        self.downloads = [
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.data_bytes("csv")), filename="eha_lse_data.csv",
+                                    label="Data (CSV)", disabled=True, width=128, css_classes=["eha-dl-data-csv"]),
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.data_bytes("mat")), filename="eha_lse_data.mat",
+                                    label="Data (.mat)", disabled=True, width=128, css_classes=["eha-dl-data-mat"]),
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.estimates_bytes("csv")),
+                                    filename="eha_lse_estimates.csv", label="Estimates (CSV)", disabled=True,
+                                    width=128, css_classes=["eha-dl-est-csv"]),
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.estimates_bytes("json")),
+                                    filename="eha_lse_estimates.json", label="Estimates (JSON)", disabled=True,
+                                    width=128, css_classes=["eha-dl-est-json"]),
+        ]
         state.param.watch(self._update_enabled, "valid")
         state.param.watch(self._inputs_changed, ["params", "valid"])
         self._update_enabled()
@@ -255,7 +296,113 @@ class LeastSquaresPanel(pn.viewable.Viewer):
     def key(self):
         """What a least-squares run with the current inputs is computed from (None if they are not valid)."""
         req, errors = self.request()
-        return None if errors or not self.state.valid else (self.state.params, req)
+        return None if errors or not self.state.valid else (self.state.params, req, self.own_data_key)
+
+    # -- the student's own data ---------------------------------------------------------
+    def _uploaded(self, _event) -> None:
+        if self.upload.value is None:
+            return
+        self._upload = (bytes(self.upload.value), self.upload.filename or "upload")
+        self.read_upload()
+
+    def read_upload(self, mapping: dict | None = None):
+        """Read the uploaded file (in a worker): use it, or ask which columns are which."""
+        from eha_core.data import DataError, file_columns, read_data, sample_time
+        from eha_core.identify.lse import MeasuredData
+
+        if self._upload is None:
+            return None
+        data, filename = self._upload
+        if len(data) > MAX_UPLOAD_BYTES:
+            self._upload_problem(f"your file = {filename!r} is not allowed: it has {len(data) / 1e6:.1f} MB; "
+                                 f"at most {MAX_UPLOAD_BYTES / 1e6:g} MB")
+            return None
+
+        def compute(_token):
+            try:
+                cols = read_data(data, LSE_COLUMNS, name="your file", filename=filename, mapping=mapping,
+                                 min_rows=50)
+            except DataError as exc:
+                if exc.what.startswith("no column"):
+                    return "map", file_columns(data, filename, name="your file"), str(exc)
+                raise
+            ts = sample_time(cols["t"], name="your file", path=filename)
+            return "ok", MeasuredData(**cols, source=filename), ts
+
+        def show(out, _job):
+            if out[0] == "map":
+                self._ask_mapping(out[1], out[2])
+                return
+            _, measured, ts = out
+            self.own_data = measured
+            self.own_data_key = (filename, len(data), tuple(sorted((mapping or {}).items())))
+            self.mapping.visible = False
+            self.simulated_button.visible = True
+            self.upload_note.object = (f"<span class='eha-ok'>Using your data: {html.escape(filename)}, "
+                                       f"{measured.t.size} samples every {ts * 1e3:.4g} ms. "
+                                       "Run the least squares on it.</span>")
+            self._inputs_changed()
+
+        return self.runner.run("reading your data", compute, show, fail=self._upload_problem, note=self._note)
+
+    def _upload_problem(self, message: str) -> None:
+        self.upload_note.object = f"<span class='eha-warn'>{html.escape(message)}</span>"
+
+    def _ask_mapping(self, available: list, message: str) -> None:
+        """Which of the file's columns is t, x, v, p1, p2, u?"""
+        options = ["(none)", *available]
+        selects = {}
+        for c in LSE_COLUMNS:
+            guess = next((a for a in available if a.split("[")[0].strip().lower() == c), "(none)")
+            selects[c] = pn.widgets.Select(label=f"{c} is", options=options, value=guess, width=250,
+                                           css_classes=[f"eha-map-{c}"])
+        go = pn.widgets.Button(label="Use these columns", color="primary", width=250, css_classes=["eha-map-go"])
+
+        def use(_e):
+            chosen = {c: s.value for c, s in selects.items() if s.value != "(none)"}
+            self.read_upload(mapping=chosen)
+
+        go.on_click(use)
+        self.mapping.objects = [pn.pane.HTML(f"<span class='eha-warn'>{html.escape(message)}</span>"),
+                                *selects.values(), go]
+        self.mapping.visible = True
+        self.mapping_selects = selects
+        self.mapping_button = go
+
+    def use_simulated(self) -> None:
+        self.own_data, self.own_data_key, self._upload = None, None, None
+        self.simulated_button.visible = False
+        self.mapping.visible = False
+        self.upload_note.object = "<span class='eha-note'>Using the simulated sensors again.</span>"
+        self._inputs_changed()
+
+    # -- downloads ---------------------------------------------------------------------
+    def data_bytes(self, kind: str) -> bytes:
+        """The measurements behind the table and the plot, as CSV or .mat (read back by the upload)."""
+        from eha_core.data import write_data
+
+        d = self.last_data
+        cols = {"t": d.t, "x": d.x, "v": d.v, "p1": d.p1, "p2": d.p2, "u": d.u}
+        return write_data(cols, kind)
+
+    def estimates_bytes(self, kind: str) -> bytes:
+        """The estimates with their standard errors and 95 % intervals (no hidden nominal value)."""
+        res = self.result
+        rows = []
+        for k, v in res.estimates.items():
+            lo, hi = res.ci95[k]
+            nominal = None if k in self.state.hidden else res.nominal.get(k)
+            rows.append({"parameter": k, "estimate": float(v), "std_error": float(res.std_errors[k]),
+                         "ci95_low": float(lo), "ci95_high": float(hi),
+                         "nominal": None if nominal is None else float(nominal)})
+        if kind == "json":
+            return json.dumps({"disturbance_model": res.disturbance_model, "data": res_source(self),
+                               "estimates": rows}, indent=1).encode()
+        buf = io.StringIO()
+        w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+        w.writeheader()
+        w.writerows(rows)
+        return buf.getvalue().encode()
 
     def table4_key(self):
         _, errors = self.request()
@@ -306,7 +453,14 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         key = self.key()
         scenario = req.scenario if req.excitation == "paper" else None
 
+        own = self.own_data
+
         def compute(token):
+            if own is not None:     # the student's measurements: nothing to simulate
+                res = identify_lse(own, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
+                                   cancel=token)
+                return res, plots.lse_view(own, None), ("Your data: the model is not re-simulated (the input "
+                                                        "is known only at its samples)."), own
             d = req.disturbance()
             data = lse_data(params, d, u=u, t_end=t_end, seed=req.seed, cancel=token)
             res = identify_lse(data, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
@@ -316,11 +470,14 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                 resim_error = ""
             except ParameterError as exc:
                 resim, resim_error = None, f"No re-simulation: the estimate is not physical ({exc})."
-            return res, plots.lse_view(data, resim), resim_error
+            return res, plots.lse_view(data, resim), resim_error, data
 
         def show(out, job):
-            res, view, resim_error = out
+            res, view, resim_error, data = out
             self.result = res
+            self.last_data = data
+            for d in self.downloads:
+                d.disabled = False
             note = (f"<p class='eha-note'>Simulated, identified and re-simulated in {job.run_s * 1e3:.0f} ms"
                     + (f" (and {job.wait_s:.1f} s waiting for the server)" if job.wait_s > 0.05 else "")
                     + f". {resim_error}</p>")
@@ -390,8 +547,9 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         return self.runner.run("hand-in", compute, show, fail=self._fail, note=self._note)
 
     def __panel__(self):
-        controls = pn.Column(self.form, self.notice, self.button, self.all_button, self.handin_button, self.verdict,
-                             self.queue_note, width=280)
+        controls = pn.Column(self.form, self.upload_note, self.upload, self.mapping, self.simulated_button,
+                             self.notice, self.button, self.all_button, self.handin_button, self.verdict,
+                             pn.FlexBox(*self.downloads, width=270), self.queue_note, width=280)
         explain = pn.pane.HTML(
             "<p class='eha-note'>Least squares on eq. 15 filtered by H(s) = 1/(0.01 s + 1) (eqs. 16-18): "
             "y<sub>1</sub> = A<sub>1</sub>p<sub>1</sub> − A<sub>2</sub>p<sub>2</sub> = M dv/dt + B v + "

@@ -1,0 +1,75 @@
+"""The student's own data: the app's exports read back give the same estimates; bad files get their message."""
+
+import json
+
+import numpy as np
+import pytest
+
+from eha_app.state import AppState
+from eha_app.tabs.identification import IdentificationTab
+
+
+def upload(lse, blob: bytes, filename: str):
+    lse._upload = (blob, filename)
+    return lse.read_upload()
+
+
+@pytest.fixture(scope="module")
+def simulated():
+    lse = IdentificationTab(AppState()).lse
+    lse.run()
+    return lse, dict(lse.result.estimates)
+
+
+@pytest.mark.parametrize("kind", ["csv", "mat"])
+def test_exported_data_uploaded_again_gives_the_same_estimates(simulated, kind):
+    exported, estimates = simulated
+    blob = exported.data_bytes(kind)
+    lse = IdentificationTab(AppState()).lse
+    upload(lse, blob, f"eha_lse_data.{kind}")
+    assert lse.own_data is not None and "Using your data" in lse.upload_note.object
+    lse.run()
+    for k, v in estimates.items():
+        np.testing.assert_allclose(lse.result.estimates[k], v, rtol=1e-6, atol=1e-6, err_msg=k)
+    assert "not re-simulated" in lse.table.object
+    lse.use_simulated()
+    assert lse.own_data is None and lse.view.status == "stale"
+
+
+def test_estimates_download_as_csv_and_json(simulated):
+    lse, estimates = simulated
+    rows = json.loads(lse.estimates_bytes("json"))["estimates"]
+    assert {r["parameter"]: r["estimate"] for r in rows} == pytest.approx(estimates)
+    assert all(r["ci95_low"] <= r["estimate"] <= r["ci95_high"] for r in rows)
+    header = lse.estimates_bytes("csv").decode().splitlines()[0]
+    assert header == "parameter,estimate,std_error,ci95_low,ci95_high,nominal"
+
+
+def test_a_file_with_other_column_names_is_mapped(simulated):
+    exported, estimates = simulated
+    text = exported.data_bytes("csv").decode().replace("t,x,v,p1,p2,u", "time,pos,vel,pa,pb,cmd", 1)
+    lse = IdentificationTab(AppState()).lse
+    upload(lse, text.encode(), "lab.csv")
+    assert lse.own_data is None and lse.mapping.visible
+    assert "no column t, x, v, p1, p2, u: the file has time, pos, vel, pa, pb, cmd" in lse.mapping.objects[0].object
+    for c, name in zip(("t", "x", "v", "p1", "p2", "u"), ("time", "pos", "vel", "pa", "pb", "cmd"), strict=True):
+        lse.mapping_selects[c].value = name
+    lse.mapping_button.clicks += 1
+    assert lse.own_data is not None and not lse.mapping.visible
+    lse.run()
+    np.testing.assert_allclose(lse.result.estimates["M"], estimates["M"], rtol=1e-6)
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"t,x,v,p1,p2,u\n0,0,0,1.2e7,1.8e7,abc\n", "column u, row 1 (line 2): &#x27;abc&#x27; is not a number"),
+    (b"t,x,v,p1,p2,u\n" + b"".join(b"%g,0,0,1.2e7,1.8e7,1\n" % (k * 1e-3) for k in range(10)),
+     "10 rows of data; need at least 50"),
+    (b"t,x,v,p1,p2,u\n" + b"".join(b"%g,0,0,1.2e7,1.8e7,1\n" % (k * 1e-3 + (k > 30) * 5e-4) for k in range(60)),
+     "column t, row 32 (line 33): the sampling is not uniform"),
+])
+def test_malformed_uploads_get_their_message(content, message):
+    lse = IdentificationTab(AppState()).lse
+    upload(lse, content, "bad.csv")
+    assert lse.own_data is None
+    assert "your file = &#x27;bad.csv&#x27; is not allowed" in lse.upload_note.object
+    assert message in lse.upload_note.object
