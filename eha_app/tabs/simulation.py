@@ -261,6 +261,9 @@ class SimulationTab(pn.viewable.Viewer):
                         css_classes=["eha-sim-info"])
         self._show(list(_paper_figure_2(self.state.params)), None)
         self.view.shown(self.key("nonlinear", "all"))
+        if self.preset == "custom":
+            # opened from a link (or a reload) with inputs of its own: run those, as typed
+            self._inputs_changed()
         self.plot_area.objects = [pn.pane.Bokeh(self.info, sizing_mode="stretch_width"),
                                   pn.pane.Bokeh(self.grid.layout, sizing_mode="stretch_width", min_height=540)]
 
