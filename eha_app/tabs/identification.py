@@ -549,7 +549,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
     def __panel__(self):
         controls = pn.Column(self.form, self.upload_note, self.upload, self.mapping, self.simulated_button,
                              self.notice, self.button, self.all_button, self.handin_button, self.verdict,
-                             pn.FlexBox(*self.downloads, width=270), self.queue_note, width=280)
+                             pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"), self.queue_note, width=280)
         explain = pn.pane.HTML(
             "<p class='eha-note'>Least squares on eq. 15 filtered by H(s) = 1/(0.01 s + 1) (eqs. 16-18): "
             "y<sub>1</sub> = A<sub>1</sub>p<sub>1</sub> − A<sub>2</sub>p<sub>2</sub> = M dv/dt + B v + "
