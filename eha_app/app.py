@@ -9,6 +9,7 @@ opening the page together would otherwise all pay at once).
 from __future__ import annotations
 
 import html
+import io
 import logging
 import os
 from collections.abc import Callable
@@ -184,11 +185,13 @@ def create_app(state: AppState | None = None, *, query: dict | None = None, runn
         '<h2 style="margin:4px 0">Electro-hydraulic actuator: modeling and identification</h2>'
         f'<span style="color:#666">a single-rod cylinder driven by a proportional valve</span>{who}</div>',
         sizing_mode="stretch_width")
-    page = pn.Column(ConnectionWatch(), header, lazy.tabs, sizing_mode="stretch_width", margin=(0, 10))
+    page = pn.Column(ConnectionWatch(), header, sizing_mode="stretch_width", margin=(0, 10))
+    page.eha_query = query
     page.eha_state = state
     page.eha_tabs = lazy.tabs
     page.eha_lazy = lazy
     page.eha_runner = runner
+    page.extend([settings_row(page), lazy.tabs])
     if served_document() is not None:
         def closed(_context):
             # nobody will see these results: free the workers for the others
@@ -198,6 +201,34 @@ def create_app(state: AppState | None = None, *, query: dict | None = None, runn
                 log.info("a page was closed: cancelled %s", ", ".join(j.label for j in jobs))
         pn.state.on_session_destroyed(closed)
     return page
+
+
+def settings_row(page) -> pn.Row:
+    """Save the session's settings as JSON, or load a saved file (every input of every tab)."""
+    from . import settings
+
+    save = pn.widgets.FileDownload(callback=lambda: io.BytesIO(settings.to_bytes(page)), filename="eha_settings.json",
+                                   label="Save settings", width=130, css_classes=["eha-save-settings"],
+                                   description="every input of every tab, as a JSON file")
+    load = pn.widgets.FileInput(accept=".json", width=230, css_classes=["eha-load-settings"])
+    note = pn.pane.HTML("", css_classes=["eha-settings-note"], styles={"font-size": "12px"},
+                        sizing_mode="stretch_width")
+
+    def loaded(_event):
+        if load.value is None:
+            return
+        try:
+            notes = settings.apply(page, bytes(load.value), load.filename or "settings.json")
+        except settings.SettingsError as exc:
+            note.object = f"<span class='eha-warn'>{html.escape(str(exc))}</span>"
+            return
+        note.object = ("<span class='eha-ok'>Settings loaded.</span> "
+                       + " ".join(f"<span class='eha-note'>{html.escape(n)}</span>" for n in notes))
+
+    load.param.watch(loaded, "value")
+    page.eha_settings_note = note
+    return pn.Row(save, pn.pane.HTML("<span class='eha-note'>Load settings:</span>", margin=(12, 4, 0, 10)), load,
+                  note, sizing_mode="stretch_width", css_classes=["eha-settings-row"])
 
 
 def _exercise_page(state: AppState, exercise, query: dict, runner):

@@ -1,0 +1,93 @@
+"""A session's settings as a JSON file: every input of every tab, saved and loaded again.
+
+The file holds the texts as typed (display units), by tab; loading one types
+them in, so a bad value gets the same message as a bad value typed, and the
+results follow (tab 2 re-runs; tab 3's results are marked out of date). An
+exercise's hidden parameters are neither saved nor loaded.
+"""
+
+from __future__ import annotations
+
+import json
+
+from eha_core.params import PARAM_NAMES
+
+__all__ = ["FORMAT", "collect", "apply", "SettingsError"]
+
+FORMAT = "eha-settings/1"
+_SECTIONS = ("parameters", "simulation", "least_squares", "frequency")
+
+
+class SettingsError(ValueError):
+    """A settings file that cannot be loaded, with what is wrong."""
+
+
+def _defaults():
+    from .tabs.identification import FREQ_DEFAULTS, LSE_DEFAULTS
+    from .tabs.simulation import DEFAULT_TEXTS
+
+    return {"simulation": DEFAULT_TEXTS, "least_squares": LSE_DEFAULTS, "frequency": FREQ_DEFAULTS}
+
+
+def _tabs(page):
+    built = page.eha_lazy.built
+    sim = built.get(1)
+    ident = built.get(2)
+    return {"simulation": sim.form if sim is not None else None,
+            "least_squares": ident.lse.form if ident is not None else None,
+            "frequency": ident.freq.form if ident is not None and ident.freq is not None else None}
+
+
+def collect(page) -> dict:
+    """Every input of the session (texts as typed), as the settings file holds them."""
+    state = page.eha_state
+    out = {"format": FORMAT,
+           "parameters": {**{n: state.texts[n] for n in PARAM_NAMES if n not in state.hidden}, "kp": state.kp_text},
+           "tab": int(page.eha_tabs.active) + 1}
+    forms = _tabs(page)
+    for section, defaults in _defaults().items():
+        form = forms[section]
+        values = dict(form.values) if form is not None else {k: page.eha_query.get(k, v) for k, v in defaults.items()}
+        out[section] = {k: str(v) for k, v in values.items() if k in defaults}
+    return out
+
+
+def to_bytes(page) -> bytes:
+    return json.dumps(collect(page), indent=1, ensure_ascii=False).encode()
+
+
+def apply(page, data: bytes | str, filename: str = "settings.json") -> list[str]:
+    """Type a settings file's values into the session; returns notes (fields it does not know)."""
+    try:
+        doc = json.loads(data)
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise SettingsError(f"settings = {filename!r} is not allowed: it is not JSON ({exc})") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise SettingsError(f"settings = {filename!r} is not allowed: not a settings file of this app "
+                            f"(format {FORMAT!r} expected); save one with “Save settings”")
+    notes = []
+    unknown = [k for k in doc if k not in (*_SECTIONS, "format", "tab")]
+    state = page.eha_state
+    params = doc.get("parameters") or {}
+    for name, text in params.items():
+        if name in state.hidden:
+            continue
+        if name in PARAM_NAMES or name == "kp":
+            state.set_text(name, str(text))
+        else:
+            unknown.append(f"parameters.{name}")
+    tab1 = page.eha_lazy.built.get(0)
+    if tab1 is not None:
+        tab1.form.values = tab1._texts()
+    forms = _tabs(page)
+    for section, defaults in _defaults().items():
+        values = {k: str(v) for k, v in (doc.get(section) or {}).items() if k in defaults}
+        unknown += [f"{section}.{k}" for k in (doc.get(section) or {}) if k not in defaults]
+        form = forms[section]
+        if form is not None:
+            form.set_values(**values)
+        else:                   # the tab is built later, from the page's query
+            page.eha_query.update(values)
+    if unknown:
+        notes.append(f"settings = {filename!r}: ignored what this app does not know: {', '.join(unknown)}")
+    return notes
