@@ -601,6 +601,15 @@ class FrequencyPanel(pn.viewable.Viewer):
                                    css_classes=["eha-freq-alert"])
         self.unstable = pn.pane.Alert("", alert_type="warning", visible=False, sizing_mode="stretch_width",
                                       css_classes=["eha-freq-unstable"])
+        self.downloads = [
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.data_bytes("csv")), filename="eha_closed_loop.csv",
+                                    label="Data (CSV)", disabled=True, width=128, css_classes=["eha-dl-freq-csv"]),
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.data_bytes("mat")), filename="eha_closed_loop.mat",
+                                    label="Data (.mat)", disabled=True, width=128, css_classes=["eha-dl-freq-mat"]),
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.estimate_bytes()),
+                                    filename="eha_transfer_function.json", label="Estimate (JSON)", disabled=True,
+                                    width=260, css_classes=["eha-dl-freq-json"]),
+        ]
         self.area = pn.Column(self.unstable, self.summary, self.backout, sizing_mode="stretch_width")
         self.kp_note = pn.pane.HTML("", width=260, css_classes=["eha-freq-kp"], margin=(0, 10))
         self.config_errors: dict = {}
@@ -720,6 +729,22 @@ class FrequencyPanel(pn.viewable.Viewer):
         self.preview_runner.run("excitation preview", lambda token: plots.excitation_view(cfg.excitation(), ts),
                                 show, fail=fail)
 
+    def data_bytes(self, kind: str) -> bytes:
+        """The closed-loop record the estimate was made from: t, r, x, u (SI), as CSV or .mat."""
+        from eha_core.data import write_data
+
+        d = self.result.data
+        return write_data({"t": d.t, "r": d.r, "x": d.x, "u": d.u}, kind)
+
+    def estimate_bytes(self) -> bytes:
+        """The estimated transfer function with its fit, validation and settings (JSON)."""
+        fi = self.result
+        out = {"estimate": fi.estimate.to_dict(), "settings": {k: getattr(fi.config, k) for k in (
+            "signal_type", "n_samples", "seed", "ts", "kp", "model", "n_poles", "n_zeros", "initial_condition",
+            "input_offset")},
+            "validation_fit_percent": None if fi.validation is None else float(fi.validation.fit_percent)}
+        return json.dumps(out, indent=1, default=float).encode()
+
     def _fail(self, message: str) -> None:
         self.alert.object = f"The experiment failed: {message}"
         self.alert.visible = True
@@ -758,6 +783,8 @@ class FrequencyPanel(pn.viewable.Viewer):
                       + ".</p>")
             self.summary.object = freq_summary_html(fi, hidden) + timing
             self.backout.object = "<h4>Backed-out parameters (eq. 27)</h4>" + backout_html(fi, hidden)
+            for d in self.downloads:
+                d.disabled = False
             alert = estimate_alert(fi.estimate)
             self.unstable.object = alert
             self.unstable.visible = bool(alert)
@@ -771,7 +798,8 @@ class FrequencyPanel(pn.viewable.Viewer):
                                note=self._note)
 
     def __panel__(self):
-        config = pn.Column(self.kp_note, self.form, self.error, self.button, self.queue_note, width=280)
+        config = pn.Column(self.kp_note, self.form, self.error, self.button,
+                           pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"), self.queue_note, width=280)
         results = pn.Column(self.alert, self.figure_tabs, self.views["summary"].banner, self.area,
                             sizing_mode="stretch_width", min_width=440)
         return side_by_side(config, results)

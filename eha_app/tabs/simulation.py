@@ -179,6 +179,22 @@ def beyond_range_html(results) -> str:
             "supply.</div>")
 
 
+def results_mat(results) -> bytes:
+    """All runs as a MATLAB .mat file: t (N x 1) and x, v, p1, p2, u, d (N x runs, SI), with the runs'
+    labels and models (cell arrays): ``load eha_simulation.mat; plot(t, x)``."""
+    import numpy as np
+    import scipy.io
+
+    t = results[0].t
+    data = {"t": t[:, None], "labels": np.array([r.label for r in results], dtype=object),
+            "models": np.array([r.model for r in results], dtype=object)}
+    for name in ("x", "v", "p1", "p2", "u", "d"):
+        data[name] = np.column_stack([getattr(r, name) for r in results])
+    buf = io.BytesIO()
+    scipy.io.savemat(buf, data)
+    return buf.getvalue()
+
+
 def results_csv(results) -> str:
     """All runs in one table: run, model, t, x, v, p1, p2, u, d (SI units)."""
     return runs_to_pandas(results).to_csv(index=False, float_format="%.10g")
@@ -239,7 +255,10 @@ class SimulationTab(pn.viewable.Viewer):
         for model, button in self.run_buttons.items():
             button.on_click(self._run_handler(model))
         self.download = pn.widgets.FileDownload(callback=self._csv, filename="eha_simulation.csv",
-                                                color="default", label="Download CSV", disabled=True, width=270)
+                                                color="default", label="Download CSV", disabled=True, width=134)
+        self.download_mat = pn.widgets.FileDownload(callback=lambda: io.BytesIO(results_mat(self.results)),
+                                                    filename="eha_simulation.mat", color="default",
+                                                    label="Download .mat", disabled=True, width=134)
         if restored:
             self.preset = "custom"       # the student had been editing inputs
         state.param.watch(self._update_enabled, "valid")
@@ -442,6 +461,7 @@ class SimulationTab(pn.viewable.Viewer):
             self.alert.object = "; ".join(f"{r.label} ({r.model}): {r.message}" for r in failed)
             self.alert.visible = True
         self.download.disabled = False
+        self.download_mat.disabled = False
 
     def _csv(self):
         return io.BytesIO(results_csv(self.results).encode())
@@ -450,7 +470,8 @@ class SimulationTab(pn.viewable.Viewer):
     def __panel__(self):
         presets = pn.Column(pn.pane.HTML("<b>Paper cases</b> (one click runs)", margin=(0, 10)),
                             pn.FlexBox(*self.preset_buttons), width=280)
-        runs = pn.Column(*self.run_buttons.values(), self.download, self.queue_note, width=280)
+        runs = pn.Column(*self.run_buttons.values(), pn.Row(self.download, self.download_mat), self.queue_note,
+                         width=280)
         side = pn.Column(presets, runs, self.form, width=290)
         main = pn.Column(self.notice, self.alert, self.view.banner, self.plot_area, sizing_mode="stretch_width",
                          min_width=440)

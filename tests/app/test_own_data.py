@@ -73,3 +73,17 @@ def test_malformed_uploads_get_their_message(content, message):
     assert lse.own_data is None
     assert "your file = &#x27;bad.csv&#x27; is not allowed" in lse.upload_note.object
     assert message in lse.upload_note.object
+
+
+def test_frequency_downloads():
+    from eha_core.data import read_data
+
+    panel = IdentificationTab(AppState()).frequency_panel()
+    panel.run()
+    for kind in ("csv", "mat"):
+        back = read_data(panel.downloads[0 if kind == "csv" else 1].callback().read(), ("t", "r", "x", "u"),
+                         filename=f"loop.{kind}")
+        np.testing.assert_allclose(back["x"], panel.result.data.x, rtol=1e-9, atol=1e-15)
+    est = json.loads(panel.downloads[2].callback().read())
+    assert est["estimate"]["den"] == pytest.approx(list(panel.result.estimate.den))
+    assert est["settings"]["kp"] == 10.0 and est["validation_fit_percent"] > 90

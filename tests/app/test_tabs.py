@@ -174,3 +174,14 @@ def test_the_server_warm_up_runs():
     app_module._warm = False
     app_module.warm_up()
     assert app_module._warm
+
+
+def test_simulation_downloads_as_mat():
+    import scipy.io
+
+    tab = SimulationTab(AppState())
+    tab.run("both")
+    mat = scipy.io.loadmat(io.BytesIO(tab.download_mat.callback().read()))
+    assert mat["t"].shape == (5001, 1) and mat["x"].shape == (5001, 8)
+    np.testing.assert_allclose(mat["p2"][:, 7], tab.results[7].p2)
+    assert [str(m[0]) for m in mat["models"].ravel()][:1] == ["nonlinear"]
