@@ -66,9 +66,17 @@ LSE_FORM = (Group("Least squares", (
           short="harmonic frequency"),
     Field("lse_seed", "noise seed", "integer", lo=0, hi=10**6, short="noise seed"),
     Field("lse_excitation", "excitation", "select", options=tuple(EXCITATIONS.items()), short="excitation"),
-)),)
+)), Group("Sensor noise (simulated measurements)", (
+    Field("lse_noise_x", "σ of x", "number", unit="mm", lo=0.0, hi=10.0, short="σ x",
+          tip="white Gaussian noise added to the position sensor, drawn from the noise seed"),
+    Field("lse_noise_v", "σ of v", "number", unit="mm/s", lo=0.0, hi=1000.0, short="σ v",
+          tip="white Gaussian noise added to the velocity sensor"),
+    Field("lse_noise_p", "σ of p1, p2", "number", unit="MPa", lo=0.0, hi=10.0, short="σ p",
+          tip="white Gaussian noise added to each pressure sensor"),
+), collapsible=True, collapsed=True),)
 LSE_DEFAULTS = {"lse_scenario": "none", "lse_custom": "sine:1000:3", "lse_model": "constant", "lse_freq": "",
-                "lse_seed": "0", "lse_excitation": "paper"}
+                "lse_seed": "0", "lse_excitation": "paper", "lse_noise_x": "0", "lse_noise_v": "0",
+                "lse_noise_p": "0"}
 _LSE_FIELDS = {f.name: f for g in LSE_FORM for f in g.fields}
 
 
@@ -82,6 +90,14 @@ class LseRequest:
     frequency_hz: float | None = None
     seed: int = 0
     excitation: str = "paper"
+    noise: tuple[float, float, float] = (0.0, 0.0, 0.0)     # σ of x [mm], v [mm/s], p1 and p2 [MPa]
+
+    def measurement_noise(self) -> dict[str, float] | None:
+        """The sensors' noise in SI, for :func:`eha_core.experiments.lse_data` (None: noise-free)."""
+        sx, sv, sp = self.noise
+        if not any(self.noise):
+            return None
+        return {"x": sx * 1e-3, "v": sv * 1e-3, "p1": sp * 1e6, "p2": sp * 1e6}
 
     def disturbance(self):
         """d(t): a scenario of Table 4, or the custom text in the signal grammar."""
@@ -118,7 +134,8 @@ def parse_lse(texts: dict) -> tuple[LseRequest, dict]:
             freq = None
     req = LseRequest(scenario=values.get("lse_scenario", "none"), custom=texts.get("lse_custom", ""),
                      model=values.get("lse_model", "constant"), frequency_hz=freq,
-                     seed=values.get("lse_seed", 0), excitation=values.get("lse_excitation", "paper"))
+                     seed=values.get("lse_seed", 0), excitation=values.get("lse_excitation", "paper"),
+                     noise=tuple(float(values.get(k, 0.0)) for k in ("lse_noise_x", "lse_noise_v", "lse_noise_p")))
     if "lse_custom" not in hidden and not errors.get("lse_custom"):
         try:
             req.disturbance()
@@ -462,7 +479,8 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                 return res, plots.lse_view(own, None), ("Your data: the model is not re-simulated (the input "
                                                         "is known only at its samples)."), own
             d = req.disturbance()
-            data = lse_data(params, d, u=u, t_end=t_end, seed=req.seed, cancel=token)
+            data = lse_data(params, d, u=u, t_end=t_end, seed=req.seed, measurement_noise=req.measurement_noise(),
+                            cancel=token)
             res = identify_lse(data, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
                                cancel=token)
             try:

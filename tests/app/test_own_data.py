@@ -87,3 +87,19 @@ def test_frequency_downloads():
     est = json.loads(panel.downloads[2].callback().read())
     assert est["estimate"]["den"] == pytest.approx(list(panel.result.estimate.den))
     assert est["settings"]["kp"] == 10.0 and est["validation_fit_percent"] > 90
+
+
+def test_sensor_noise_changes_the_estimates_reproducibly():
+    lse = IdentificationTab(AppState()).lse
+    lse.run()
+    clean = dict(lse.result.estimates)
+    lse.form.values = {**lse.form.values, "lse_noise_p": "0.05", "lse_noise_v": "0.2"}
+    assert lse.view.status == "stale"
+    lse.run()
+    noisy = dict(lse.result.estimates)
+    assert abs(noisy["M"] / clean["M"] - 1) > 1e-4                    # the noise shows in the estimates
+    assert lse.result.std_errors["M"] > 0
+    lse.run()
+    assert lse.result.estimates == pytest.approx(noisy)               # seeded: the same draw again
+    lse.form.values = {**lse.form.values, "lse_noise_p": "-1"}
+    assert "σ p = -1 is not allowed" in lse.form.errors["lse_noise_p"] and lse.button.disabled
