@@ -211,6 +211,15 @@ def settings_row(page) -> pn.Row:
                                    label="Save settings", width=130, css_classes=["eha-save-settings"],
                                    description="every input of every tab, as a JSON file")
     load = pn.widgets.FileInput(accept=".json", width=230, css_classes=["eha-load-settings"])
+
+    def report():
+        from .report import session_report
+
+        return io.BytesIO(session_report(page))
+
+    lab_report = pn.widgets.FileDownload(callback=report, filename="eha_session_report.html",
+                                         label="Report of this session", width=190, css_classes=["eha-session-report"],
+                                         description="what you ran, as one HTML file: settings, plots, estimates")
     note = pn.pane.HTML("", css_classes=["eha-settings-note"], styles={"font-size": "12px"},
                         sizing_mode="stretch_width")
 
@@ -228,7 +237,7 @@ def settings_row(page) -> pn.Row:
     load.param.watch(loaded, "value")
     page.eha_settings_note = note
     return pn.Row(save, pn.pane.HTML("<span class='eha-note'>Load settings:</span>", margin=(12, 4, 0, 10)), load,
-                  note, sizing_mode="stretch_width", css_classes=["eha-settings-row"])
+                  lab_report, note, sizing_mode="stretch_width", css_classes=["eha-settings-row"])
 
 
 def _exercise_page(state: AppState, exercise, query: dict, runner):

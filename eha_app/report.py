@@ -390,9 +390,19 @@ def _page(r, numbers, params_html, lse_html, freq_html, diff_table, diff_items, 
                    "The data behind every figure and table: <code>data/*.csv</code>; "
                    "every number: <code>data/results.json</code>.</p>"),
     ])
+    header = f"""<h1>Modeling and identification of an electro-hydraulic actuator: the paper's results, reproduced</h1>
+<p>Every figure and table of <i>Modeling and System Identification of Hydraulic-electric Actuator: a GUI
+application for illustration</i>, regenerated with this project and set beside the paper's printed numbers.
+Seed {settings.seed}; eha {html.escape(vers.get('eha', '?'))}.</p>
+<nav>{toc}</nav>"""
+    return html_document("EHA: the paper's results, reproduced", header, body, script, resources)
+
+
+def html_document(title: str, header: str, body: str, script: str, resources: str) -> str:
+    """One self-contained page (Bokeh inlined): the report's and a session report's frame."""
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">
-<title>EHA: the paper's results, reproduced</title>
+<title>{html.escape(title)}</title>
 {resources}
 <style>
 body {{ font-family: Helvetica, Arial, sans-serif; margin: 0 auto; max-width: 1100px; padding: 0 20px 60px;
@@ -408,12 +418,76 @@ li {{ margin-bottom: 8px; }}
 {CSS}
 </style></head>
 <body>
-<header><h1>Modeling and identification of an electro-hydraulic actuator: the paper's results, reproduced</h1>
-<p>Every figure and table of <i>Modeling and System Identification of Hydraulic-electric Actuator: a GUI
-application for illustration</i>, regenerated with this project and set beside the paper's printed numbers.
-Seed {settings.seed}; eha {html.escape(vers.get('eha', '?'))}.</p>
-<nav>{toc}</nav></header>
+<header>{header}</header>
 {body}
 {script}
 </body></html>
 """
+
+
+# -- the report of one session (the lab report a student hands in) ------------------------
+
+def session_report(page) -> bytes:
+    """What this student ran, as one self-contained HTML file: their settings, the plots, the
+    estimates with intervals, the fit and the back-out, drawn by the same code as ``eha reproduce``
+    (an exercise's hidden values are left out as on the page)."""
+    from bokeh.embed import components
+
+    from . import settings as session_settings
+
+    state = page.eha_state
+    hidden = state.hidden
+    built = page.eha_lazy.built
+    figures, sections = {}, []
+    cfg = session_settings.collect(page)
+    rows = [[html.escape(k), html.escape(str(v))] for k, v in cfg["parameters"].items()]
+    intro = ("" if not hidden else
+             f"<p>Exercise <b>{html.escape(state.exercise.title)}</b>, student <b>{html.escape(state.student)}</b>; "
+             f"hidden: {html.escape(', '.join(hidden))}.</p>")
+    sections.append(("parameters", "Parameters (as typed, display units)", intro + table_html(["", "value"], rows)))
+    sim = built.get(1)
+    if sim is not None and sim.results:
+        figures["sim"] = plots.TimeSeriesGrid(sim.results).layout
+        runs = ", ".join(html.escape(f"{r.label} ({r.model})") for r in sim.results)
+        sections.append(("simulation", "Simulation", _stale_note(sim.view) + f"<p>Runs: {runs}.</p>{{{{sim}}}}"))
+    ident = built.get(2)
+    if ident is not None and ident.lse.result is not None:
+        lse = ident.lse
+        fig = plots.LseFitFigure()
+        fig.update(plots.lse_view(lse.last_data, None))
+        figures["lse"] = fig.layout
+        sections.append(("lse", "Least squares (eqs. 15-18)", _stale_note(lse.view)
+                         + lse_table_html(lse.result, None, hidden=hidden) + "{{lse}}"))
+    freq = ident.freq if ident is not None else None
+    if freq is not None and freq.result is not None:
+        fi = freq.result
+        view = plots.frequency_view(fi, hidden)
+        for key, cls in (("fit", plots.FitFigure), ("bode", plots.BodeFigure), ("validation", plots.ValidationFigure)):
+            fig = cls()
+            if key == "fit":
+                fig.update(view, fi.config.model)
+            else:
+                fig.update(view)
+            figures[key] = fig.layout
+        sections.append(("frequency", "Transfer function (eqs. 19-27)", _stale_note(freq.views["summary"])
+                         + freq_summary_html(fi, hidden) + "{{fit}}{{bode}}{{validation}}"
+                         + "<h3>Backed-out parameters (eq. 27)</h3>" + backout_html(fi, hidden)))
+    sections.append(("settings", "Settings of this session (load them with “Load settings”)",
+                     f"<pre>{html.escape(json.dumps(cfg, indent=1, ensure_ascii=False))}</pre>"))
+    script, divs = components(figures) if figures else ("", {})
+    body = ""
+    for sid, title, content in sections:
+        for key, div in divs.items():
+            content = content.replace("{{" + key + "}}", f'<div class="fig">{div}</div>')
+        body += f'<section id="{sid}"><h2>{title}</h2>{content}</section>'
+    when = _dt.datetime.now().isoformat(timespec="seconds")
+    header = (f"<h1>Electro-hydraulic actuator: report of a session</h1><p>Generated {when} by the EHA app "
+              f"(eha {html.escape(versions().get('eha', '?'))}).</p>")
+    return html_document("EHA: report of a session", header, body, script, _bokeh_js()).encode()
+
+
+def _stale_note(view) -> str:
+    if view.status in ("current", "empty"):
+        return ""
+    return ("<p class='eha-warn'>Out of date: the inputs changed after this run; it shows the run's "
+            "results.</p>")

@@ -52,3 +52,20 @@ def test_a_bad_value_in_a_settings_file_gets_the_typed_message():
 def test_a_file_that_is_not_settings_is_refused(content, message):
     with pytest.raises(settings.SettingsError, match=message):
         settings.apply(create_app(AppState()), content, "x.json")
+
+
+def test_the_session_report_holds_what_the_student_ran(tmp_path):
+    from eha_app.report import session_report
+
+    page = create_app(AppState())
+    page.eha_state.set_text("M", "6000")
+    page.eha_lazy.build(1).run("both")
+    ident = page.eha_lazy.build(2)
+    ident.lse.run()
+    ident.frequency_panel().run()
+    text = session_report(page).decode()
+    for part in ("report of a session", "Simulation", "Least squares", "Transfer function", "95 % interval",
+                 "Backed-out parameters", "&quot;M&quot;: &quot;6000&quot;", "Bokeh"):
+        assert part in text, part
+    assert text.count('class="fig"') == 5                     # the grid, the fit of eqs. 15-18, Figs. 11-13
+    assert "<script src=" not in text and "<link" not in text            # all inline: it opens offline

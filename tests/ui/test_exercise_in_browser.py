@@ -124,15 +124,27 @@ def test_the_secret_never_reaches_a_students_browser(browser, tmp_path):
         page.locator(".bk-header .bk-tab", has_text="1. Parameters").first.click()
         page.wait_for_selector(".eha-hidden-note")
         pages.append(page.content())
+        downloads = []
+        for button in ("Report of this session", "Save settings", "Estimates (JSON)", "Data (CSV)"):
+            with page.expect_download() as download:
+                if button in ("Estimates (JSON)", "Data (CSV)"):
+                    page.locator(".bk-header .bk-tab", has_text="3. Identification").first.click()
+                    page.locator(".bk-tab", has_text="Time domain").first.click()
+                page.get_by_role("button", name=button).first.click()
+            downloads.append(open(download.value.path(), encoding="utf-8").read())
+        report = downloads[0]
+        assert "report of a session" in report and "Least squares" in report
+        # the report's text without Bokeh's inlined JavaScript (its own numbers are not the student's)
+        report_text = re.sub(r"<script[^>]*>.*?</script>", "", report, flags=re.S)
         messages = [f if isinstance(f, str) else f.decode("latin-1") for f in frames]
-        blob = "\n".join(pages + [csv_text] + messages)
+        blob = "\n".join(pages + [csv_text] + messages + downloads)
         assert len(frames) > 20 and "s42" in blob                  # the capture saw the session
         assert ex.secret not in blob and "secret" not in blob.lower()
         leaks = {n: s for n in HIDE for s in formats(getattr(truth, n), DISPLAY_SCALE[n]) if appears(s, blob)}
         assert not leaks, {n: surroundings(s, blob) for n, s in leaks.items()}
         # rounded to 4-6 digits too, in the pages and messages (the simulated data's thousands of numbers
         # hold any 4-digit one), once the student's own estimates are taken out of the text
-        blob = "\n".join(pages + [m for m in messages if m.startswith("{")])
+        blob = "\n".join(pages + [m for m in messages if m.startswith("{")] + [report_text] + downloads[1:3])
         own = sorted(the_students_own_numbers(truth), key=len, reverse=True)
         for number in own:
             blob = blob.replace(number, "·")
