@@ -212,16 +212,32 @@ def settings_row(page) -> pn.Row:
                                    description="every input of every tab, as a JSON file")
     load = pn.widgets.FileInput(accept=".json", width=230, css_classes=["eha-load-settings"])
 
-    def report():
-        from .report import session_report
-
-        return io.BytesIO(session_report(page))
-
-    lab_report = pn.widgets.FileDownload(callback=report, filename="eha_session_report.html",
-                                         label="Report of this session", width=190, css_classes=["eha-session-report"],
-                                         description="what you ran, as one HTML file: settings, plots, estimates")
     note = pn.pane.HTML("", css_classes=["eha-settings-note"], styles={"font-size": "12px"},
                         sizing_mode="stretch_width")
+    # The report takes about 0.8 s to draw: a worker prepares it (the page's thread serves the
+    # other students meanwhile), then it is offered for download.
+    lab_report = pn.widgets.Button(label="Report of this session", width=190, css_classes=["eha-session-report"],
+                                   description="what you ran, as one HTML file: settings, plots, estimates")
+    lab_download = pn.widgets.FileDownload(filename="eha_session_report.html", label="Download the report",
+                                           visible=False, width=190, color="success",
+                                           css_classes=["eha-session-report-download"])
+
+    def prepare(_event):
+        from .report import session_report
+
+        def show(data, _job):
+            lab_download.file = io.BytesIO(data)
+            lab_download.label = f"Download the report ({len(data) / 1e6:.1f} MB)"
+            lab_download.visible = True
+
+        def fail(message):
+            note.object = f"<span class='eha-warn'>The report could not be made: {html.escape(message)}</span>"
+
+        lab_download.visible = False
+        page.eha_runner.run("session report", lambda _token: session_report(page), show, fail=fail)
+
+    lab_report.on_click(prepare)
+    page.eha_report_button, page.eha_report_download = lab_report, lab_download
 
     def loaded(_event):
         if load.value is None:
@@ -237,7 +253,7 @@ def settings_row(page) -> pn.Row:
     load.param.watch(loaded, "value")
     page.eha_settings_note = note
     return pn.Row(save, pn.pane.HTML("<span class='eha-note'>Load settings:</span>", margin=(12, 4, 0, 10)), load,
-                  lab_report, note, sizing_mode="stretch_width", css_classes=["eha-settings-row"])
+                  lab_report, lab_download, note, sizing_mode="stretch_width", css_classes=["eha-settings-row"])
 
 
 def _exercise_page(state: AppState, exercise, query: dict, runner):

@@ -69,3 +69,12 @@ def test_the_session_report_holds_what_the_student_ran(tmp_path):
         assert part in text, part
     assert text.count('class="fig"') == 5                     # the grid, the fit of eqs. 15-18, Figs. 11-13
     assert "<script src=" not in text and "<link" not in text            # all inline: it opens offline
+
+
+def test_the_report_button_prepares_the_download():
+    page = create_app(AppState())
+    page.eha_lazy.build(1)
+    assert not page.eha_report_download.visible
+    page.eha_report_button.clicks += 1                 # without a server the worker's job runs here
+    assert page.eha_report_download.visible and "MB" in page.eha_report_download.label
+    assert b"report of a session" in page.eha_report_download.file.getvalue()

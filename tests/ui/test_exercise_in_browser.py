@@ -125,7 +125,9 @@ def test_the_secret_never_reaches_a_students_browser(browser, tmp_path):
         page.wait_for_selector(".eha-hidden-note")
         pages.append(page.content())
         downloads = []
-        for button in ("Report of this session", "Save settings", "Estimates (JSON)", "Data (CSV)"):
+        page.get_by_role("button", name="Report of this session").click()       # prepared by a worker
+        page.locator(".eha-session-report-download").wait_for(state="visible", timeout=60_000)
+        for button in ("Download the report", "Save settings", "Estimates (JSON)", "Data (CSV)"):
             with page.expect_download() as download:
                 if button in ("Estimates (JSON)", "Data (CSV)"):
                     page.locator(".bk-header .bk-tab", has_text="3. Identification").first.click()
