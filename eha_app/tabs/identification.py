@@ -9,6 +9,7 @@ import json
 import math
 from dataclasses import dataclass
 
+import numpy as np
 import panel as pn
 
 from eha_core.experiments import (
@@ -288,6 +289,13 @@ class LeastSquaresPanel(pn.viewable.Viewer):
             "t, x, v, p1, p2, u (SI, or units in the header such as <code>p1[MPa]</code>).</span>",
             width=270, css_classes=["eha-lse-upload-note"])
         self.mapping = pn.Column(visible=False, width=270, css_classes=["eha-lse-mapping"])
+        # the part of the student's record to use (preprocessing: a time range)
+        self.window_form = Form(spec=[Group("Part of your record to use", (
+            Field("own_from", "from t", "text", unit="s", placeholder="its start", short="from t"),
+            Field("own_to", "to t", "text", unit="s", placeholder="its end", short="to t"),
+        )).to_spec()], values={"own_from": "", "own_to": ""}, width=270, visible=False,
+            css_classes=["eha-lse-window"], margin=(5, 10))
+        self.window_form.param.watch(lambda _e: self._update_enabled(), "values")
         self.simulated_button = pn.widgets.Button(label="Back to simulated data", width=260, visible=False,
                                                   css_classes=["eha-lse-simulated"])
         self.simulated_button.on_click(lambda _e: self.use_simulated())
@@ -313,7 +321,59 @@ class LeastSquaresPanel(pn.viewable.Viewer):
     def key(self):
         """What a least-squares run with the current inputs is computed from (None if they are not valid)."""
         req, errors = self.request()
-        return None if errors or not self.state.valid else (self.state.params, req, self.own_data_key)
+        if errors or not self.state.valid or self.window_errors():
+            return None
+        return self.state.params, req, self.own_data_key, self.window() if self.own_data is not None else None
+
+    def window(self) -> tuple[float | None, float | None]:
+        """The time range of the student's record to use (None: its start or end)."""
+        out = []
+        for name in ("own_from", "own_to"):
+            text = str(self.window_form.values.get(name, "")).strip().replace(",", ".")
+            out.append(float(text) if text else None)
+        return out[0], out[1]
+
+    def window_errors(self) -> dict:
+        """Messages of the time-range fields (in seconds, within the record, at least 50 samples)."""
+        if self.own_data is None:
+            return {}
+        t = self.own_data.t
+        errors, values = {}, {}
+        for name, label in (("own_from", "from t"), ("own_to", "to t")):
+            text = str(self.window_form.values.get(name, "")).strip()
+            if not text:
+                continue
+            try:
+                v = float(text.replace(",", "."))
+                if not math.isfinite(v):
+                    raise ValueError
+            except ValueError:
+                errors[name] = f"{label} = {text} is not allowed: enter a time in s, or leave it blank"
+                continue
+            if not t[0] <= v <= t[-1]:
+                errors[name] = f"{label} = {text} s is not allowed: your record runs from {t[0]:g} to {t[-1]:g} s"
+            values[name] = v
+        if not errors:
+            lo, hi = values.get("own_from", t[0]), values.get("own_to", t[-1])
+            n = int(np.count_nonzero((t >= lo) & (t <= hi)))
+            if n < 50:
+                target = "own_to" if "own_to" in values else "own_from"
+                errors[target] = (f"{'to t' if target == 'own_to' else 'from t'} = "
+                                  f"{self.window_form.values[target]} s is not allowed: the range [{lo:g}, {hi:g}] s "
+                                  f"holds {n} samples; need at least 50")
+        return errors
+
+    def windowed(self):
+        """The student's record cut to the chosen time range."""
+        from eha_core.identify.lse import MeasuredData
+
+        d = self.own_data
+        lo, hi = self.window()
+        keep = (d.t >= (d.t[0] if lo is None else lo)) & (d.t <= (d.t[-1] if hi is None else hi))
+        if keep.all():
+            return d
+        return MeasuredData(d.t[keep], d.x[keep], d.v[keep], d.p1[keep], d.p2[keep], d.u[keep],
+                            source=f"{d.source}, t in [{d.t[keep][0]:g}, {d.t[keep][-1]:g}] s")
 
     # -- the student's own data ---------------------------------------------------------
     def _uploaded(self, _event) -> None:
@@ -354,6 +414,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
             self.own_data = measured
             self.own_data_key = (filename, len(data), tuple(sorted((mapping or {}).items())))
             self.mapping.visible = False
+            self.window_form.visible = True
             self.simulated_button.visible = True
             self.upload_note.object = (f"<span class='eha-ok'>Using your data: {html.escape(filename)}, "
                                        f"{measured.t.size} samples every {ts * 1e3:.4g} ms. "
@@ -389,6 +450,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
     def use_simulated(self) -> None:
         self.own_data, self.own_data_key, self._upload = None, None, None
         self.simulated_button.visible = False
+        self.window_form.visible = False
         self.mapping.visible = False
         self.upload_note.object = "<span class='eha-note'>Using the simulated sensors again.</span>"
         self._inputs_changed()
@@ -435,6 +497,9 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         _, errors = self.request()
         self.form.errors = errors
         self.form.hidden = lse_hidden(self.form.values)
+        window_errors = self.window_errors()
+        self.window_form.errors = window_errors
+        errors = {**errors, **window_errors}
         ok = self.state.valid
         self.button.disabled = not ok or bool(errors)
         self.all_button.disabled = not ok or "lse_seed" in errors
@@ -470,14 +535,15 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         key = self.key()
         scenario = req.scenario if req.excitation == "paper" else None
 
-        own = self.own_data
+        own = self.windowed() if self.own_data is not None else None
 
         def compute(token):
             if own is not None:     # the student's measurements: nothing to simulate
                 res = identify_lse(own, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
                                    cancel=token)
-                return res, plots.lse_view(own, None), ("Your data: the model is not re-simulated (the input "
-                                                        "is known only at its samples)."), own
+                return res, plots.lse_view(own, None), (f"Your data ({html.escape(own.source)}, {own.t.size} "
+                                                        "samples): the model is not re-simulated (the input is "
+                                                        "known only at its samples)."), own
             d = req.disturbance()
             data = lse_data(params, d, u=u, t_end=t_end, seed=req.seed, measurement_noise=req.measurement_noise(),
                             cancel=token)
@@ -565,7 +631,8 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         return self.runner.run("hand-in", compute, show, fail=self._fail, note=self._note)
 
     def __panel__(self):
-        controls = pn.Column(self.form, self.upload_note, self.upload, self.mapping, self.simulated_button,
+        controls = pn.Column(self.form, self.upload_note, self.upload, self.mapping, self.window_form,
+                             self.simulated_button,
                              self.notice, self.button, self.all_button, self.handin_button, self.verdict,
                              pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"), self.queue_note, width=280)
         explain = pn.pane.HTML(

@@ -103,3 +103,20 @@ def test_sensor_noise_changes_the_estimates_reproducibly():
     assert lse.result.estimates == pytest.approx(noisy)               # seeded: the same draw again
     lse.form.values = {**lse.form.values, "lse_noise_p": "-1"}
     assert "σ p = -1 is not allowed" in lse.form.errors["lse_noise_p"] and lse.button.disabled
+
+
+def test_a_time_range_of_the_own_record(simulated):
+    exported, estimates = simulated
+    lse = IdentificationTab(AppState()).lse
+    upload(lse, exported.data_bytes("csv"), "run.csv")
+    assert lse.window_form.visible
+    lse.window_form.values = {"own_from": "1", "own_to": "4"}
+    lse.run()
+    assert lse.last_data.t[0] == pytest.approx(1.0) and lse.last_data.t[-1] == pytest.approx(4.0)
+    assert "t in [1, 4] s" in lse.table.object and "3001 samples" in lse.table.object
+    np.testing.assert_allclose(lse.result.estimates["M"], estimates["M"], rtol=1e-3)   # the same actuator
+    lse.window_form.values = {"own_from": "4.99", "own_to": ""}
+    assert "holds 11 samples; need at least 50" in lse.window_form.errors["own_from"] and lse.button.disabled
+    lse.window_form.values = {"own_from": "7", "own_to": ""}
+    assert "your record runs from 0 to 5 s" in lse.window_form.errors["own_from"]
+    assert lse.view.status == "stale"
