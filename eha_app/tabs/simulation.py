@@ -51,6 +51,14 @@ class SimulationRequest:
     d_sigma: float = 1000.0
     d_seed: int = 0
     t_end: float = 5.0
+    sensor_x: float = 0.0       # σ of the sensors' white noise: x [mm], v [mm/s], p1 and p2 [MPa]
+    sensor_v: float = 0.0
+    sensor_p: float = 0.0
+    sensor_seed: int = 0
+
+    @property
+    def sensor_noise(self) -> tuple[float, float, float]:
+        return self.sensor_x, self.sensor_v, self.sensor_p
 
 
 _U = Field("u_kind", "input u(t)", "select", options=(("sine", "sine"), ("step", "step"), ("square", "square"),
@@ -75,6 +83,13 @@ SIMULATION_FORM = (
         Field("t_end", "horizon", "number", unit="s", lo=0.0, hi=MAX_T_END, lo_open=True, short="horizon",
               tip="simulated time, a whole number of milliseconds"),
     )),
+    Group("Sensor noise (what the sensors would read)", (
+        Field("sensor_x", "σ of x", "number", unit="mm", lo=0.0, hi=10.0, short="sensor σ x",
+              tip="white Gaussian noise added to the drawn x, as a position sensor would add it"),
+        Field("sensor_v", "σ of v", "number", unit="mm/s", lo=0.0, hi=1000.0, short="sensor σ v"),
+        Field("sensor_p", "σ of p1, p2", "number", unit="MPa", lo=0.0, hi=10.0, short="sensor σ p"),
+        Field("sensor_seed", "sensor noise seed", "integer", lo=0, hi=10**6, short="sensor noise seed"),
+    ), collapsible=True, collapsed=True),
 )
 _FIELDS = {f.name: f for g in SIMULATION_FORM for f in g.fields}
 DEFAULT_TEXTS = {name: f.text(getattr(SimulationRequest(), name)) for name, f in _FIELDS.items()}
@@ -139,12 +154,27 @@ def build_inputs(req: SimulationRequest):
 
 
 def compute_runs(params, req: SimulationRequest, model: str, cancel=None):
-    """The runs for a request (in a worker thread in the app)."""
+    """The runs for a request (in a worker thread in the app), with the sensors' noise if asked."""
     labels, us, ds, t_end = build_inputs(req)
     results = []
     for m in MODEL_CHOICES[model]:
         results += simulate_many(params, us, ds, t_end=t_end, dt=DT, model=m, labels=labels, cancel=cancel)
-    return results
+    return with_sensor_noise(results, req) if any(req.sensor_noise) else results
+
+
+def with_sensor_noise(results, req: SimulationRequest):
+    """The runs as noisy sensors would read them: white Gaussian noise on x, v, p1, p2 (σ in the
+    form's units), drawn from the sensor seed (each run its own stream); the labels say so."""
+    import numpy as np
+
+    sx, sv, sp = req.sensor_x * 1e-3, req.sensor_v * 1e-3, req.sensor_p * 1e6
+    out = []
+    for k, r in enumerate(results):
+        rng = np.random.default_rng([req.sensor_seed, k])
+        noisy = {name: getattr(r, name) + sigma * rng.standard_normal(r.t.size)
+                 for name, sigma in (("x", sx), ("v", sv), ("p1", sp), ("p2", sp)) if sigma > 0}
+        out.append(replace(r, label=f"{r.label} + sensor noise", **noisy))
+    return out
 
 
 @lru_cache(maxsize=8)
@@ -279,8 +309,10 @@ class SimulationTab(pn.viewable.Viewer):
         self.info = Div(text="Choose a case or an input, then run a model.", sizing_mode="stretch_width",
                         css_classes=["eha-sim-info"])
         self._show(list(_paper_figure_2(self.state.params)), None)
-        self.view.shown(self.key("nonlinear", "all"))
-        if self.preset == "custom":
+        req, _ = self.request()
+        # the paper's Fig. 2 as computed: the four cases, nonlinear, no sensor noise
+        self.view.shown((self.state.params, "all", "nonlinear", (0.0, 0.0, 0.0), req.sensor_seed))
+        if self.preset == "custom" or any(req.sensor_noise):
             # opened from a link (or a reload) with inputs of its own: run those, as typed
             self._inputs_changed()
         self.plot_area.objects = [pn.pane.Bokeh(self.info, sizing_mode="stretch_width"),
@@ -300,15 +332,17 @@ class SimulationTab(pn.viewable.Viewer):
         req, errors = parse_request(self.form.values, preset)
         if errors or not self.state.valid:
             return None
-        if preset == "all":             # the four cases ignore the form's inputs
-            return self.state.params, "all", model
+        if preset == "all":             # the four cases ignore the form's inputs, not the sensors
+            return self.state.params, "all", model, req.sensor_noise, req.sensor_seed
         return self.state.params, req, model
 
     def _typed(self, event) -> None:
         if getattr(self, "_applying_preset", False):
             return                        # the preset's own run follows
-        if self.preset != "custom":
-            self.preset = "custom"        # editing an input leaves the preset
+        old, new = event.old or {}, event.new or {}
+        changed = {k for k in set(old) | set(new) if old.get(k) != new.get(k)}
+        if self.preset != "custom" and not all(k.startswith("sensor_") for k in changed):
+            self.preset = "custom"        # editing an input leaves the preset (the sensors do not)
         self._update_enabled()
         self._inputs_changed()
 

@@ -185,3 +185,18 @@ def test_simulation_downloads_as_mat():
     assert mat["t"].shape == (5001, 1) and mat["x"].shape == (5001, 8)
     np.testing.assert_allclose(mat["p2"][:, 7], tab.results[7].p2)
     assert [str(m[0]) for m in mat["models"].ravel()][:1] == ["nonlinear"]
+
+
+def test_sensor_noise_on_the_simulation_is_seeded_and_said():
+    s = AppState()
+    tab = SimulationTab(s)
+    clean = tab.results[0]
+    tab.form.values = {**tab.form.values, "sensor_p": "0.2", "sensor_seed": "3"}
+    noisy = tab.results[0]                                      # re-run at once: the four cases, with noise
+    assert noisy.label == "Case 1 + sensor noise" and "sensor noise" in tab.info.text
+    dp = noisy.p1 - clean.p1
+    assert 0.15e6 < dp.std() < 0.25e6 and np.array_equal(noisy.x, clean.x)
+    tab.run("nonlinear")
+    np.testing.assert_array_equal(tab.results[0].p1, noisy.p1)  # the same seed, the same draw
+    tab.form.values = {**tab.form.values, "sensor_p": "-1"}
+    assert "sensor σ p = -1 is not allowed" in tab.form.errors["sensor_p"]
