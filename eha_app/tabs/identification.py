@@ -30,12 +30,21 @@ from eha_core.signals import SignalSpecError, parse_signal
 
 from .. import plots
 from ..form import Field, Form, Group, parse_fields
+from ..formatting import tf_html
 from ..freshness import ResultView
 from ..glossary import GLOSSARY, term
 from ..layout import side_by_side
 from ..limits import check_frequency, check_lse
 from ..state import AppState
-from ..tables import SCENARIOS, backout_html, estimate_alert, freq_summary_html, lse_table_html, table4_html
+from ..tables import (
+    SCENARIOS,
+    backout_html,
+    estimate_alert,
+    estimation_sentences,
+    freq_summary_html,
+    lse_table_html,
+    table4_html,
+)
 from ..tasks import SessionRunner, apply_locked, frozen_models
 
 __all__ = ["IdentificationTab", "LseRequest", "LSE_FORM", "FREQ_FORM", "parse_lse", "parse_freq"]
@@ -714,6 +723,7 @@ class FrequencyPanel(pn.viewable.Viewer):
                                    sizing_mode="stretch_width", css_classes=["eha-freq-figures"])
         self._shown = {"excitation"}
         self.figure_tabs.param.watch(self._on_figure_tab, "active")
+        self._record_widgets()
         state.param.watch(self._update_enabled, "valid")
         state.param.watch(self._on_config, ["params", "kp", "valid"])
         self._on_config()
@@ -882,11 +892,132 @@ class FrequencyPanel(pn.viewable.Viewer):
         return self.runner.run("frequency experiment", compute, show, fail=self._fail, busy=[self.area],
                                note=self._note)
 
+    # -- the student's own record ---------------------------------------------------------
+    def _record_widgets(self) -> None:
+        self.record = None                  # (t, u, y, filename) of an upload
+        self.record_result = None
+        self.record_note = pn.pane.HTML(
+            "<span class='eha-note'>Or estimate H(s) from your own record: a CSV or .mat file with t, u, y "
+            "(or t, r, x), in SI or with units in the header. Its first two thirds estimate, the rest "
+            "validates.</span>", width=270, css_classes=["eha-freq-record-note"])
+        self.record_upload = pn.widgets.FileInput(accept=".csv,.mat", width=260, css_classes=["eha-freq-upload"])
+        self.record_upload.param.watch(self._record_uploaded, "value")
+        self.record_detrend = pn.widgets.Select(label="remove from u and y", value="none", width=260,
+                                                options={"nothing": "none", "the mean": "mean",
+                                                         "a linear trend": "linear"})
+        self.record_button = pn.widgets.Button(label="Estimate from your record", disabled=True, width=260,
+                                               css_classes=["eha-freq-record-run"])
+        self.record_button.on_click(lambda _e: self.run_record())
+        self.record_summary = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-freq-record-summary"])
+        self.record_bode: plots.BodeFigure | None = None
+        self.record_area = pn.Column(self.record_summary, sizing_mode="stretch_width", visible=False)
+        self.record_view = ResultView("freq-record", self.record_area,
+                                      run_hint="Press “Estimate from your record” to update it.")
+        self.record_detrend.param.watch(lambda _e: self.record_view.inputs_changed(self.record_key()), "value")
+        self.form.param.watch(lambda _e: self.record_view.inputs_changed(self.record_key()), "values")
+
+    def record_key(self):
+        cfg, _ = self.config()
+        if self.record is None or cfg is None:
+            return None
+        return (self.record[3], self.record[0].size, self.record_detrend.value, cfg.n_poles, cfg.n_zeros,
+                cfg.initial_condition, cfg.input_offset)
+
+    def _record_uploaded(self, _event) -> None:
+        from eha_core.data import DataError, read_data, sample_time
+
+        if self.record_upload.value is None:
+            return
+        data, filename = bytes(self.record_upload.value), self.record_upload.filename or "upload"
+
+        def compute(_token):
+            if len(data) > MAX_UPLOAD_BYTES:
+                raise ValueError(f"your file = {filename!r} is not allowed: it has {len(data) / 1e6:.1f} MB; at "
+                                 f"most {MAX_UPLOAD_BYTES / 1e6:g} MB")
+            try:
+                cols = read_data(data, ("t", "u", "y"), name="your file", filename=filename, min_rows=20)
+                u, y = cols["u"], cols["y"]
+            except DataError as exc:
+                if not exc.what.startswith("no column"):
+                    raise
+                try:
+                    cols = read_data(data, ("t", "r", "x"), name="your file", filename=filename, min_rows=20)
+                except DataError as second:
+                    if not second.what.startswith("no column"):
+                        raise
+                    have = exc.what.split("the file has ", 1)[-1].split(";")[0]
+                    raise DataError("your file", filename, f"it needs columns t, u, y (or t, r, x); the file has "
+                                                           f"{have}") from None
+                u, y = cols["r"], cols["x"]
+            return cols["t"], u, y, filename, sample_time(cols["t"], name="your file", path=filename)
+
+        def show(out, _job):
+            t, u, y, name, ts = out
+            self.record = (t, u, y, name)
+            self.record_button.disabled = False
+            self.record_note.object = (f"<span class='eha-ok'>Your record: {html.escape(name)}, {t.size} samples "
+                                       f"every {ts * 1e3:.4g} ms.</span>")
+            self.record_view.inputs_changed(self.record_key())
+
+        def fail(message):
+            self.record_note.object = f"<span class='eha-warn'>{html.escape(message)}</span>"
+
+        self.runner.run("reading your record", compute, show, fail=fail, note=self._note)
+
+    def run_record(self):
+        """H(s) from the student's record (a worker), shown with its validation and Bode diagram."""
+        from eha_core.identify.record import identify_record
+
+        cfg, _ = self.config()
+        if self.record is None or cfg is None:
+            return None
+        t, u, y, name = self.record
+        detrend, key = self.record_detrend.value, self.record_key()
+
+        def compute(token):
+            rec = identify_record(t, u, y, n_poles=cfg.n_poles, n_zeros=cfg.n_zeros,
+                                  initial_condition=cfg.initial_condition, input_offset=cfg.input_offset,
+                                  detrend=detrend, cancel=token)
+            return rec, plots.record_view(rec)
+
+        def show(out, _job):
+            rec, view = out
+            self.record_result = rec
+            e = rec.estimate
+            alert = estimate_alert(e)
+            parts = [f"<h4>Your record: {html.escape(name)}</h4>"]
+            if alert:
+                parts.append(f"<div class='eha-warn'>{alert}</div>")
+            if e.success and np.all(np.isfinite(e.den)):
+                parts.append(tf_html("Ĥ(s)", e.num, e.den, f"from the first {rec.n_estimation} samples; "
+                                     f"{term('fit', f'fit {e.fit_percent:.2f} %')}"))
+                if rec.validation is not None:
+                    parts.append(f"<p>Validated on the last {t.size - rec.n_estimation} samples: fit "
+                                 f"<b>{rec.validation.fit_percent:.2f} %</b>.</p>")
+                parts.append(estimation_sentences(e))
+            if detrend != "none":
+                parts.append(f"<p class='eha-note'>{'The mean' if detrend == 'mean' else 'A linear trend'} was "
+                             "removed from u and y first.</p>")
+            self.record_summary.object = "".join(parts)
+            if self.record_bode is None:
+                self.record_bode = plots.BodeFigure()
+                self.record_bode.update(view)
+                self.record_area.objects = [self.record_summary,
+                                            pn.pane.Bokeh(self.record_bode.layout, sizing_mode="stretch_width")]
+            else:
+                self.record_bode.update(view)
+            self.record_area.visible = True
+            self.record_view.shown(key)
+            self.record_view.inputs_changed(self.record_key())
+
+        return self.runner.run("estimate from your record", compute, show, fail=self._fail, note=self._note)
+
     def __panel__(self):
         config = pn.Column(self.kp_note, self.form, self.error, self.button,
-                           pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"), self.queue_note, width=280)
+                           pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"), self.record_note,
+                           self.record_upload, self.record_detrend, self.record_button, self.queue_note, width=280)
         results = pn.Column(self.alert, self.figure_tabs, self.views["summary"].banner, self.area,
-                            sizing_mode="stretch_width", min_width=440)
+                            self.record_view.banner, self.record_area, sizing_mode="stretch_width", min_width=440)
         return side_by_side(config, results)
 
 

@@ -120,3 +120,24 @@ def test_a_time_range_of_the_own_record(simulated):
     lse.window_form.values = {"own_from": "7", "own_to": ""}
     assert "your record runs from 0 to 5 s" in lse.window_form.errors["own_from"]
     assert lse.view.status == "stale"
+
+
+def test_a_transfer_function_from_the_students_own_record():
+    source = IdentificationTab(AppState()).frequency_panel()
+    source.run()
+    record_csv = source.data_bytes("csv")                        # t, r, x, u: the r/x names are understood
+    panel = IdentificationTab(AppState()).frequency_panel()
+    panel.record_upload.filename = "loop.csv"
+    panel.record_upload.value = record_csv
+    assert "Your record: loop.csv, 1000 samples every 10 ms" in panel.record_note.object
+    panel.run_record()
+    rec = panel.record_result
+    assert rec.n_estimation == 667 and rec.estimate.fit_percent > 90 and rec.validation.fit_percent > 85
+    assert "Validated on the last 333 samples" in panel.record_summary.object
+    assert panel.record_view.status == "current" and len(panel.record_bode.points.data["w"]) > 10
+    assert "of your record" in panel.record_bode.data_item.label["value"]
+    panel.record_detrend.value = "mean"
+    assert panel.record_view.status == "stale"
+    panel.record_upload.filename = "bad.csv"
+    panel.record_upload.value = b"t,u\n0,1\n"
+    assert "it needs columns t, u, y (or t, r, x); the file has t, u" in panel.record_note.object
