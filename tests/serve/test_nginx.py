@@ -51,10 +51,12 @@ def test_thirty_students_through_nginx_spread_over_three_processes(nginx_front):
     for step in steps:
         assert result.ok(step) == 30, (step, result.errors(step)[:3])
     assert result.error_count() == 0
-    # every process served some of the class (affinity by a random cookie, hashed)
+    # every process served some of the class (affinity by a random cookie, hashed consistently: the
+    # shares are near but not exactly a third; with 30 students a process gets 2 or more but for
+    # a chance of about 1e-3, where ">= 4" failed about once in a hundred runs: 13/14/3 was seen)
     ports = {f"127.0.0.1:{b.port}" for b in backends}
     assert set(result.upstreams) == ports, result.upstreams
-    assert min(result.upstreams.values()) >= 4, result.upstreams
+    assert min(result.upstreams.values()) >= 2, result.upstreams
     # affinity: each page's websocket reached the process that served the page
     for b in backends:
         log = b.log_text()
