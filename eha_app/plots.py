@@ -365,23 +365,20 @@ def _band_edge(edge, magnitude_db, side: int):
 def record_view(rec) -> FrequencyView:
     """What the Bode figure draws for a student's record (:mod:`eha_core.identify.record`):
     the estimate and the record's own frequency response; no eq. 24 (nothing is known of the plant)."""
-    e, dr = rec.estimate, rec.data_response
     base = dict(excitation_t=rec.t, excitation_r=rec.u, excitation_title="your record", t=rec.t, r=rec.u,
                 x_mm=rec.y * 1e3, u=rec.u)
-    if not (e.success and np.all(np.isfinite(e.den))):
+    b = rec.bode
+    if b is None:
         return FrequencyView(fit_ok=False, **base)
-    w = np.logspace(-2, np.log10(np.pi / rec.ts), 400)
-    est = e.frequency_response(w)
-    model_phase = e.frequency_response(dr.w).phase_deg
-    data_phase = model_phase + (np.asarray(dr.phase_deg) - model_phase + 180.0) % 360.0 - 180.0
-    nan = np.full_like(w, np.nan)
+    nan = np.full_like(b.w, np.nan)
     return FrequencyView(
-        **base, fit_ok=True, w=w, est_db=est.magnitude_db, est_deg=est.phase_deg, theory_db=nan, theory_deg=nan,
-        data_w=np.asarray(dr.w), data_db=np.asarray(dr.magnitude_db), data_deg=data_phase,
-        data_lower_db=_band_edge(dr.lower_db, dr.magnitude_db, -1),
-        data_upper_db=_band_edge(dr.upper_db, dr.magnitude_db, +1),
-        data_label=("ETFE of your record" if dr.method == "etfe" else "spectral estimate of your record, 95 % band"),
-        data_description=dr.description)
+        **base, fit_ok=True, w=b.w, est_db=b.estimate.magnitude_db, est_deg=b.estimate.phase_deg, theory_db=nan,
+        theory_deg=nan, data_w=np.asarray(b.data_w), data_db=np.asarray(b.data_magnitude_db),
+        data_deg=b.data_phase_deg, data_lower_db=_band_edge(b.data_lower_db, b.data_magnitude_db, -1),
+        data_upper_db=_band_edge(b.data_upper_db, b.data_magnitude_db, +1),
+        data_label=("ETFE of your record" if b.data_method == "etfe"
+                    else "spectral estimate of your record, 95 % band"),
+        data_description=b.data_description)
 
 
 def excitation_view(excitation, ts: float) -> tuple[np.ndarray, np.ndarray, str]:

@@ -396,7 +396,7 @@ class BodeData:
 
     w: np.ndarray
     estimate: FrequencyResponseData
-    theoretical: FrequencyResponseData
+    theoretical: FrequencyResponseData | None     # None for a measured record
     data_w: np.ndarray
     data_magnitude_db: np.ndarray
     data_phase_deg: np.ndarray
@@ -417,7 +417,8 @@ def bode_data(estimate: TFEstimate, theoretical, data: DataFrequencyResponse, ts
     """The curves of Fig. 12 from 0.01 rad/s to the Nyquist frequency pi/ts.
 
     ``data`` is the data's frequency response
-    (:func:`~eha_core.identify.spectral.data_frequency_response`).
+    (:func:`~eha_core.identify.spectral.data_frequency_response`); ``theoretical``
+    ``(num, den)`` or None (a measured record: nothing is known of the plant).
     """
     from .identify._ctmodels import readonly
     from .identify.validate import frequency_response
@@ -425,7 +426,8 @@ def bode_data(estimate: TFEstimate, theoretical, data: DataFrequencyResponse, ts
     w = np.logspace(-2, np.log10(np.pi / ts), n_points)
     model_phase = estimate.frequency_response(data.w).phase_deg
     data_phase = model_phase + (np.asarray(data.phase_deg) - model_phase + 180.0) % 360.0 - 180.0
-    return BodeData(w=w, estimate=estimate.frequency_response(w), theoretical=frequency_response(*theoretical, w),
+    theory = None if theoretical is None else frequency_response(*theoretical, w)
+    return BodeData(w=w, estimate=estimate.frequency_response(w), theoretical=theory,
                     data_w=data.w, data_magnitude_db=data.magnitude_db, data_phase_deg=readonly(data_phase),
                     data_lower_db=data.lower_db, data_upper_db=data.upper_db, data_method=data.method,
                     data_description=data.description, data_band=data.band)

@@ -55,10 +55,6 @@ LSE_COLUMNS = ("t", "x", "v", "p1", "p2", "u")
 MAX_UPLOAD_BYTES = 20e6
 
 
-def res_source(panel) -> str:
-    return panel.last_data.source if panel.last_data is not None else ""
-
-
 _NAMES_HTML = {"M": "M", "B": "B", "Af": "A<sub>f</sub>", "beta_e": "β<sub>e</sub>"}
 EXCITATIONS = {"paper": "u = 6 sin(4πt), 5 s (default)",
                "rich": "u = 8 sin(4πt) + 4 sin(10πt), 20 s (narrows B)"}
@@ -484,7 +480,8 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                          "ci95_low": float(lo), "ci95_high": float(hi),
                          "nominal": None if nominal is None else float(nominal)})
         if kind == "json":
-            return json.dumps({"disturbance_model": res.disturbance_model, "data": res_source(self),
+            source = self.last_data.source if self.last_data is not None else ""
+            return json.dumps({"disturbance_model": res.disturbance_model, "data": source,
                                "estimates": rows}, indent=1).encode()
         buf = io.StringIO()
         w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")

@@ -47,6 +47,7 @@ class RecordIdentification:
     y_hat: np.ndarray | None    # the estimate's output over the estimation part
     data_response: object       # DataFrequencyResponse of the whole record
     residuals: object | None    # ResidualAnalysis of the estimation part
+    bode: object | None = None  # BodeData: the estimate and the record's response (no theoretical curve)
 
 
 def _detrended(x: np.ndarray, how: str) -> np.ndarray:
@@ -84,6 +85,10 @@ def identify_record(t, u, y, *, n_poles: int = 3, n_zeros: int = 0, initial_cond
         if t.size - n_est >= 2 * (n_poles + n_zeros + 2):
             validation = compare(est.num, est.den, u[n_est:], y[n_est:], ts, initial_condition="estimate",
                                  input_offset=input_offset)
+    from ..experiments import bode_data
+
+    response = data_frequency_response(u, y, ts)
+    bode = bode_data(est, None, response, ts) if y_hat is not None else None
     return RecordIdentification(t=t, u=u, y=y, ts=ts, detrend=detrend, n_estimation=n_est, estimate=est,
-                                validation=validation, y_hat=y_hat, data_response=data_frequency_response(u, y, ts),
-                                residuals=residuals)
+                                validation=validation, y_hat=y_hat, data_response=response,
+                                residuals=residuals, bode=bode)

@@ -178,8 +178,26 @@ BAND_LEVEL = 1e-2
 # ---------------------------------------------------------------------------
 # results
 # ---------------------------------------------------------------------------
+class _ReadsResponse:
+    """``w``, ``magnitude_db`` and ``phase_deg`` read through from the ``response`` field."""
+
+    response: FrequencyResponseData
+
+    @property
+    def w(self) -> np.ndarray:
+        return self.response.w
+
+    @property
+    def magnitude_db(self) -> np.ndarray:
+        return self.response.magnitude_db
+
+    @property
+    def phase_deg(self) -> np.ndarray:
+        return self.response.phase_deg
+
+
 @dataclass(frozen=True, eq=False)
-class SpectralEstimate:
+class SpectralEstimate(_ReadsResponse):
     """A Blackman-Tukey estimate of ``G(exp(j w Ts))`` with its confidence band.
 
     Attributes
@@ -218,21 +236,9 @@ class SpectralEstimate:
     band: tuple[float, float]
     confidence: float
 
-    @property
-    def w(self) -> np.ndarray:
-        return self.response.w
-
-    @property
-    def magnitude_db(self) -> np.ndarray:
-        return self.response.magnitude_db
-
-    @property
-    def phase_deg(self) -> np.ndarray:
-        return self.response.phase_deg
-
 
 @dataclass(frozen=True, eq=False)
-class DataFrequencyResponse:
+class DataFrequencyResponse(_ReadsResponse):
     """The data's frequency response as :func:`data_frequency_response` chose to estimate it.
 
     Attributes
@@ -273,18 +279,6 @@ class DataFrequencyResponse:
     n_periods: int
     lags: int | None = None
     confidence: float | None = None
-
-    @property
-    def w(self) -> np.ndarray:
-        return self.response.w
-
-    @property
-    def magnitude_db(self) -> np.ndarray:
-        return self.response.magnitude_db
-
-    @property
-    def phase_deg(self) -> np.ndarray:
-        return self.response.phase_deg
 
 
 # ---------------------------------------------------------------------------
