@@ -683,3 +683,109 @@ class LseFitFigure:
             self.resim.data = {"t": _f32(view.resim_t), "x": _f32(view.resim_x_mm), "p1": _f32(view.resim_p1_mpa)}
             _set_legend_label(self.resim_item, "re-simulated with the estimates")
             self.resim_item.visible = True
+
+
+# -- the student's own record (frequency domain) --------------------------------------------
+
+@dataclass(frozen=True)
+class RecordDataView:
+    """A student's record as read, as prepared for the estimation, and the estimate's output."""
+
+    t: np.ndarray                       # the file's whole record
+    u: np.ndarray
+    y: np.ndarray
+    used_t: np.ndarray                  # the chosen range, trend removed
+    used_u: np.ndarray
+    used_y: np.ndarray
+    trend_u: np.ndarray | None          # the removed trend on that range (None: nothing removed)
+    trend_y: np.ndarray | None
+    t_split: float
+    title: str
+    model_t: np.ndarray | None = None   # the estimate's output (estimation part, then validation part)
+    model_y: np.ndarray | None = None
+    model_label: str = ""
+
+
+def record_data_view(t, u, y, prepared, rec=None) -> RecordDataView:
+    """What :class:`RecordDataFigure` draws, from the file's columns and
+    :class:`~eha_core.identify.record.PreparedRecord` (and the estimate, once made)."""
+    p = prepared
+    removed = p.detrend != "none"
+    what = {"none": "", "mean": "; the mean removed", "linear": "; a linear trend removed"}[p.detrend]
+    title = (f"Estimation on t ∈ [{p.t_from:g}, {p.t_split:g}] s, validation on the rest up to {p.t_to:g} s"
+             f"{what}")
+    model_t = model_y = None
+    label = ""
+    if rec is not None and rec.y_hat is not None:
+        n = rec.n_estimation
+        model_t, model_y = rec.t[:n], rec.y_hat
+        label = f"estimated H(s): fit {rec.estimate.fit_percent:.1f} %"
+        if rec.validation is not None:
+            model_t = np.concatenate([model_t, rec.t[n:]])
+            model_y = np.concatenate([model_y, rec.validation.y_hat])
+            label += f", validation {rec.validation.fit_percent:.1f} %"
+    return RecordDataView(t=np.asarray(t), u=np.asarray(u), y=np.asarray(y), used_t=p.t, used_u=p.u, used_y=p.y,
+                          trend_u=p.u_removed if removed else None, trend_y=p.y_removed if removed else None,
+                          t_split=p.t_split, title=title, model_t=model_t, model_y=model_y, model_label=label)
+
+
+class RecordDataFigure:
+    """The student's record: the file's u and y (grey), the part used with its trend removed
+    (colour), the removed trend (dashed), the estimation/validation split, and the estimate's output."""
+
+    def __init__(self, *, height: int = 200, width: int = FIGURE_WIDTH):
+        keys = ("t", "u", "y")
+        self.raw = ColumnDataSource(data={k: _f32([]) for k in keys})
+        self.used = ColumnDataSource(data={k: _f32([]) for k in keys})
+        self.trend = ColumnDataSource(data={k: _f32([]) for k in keys})
+        self.model = ColumnDataSource(data={"t": _f32([]), "y": _f32([])})
+        x_range = DataRange1d()
+        self.figs = []
+        self.splits = []
+        items = []
+        for key, label in (("u", "input u"), ("y", "output y")):
+            fig = _figure(width=width // 2, height=height, x_range=x_range, x_axis_label="t [s]",
+                          y_axis_label=label, title=f"Your record: {label}")
+            r_raw = fig.line("t", key, source=self.raw, color="#b0b0b0", line_width=1)
+            r_used = fig.line("t", key, source=self.used, color=CASE_COLORS[0], line_width=1.5)
+            r_trend = fig.line("t", key, source=self.trend, color=CASE_COLORS[1], line_dash="dashed", line_width=2)
+            split = Span(location=0.0, dimension="height", line_color="#555555", line_dash="dotted", line_width=2)
+            fig.add_layout(split)
+            self.splits.append(split)
+            if key == "y":
+                r_model = fig.line("t", "y", source=self.model, color=CASE_COLORS[2], line_dash="dashed",
+                                   line_width=2)
+                self.model_item = LegendItem(label="estimated H(s)", renderers=[r_model], visible=False)
+                items = [LegendItem(label="as in the file", renderers=[r_raw]),
+                         LegendItem(label="as estimated", renderers=[r_used]),
+                         LegendItem(label="removed trend", renderers=[r_trend]), self.model_item]
+                _legend_above(fig, items)
+            self.figs.append(fig)
+        self.trend_item = items[2]
+        self.note = Div(text="", sizing_mode="stretch_width", css_classes=["eha-record-data-note"],
+                        styles={"font-size": "12px", "color": "#555"})
+        _lean(*self.figs)
+        self.layout = column(row(*self.figs, sizing_mode="stretch_width"), self.note, sizing_mode="stretch_width")
+
+    def update(self, view: RecordDataView) -> None:
+        t, u, y = decimate(view.t, view.u, view.y)
+        self.raw.data = {"t": _f32(t), "u": _f32(u), "y": _f32(y)}
+        t, u, y = decimate(view.used_t, view.used_u, view.used_y)
+        self.used.data = {"t": _f32(t), "u": _f32(u), "y": _f32(y)}
+        if view.trend_u is None:
+            self.trend.data = {k: _f32([]) for k in ("t", "u", "y")}
+        else:
+            t, u, y = decimate(view.used_t, view.trend_u, view.trend_y)
+            self.trend.data = {"t": _f32(t), "u": _f32(u), "y": _f32(y)}
+        self.trend_item.visible = view.trend_u is not None
+        if view.model_t is None:
+            self.model.data = {"t": _f32([]), "y": _f32([])}
+            self.model_item.visible = False
+        else:
+            t, y = decimate(view.model_t, view.model_y)
+            self.model.data = {"t": _f32(t), "y": _f32(y)}
+            _set_legend_label(self.model_item, view.model_label)
+            self.model_item.visible = True
+        for split in self.splits:
+            split.location = view.t_split
+        self.note.text = html.escape(view.title) + " (dotted line: where validation starts)."

@@ -84,7 +84,10 @@ def test_frequency_downloads():
         back = read_data(panel.downloads[0 if kind == "csv" else 1].callback().read(), ("t", "r", "x", "u"),
                          filename=f"loop.{kind}")
         np.testing.assert_allclose(back["x"], panel.result.data.x, rtol=1e-9, atol=1e-15)
-    est = json.loads(panel.downloads[2].callback().read())
+    by_class = {d.css_classes[0]: d for d in panel.downloads}
+    est = json.loads(by_class["eha-dl-freq-json"].callback().read())
+    assert by_class["eha-dl-freq-est-csv"].callback().read().startswith(b"coefficient,")
+    assert by_class["eha-dl-freq-bode"].callback().read().startswith(b"curve,w_rad_s")
     assert est["estimate"]["den"] == pytest.approx(list(panel.result.estimate.den))
     assert est["settings"]["kp"] == 10.0 and est["validation_fit_percent"] > 90
 
@@ -122,22 +125,130 @@ def test_a_time_range_of_the_own_record(simulated):
     assert lse.view.status == "stale"
 
 
-def test_a_transfer_function_from_the_students_own_record():
+@pytest.fixture(scope="module")
+def closed_loop():
+    """The frequency panel's own experiment: its record (t, r, x, u) as CSV and .mat, and its estimate."""
     source = IdentificationTab(AppState()).frequency_panel()
     source.run()
-    record_csv = source.data_bytes("csv")                        # t, r, x, u: the r/x names are understood
+    return source
+
+
+def _upload_record(panel, blob: bytes, filename: str):
+    panel.record.upload.filename = filename
+    panel.record.upload.value = blob
+    return panel.record
+
+
+def test_a_transfer_function_from_the_students_own_record(closed_loop):
     panel = IdentificationTab(AppState()).frequency_panel()
-    panel.record_upload.filename = "loop.csv"
-    panel.record_upload.value = record_csv
-    assert "Your record: loop.csv, 1000 samples every 10 ms" in panel.record_note.object
-    panel.run_record()
-    rec = panel.record_result
+    record = _upload_record(panel, closed_loop.data_bytes("csv"), "loop.csv")   # t, r, x, u: r/x understood
+    assert "Your record: loop.csv, 1000 samples every 10 ms, t from 0 to 9.99 s" in record.note.object
+    # the record is drawn as soon as it is read: as in the file, and as it will be estimated
+    fig = record.data_figure
+    assert record.data_area.visible and len(fig.raw.data["t"]) == 1000 and len(fig.used.data["t"]) == 1000
+    assert not fig.trend_item.visible and not fig.model_item.visible
+    assert fig.splits[0].location == pytest.approx(6.67)          # validation starts at sample 667
+    record.run()
+    rec = record.result
     assert rec.n_estimation == 667 and rec.estimate.fit_percent > 90 and rec.validation.fit_percent > 85
-    assert "Validated on the last 333 samples" in panel.record_summary.object
-    assert panel.record_view.status == "current" and len(panel.record_bode.points.data["w"]) > 10
-    assert "of your record" in panel.record_bode.data_item.label["value"]
-    panel.record_detrend.value = "mean"
-    assert panel.record_view.status == "stale"
-    panel.record_upload.filename = "bad.csv"
-    panel.record_upload.value = b"t,u\n0,1\n"
-    assert "it needs columns t, u, y (or t, r, x); the file has t, u" in panel.record_note.object
+    assert "Validated on the last 333 samples" in record.summary.object
+    assert record.view.status == "current" and len(record.bode.points.data["w"]) > 10
+    assert "of your record" in record.bode.data_item.label["value"]
+    # after the estimate, its output is drawn over the record (estimation part, then validation)
+    assert fig.model_item.visible and "validation" in fig.model_item.label["value"]
+    assert len(fig.model.data["t"]) == 1000
+    record.detrend.value = "mean"
+    assert record.view.status == "stale"
+
+
+def test_preprocessing_is_drawn_on_the_record_and_checked(closed_loop):
+    panel = IdentificationTab(AppState()).frequency_panel()
+    record = _upload_record(panel, closed_loop.data_bytes("csv"), "loop.csv")
+    x = closed_loop.result.data.x
+    record.detrend.value = "linear"
+    fig = record.data_figure
+    assert fig.trend_item.visible
+    used_y = np.asarray(fig.used.data["y"], dtype=float)
+    trend_y = np.asarray(fig.trend.data["y"], dtype=float)
+    np.testing.assert_allclose(used_y + trend_y, x, atol=1e-6)           # drawn: what is used + what is removed
+    k = np.arange(x.size)
+    assert abs(np.polyfit(k, used_y, 1)[0]) < 1e-9                      # no trend left
+    record.window_form.values = {"rec_from": "2", "rec_to": "8"}
+    assert record.prepared.t[0] == pytest.approx(2.0) and record.prepared.t[-1] == pytest.approx(8.0)
+    assert "Estimation on t ∈ [2, 6.01] s" in fig.note.text and "a linear trend removed" in fig.note.text
+    record.run()
+    assert record.result.t.size == 601 and record.result.prepared.detrend == "linear"
+    assert "(t ∈ [2, 6.01] s)" in record.summary.object and "A linear trend was removed" in record.summary.object
+    record.window_form.values = {"rec_from": "2", "rec_to": "99"}
+    assert record.window_form.errors == {
+        "rec_to": "to t = 99 is not allowed: your record runs from 0 to 9.99 s"}
+    assert record.button.disabled and record.view.status == "stale"
+    record.window_form.values = {"rec_from": "9.9", "rec_to": ""}
+    assert "holds 10 samples; need at least 30" in record.window_form.errors["rec_from"]
+
+
+def test_a_record_with_other_column_names_is_mapped(closed_loop):
+    from eha_core.data import write_data
+
+    d = closed_loop.result.data
+    blob = write_data({"time": d.t, "cmd": d.r, "pos": d.x}, "csv", units={"pos": "mm"})
+    panel = IdentificationTab(AppState()).frequency_panel()
+    record = _upload_record(panel, blob, "lab.csv")
+    assert record.columns is None and record.mapping.panel.visible
+    assert "it needs columns t, u, y (or t, r, x); the file has time, cmd, pos[mm]" in \
+        record.mapping.panel.objects[0].object
+    record.mapping.selects["t"].value = "time"
+    record.mapping.selects["u"].value = "cmd"
+    record.mapping.selects["y"].value = "pos[mm]"
+    record.mapping.button.clicks += 1
+    assert record.columns is not None and not record.mapping.panel.visible
+    np.testing.assert_allclose(record.columns[2], d.x, rtol=1e-9)       # mm read back as m
+    record.run()
+    direct = _upload_record(IdentificationTab(AppState()).frequency_panel(), closed_loop.data_bytes("mat"),
+                            "loop.mat")
+    direct.run()                                                        # the .mat export, read by name
+    np.testing.assert_allclose(record.result.estimate.den, direct.result.estimate.den, rtol=1e-6)
+    settings = json.loads(record.estimate_bytes("json"))["settings"]
+    assert settings["columns"] == {"t": "time", "u": "cmd", "y": "pos[mm]"} and settings["file"] == "lab.csv"
+
+
+def test_a_record_without_the_columns_gets_its_message():
+    panel = IdentificationTab(AppState()).frequency_panel()
+    record = _upload_record(panel, b"t,u\n0,1\n", "bad.csv")
+    assert "it needs columns t, u, y (or t, r, x); the file has t, u" in record.mapping.panel.objects[0].object
+    record.mapping.selects["t"].value = "t"
+    record.mapping.selects["u"].value = "u"
+    record.mapping.button.clicks += 1                                 # y still missing: the reader says so
+    assert "no column y: the file has t, u" in record.note.object and record.columns is None
+    _upload_record(panel, b"t,u,y\n0,1,2\n0.1,nan,3\n", "nan.csv")
+    assert "column u" in record.note.object and "row" in record.note.object
+
+
+def test_the_estimate_and_the_bode_curves_download(closed_loop):
+    import csv
+    import io
+
+    rows = list(csv.DictReader(io.StringIO(closed_loop.estimate_bytes("csv").decode())))
+    e = closed_loop.result.estimate
+    assert [r["coefficient"] for r in rows] == ["a1", "a2", "a3", "b0", "input_offset"]
+    assert float(rows[2]["value"]) == pytest.approx(e.den[3], rel=1e-9)
+    lo, hi, v = float(rows[0]["ci95_low"]), float(rows[0]["ci95_high"]), float(rows[0]["value"])
+    assert lo < v < hi and (hi - lo) / 2 == pytest.approx(1.959964 * e.param_std[0], rel=1e-6)
+    est = json.loads(closed_loop.estimate_bytes("json"))
+    assert est["coefficients"] == json.loads(json.dumps(est["coefficients"])) and est["fit_percent"] > 90
+    bode = list(csv.DictReader(io.StringIO(closed_loop.bode_bytes().decode())))
+    curves = {r["curve"] for r in bode}
+    assert {"estimate", "linearised_eq24"} <= curves and curves & {"etfe", "spectral"}
+    first = next(r for r in bode if r["curve"] == "estimate")
+    assert float(first["magnitude_db"]) == pytest.approx(closed_loop.result.bode.estimate.magnitude_db[0], rel=1e-8)
+
+
+def test_an_exercise_leaves_eq24_out_of_the_bode_curves(closed_loop):
+    import dataclasses
+
+    state = AppState()
+    state.secret = {"M": 4000.0, "B": 1000.0}
+    panel = IdentificationTab(state).frequency_panel()
+    panel.result = dataclasses.replace(closed_loop.result)
+    curves = {line.split(",")[0] for line in panel.bode_bytes().decode().splitlines()[1:]}
+    assert "linearised_eq24" not in curves and "estimate" in curves

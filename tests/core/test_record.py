@@ -38,3 +38,27 @@ def test_a_drift_is_removed_by_the_linear_detrend():
     assert np.isclose(fixed.y.mean(), 0, atol=1e-12) and np.isclose(fixed.u.mean(), 0, atol=1e-12)
     with pytest.raises(ValueError, match="detrend = cubic is not allowed"):
         identify_record(t, u, y, detrend="cubic")
+
+
+def test_prepare_record_keeps_what_it_removes_and_checks_the_range():
+    from eha_core.identify.record import prepare_record
+
+    t = np.arange(500) * 0.01
+    u = np.sin(t) + 2.0
+    y = 0.3 * t + np.cos(3 * t)
+    p = prepare_record(t, u, y, detrend="linear", t_from="1", t_to=4.0)
+    assert p.t[0] == 1.0 and p.t[-1] == pytest.approx(4.0) and p.t.size == 301
+    np.testing.assert_allclose(p.y + p.y_removed, y[100:401], atol=1e-12)     # used + removed = the file's
+    np.testing.assert_allclose(p.u + p.u_removed, u[100:401], atol=1e-12)
+    assert abs(np.polyfit(np.arange(p.t.size), p.y, 1)[0]) < 1e-12
+    assert p.n_estimation == 201 and p.t_split == pytest.approx(t[301])
+    m = prepare_record(t, u, y, detrend="mean")
+    assert abs(m.u.mean()) < 1e-12 and np.ptp(m.u_removed) == 0
+    none = prepare_record(t, u, y)
+    assert np.array_equal(none.y, y) and not none.y_removed.any()
+    with pytest.raises(ValueError, match=r"^to t = 9 is not allowed: your record runs from 0 to 4.99 s$"):
+        prepare_record(t, u, y, t_to=9)
+    with pytest.raises(ValueError, match=r"^from t = abc is not allowed: enter a time in s, or leave it blank$"):
+        prepare_record(t, u, y, t_from="abc")
+    with pytest.raises(ValueError, match=r"holds 11 samples; need at least 30"):
+        prepare_record(t, u, y, t_from=2.0, t_to=2.1)

@@ -1,0 +1,90 @@
+"""Files a student downloads from tab 3's frequency domain: the estimated transfer function
+(CSV, JSON) and the Bode diagram's curves (CSV).
+
+They only write what the core computed. In an exercise the curves computed from
+the hidden parameters (eq. 24's H(s)) are left out, as on the page.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+
+import numpy as np
+
+from eha_core.identify._stats import Z95
+
+__all__ = ["tf_estimate_rows", "tf_estimate_bytes", "bode_csv"]
+
+
+def _finite(v) -> float | None:
+    v = float(v)
+    return v if np.isfinite(v) else None
+
+
+def tf_estimate_rows(estimate) -> list[dict]:
+    """One row per coefficient of H(s) = (b0 s^m + ... + bm) / (s^n + a1 s^(n-1) + ... + an):
+    its value, standard error and 95 % interval (``param_std`` is ordered ``[den[1:], num]``)."""
+    n, m = estimate.n_poles, estimate.n_zeros
+    names = [(f"a{k}", "den", n - k) for k in range(1, n + 1)] + [(f"b{k}", "num", m - k) for k in range(m + 1)]
+    values = list(estimate.den[1:]) + list(estimate.num)
+    std = list(estimate.param_std) if estimate.param_std is not None else [np.nan] * len(values)
+    rows = []
+    for (name, part, power), value, s in zip(names, values, std, strict=True):
+        rows.append({"coefficient": name, "of": part, "power_of_s": power, "value": _finite(value),
+                     "std_error": _finite(s), "ci95_low": _finite(value - Z95 * s),
+                     "ci95_high": _finite(value + Z95 * s)})
+    if estimate.input_offset is not None:
+        s = estimate.input_offset_std if estimate.input_offset_std is not None else np.nan
+        rows.append({"coefficient": "input_offset", "of": "input", "power_of_s": None,
+                     "value": _finite(estimate.input_offset), "std_error": _finite(s),
+                     "ci95_low": _finite(estimate.input_offset - Z95 * s),
+                     "ci95_high": _finite(estimate.input_offset + Z95 * s)})
+    delay = getattr(estimate, "input_delay", 0.0) or 0.0
+    if delay:
+        s = getattr(estimate, "input_delay_std", None)
+        s = np.nan if s is None else s
+        rows.append({"coefficient": "input_delay_s", "of": "input", "power_of_s": None, "value": _finite(delay),
+                     "std_error": _finite(s), "ci95_low": _finite(delay - Z95 * s),
+                     "ci95_high": _finite(delay + Z95 * s)})
+    return rows
+
+
+def tf_estimate_bytes(estimate, kind: str, *, settings: dict | None = None, fits: dict | None = None) -> bytes:
+    """The estimate as CSV (one row per coefficient) or JSON (the rows, the estimate's own fields,
+    the settings it was made with and its fit percentages)."""
+    rows = tf_estimate_rows(estimate)
+    if kind == "json":
+        out = {"estimate": estimate.to_dict(), "coefficients": rows, "settings": settings or {},
+               **{k: _finite(v) if v is not None else None for k, v in (fits or {}).items()}}
+        return json.dumps(out, indent=1, default=float).encode()
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    w.writeheader()
+    for row in rows:
+        w.writerow({k: "" if v is None else (f"{v:.10g}" if isinstance(v, float) else v) for k, v in row.items()})
+    return buf.getvalue().encode()
+
+
+def bode_csv(bode, *, theoretical: bool = True) -> bytes:
+    """The Bode diagram's curves in long form: ``curve, w_rad_s, magnitude_db, phase_deg, lower_db, upper_db``.
+
+    Curves: ``estimate``, ``linearised_eq24`` (when ``theoretical`` and known),
+    and the data's points (``etfe`` or ``spectral``, the latter with its 95 % band).
+    """
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["curve", "w_rad_s", "magnitude_db", "phase_deg", "lower_db", "upper_db"])
+
+    def put(name, ws, db, deg, lo=None, hi=None):
+        for i, wv in enumerate(ws):
+            w.writerow([name, f"{wv:.10g}", f"{db[i]:.10g}", f"{deg[i]:.10g}",
+                        "" if lo is None else f"{lo[i]:.10g}", "" if hi is None else f"{hi[i]:.10g}"])
+
+    put("estimate", bode.w, bode.estimate.magnitude_db, bode.estimate.phase_deg)
+    if theoretical and bode.theoretical is not None:
+        put("linearised_eq24", bode.w, bode.theoretical.magnitude_db, bode.theoretical.phase_deg)
+    put("etfe" if bode.data_method == "etfe" else "spectral", np.asarray(bode.data_w),
+        np.asarray(bode.data_magnitude_db), np.asarray(bode.data_phase_deg), bode.data_lower_db, bode.data_upper_db)
+    return buf.getvalue().encode()

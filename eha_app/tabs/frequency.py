@@ -1,0 +1,372 @@
+"""Tab 3, frequency domain: the closed-loop experiment, tfest, validation and back-out (Figs. 8-13)."""
+
+from __future__ import annotations
+
+import io
+
+import panel as pn
+
+from eha_core.experiments import (
+    FrequencyExperiment,
+    run_frequency_identification,
+)
+
+from .. import plots
+from ..exports import bode_csv, tf_estimate_bytes
+from ..form import Field, Form, Group, parse_fields
+from ..freshness import ResultView
+from ..glossary import GLOSSARY
+from ..layout import side_by_side
+from ..limits import check_frequency
+from ..state import AppState
+from ..tables import (
+    backout_html,
+    estimate_alert,
+    freq_summary_html,
+)
+from ..tasks import SessionRunner, apply_locked
+from .record import RecordPanel
+
+__all__ = ["FrequencyPanel", "FREQ_FORM", "FREQ_DEFAULTS", "parse_freq"]
+
+# -- the frequency-domain request --------------------------------------------------------------
+
+FREQ_FORM = (
+    Group("Excitation (idinput)", (
+        Field("signal_type", "idinput type", "select",
+              options=(("sine", "sine"), ("rgs", "rgs"), ("rbs", "rbs"), ("prbs", "prbs")), short="idinput type",
+              tip=GLOSSARY["idinput"]),
+        Field("n_samples", "samples N", "integer", lo=20, hi=20000, short="N"),
+        Field("freq_seed", "seed", "integer", lo=0, hi=10**6, short="seed"),
+        Field("band_lo", "band low", "number", unit="× Nyquist", lo=0.0, hi=1.0, short="band low"),
+        Field("band_hi", "band high", "number", unit="× Nyquist", lo=0.0, hi=1.0, short="band high"),
+        Field("range_lo", "range min", "number", unit="m", short="range min"),
+        Field("range_hi", "range max", "number", unit="m", short="range max"),
+        Field("n_sines", "sinusoids", "integer", lo=1, hi=5000, short="sinusoids"),
+        Field("n_trials", "trials", "integer", lo=1, hi=500, short="trials"),
+        Field("grid_skip", "grid skip", "integer", lo=1, hi=100, short="grid skip"),
+        Field("ts", "Ts", "number", unit="s", lo=1e-4, hi=1.0, short="Ts",
+              tip="sample time of the controller; its output is held between samples (ZOH: " + GLOSSARY["ZOH"] + ")"),
+    )),
+    Group("Loop and model", (
+        Field("model", "model in the loop", "select", options=(("nonlinear", "nonlinear"), ("linear", "linearised")),
+              short="model", tip="the actuator's model the closed loop is simulated with"),
+        Field("n_poles", "poles", "integer", lo=1, hi=6, short="poles", tip="poles: " + GLOSSARY["poles"]),
+        Field("n_zeros", "zeros", "integer", lo=0, hi=5, short="zeros", tip="zeros: " + GLOSSARY["zeros"]),
+        Field("initial_condition", "initial condition", "select", options=(("estimate", "estimate"), ("zero", "zero")),
+              short="initial condition", tip=GLOSSARY["initial condition"]),
+        Field("input_offset", "input offset", "select", options=(("estimate", "estimate"), ("zero", "zero")),
+              short="input offset", tip=GLOSSARY["input offset"]),
+    )),
+)
+_FREQ_FIELDS = {f.name: f for g in FREQ_FORM for f in g.fields}
+_CONFIG_NAME = {"signal_type": "signal_type", "n_samples": "n_samples", "freq_seed": "seed", "ts": "ts",
+                "model": "model", "n_poles": "n_poles", "n_zeros": "n_zeros",
+                "initial_condition": "initial_condition", "input_offset": "input_offset"}
+_DEFAULT_CONFIG = FrequencyExperiment()
+FREQ_DEFAULTS = {
+    "signal_type": _DEFAULT_CONFIG.signal_type, "n_samples": str(_DEFAULT_CONFIG.n_samples),
+    "freq_seed": str(_DEFAULT_CONFIG.seed), "band_lo": f"{_DEFAULT_CONFIG.band[0]:g}",
+    "band_hi": f"{_DEFAULT_CONFIG.band[1]:g}", "range_lo": f"{_DEFAULT_CONFIG.range[0]:g}",
+    "range_hi": f"{_DEFAULT_CONFIG.range[1]:g}", "n_sines": str(_DEFAULT_CONFIG.sinedata[0]),
+    "n_trials": str(_DEFAULT_CONFIG.sinedata[1]), "grid_skip": str(_DEFAULT_CONFIG.sinedata[2]),
+    "ts": f"{_DEFAULT_CONFIG.ts:g}", "model": _DEFAULT_CONFIG.model,
+    "n_poles": str(_DEFAULT_CONFIG.n_poles), "n_zeros": str(_DEFAULT_CONFIG.n_zeros),
+    "initial_condition": _DEFAULT_CONFIG.initial_condition, "input_offset": _DEFAULT_CONFIG.input_offset,
+}
+
+
+def freq_hidden(texts: dict) -> list[str]:
+    return [] if texts.get("signal_type", "sine") == "sine" else ["n_sines", "n_trials", "grid_skip"]
+
+
+def _field_of_message(message: str) -> str | None:
+    """The form field a core message (``NAME = VALUE is not allowed: ...``) is about."""
+    head = message.split(" = ", 1)[0].strip()
+    for form_name, config_name in _CONFIG_NAME.items():
+        if head == config_name:
+            return form_name
+    return {"band": "band_lo", "range": "range_lo", "sinedata": "n_sines"}.get(head)
+
+
+def parse_freq(texts: dict, kp: float = _DEFAULT_CONFIG.kp) -> tuple[FrequencyExperiment | None, dict]:
+    """The experiment the form describes (None if invalid), and a message per invalid field ("" for the rest).
+
+    ``kp`` is the controller gain: tab 1's, the one H(s) is shown with everywhere.
+    """
+    hidden = set(freq_hidden(texts))
+    values, errors = parse_fields(_FREQ_FIELDS.values(), texts, skip=hidden)
+    if errors:
+        return None, errors
+    d = _DEFAULT_CONFIG
+    try:
+        cfg = FrequencyExperiment(
+            n_samples=values["n_samples"], ts=values["ts"], signal_type=values["signal_type"],
+            band=(values["band_lo"], values["band_hi"]), range=(values["range_lo"], values["range_hi"]),
+            sinedata=(values.get("n_sines", d.sinedata[0]), values.get("n_trials", d.sinedata[1]),
+                      values.get("grid_skip", d.sinedata[2])),
+            seed=values["freq_seed"], kp=kp, model=values["model"], n_poles=values["n_poles"],
+            n_zeros=values["n_zeros"], initial_condition=values["initial_condition"],
+            input_offset=values["input_offset"])
+    except (ValueError, TypeError) as exc:
+        message = " ".join(str(exc).split())
+        return None, {_field_of_message(message) or "": message}
+    return cfg, {}
+
+
+
+_FIGURES = (("Fig. 8 excitation", "excitation", plots.ExcitationFigure),
+            ("Fig. 9 closed-loop data", "data", plots.ClosedLoopFigure),
+            ("Fig. 11 fit", "fit", plots.FitFigure),
+            ("Fig. 12 Bode", "bode", plots.BodeFigure),
+            ("Fig. 13 validation", "validation", plots.ValidationFigure),
+            ("Residuals", "residuals", plots.ResidualFigure))
+
+
+class FrequencyPanel(pn.viewable.Viewer):
+    """Frequency domain: the closed-loop experiment, tfest, validation, back-out (Figs. 8-13)."""
+
+    def __init__(self, state: AppState, runner: SessionRunner, query: dict | None = None, **kwargs):
+        super().__init__(**kwargs)
+        self.state = state
+        self.runner = runner
+        # the excitation preview is a job of its own: typing N must not wait behind an experiment
+        self.preview_runner = SessionRunner((runner.owner, "preview"), runner._queue)
+        self.result = None
+        self.view: plots.FrequencyView | None = None
+        self.preview = None
+        texts = dict(FREQ_DEFAULTS)
+        texts.update({k: v for k, v in (query or {}).items() if k in _FREQ_FIELDS})
+        self.form = Form(spec=[g.to_spec() for g in FREQ_FORM], values=texts, url_defaults=FREQ_DEFAULTS, width=270,
+                         css_classes=["eha-freq-form"], margin=(5, 10))
+        self.form.param.watch(self._on_config, "values")
+        self.error = pn.pane.HTML("", visible=False, width=260, css_classes=["eha-error", "eha-error-freq"],
+                                  styles={"color": "#b00020", "font-size": "12px"})
+        self.button = pn.widgets.Button(label="Run experiment and estimate", color="primary", width=260,
+                                        css_classes=["eha-run-freq"])
+        self.button.on_click(lambda _e: self.run())
+        self.queue_note = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-queue-note"],
+                                       styles={"color": "#555", "font-size": "12px"})
+        self.summary = pn.pane.HTML("<p>Configure the excitation (Fig. 8) and run the closed-loop experiment.</p>",
+                                    sizing_mode="stretch_width", css_classes=["eha-freq-summary"])
+        self.backout = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-backout"])
+        self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
+                                   css_classes=["eha-freq-alert"])
+        self.unstable = pn.pane.Alert("", alert_type="warning", visible=False, sizing_mode="stretch_width",
+                                      css_classes=["eha-freq-unstable"])
+        self.downloads = [
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.data_bytes("csv")), filename="eha_closed_loop.csv",
+                                    label="Data (CSV)", disabled=True, width=128, css_classes=["eha-dl-freq-csv"]),
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.data_bytes("mat")), filename="eha_closed_loop.mat",
+                                    label="Data (.mat)", disabled=True, width=128, css_classes=["eha-dl-freq-mat"]),
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.estimate_bytes("csv")),
+                                    filename="eha_transfer_function.csv", label="Estimate (CSV)", disabled=True,
+                                    width=128, css_classes=["eha-dl-freq-est-csv"]),
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.estimate_bytes("json")),
+                                    filename="eha_transfer_function.json", label="Estimate (JSON)", disabled=True,
+                                    width=128, css_classes=["eha-dl-freq-json"]),
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.bode_bytes()),
+                                    filename="eha_bode.csv", label="Bode curves (CSV)", disabled=True,
+                                    width=260, css_classes=["eha-dl-freq-bode"]),
+        ]
+        self.area = pn.Column(self.unstable, self.summary, self.backout, sizing_mode="stretch_width")
+        self.kp_note = pn.pane.HTML("", width=260, css_classes=["eha-freq-kp"], margin=(0, 10))
+        self.config_errors: dict = {}
+        self.excitation_errors: dict = {}
+        self.figures: dict[str, object] = {}
+        self._slots = {key: pn.Column(pn.pane.HTML(
+            "<p class='eha-note'>" + ("Computing the excitation…" if key == "excitation" else
+                                      "Run the experiment to see this figure.") + "</p>"),
+            min_height=260, sizing_mode="stretch_width") for _, key, _ in _FIGURES}
+        hint = "Press “Run experiment and estimate” to update it."
+        # Fig. 8 follows the settings by itself (a preview); the others come from the experiment
+        self.views = {key: ResultView(f"freq-{key}", self._slots[key], run_hint=hint) for _, key, _ in _FIGURES}
+        self.views["summary"] = ResultView("freq-summary", self.area, run_hint=hint)
+        self.figure_tabs = pn.Tabs(*((title, pn.Column(self.views[key].banner, self._slots[key],
+                                                       sizing_mode="stretch_width"))
+                                     for title, key, _ in _FIGURES), dynamic=False,
+                                   sizing_mode="stretch_width", css_classes=["eha-freq-figures"])
+        self._shown = {"excitation"}
+        self.figure_tabs.param.watch(self._on_figure_tab, "active")
+        self.record = RecordPanel(runner, lambda: self.config()[0], note=self._note, fail=self._fail)
+        self.form.param.watch(lambda _e: self.record.inputs_changed(), "values")
+        state.param.watch(self._update_enabled, "valid")
+        state.param.watch(self._on_config, ["params", "kp", "valid"])
+        self._on_config()
+
+    def config(self):
+        """The experiment the form and tab 1's Kp describe (None if invalid), and the messages."""
+        return parse_freq(self.form.values, self.state.kp)
+
+    def key(self, cfg=None):
+        """What the experiment's results are computed from (None if the inputs are not valid)."""
+        cfg = cfg if cfg is not None else self.config()[0]
+        return None if cfg is None or not self.state.valid else (self.state.params, cfg)
+
+    @staticmethod
+    def excitation_key(cfg):
+        return None if cfg is None else (cfg.signal_type, cfg.n_samples, cfg.seed, cfg.band, cfg.range,
+                                         cfg.sinedata, cfg.ts)
+
+    def _mark(self, cfg, *, preview_queued: bool) -> None:
+        """Mark every view of this panel against the current inputs."""
+        why = "a parameter on tab 1 is not valid" if not self.state.valid else ""
+        key = self.key(cfg)
+        for name, view in self.views.items():
+            if name == "excitation":
+                view.inputs_changed(self.excitation_key(cfg), updating=preview_queued, why=why)
+            else:
+                view.inputs_changed(key, why=why)
+
+    # A figure is built when it is first shown with data to draw; afterwards
+    # only its data change.
+    def _on_figure_tab(self, event) -> None:
+        key = _FIGURES[event.new][1]
+        self._shown.add(key)
+        apply_locked(lambda: self._draw(key))
+
+    def _has_data(self, key: str) -> bool:
+        return self.preview is not None if key == "excitation" else self.view is not None
+
+    def _draw(self, key: str) -> None:
+        if key not in self._shown or not self._has_data(key):
+            return
+        fig = self.figures.get(key)
+        built = fig is None
+        if built:
+            fig = self.figures[key] = next(c for _, k, c in _FIGURES if k == key)()
+        if key == "excitation":
+            fig.update(*self.preview)
+        elif key == "fit":
+            fig.update(self.view, self.result.config.model if self.result is not None else "nonlinear")
+        else:
+            fig.update(self.view)
+        if built:
+            self._slots[key].objects = [pn.pane.Bokeh(fig.layout, sizing_mode="stretch_width")]
+
+    def _update_enabled(self, *_events) -> None:
+        errors = {**self.config_errors, **self.excitation_errors}
+        self.form.errors = {k: v for k, v in errors.items() if k}
+        ok = self.state.valid and not errors
+        self.button.disabled = not ok
+        if not self.state.valid:
+            self.error.object = "A parameter on the first tab is not valid: fix it to run the experiment."
+        else:
+            self.error.object = errors.get("", "") or (f"Fix the input to run: {next(iter(errors.values()))}"
+                                                       if errors else "")
+        self.error.visible = bool(self.error.object)
+
+    def _on_config(self, *_events) -> None:
+        cfg, errors = self.config()
+        self.config_errors = errors
+        self.form.hidden = freq_hidden(self.form.values)
+        self.kp_note.object = (f"<span class='eha-note'>Controller gain K<sub>p</sub> = {self.state.kp:g} V/m, "
+                               "set on tab 1 (the same K<sub>p</sub> as tab 1's H(s)).</span>")
+        if cfg is None:
+            self._mark(None, preview_queued=False)
+            self._update_enabled()
+            return
+        ts = cfg.ts
+        exc_key = self.excitation_key(cfg)
+        if exc_key == self.views["excitation"].computed_from:
+            self._mark(cfg, preview_queued=False)
+            self._update_enabled()
+            return
+
+        def show(out, _job):
+            self.excitation_errors = {}
+            self.preview = out
+            self._draw("excitation")
+            self.views["excitation"].shown(exc_key)
+            self._update_enabled()
+
+        def fail(message):
+            # idinput checks the band, range and sinusoid settings against N
+            self.excitation_errors = {_field_of_message(message) or "": message}
+            self._update_enabled()
+
+        self._update_enabled()
+        self._mark(cfg, preview_queued=True)
+        self.preview_runner.run("excitation preview", lambda token: plots.excitation_view(cfg.excitation(), ts),
+                                show, fail=fail)
+
+    def data_bytes(self, kind: str) -> bytes:
+        """The closed-loop record the estimate was made from: t, r, x, u (SI), as CSV or .mat."""
+        from eha_core.data import write_data
+
+        d = self.result.data
+        return write_data({"t": d.t, "r": d.r, "x": d.x, "u": d.u}, kind)
+
+    def estimate_bytes(self, kind: str = "json") -> bytes:
+        """The estimated transfer function with its intervals, fits and settings (CSV or JSON)."""
+        fi = self.result
+        settings = {k: getattr(fi.config, k) for k in (
+            "signal_type", "n_samples", "seed", "ts", "kp", "model", "n_poles", "n_zeros", "initial_condition",
+            "input_offset")}
+        return tf_estimate_bytes(fi.estimate, kind, settings=settings, fits={
+            "fit_percent": fi.estimate.fit_percent,
+            "validation_fit_percent": None if fi.validation is None else fi.validation.fit_percent})
+
+    def bode_bytes(self) -> bytes:
+        """Fig. 12's curves as CSV (eq. 24's left out in an exercise: it is computed from the hidden values)."""
+        return bode_csv(self.result.bode, theoretical=not self.state.hidden)
+
+    def _fail(self, message: str) -> None:
+        self.alert.object = f"The experiment failed: {message}"
+        self.alert.visible = True
+
+    def _note(self, text: str) -> None:
+        self.queue_note.object = text
+        self.queue_note.visible = bool(text)
+
+    def run(self):
+        cfg, errors = self.config()
+        if cfg is None or not self.state.valid or self.excitation_errors:
+            return None
+        self.alert.visible = False
+        try:
+            check_frequency(cfg)
+        except ValueError as exc:
+            self._fail(str(exc))
+            return None
+        params = self.state.params
+        run_key = (params, cfg)
+
+        hidden = self.state.hidden
+
+        def compute(token):
+            fi = run_frequency_identification(params, cfg, cancel=token)
+            return fi, plots.frequency_view(fi, hidden)
+
+        def show(out, job):
+            fi, view = out
+            self.result = fi
+            self.view = view
+            self.preview = (view.excitation_t, view.excitation_r, view.excitation_title)
+            timing = (f"<p class='eha-note'>Experiment, estimation and validation in {job.run_s:.2f} s "
+                      f"(estimation alone {fi.timings.get('tfest', float('nan')):.2f} s)"
+                      + (f", after {job.wait_s:.1f} s waiting for the server" if job.wait_s > 0.05 else "")
+                      + ".</p>")
+            self.summary.object = freq_summary_html(fi, hidden) + timing
+            self.backout.object = "<h4>Backed-out parameters (eq. 27)</h4>" + backout_html(fi, hidden)
+            for d in self.downloads:
+                d.disabled = fi.bode is None and d is self.downloads[-1]
+            alert = estimate_alert(fi.estimate)
+            self.unstable.object = alert
+            self.unstable.visible = bool(alert)
+            for _, key, _ in _FIGURES:
+                self._draw(key)
+            for name, view in self.views.items():
+                view.shown(self.excitation_key(cfg) if name == "excitation" else run_key)
+            self._mark(self.config()[0], preview_queued=False)      # typed while it computed
+
+        return self.runner.run("frequency experiment", compute, show, fail=self._fail, busy=[self.area],
+                               note=self._note)
+
+    def __panel__(self):
+        config = pn.Column(self.kp_note, self.form, self.error, self.button,
+                           pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"), *self.record.controls(),
+                           self.queue_note, width=280)
+        results = pn.Column(self.alert, self.figure_tabs, self.views["summary"].banner, self.area,
+                            *self.record.results(), sizing_mode="stretch_width", min_width=440)
+        return side_by_side(config, results)

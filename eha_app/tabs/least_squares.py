@@ -1,0 +1,551 @@
+"""Tab 3, time domain: least squares on eqs. 15-18, the student's own data, the hand-in."""
+
+from __future__ import annotations
+
+import csv
+import html
+import io
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import panel as pn
+
+from eha_core.experiments import (
+    LSE_INPUT,
+    LSE_INPUT_RICH,
+    LSE_INPUT_RICH_T_END,
+    LSE_SCENARIOS,
+    lse_data,
+    lse_resimulation,
+    run_lse_table,
+)
+from eha_core.identify.disturbance import MAX_FREQ_HZ
+from eha_core.identify.lse import identify_lse
+from eha_core.params import ParameterError
+from eha_core.signals import SignalSpecError, parse_signal
+
+from .. import plots
+from ..form import Field, Form, Group, parse_fields
+from ..freshness import ResultView
+from ..glossary import term
+from ..layout import side_by_side
+from ..limits import check_lse
+from ..state import AppState
+from ..tables import (
+    SCENARIOS,
+    lse_table_html,
+    table4_html,
+)
+from ..tasks import SessionRunner
+from .uploads import ColumnMapping, check_size
+
+__all__ = ["LeastSquaresPanel", "LseRequest", "LSE_FORM", "LSE_DEFAULTS", "parse_lse"]
+
+#: The columns the least squares need from a data file (eqs. 15-18).
+LSE_COLUMNS = ("t", "x", "v", "p1", "p2", "u")
+
+
+_NAMES_HTML = {"M": "M", "B": "B", "Af": "A<sub>f</sub>", "beta_e": "β<sub>e</sub>"}
+EXCITATIONS = {"paper": "u = 6 sin(4πt), 5 s (default)",
+               "rich": "u = 8 sin(4πt) + 4 sin(10πt), 20 s (narrows B)"}
+
+# -- the least-squares request ---------------------------------------------------------------
+
+LSE_FORM = (Group("Least squares", (
+    Field("lse_scenario", "disturbance", "select", options=tuple(SCENARIOS.items()), short="disturbance"),
+    Field("lse_custom", "custom d(t)", "text", short="custom d(t)",
+          tip="none, sine:AMP[:FREQ_HZ], white:SIGMA, or any signal of the simulation, e.g. sine:500:2+noise:100:1"),
+    Field("lse_model", "disturbance model", "select", options=(("constant", "constant d0 (the paper's)"),
+                                                               ("harmonic", "d0 + a sinusoid")),
+          short="disturbance model"),
+    Field("lse_freq", "harmonic frequency", "text", unit="Hz", placeholder="blank: estimate it",
+          short="harmonic frequency"),
+    Field("lse_seed", "noise seed", "integer", lo=0, hi=10**6, short="noise seed"),
+    Field("lse_excitation", "excitation", "select", options=tuple(EXCITATIONS.items()), short="excitation"),
+)), Group("Sensor noise (simulated measurements)", (
+    Field("lse_noise_x", "σ of x", "number", unit="mm", lo=0.0, hi=10.0, short="σ x",
+          tip="white Gaussian noise added to the position sensor, drawn from the noise seed"),
+    Field("lse_noise_v", "σ of v", "number", unit="mm/s", lo=0.0, hi=1000.0, short="σ v",
+          tip="white Gaussian noise added to the velocity sensor"),
+    Field("lse_noise_p", "σ of p1, p2", "number", unit="MPa", lo=0.0, hi=10.0, short="σ p",
+          tip="white Gaussian noise added to each pressure sensor"),
+), collapsible=True, collapsed=True),)
+LSE_DEFAULTS = {"lse_scenario": "none", "lse_custom": "sine:1000:3", "lse_model": "constant", "lse_freq": "",
+                "lse_seed": "0", "lse_excitation": "paper", "lse_noise_x": "0", "lse_noise_v": "0",
+                "lse_noise_p": "0"}
+_LSE_FIELDS = {f.name: f for g in LSE_FORM for f in g.fields}
+
+
+@dataclass(frozen=True)
+class LseRequest:
+    """A parsed least-squares request."""
+
+    scenario: str = "none"
+    custom: str = "sine:1000:3"
+    model: str = "constant"
+    frequency_hz: float | None = None
+    seed: int = 0
+    excitation: str = "paper"
+    noise: tuple[float, float, float] = (0.0, 0.0, 0.0)     # σ of x [mm], v [mm/s], p1 and p2 [MPa]
+
+    def measurement_noise(self) -> dict[str, float] | None:
+        """The sensors' noise in SI, for :func:`eha_core.experiments.lse_data` (None: noise-free)."""
+        sx, sv, sp = self.noise
+        if not any(self.noise):
+            return None
+        return {"x": sx * 1e-3, "v": sv * 1e-3, "p1": sp * 1e6, "p2": sp * 1e6}
+
+    def disturbance(self):
+        """d(t): a scenario of Table 4, or the custom text in the signal grammar."""
+        spec = self.custom if self.scenario == "custom" else LSE_SCENARIOS[self.scenario]
+        return parse_signal(spec, name="custom d(t)", seed=self.seed, hold_s=1e-3)
+
+    def input_signal(self):
+        return (LSE_INPUT, 5.0) if self.excitation == "paper" else (LSE_INPUT_RICH, LSE_INPUT_RICH_T_END)
+
+
+def lse_hidden(texts: dict) -> list[str]:
+    hidden = []
+    if texts.get("lse_scenario") != "custom":
+        hidden.append("lse_custom")
+    if texts.get("lse_model") != "harmonic":
+        hidden.append("lse_freq")
+    return hidden
+
+
+def parse_lse(texts: dict) -> tuple[LseRequest, dict]:
+    """The least-squares request the form describes, and a message per invalid field."""
+    hidden = set(lse_hidden(texts))
+    values, errors = parse_fields(_LSE_FIELDS.values(), texts, skip=hidden)
+    freq = None
+    text = str(texts.get("lse_freq", "")).strip()
+    if "lse_freq" not in hidden and text:
+        try:
+            freq = float(text.replace(",", "."))
+            if not (math.isfinite(freq) and 0 < freq < MAX_FREQ_HZ):
+                raise ValueError
+        except ValueError:
+            errors["lse_freq"] = (f"harmonic frequency = {text} is not allowed: a number in (0, {MAX_FREQ_HZ:g}) "
+                                  f"Hz, or blank to estimate it")
+            freq = None
+    req = LseRequest(scenario=values.get("lse_scenario", "none"), custom=texts.get("lse_custom", ""),
+                     model=values.get("lse_model", "constant"), frequency_hz=freq,
+                     seed=values.get("lse_seed", 0), excitation=values.get("lse_excitation", "paper"),
+                     noise=tuple(float(values.get(k, 0.0)) for k in ("lse_noise_x", "lse_noise_v", "lse_noise_p")))
+    if "lse_custom" not in hidden and not errors.get("lse_custom"):
+        try:
+            req.disturbance()
+        except (ValueError, SignalSpecError) as exc:
+            errors["lse_custom"] = " ".join(str(exc).split())
+    return req, errors
+
+
+class LeastSquaresPanel(pn.viewable.Viewer):
+    """Time domain: least squares on eqs. 15-18, one scenario or Table 4."""
+
+    def __init__(self, state: AppState, runner: SessionRunner, query: dict | None = None, **kwargs):
+        super().__init__(**kwargs)
+        self.state = state
+        self.runner = runner
+        self.result = None
+        self.all_results = None
+        texts = dict(LSE_DEFAULTS)
+        texts.update({k: v for k, v in (query or {}).items() if k in _LSE_FIELDS})
+        self.form = Form(spec=[g.to_spec() for g in LSE_FORM], values=texts, url_defaults=LSE_DEFAULTS, width=270,
+                         css_classes=["eha-lse-form"], margin=(5, 10))
+        self.form.param.watch(self._update_enabled, "values")
+        self.table = pn.pane.HTML("<p>Choose a disturbance and run the least squares.</p>",
+                                  sizing_mode="stretch_width", css_classes=["eha-lse-table"])
+        # the figure is built with the first result: an empty figure is no use to
+        # anyone and makes Bokeh complain that it cannot range it
+        self.figure: plots.LseFitFigure | None = None
+        self.plot = pn.Column(sizing_mode="stretch_width", css_classes=["eha-lse-plot"])
+        self.area = pn.Column(self.table, self.plot, sizing_mode="stretch_width")
+        self.table4 = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-table4-pane"])
+        self.table4_area = pn.Column(self.table4, sizing_mode="stretch_width")
+        self.view = ResultView("lse", self.area, run_hint="Press “Run least squares” to update it.")
+        self.table4_view = ResultView("table4", self.table4_area,
+                                      run_hint="Press “Run all four scenarios” to update it.")
+        self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
+                                   css_classes=["eha-lse-alert"])
+        self.notice = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-lse-notice"])
+        self.queue_note = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-queue-note"],
+                                       styles={"color": "#555", "font-size": "12px"})
+        self.button = pn.widgets.Button(label="Run least squares", color="primary", width=260,
+                                        css_classes=["eha-run-lse"])
+        self.all_button = pn.widgets.Button(label="Run all four scenarios (Table 4)", color="success", width=260,
+                                            css_classes=["eha-run-table4"])
+        self.button.on_click(lambda _e: self.run())
+        self.all_button.on_click(lambda _e: self.run_all())
+        # an exercise: hand in the hidden parameters' estimates (Table 4 would show the truth)
+        self.all_button.visible = not state.hidden
+        self.handin_button = pn.widgets.Button(label="Hand in these estimates", color="warning", width=260,
+                                               css_classes=["eha-handin"], visible=bool(state.hidden), disabled=True,
+                                               description="run the least squares first")
+        self.handin_button.on_click(lambda _e: self.hand_in())
+        self.verdict = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-verdict"])
+        # the student's own data (CSV or .mat), instead of the simulated sensors
+        self.own_data = None                # MeasuredData of an upload, when one is in use
+        self.own_data_key = None
+        self.last_data = None               # the data behind the table and the plot (for downloads)
+        self._upload = None
+        self.upload = pn.widgets.FileInput(accept=".csv,.mat", width=260, css_classes=["eha-lse-upload"],
+                                           multiple=False)
+        self.upload.param.watch(self._uploaded, "value")
+        self.upload_note = pn.pane.HTML(
+            "<span class='eha-note'>Or use your own measurements: a CSV or MATLAB .mat file with columns "
+            "t, x, v, p1, p2, u (SI, or units in the header such as <code>p1[MPa]</code>).</span>",
+            width=270, css_classes=["eha-lse-upload-note"])
+        self.column_mapping = ColumnMapping({c: (c, ()) for c in LSE_COLUMNS}, "lse")
+        self.mapping = self.column_mapping.panel
+        # the part of the student's record to use (preprocessing: a time range)
+        self.window_form = Form(spec=[Group("Part of your record to use", (
+            Field("own_from", "from t", "text", unit="s", placeholder="its start", short="from t"),
+            Field("own_to", "to t", "text", unit="s", placeholder="its end", short="to t"),
+        )).to_spec()], values={"own_from": "", "own_to": ""}, width=270, visible=False,
+            css_classes=["eha-lse-window"], margin=(5, 10))
+        self.window_form.param.watch(lambda _e: self._update_enabled(), "values")
+        self.simulated_button = pn.widgets.Button(label="Back to simulated data", width=260, visible=False,
+                                                  css_classes=["eha-lse-simulated"])
+        self.simulated_button.on_click(lambda _e: self.use_simulated())
+        self.downloads = [
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.data_bytes("csv")), filename="eha_lse_data.csv",
+                                    label="Data (CSV)", disabled=True, width=128, css_classes=["eha-dl-data-csv"]),
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.data_bytes("mat")), filename="eha_lse_data.mat",
+                                    label="Data (.mat)", disabled=True, width=128, css_classes=["eha-dl-data-mat"]),
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.estimates_bytes("csv")),
+                                    filename="eha_lse_estimates.csv", label="Estimates (CSV)", disabled=True,
+                                    width=128, css_classes=["eha-dl-est-csv"]),
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.estimates_bytes("json")),
+                                    filename="eha_lse_estimates.json", label="Estimates (JSON)", disabled=True,
+                                    width=128, css_classes=["eha-dl-est-json"]),
+        ]
+        state.param.watch(self._update_enabled, "valid")
+        state.param.watch(self._inputs_changed, ["params", "valid"])
+        self._update_enabled()
+
+    def request(self) -> tuple[LseRequest, dict]:
+        return parse_lse(self.form.values)
+
+    def key(self):
+        """What a least-squares run with the current inputs is computed from (None if they are not valid)."""
+        req, errors = self.request()
+        if errors or not self.state.valid or self.window_errors():
+            return None
+        return self.state.params, req, self.own_data_key, self.window() if self.own_data is not None else None
+
+    def window(self) -> tuple[float | None, float | None]:
+        """The time range of the student's record to use (None: its start or end)."""
+        out = []
+        for name in ("own_from", "own_to"):
+            text = str(self.window_form.values.get(name, "")).strip().replace(",", ".")
+            out.append(float(text) if text else None)
+        return out[0], out[1]
+
+    def window_errors(self) -> dict:
+        """Messages of the time-range fields (in seconds, within the record, at least 50 samples)."""
+        if self.own_data is None:
+            return {}
+        t = self.own_data.t
+        errors, values = {}, {}
+        for name, label in (("own_from", "from t"), ("own_to", "to t")):
+            text = str(self.window_form.values.get(name, "")).strip()
+            if not text:
+                continue
+            try:
+                v = float(text.replace(",", "."))
+                if not math.isfinite(v):
+                    raise ValueError
+            except ValueError:
+                errors[name] = f"{label} = {text} is not allowed: enter a time in s, or leave it blank"
+                continue
+            if not t[0] <= v <= t[-1]:
+                errors[name] = f"{label} = {text} s is not allowed: your record runs from {t[0]:g} to {t[-1]:g} s"
+            values[name] = v
+        if not errors:
+            lo, hi = values.get("own_from", t[0]), values.get("own_to", t[-1])
+            n = int(np.count_nonzero((t >= lo) & (t <= hi)))
+            if n < 50:
+                target = "own_to" if "own_to" in values else "own_from"
+                errors[target] = (f"{'to t' if target == 'own_to' else 'from t'} = "
+                                  f"{self.window_form.values[target]} s is not allowed: the range [{lo:g}, {hi:g}] s "
+                                  f"holds {n} samples; need at least 50")
+        return errors
+
+    def windowed(self):
+        """The student's record cut to the chosen time range."""
+        from eha_core.identify.lse import MeasuredData
+
+        d = self.own_data
+        lo, hi = self.window()
+        keep = (d.t >= (d.t[0] if lo is None else lo)) & (d.t <= (d.t[-1] if hi is None else hi))
+        if keep.all():
+            return d
+        return MeasuredData(d.t[keep], d.x[keep], d.v[keep], d.p1[keep], d.p2[keep], d.u[keep],
+                            source=f"{d.source}, t in [{d.t[keep][0]:g}, {d.t[keep][-1]:g}] s")
+
+    # -- the student's own data ---------------------------------------------------------
+    def _uploaded(self, _event) -> None:
+        if self.upload.value is None:
+            return
+        self._upload = (bytes(self.upload.value), self.upload.filename or "upload")
+        self.read_upload()
+
+    def read_upload(self, mapping: dict | None = None):
+        """Read the uploaded file (in a worker): use it, or ask which columns are which."""
+        from eha_core.data import DataError, file_columns, read_data, sample_time
+        from eha_core.identify.lse import MeasuredData
+
+        if self._upload is None:
+            return None
+        data, filename = self._upload
+        try:
+            check_size(data, filename)
+        except ValueError as exc:
+            self._upload_problem(str(exc))
+            return None
+
+        def compute(_token):
+            try:
+                cols = read_data(data, LSE_COLUMNS, name="your file", filename=filename, mapping=mapping,
+                                 min_rows=50)
+            except DataError as exc:
+                if exc.what.startswith("no column"):
+                    return "map", file_columns(data, filename, name="your file"), str(exc)
+                raise
+            ts = sample_time(cols["t"], name="your file", path=filename)
+            return "ok", MeasuredData(**cols, source=filename), ts
+
+        def show(out, _job):
+            if out[0] == "map":
+                self._ask_mapping(out[1], out[2])
+                return
+            _, measured, ts = out
+            self.own_data = measured
+            self.own_data_key = (filename, len(data), tuple(sorted((mapping or {}).items())))
+            self.mapping.visible = False
+            self.window_form.visible = True
+            self.simulated_button.visible = True
+            self.upload_note.object = (f"<span class='eha-ok'>Using your data: {html.escape(filename)}, "
+                                       f"{measured.t.size} samples every {ts * 1e3:.4g} ms. "
+                                       "Run the least squares on it.</span>")
+            self._inputs_changed()
+
+        return self.runner.run("reading your data", compute, show, fail=self._upload_problem, note=self._note)
+
+    def _upload_problem(self, message: str) -> None:
+        self.upload_note.object = f"<span class='eha-warn'>{html.escape(message)}</span>"
+
+    def _ask_mapping(self, available: list, message: str) -> None:
+        """Which of the file's columns is t, x, v, p1, p2, u?"""
+        self.column_mapping.ask(available, message, lambda chosen: self.read_upload(mapping=chosen))
+
+    @property
+    def mapping_selects(self) -> dict:
+        return self.column_mapping.selects
+
+    @property
+    def mapping_button(self):
+        return self.column_mapping.button
+
+    def use_simulated(self) -> None:
+        self.own_data, self.own_data_key, self._upload = None, None, None
+        self.simulated_button.visible = False
+        self.window_form.visible = False
+        self.mapping.visible = False
+        self.upload_note.object = "<span class='eha-note'>Using the simulated sensors again.</span>"
+        self._inputs_changed()
+
+    # -- downloads ---------------------------------------------------------------------
+    def data_bytes(self, kind: str) -> bytes:
+        """The measurements behind the table and the plot, as CSV or .mat (read back by the upload)."""
+        from eha_core.data import write_data
+
+        d = self.last_data
+        cols = {"t": d.t, "x": d.x, "v": d.v, "p1": d.p1, "p2": d.p2, "u": d.u}
+        return write_data(cols, kind)
+
+    def estimates_bytes(self, kind: str) -> bytes:
+        """The estimates with their standard errors and 95 % intervals (no hidden nominal value)."""
+        res = self.result
+        rows = []
+        for k, v in res.estimates.items():
+            lo, hi = res.ci95[k]
+            nominal = None if k in self.state.hidden else res.nominal.get(k)
+            rows.append({"parameter": k, "estimate": float(v), "std_error": float(res.std_errors[k]),
+                         "ci95_low": float(lo), "ci95_high": float(hi),
+                         "nominal": None if nominal is None else float(nominal)})
+        if kind == "json":
+            source = self.last_data.source if self.last_data is not None else ""
+            return json.dumps({"disturbance_model": res.disturbance_model, "data": source,
+                               "estimates": rows}, indent=1).encode()
+        buf = io.StringIO()
+        w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+        w.writeheader()
+        w.writerows(rows)
+        return buf.getvalue().encode()
+
+    def table4_key(self):
+        _, errors = self.request()
+        return None if "lse_seed" in errors or not self.state.valid else (self.state.params,
+                                                                          self.form.values.get("lse_seed"))
+
+    def _inputs_changed(self, *_events) -> None:
+        why = "a parameter on tab 1 is not valid" if not self.state.valid else ""
+        self.view.inputs_changed(self.key(), why=why)
+        self.table4_view.inputs_changed(self.table4_key(), why=why)
+
+    def _update_enabled(self, *_events) -> None:
+        _, errors = self.request()
+        self.form.errors = errors
+        self.form.hidden = lse_hidden(self.form.values)
+        window_errors = self.window_errors()
+        self.window_form.errors = window_errors
+        errors = {**errors, **window_errors}
+        ok = self.state.valid
+        self.button.disabled = not ok or bool(errors)
+        self.all_button.disabled = not ok or "lse_seed" in errors
+        if not ok:
+            self.notice.object = ('<span class="eha-warn">The buttons are off: a parameter on tab 1 is not valid; '
+                                  'fix it to run the identification.</span>')
+        elif errors:
+            self.notice.object = ('<span class="eha-warn">“Run least squares” is off until this input is fixed: '
+                                  f'{next(iter(errors.values()))}</span>')
+        self.notice.visible = not ok or bool(errors)
+        self._inputs_changed()
+
+    def _fail(self, message: str) -> None:
+        self.alert.object = f"The identification failed: {message}"
+        self.alert.visible = True
+
+    def _note(self, text: str) -> None:
+        self.queue_note.object = text
+        self.queue_note.visible = bool(text)
+
+    def run(self):
+        req, errors = self.request()
+        if errors or not self.state.valid:
+            return None
+        u, t_end = req.input_signal()
+        self.alert.visible = False
+        try:
+            check_lse(t_end)
+        except ValueError as exc:
+            self._fail(str(exc))
+            return None
+        params = self.state.params
+        key = self.key()
+        scenario = req.scenario if req.excitation == "paper" else None
+
+        own = self.windowed() if self.own_data is not None else None
+
+        def compute(token):
+            if own is not None:     # the student's measurements: nothing to simulate
+                res = identify_lse(own, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
+                                   cancel=token)
+                return res, plots.lse_view(own, None), (f"Your data ({html.escape(own.source)}, {own.t.size} "
+                                                        "samples): the model is not re-simulated (the input is "
+                                                        "known only at its samples)."), own
+            d = req.disturbance()
+            data = lse_data(params, d, u=u, t_end=t_end, seed=req.seed, measurement_noise=req.measurement_noise(),
+                            cancel=token)
+            res = identify_lse(data, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
+                               cancel=token)
+            try:
+                resim = lse_resimulation(res, params, data, u=u, cancel=token)
+                resim_error = ""
+            except ParameterError as exc:
+                resim, resim_error = None, f"No re-simulation: the estimate is not physical ({exc})."
+            return res, plots.lse_view(data, resim), resim_error, data
+
+        def show(out, job):
+            res, view, resim_error, data = out
+            self.result = res
+            self.last_data = data
+            for d in self.downloads:
+                d.disabled = False
+            note = (f"<p class='eha-note'>Simulated, identified and re-simulated in {job.run_s * 1e3:.0f} ms"
+                    + (f" (and {job.wait_s:.1f} s waiting for the server)" if job.wait_s > 0.05 else "")
+                    + f". {resim_error}</p>")
+            warn = "" if res.success else f"<div class='eha-warn'>{res.message}</div>"
+            self.table.object = warn + lse_table_html(res, scenario if scenario != "custom" else None,
+                                                      hidden=self.state.hidden) + note
+            self.handin_button.disabled = not self.state.hidden
+            if self.figure is None:
+                self.figure = plots.LseFitFigure()
+                self.figure.update(view)
+                self.plot.objects = [pn.pane.Bokeh(self.figure.layout, sizing_mode="stretch_width")]
+            else:
+                self.figure.update(view)
+            self.view.shown(key)
+            self._inputs_changed()          # typed while it computed
+
+        return self.runner.run("least squares", compute, show, fail=self._fail, busy=[self.area], note=self._note)
+
+    def run_all(self):
+        _, errors = self.request()
+        if not self.state.valid or "lse_seed" in errors:
+            return None
+        self.alert.visible = False
+        params = self.state.params
+        seed = int(self.form.values.get("lse_seed", "0"))
+        key = self.table4_key()
+
+        def compute(token):
+            return {m: run_lse_table(params, disturbance_model=m, seed=seed, cancel=token)
+                    for m in ("constant", "harmonic")}
+
+        def show(results, job):
+            self.all_results = results
+            self.table4.object = (f"<h4>Table 4: four scenarios, both disturbance models, beside the paper "
+                                  f"({job.run_s * 1e3:.0f} ms)</h4>" + table4_html(results))
+            self.table4_view.shown(key)
+            self._inputs_changed()
+
+        return self.runner.run("Table 4", compute, show, fail=self._fail, busy=[self.table4_area], note=self._note)
+
+    def hand_in(self):
+        """Hand in the last estimates of the exercise's hidden parameters; show the verdicts (never the truth)."""
+        s = self.state
+        if self.result is None or not s.hidden:
+            return None
+        estimates = {n: float(self.result.estimates[n]) for n in s.hidden}
+        exercise, student, store = s.exercise, s.student, s.handins
+
+        def compute(_token):
+            verdicts = exercise.verdicts(student, estimates)
+            store.add(student, estimates, verdicts)
+            return verdicts, len([h for h in store.all() if h.student == student])
+
+        def show(out, _job):
+            verdicts, count = out
+            tol = f"±{100 * exercise.tolerance:g} %"
+            items = "".join(f"<li>{_NAMES_HTML.get(n, n)} = {estimates[n]:.5g}: "
+                            + (f"<span class='eha-ok'>within {tol} ✓</span>" if ok else
+                               f"<span class='eha-warn'>not within {tol} ✗</span>") + "</li>"
+                            for n, ok in verdicts.items())
+            score = sum(verdicts.values())
+            self.verdict.object = (f"<div class='eha-verdict-box'><b>Handed in</b> (hand-in {count} of "
+                                   f"{html.escape(student)}): {score} of {len(verdicts)} within tolerance."
+                                   f"<ul>{items}</ul></div>")
+            self.verdict.visible = True
+
+        return self.runner.run("hand-in", compute, show, fail=self._fail, note=self._note)
+
+    def __panel__(self):
+        controls = pn.Column(self.form, self.upload_note, self.upload, self.mapping, self.window_form,
+                             self.simulated_button,
+                             self.notice, self.button, self.all_button, self.handin_button, self.verdict,
+                             pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"), self.queue_note, width=280)
+        explain = pn.pane.HTML(
+            "<p class='eha-note'>Least squares on eq. 15 filtered by H(s) = 1/(0.01 s + 1) (eqs. 16-18): "
+            "y<sub>1</sub> = A<sub>1</sub>p<sub>1</sub> − A<sub>2</sub>p<sub>2</sub> = M dv/dt + B v + "
+            "A<sub>f</sub> S(v) + d<sub>0</sub>, and dp<sub>1</sub>/dt = β<sub>e</sub> φ<sub>2</sub>: each "
+            f"unknown multiplies a {term('regressor')} formed from the measurements. "
+            "D<sub>c</sub>, d<sub>c</sub>, L<sub>0</sub>, K<sub>q</sub> are measured; 1 kHz sensors.</p>",
+            sizing_mode="stretch_width")
+        results = pn.Column(explain, self.alert, self.view.banner, self.area, self.table4_view.banner,
+                            self.table4_area, sizing_mode="stretch_width", min_width=440)
+        return side_by_side(controls, results)

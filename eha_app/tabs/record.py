@@ -1,0 +1,275 @@
+"""Tab 3, frequency domain: a transfer function from the student's own record.
+
+The student uploads t, u, y (or the closed loop's t, r, x) as CSV or .mat,
+maps the columns when the names differ, chooses the part of the record and
+whether to remove its mean or a linear trend (drawn on the record's plot as it
+is chosen), and estimates H(s) on the first two thirds, validated on the rest.
+"""
+
+from __future__ import annotations
+
+import html
+import io
+from collections.abc import Callable
+
+import numpy as np
+import panel as pn
+
+from .. import plots
+from ..exports import bode_csv, tf_estimate_bytes
+from ..form import Field, Form, Group
+from ..formatting import tf_html
+from ..freshness import ResultView
+from ..glossary import term
+from ..tables import estimate_alert, estimation_sentences
+from ..tasks import SessionRunner
+from .uploads import ColumnMapping, check_size
+
+__all__ = ["RecordPanel", "RECORD_COLUMNS"]
+
+#: The columns a record needs, with the closed loop's names they may go by (u = r, y = x).
+RECORD_COLUMNS = {"t": ("t", ()), "u": ("input u (or r)", ("r",)), "y": ("output y (or x)", ("x",))}
+DETRENDS = {"nothing": "none", "the mean": "mean", "a linear trend": "linear"}
+_WINDOW_FIELDS = ("rec_from", "rec_to")
+
+
+class RecordPanel:
+    """The own-record part of the frequency-domain panel.
+
+    ``orders()`` gives the frequency form's model settings (poles, zeros,
+    initial condition, input offset) or None while they are not valid;
+    ``note`` writes the panel's queue note; ``fail`` its alert.
+    """
+
+    def __init__(self, runner: SessionRunner, orders: Callable[[], object | None], *,
+                 note: Callable[[str], None], fail: Callable[[str], None]):
+        self.runner = runner
+        # previews of the preprocessing are jobs of their own: they must not replace an estimate
+        self.preview_runner = SessionRunner((runner.owner, "record preview"), runner._queue)
+        self.orders = orders
+        self._note, self._fail = note, fail
+        self.columns: tuple[np.ndarray, np.ndarray, np.ndarray, str] | None = None    # t, u, y, file name
+        self._upload: tuple[bytes, str] | None = None
+        self._mapping: dict | None = None
+        self.prepared = None
+        self.result = None
+        self.note = pn.pane.HTML(
+            "<span class='eha-note'>Or estimate H(s) from your own record: a CSV or .mat file with t, u, y "
+            "(or t, r, x), in SI or with units in the header. Its first two thirds estimate, the rest "
+            "validates.</span>", width=270, css_classes=["eha-freq-record-note"])
+        self.upload = pn.widgets.FileInput(accept=".csv,.mat", width=260, css_classes=["eha-freq-upload"])
+        self.upload.param.watch(self._uploaded, "value")
+        self.mapping = ColumnMapping(RECORD_COLUMNS, "freq-record")
+        self.window_form = Form(spec=[Group("Part of your record to use", (
+            Field("rec_from", "from t", "text", unit="s", placeholder="its start", short="from t"),
+            Field("rec_to", "to t", "text", unit="s", placeholder="its end", short="to t"),
+        )).to_spec()], values={"rec_from": "", "rec_to": ""}, width=270, visible=False,
+            css_classes=["eha-freq-record-window"], margin=(5, 10))
+        self.detrend = pn.widgets.Select(label="remove from u and y", value="none", width=260, options=DETRENDS,
+                                         visible=False, css_classes=["eha-freq-record-detrend"])
+        self.button = pn.widgets.Button(label="Estimate from your record", disabled=True, width=260,
+                                        css_classes=["eha-freq-record-run"])
+        self.button.on_click(lambda _e: self.run())
+        self.data_figure: plots.RecordDataFigure | None = None
+        self.data_area = pn.Column(sizing_mode="stretch_width", visible=False, css_classes=["eha-freq-record-data"])
+        self.summary = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-freq-record-summary"])
+        self.bode: plots.BodeFigure | None = None
+        self.area = pn.Column(self.summary, sizing_mode="stretch_width", visible=False)
+        self.view = ResultView("freq-record", self.area, run_hint="Press “Estimate from your record” to update it.")
+        self.downloads = [
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.estimate_bytes("csv")),
+                                    filename="eha_record_transfer_function.csv", label="Estimate (CSV)",
+                                    disabled=True, width=128, css_classes=["eha-dl-record-csv"]),
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.estimate_bytes("json")),
+                                    filename="eha_record_transfer_function.json", label="Estimate (JSON)",
+                                    disabled=True, width=128, css_classes=["eha-dl-record-json"]),
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(bode_csv(self.result.bode, theoretical=False)),
+                                    filename="eha_record_bode.csv", label="Bode curves (CSV)", disabled=True,
+                                    width=260, css_classes=["eha-dl-record-bode"]),
+        ]
+        self.window_form.param.watch(lambda _e: self.preview(), "values")
+        self.detrend.param.watch(lambda _e: self.preview(), "value")
+
+    # -- inputs ------------------------------------------------------------------------------
+    def window(self) -> tuple[str, str]:
+        return tuple(str(self.window_form.values.get(k, "")).strip() for k in _WINDOW_FIELDS)
+
+    def key(self):
+        """What an estimate from the record is computed from (None: no record, or invalid settings)."""
+        cfg = self.orders()
+        if self.columns is None or cfg is None or self.window_form.errors:
+            return None
+        return (self.columns[3], self.columns[0].size, self.window(), self.detrend.value, cfg.n_poles, cfg.n_zeros,
+                cfg.initial_condition, cfg.input_offset)
+
+    def inputs_changed(self) -> None:
+        self.view.inputs_changed(self.key())
+        self.button.disabled = self.key() is None
+
+    # -- reading the file ----------------------------------------------------------------------
+    def _uploaded(self, _event) -> None:
+        if self.upload.value is None:
+            return
+        self._upload = (bytes(self.upload.value), self.upload.filename or "upload")
+        self.read(None)
+
+    def read(self, mapping: dict | None) -> None:
+        """Read the upload in a worker: its t, u, y (or t, r, x, or the mapped columns), or ask for a mapping."""
+        from eha_core.data import DataError, file_columns, read_data, sample_time
+
+        if self._upload is None:
+            return
+        data, filename = self._upload
+
+        def columns(needed):
+            return read_data(data, needed, name="your file", filename=filename, mapping=mapping, min_rows=20)
+
+        def compute(_token):
+            check_size(data, filename)
+            try:
+                cols = columns(("t", "u", "y"))
+                u, y = cols["u"], cols["y"]
+            except DataError as exc:
+                if not exc.what.startswith("no column") or mapping:
+                    raise
+                try:
+                    cols = columns(("t", "r", "x"))
+                    u, y = cols["r"], cols["x"]
+                except DataError as second:
+                    if not second.what.startswith("no column"):
+                        raise
+                    have = exc.what.split("the file has ", 1)[-1].split(";")[0]
+                    message = f"your file {filename}: it needs columns t, u, y (or t, r, x); the file has {have}"
+                    return "map", file_columns(data, filename, name="your file"), message
+            return "ok", (cols["t"], u, y, filename), sample_time(cols["t"], name="your file", path=filename)
+
+        def show(out, _job):
+            if out[0] == "map":
+                self.mapping.ask(out[1], out[2] + ". Choose which column is which:", self.read)
+                self.note.object = ("<span class='eha-warn'>Your record's columns are not named t, u, y: choose "
+                                    "them below.</span>")
+                return
+            _, cols, ts = out
+            self.columns, self._mapping = cols, mapping
+            self.mapping.hide()
+            t, name = cols[0], cols[3]
+            self.note.object = (f"<span class='eha-ok'>Your record: {html.escape(name)}, {t.size} samples every "
+                                f"{ts * 1e3:.4g} ms, t from {t[0]:g} to {t[-1]:g} s.</span>")
+            self.window_form.values = {"rec_from": "", "rec_to": ""}
+            self.window_form.visible = self.detrend.visible = True
+            self.preview()
+
+        def fail(message):
+            self.note.object = f"<span class='eha-warn'>{html.escape(message)}</span>"
+
+        self.runner.run("reading your record", compute, show, fail=fail, note=self._note)
+
+    # -- preprocessing, drawn as it is chosen ----------------------------------------------------
+    def preview(self) -> None:
+        """Prepare the record (range, trend) in a worker and draw it; a bad range gets its message."""
+        from eha_core.identify.record import prepare_record
+
+        if self.columns is None:
+            return
+        t, u, y, _ = self.columns
+        (t_from, t_to), detrend = self.window(), self.detrend.value
+
+        def compute(_token):
+            prepared = prepare_record(t, u, y, detrend=detrend, t_from=t_from, t_to=t_to)
+            rec = self.result if self.result is not None and self.view.status == "current" else None
+            return prepared, plots.record_data_view(t, u, y, prepared, rec)
+
+        def show(out, _job):
+            self.window_form.errors = {}
+            self.prepared, view = out
+            self._draw_data(view)
+            self.inputs_changed()
+
+        def fail(message):
+            field = "rec_to" if message.startswith("to t") else "rec_from"
+            self.window_form.errors = {field: message}
+            self.inputs_changed()
+
+        self.preview_runner.run("preparing your record", compute, show, fail=fail)
+
+    def _draw_data(self, view) -> None:
+        if self.data_figure is None:
+            self.data_figure = plots.RecordDataFigure()
+            self.data_figure.update(view)
+            self.data_area.objects = [pn.pane.Bokeh(self.data_figure.layout, sizing_mode="stretch_width")]
+        else:
+            self.data_figure.update(view)
+        self.data_area.visible = True
+
+    # -- the estimate --------------------------------------------------------------------------------
+    def run(self):
+        """H(s) from the prepared record (a worker), shown with its validation, data plot and Bode diagram."""
+        from eha_core.identify.record import identify_record
+
+        cfg, key = self.orders(), self.key()
+        if key is None:
+            return None
+        t, u, y, name = self.columns
+        (t_from, t_to), detrend = self.window(), self.detrend.value
+
+        def compute(token):
+            rec = identify_record(t, u, y, n_poles=cfg.n_poles, n_zeros=cfg.n_zeros,
+                                  initial_condition=cfg.initial_condition, input_offset=cfg.input_offset,
+                                  detrend=detrend, t_from=t_from, t_to=t_to, cancel=token)
+            return rec, plots.record_view(rec), plots.record_data_view(t, u, y, rec.prepared, rec)
+
+        def show(out, _job):
+            rec, bode_view, data_view = out
+            self.result = rec
+            self.summary.object = self._summary(rec, name)
+            if self.bode is None:
+                self.bode = plots.BodeFigure()
+                self.bode.update(bode_view)
+                self.area.objects = [self.summary, pn.pane.Bokeh(self.bode.layout, sizing_mode="stretch_width")]
+            else:
+                self.bode.update(bode_view)
+            self._draw_data(data_view)
+            self.downloads[0].disabled = self.downloads[1].disabled = False
+            self.downloads[2].disabled = rec.bode is None
+            self.area.visible = True
+            self.view.shown(key)
+            self.inputs_changed()
+
+        return self.runner.run("estimate from your record", compute, show, fail=self._fail, note=self._note)
+
+    @staticmethod
+    def _summary(rec, name: str) -> str:
+        e, p = rec.estimate, rec.prepared
+        parts = [f"<h4>Your record: {html.escape(name)}</h4>"]
+        alert = estimate_alert(e)
+        if alert:
+            parts.append(f"<div class='eha-warn'>{alert}</div>")
+        if e.success and np.all(np.isfinite(e.den)):
+            parts.append(tf_html("Ĥ(s)", e.num, e.den, f"from the first {rec.n_estimation} samples "
+                                 f"(t ∈ [{p.t_from:g}, {p.t_split:g}] s); {term('fit', f'fit {e.fit_percent:.2f} %')}"))
+            if rec.validation is not None:
+                parts.append(f"<p>Validated on the last {rec.t.size - rec.n_estimation} samples: fit "
+                             f"<b>{rec.validation.fit_percent:.2f} %</b>.</p>")
+            parts.append(estimation_sentences(e))
+        if rec.detrend != "none":
+            parts.append(f"<p class='eha-note'>{'The mean' if rec.detrend == 'mean' else 'A linear trend'} was "
+                         "removed from u and y first.</p>")
+        return "".join(parts)
+
+    def estimate_bytes(self, kind: str) -> bytes:
+        """The record's estimate with its intervals, the preprocessing and the fits (CSV or JSON)."""
+        rec, p = self.result, self.result.prepared
+        settings = {"file": self.columns[3] if self.columns else "", "columns": self._mapping or {},
+                    "t_from_s": p.t_from, "t_to_s": p.t_to, "detrend": p.detrend,
+                    "n_estimation": rec.n_estimation, "n_validation": int(rec.t.size - rec.n_estimation)}
+        return tf_estimate_bytes(rec.estimate, kind, settings=settings, fits={
+            "fit_percent": rec.estimate.fit_percent,
+            "validation_fit_percent": None if rec.validation is None else rec.validation.fit_percent})
+
+    # -- layout ------------------------------------------------------------------------------------
+    def controls(self) -> list:
+        return [self.note, self.upload, self.mapping.panel, self.window_form, self.detrend, self.button,
+                pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed")]
+
+    def results(self) -> list:
+        return [self.data_area, self.view.banner, self.area]
