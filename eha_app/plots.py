@@ -532,8 +532,9 @@ class BodeFigure:
         self.phase.line("w", "th_deg", source=self.curves, color=CASE_COLORS[2], line_dash="dashed")
         self.phase.scatter("w", "deg", source=self.points, color="#333333", size=4)
         self.data_item = LegendItem(label="the data", renderers=[r3, r4])
-        _legend_above(self.mag, [LegendItem(label="estimated H(s)", renderers=[r1]),
-                                 LegendItem(label="linearised H(s), eq. 24", renderers=[r2]), self.data_item])
+        self.theory_item = LegendItem(label="linearised H(s), eq. 24", renderers=[r2])
+        _legend_above(self.mag, [LegendItem(label="estimated H(s)", renderers=[r1]), self.theory_item,
+                                 self.data_item])
         self.note = Div(text="", sizing_mode="stretch_width", css_classes=["eha-bode-note"],
                         styles={"font-size": "12px", "color": "#555"})
         _lean(self.mag, self.phase)
@@ -554,6 +555,11 @@ class BodeFigure:
         else:
             self.band.data = {"w": _f32(view.data_w), "lo": _f32(view.data_lower_db), "hi": _f32(view.data_upper_db)}
         _set_legend_label(self.data_item, view.data_label)
+        # no eq. 24 for a student's record (nothing is known of its plant): no legend entry either;
+        # in an exercise the entry says that it is hidden
+        hidden = "hidden" in view.theory_label
+        _set_legend_label(self.theory_item, view.theory_label if hidden else "linearised H(s), eq. 24")
+        self.theory_item.visible = hidden or bool(np.isfinite(view.theory_db).any())
         description = html.escape(view.data_description)
         for word, shown in (("ETFE", "ETFE"), ("spectral estimate", "Spectral estimate")):
             if description.startswith(shown):
@@ -729,9 +735,18 @@ def record_data_view(t, u, y, prepared, rec=None) -> RecordDataView:
                           t_split=p.t_split, title=title, model_t=model_t, model_y=model_y, model_label=label)
 
 
+def _swatch(label: str, color: str, dash: str = "solid", width: int = 3) -> str:
+    return (f'<span style="white-space:nowrap;margin-right:14px"><span style="display:inline-block;width:22px;'
+            f'height:0;border-top:{width}px {dash} {color};vertical-align:middle;margin-right:5px"></span>'
+            f'{_escape(label)}</span>')
+
+
 class RecordDataFigure:
     """The student's record: the file's u and y (grey), the part used with its trend removed
-    (colour), the removed trend (dashed), the estimation/validation split, and the estimate's output."""
+    (colour), the removed trend (dashed), the estimation/validation split, and the estimate's output.
+
+    The legend is one HTML line above both panels: it wraps on a narrow page, a Bokeh legend would not.
+    """
 
     def __init__(self, *, height: int = 200, width: int = FIGURE_WIDTH):
         keys = ("t", "u", "y")
@@ -742,30 +757,28 @@ class RecordDataFigure:
         x_range = DataRange1d()
         self.figs = []
         self.splits = []
-        items = []
         for key, label in (("u", "input u"), ("y", "output y")):
             fig = _figure(width=width // 2, height=height, x_range=x_range, x_axis_label="t [s]",
                           y_axis_label=label, title=f"Your record: {label}")
-            r_raw = fig.line("t", key, source=self.raw, color="#b0b0b0", line_width=1)
-            r_used = fig.line("t", key, source=self.used, color=CASE_COLORS[0], line_width=1.5)
-            r_trend = fig.line("t", key, source=self.trend, color=CASE_COLORS[1], line_dash="dashed", line_width=2)
+            fig.min_width = 200         # two side by side in the results column of an 800 px page
+            fig.line("t", key, source=self.raw, color="#b0b0b0", line_width=1)
+            fig.line("t", key, source=self.used, color=CASE_COLORS[0], line_width=1.5)
+            fig.line("t", key, source=self.trend, color=CASE_COLORS[1], line_dash="dashed", line_width=2)
             split = Span(location=0.0, dimension="height", line_color="#555555", line_dash="dotted", line_width=2)
             fig.add_layout(split)
             self.splits.append(split)
             if key == "y":
-                r_model = fig.line("t", "y", source=self.model, color=CASE_COLORS[2], line_dash="dashed",
-                                   line_width=2)
-                self.model_item = LegendItem(label="estimated H(s)", renderers=[r_model], visible=False)
-                items = [LegendItem(label="as in the file", renderers=[r_raw]),
-                         LegendItem(label="as estimated", renderers=[r_used]),
-                         LegendItem(label="removed trend", renderers=[r_trend]), self.model_item]
-                _legend_above(fig, items)
+                fig.line("t", "y", source=self.model, color=CASE_COLORS[2], line_dash="dashed", line_width=2)
             self.figs.append(fig)
-        self.trend_item = items[2]
+        self.trend_shown = False
+        self.model_label = ""
+        self.legend = Div(text="", sizing_mode="stretch_width", css_classes=["eha-record-legend"],
+                          styles={"font-size": "12px"})
         self.note = Div(text="", sizing_mode="stretch_width", css_classes=["eha-record-data-note"],
                         styles={"font-size": "12px", "color": "#555"})
         _lean(*self.figs)
-        self.layout = column(row(*self.figs, sizing_mode="stretch_width"), self.note, sizing_mode="stretch_width")
+        self.layout = column(self.legend, row(*self.figs, sizing_mode="stretch_width"), self.note,
+                             sizing_mode="stretch_width")
 
     def update(self, view: RecordDataView) -> None:
         t, u, y = decimate(view.t, view.u, view.y)
@@ -777,15 +790,19 @@ class RecordDataFigure:
         else:
             t, u, y = decimate(view.used_t, view.trend_u, view.trend_y)
             self.trend.data = {"t": _f32(t), "u": _f32(u), "y": _f32(y)}
-        self.trend_item.visible = view.trend_u is not None
+        self.trend_shown = view.trend_u is not None
         if view.model_t is None:
             self.model.data = {"t": _f32([]), "y": _f32([])}
-            self.model_item.visible = False
         else:
             t, y = decimate(view.model_t, view.model_y)
             self.model.data = {"t": _f32(t), "y": _f32(y)}
-            _set_legend_label(self.model_item, view.model_label)
-            self.model_item.visible = True
+        self.model_label = view.model_label if view.model_t is not None else ""
+        parts = [_swatch("as in the file", "#b0b0b0", width=2), _swatch("as estimated", CASE_COLORS[0])]
+        if self.trend_shown:
+            parts.append(_swatch("removed trend", CASE_COLORS[1], "dashed"))
+        if self.model_label:
+            parts.append(_swatch(self.model_label, CASE_COLORS[2], "dashed"))
+        self.legend.text = "".join(parts)
         for split in self.splits:
             split.location = view.t_split
         self.note.text = html.escape(view.title) + " (dotted line: where validation starts)."

@@ -146,7 +146,7 @@ def test_a_transfer_function_from_the_students_own_record(closed_loop):
     # the record is drawn as soon as it is read: as in the file, and as it will be estimated
     fig = record.data_figure
     assert record.data_area.visible and len(fig.raw.data["t"]) == 1000 and len(fig.used.data["t"]) == 1000
-    assert not fig.trend_item.visible and not fig.model_item.visible
+    assert not fig.trend_shown and not fig.model_label and "removed trend" not in fig.legend.text
     assert fig.splits[0].location == pytest.approx(6.67)          # validation starts at sample 667
     record.run()
     rec = record.result
@@ -155,7 +155,7 @@ def test_a_transfer_function_from_the_students_own_record(closed_loop):
     assert record.view.status == "current" and len(record.bode.points.data["w"]) > 10
     assert "of your record" in record.bode.data_item.label["value"]
     # after the estimate, its output is drawn over the record (estimation part, then validation)
-    assert fig.model_item.visible and "validation" in fig.model_item.label["value"]
+    assert "validation" in fig.model_label and fig.model_label in fig.legend.text
     assert len(fig.model.data["t"]) == 1000
     record.detrend.value = "mean"
     assert record.view.status == "stale"
@@ -167,7 +167,7 @@ def test_preprocessing_is_drawn_on_the_record_and_checked(closed_loop):
     x = closed_loop.result.data.x
     record.detrend.value = "linear"
     fig = record.data_figure
-    assert fig.trend_item.visible
+    assert fig.trend_shown and "removed trend" in fig.legend.text
     used_y = np.asarray(fig.used.data["y"], dtype=float)
     trend_y = np.asarray(fig.trend.data["y"], dtype=float)
     np.testing.assert_allclose(used_y + trend_y, x, atol=1e-6)           # drawn: what is used + what is removed
@@ -252,3 +252,13 @@ def test_an_exercise_leaves_eq24_out_of_the_bode_curves(closed_loop):
     panel.result = dataclasses.replace(closed_loop.result)
     curves = {line.split(",")[0] for line in panel.bode_bytes().decode().splitlines()[1:]}
     assert "linearised_eq24" not in curves and "estimate" in curves
+
+
+def test_the_record_bode_has_no_eq24_entry(closed_loop):
+    panel = IdentificationTab(AppState()).frequency_panel()
+    record = _upload_record(panel, closed_loop.data_bytes("csv"), "loop.csv")
+    record.run()
+    assert not record.bode.theory_item.visible                  # nothing is known of a record's plant
+    closed_loop._shown.add("bode")
+    closed_loop._draw("bode")
+    assert closed_loop.figures["bode"].theory_item.visible

@@ -121,6 +121,20 @@ def test_the_secret_never_reaches_a_students_browser(browser, tmp_path):
         page.wait_for_selector(".eha-freq-summary >> text=Validation on a fresh excitation", timeout=90_000)
         for fig in ("Fig. 11 fit", "Fig. 12 Bode", "Fig. 13 validation"):
             page.locator(".bk-tab", has_text=fig).first.click()
+        # the frequency domain's downloads, and its record uploaded again as the student's own
+        freq_files = []
+        for button in ("eha-dl-freq-est-csv", "eha-dl-freq-bode", "eha-dl-freq-csv"):
+            with page.expect_download() as download:
+                page.locator(f".{button}").get_by_role("button").first.click()
+            freq_files.append(open(download.value.path(), encoding="utf-8").read())
+        assert "linearised_eq24" not in freq_files[1]                  # eq. 24 is computed from hidden values
+        record = tmp_path / "my_loop.csv"
+        record.write_text(freq_files[2])
+        page.locator(".eha-freq-upload input[type=file]").set_input_files(str(record))
+        page.wait_for_selector(".eha-freq-record-note >> text=Your record: my_loop.csv", timeout=60_000)
+        page.get_by_role("button", name="Estimate from your record").click()
+        page.wait_for_selector(".eha-freq-record-summary >> text=Validated on the last", timeout=90_000)
+        pages.append(page.content())
         page.locator(".bk-header .bk-tab", has_text="1. Parameters").first.click()
         page.wait_for_selector(".eha-hidden-note")
         pages.append(page.content())
@@ -139,7 +153,7 @@ def test_the_secret_never_reaches_a_students_browser(browser, tmp_path):
         # the report's text without Bokeh's inlined JavaScript (its own numbers are not the student's)
         report_text = re.sub(r"<script[^>]*>.*?</script>", "", report, flags=re.S)
         messages = [f if isinstance(f, str) else f.decode("latin-1") for f in frames]
-        blob = "\n".join(pages + [csv_text] + messages + downloads)
+        blob = "\n".join(pages + [csv_text] + messages + downloads + freq_files)
         assert len(frames) > 20 and "s42" in blob                  # the capture saw the session
         assert ex.secret not in blob and "secret" not in blob.lower()
         leaks = {n: s for n in HIDE for s in formats(getattr(truth, n), DISPLAY_SCALE[n]) if appears(s, blob)}
