@@ -10,12 +10,13 @@ from __future__ import annotations
 import csv
 import io
 import json
+import zipfile
 
 import numpy as np
 
 from eha_core.identify._stats import Z95
 
-__all__ = ["tf_estimate_rows", "tf_estimate_bytes", "bode_csv"]
+__all__ = ["tf_estimate_rows", "tf_estimate_bytes", "bode_csv", "frequency_figures_zip"]
 
 
 def _finite(v) -> float | None:
@@ -88,3 +89,47 @@ def bode_csv(bode, *, theoretical: bool = True) -> bytes:
     put("etfe" if bode.data_method == "etfe" else "spectral", np.asarray(bode.data_w),
         np.asarray(bode.data_magnitude_db), np.asarray(bode.data_phase_deg), bode.data_lower_db, bode.data_upper_db)
     return buf.getvalue().encode()
+
+
+def frequency_figures_zip(fi, *, hidden: bool = False) -> bytes:
+    """The data behind every figure of the frequency experiment, one CSV per figure and all of it
+    in one .mat (variables named ``fig9_closed_loop_t``, ``fig12_bode_curves_estimate_db``, ...), zipped.
+
+    ``hidden``: an exercise; eq. 24's curves (computed from the hidden values) are left out.
+    """
+    from eha_core.data import write_data
+
+    d = fi.data
+    tables = {"fig8_excitation": {"t": np.arange(fi.excitation.u.size) * fi.config.ts, "r": fi.excitation.u},
+              "fig9_closed_loop": {"t": d.t, "r": d.r, "x": d.x, "u": d.u}}
+    if fi.estimate_output is not None:
+        fit = {"t": d.t, "x": d.x, "x_estimate": fi.estimate_output}
+        if not hidden and fi.theoretical_comparison is not None:
+            fit["x_eq24"] = fi.theoretical_comparison.y_hat
+        tables["fig11_fit"] = fit
+    if fi.validation is not None:
+        vd = fi.validation_data
+        tables["fig13_validation"] = {"t": vd.t, "r": vd.r, "x": vd.x, "x_estimate": fi.validation.y_hat}
+    if fi.residuals is not None:
+        ra = fi.residuals
+        tables["residuals_autocorrelation"] = {"lag": ra.lags, "autocorrelation": ra.autocorrelation,
+                                               "band_99": np.full(ra.lags.size, ra.confidence_bound)}
+        tables["residuals_cross_correlation"] = {"lag": ra.cross_lags, "cross_correlation": ra.cross_correlation,
+                                                 "band_99": np.full(ra.cross_lags.size, ra.confidence_bound)}
+    if fi.bode is not None:
+        b = fi.bode
+        tables["fig12_bode_curves"] = {"w": b.w, "estimate_db": b.estimate.magnitude_db,
+                                       "estimate_deg": b.estimate.phase_deg}
+        if not hidden and b.theoretical is not None:
+            tables["fig12_bode_curves"].update(eq24_db=b.theoretical.magnitude_db, eq24_deg=b.theoretical.phase_deg)
+        points = {"w": b.data_w, "magnitude_db": b.data_magnitude_db, "phase_deg": b.data_phase_deg}
+        if b.data_lower_db is not None:
+            points.update(lower_db=b.data_lower_db, upper_db=b.data_upper_db)
+        tables["fig12_bode_data_points"] = points
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+        for name, cols in tables.items():
+            z.writestr(f"{name}.csv", write_data(cols, "csv"))
+        z.writestr("figures.mat", write_data({f"{name}_{k}": v for name, cols in tables.items()
+                                              for k, v in cols.items()}, "mat"))
+    return buf.getvalue()

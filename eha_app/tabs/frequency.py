@@ -12,7 +12,7 @@ from eha_core.experiments import (
 )
 
 from .. import plots
-from ..exports import bode_csv, tf_estimate_bytes
+from ..exports import bode_csv, frequency_figures_zip, tf_estimate_bytes
 from ..form import Field, Form, Group, parse_fields
 from ..freshness import ResultView
 from ..glossary import GLOSSARY
@@ -167,7 +167,11 @@ class FrequencyPanel(pn.viewable.Viewer):
                                     width=128, css_classes=["eha-dl-freq-json"]),
             pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.bode_bytes()),
                                     filename="eha_bode.csv", label="Bode curves (CSV)", disabled=True,
-                                    width=260, css_classes=["eha-dl-freq-bode"]),
+                                    width=128, css_classes=["eha-dl-freq-bode"]),
+            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.figures_bytes()),
+                                    filename="eha_frequency_figures.zip", label="All figures' data", disabled=True,
+                                    width=128, css_classes=["eha-dl-freq-zip"],
+                                    description="Figs. 8-13 and the residuals: one CSV per figure and a .mat"),
         ]
         self.area = pn.Column(self.unstable, self.summary, self.backout, sizing_mode="stretch_width")
         self.kp_note = pn.pane.HTML("", width=260, css_classes=["eha-freq-kp"], margin=(0, 10))
@@ -311,6 +315,10 @@ class FrequencyPanel(pn.viewable.Viewer):
         """Fig. 12's curves as CSV (eq. 24's left out in an exercise: it is computed from the hidden values)."""
         return bode_csv(self.result.bode, theoretical=not self.state.hidden)
 
+    def figures_bytes(self) -> bytes:
+        """The data behind Figs. 8-13 and the residual plots (zip of CSVs and one .mat)."""
+        return frequency_figures_zip(self.result, hidden=bool(self.state.hidden))
+
     def _fail(self, message: str) -> None:
         self.alert.object = f"The experiment failed: {message}"
         self.alert.visible = True
@@ -350,7 +358,7 @@ class FrequencyPanel(pn.viewable.Viewer):
             self.summary.object = freq_summary_html(fi, hidden) + timing
             self.backout.object = "<h4>Backed-out parameters (eq. 27)</h4>" + backout_html(fi, hidden)
             for d in self.downloads:
-                d.disabled = fi.bode is None and d is self.downloads[-1]
+                d.disabled = fi.bode is None and "bode" in d.css_classes[0]
             alert = estimate_alert(fi.estimate)
             self.unstable.object = alert
             self.unstable.visible = bool(alert)

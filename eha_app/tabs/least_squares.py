@@ -190,6 +190,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         self.own_data = None                # MeasuredData of an upload, when one is in use
         self.own_data_key = None
         self.last_data = None               # the data behind the table and the plot (for downloads)
+        self.last_resim = None              # the plot's re-simulation with the estimates
         self._upload = None
         self.upload = pn.widgets.FileInput(accept=".csv,.mat", width=260, css_classes=["eha-lse-upload"],
                                            multiple=False)
@@ -360,11 +361,15 @@ class LeastSquaresPanel(pn.viewable.Viewer):
 
     # -- downloads ---------------------------------------------------------------------
     def data_bytes(self, kind: str) -> bytes:
-        """The measurements behind the table and the plot, as CSV or .mat (read back by the upload)."""
+        """The measurements behind the table and the plot, as CSV or .mat (read back by the upload),
+        with the plot's re-simulation with the estimates beside them (``x_resim``, ...) when there is one."""
         from eha_core.data import write_data
 
         d = self.last_data
         cols = {"t": d.t, "x": d.x, "v": d.v, "p1": d.p1, "p2": d.p2, "u": d.u}
+        r = self.last_resim
+        if r is not None and r.t.size == d.t.size:
+            cols.update(x_resim=r.x, v_resim=r.v, p1_resim=r.p1, p2_resim=r.p2)
         return write_data(cols, kind)
 
     def estimates_bytes(self, kind: str) -> bytes:
@@ -447,7 +452,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                                    cancel=token)
                 return res, plots.lse_view(own, None), (f"Your data ({html.escape(own.source)}, {own.t.size} "
                                                         "samples): the model is not re-simulated (the input is "
-                                                        "known only at its samples)."), own
+                                                        "known only at its samples)."), own, None
             d = req.disturbance()
             data = lse_data(params, d, u=u, t_end=t_end, seed=req.seed, measurement_noise=req.measurement_noise(),
                             cancel=token)
@@ -458,12 +463,12 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                 resim_error = ""
             except ParameterError as exc:
                 resim, resim_error = None, f"No re-simulation: the estimate is not physical ({exc})."
-            return res, plots.lse_view(data, resim), resim_error, data
+            return res, plots.lse_view(data, resim), resim_error, data, resim
 
         def show(out, job):
-            res, view, resim_error, data = out
+            res, view, resim_error, data, resim = out
             self.result = res
-            self.last_data = data
+            self.last_data, self.last_resim = data, resim
             for d in self.downloads:
                 d.disabled = False
             note = (f"<p class='eha-note'>Simulated, identified and re-simulated in {job.run_s * 1e3:.0f} ms"
