@@ -122,12 +122,26 @@ def test_the_secret_never_reaches_a_students_browser(browser, tmp_path):
         for fig in ("Fig. 11 fit", "Fig. 12 Bode", "Fig. 13 validation"):
             page.locator(".bk-tab", has_text=fig).first.click()
         # the frequency domain's downloads, and its record uploaded again as the student's own
+        import io
+        import zipfile
+
+        import numpy as np
+        import scipy.io
+
         freq_files = []
         for button in ("eha-dl-freq-est-csv", "eha-dl-freq-bode", "eha-dl-freq-csv"):
             with page.expect_download() as download:
                 page.locator(f".{button}").get_by_role("button").first.click()
             freq_files.append(open(download.value.path(), encoding="utf-8").read())
         assert "linearised_eq24" not in freq_files[1]                  # eq. 24 is computed from hidden values
+        with page.expect_download() as download:
+            page.locator(".eha-dl-freq-zip").get_by_role("button").first.click()
+        with zipfile.ZipFile(download.value.path()) as z:
+            figure_csvs = [z.read(n).decode() for n in z.namelist() if n.endswith(".csv")]
+            mat = scipy.io.loadmat(io.BytesIO(z.read("figures.mat")))
+        assert len(figure_csvs) >= 6 and not any("eq24" in k for k in mat)
+        freq_files += figure_csvs + [repr(np.asarray(v, dtype=float).ravel().tolist()) for k, v in mat.items()
+                                     if not k.startswith("__")]
         record = tmp_path / "my_loop.csv"
         record.write_text(freq_files[2])
         page.locator(".eha-freq-upload input[type=file]").set_input_files(str(record))
