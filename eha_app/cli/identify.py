@@ -60,6 +60,11 @@ def add_parser(sub) -> None:
     tf.add_argument("--input-offset", default=None,
                     help="zero or estimate a constant input offset (default: estimate for the paper experiment, "
                          "zero for --data)")
+    tf.add_argument("--delay", default=None, metavar="SECONDS|estimate",
+                    help="input delay of the model G(s) exp(-s tau): a fixed delay >= 0 s (any multiple of the "
+                         "sample time or not), or estimate; default 0 (none). With --data only")
+    tf.add_argument("--max-delay", type=float, default=None, metavar="SECONDS",
+                    help="upper bound of an estimated delay [s] (default a tenth of the record)")
     tf.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help=PARAM_HELP)
     tf.add_argument("--json", action="store_true", help="print JSON (default: a summary)")
     tf.set_defaults(handler=run_tf)
@@ -126,6 +131,60 @@ def _choice(option: str, value, allowed) -> None:
         raise UsageError(f"{option} = {value} is not allowed: use {' or '.join(allowed)}")
 
 
+def _delay(text: str | None):
+    """``--delay`` as seconds (0.0 when not given) or ``"estimate"``."""
+    if text is None:
+        return 0.0
+    if text.strip() == "estimate":
+        return "estimate"
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0):
+        raise UsageError(f"--delay = {text.strip() or '(empty)'} is not allowed: use a delay >= 0 s or estimate")
+    return value
+
+
+def _checked_delay(args):
+    """``--delay`` (seconds or ``"estimate"``), checked with ``--max-delay`` against the other options."""
+    delay = _delay(args.delay)
+    if delay != 0.0 and not args.data:
+        raise UsageError(f"--delay = {args.delay.strip()} is not allowed without --data: the paper experiment's "
+                         "loop has no delay")
+    if args.max_delay is not None:
+        _positive("--max-delay", args.max_delay, "s")
+        if delay != "estimate":
+            raise UsageError(f"--max-delay = {args.max_delay:g} is not allowed: it bounds an estimated delay; "
+                             "give it with --delay estimate")
+    return delay
+
+
+#: The core's names of the delay arguments, and the options that set them.
+_DELAY_OPTIONS = (("input_delay = ", "--delay = "), ("max_delay = ", "--max-delay = "))
+
+
+def _tf_on_data(args, delay) -> dict:
+    """``tfest`` on the CSV of ``--data``: the estimate's dictionary with ``ts``."""
+    from eha_core.data import read_columns, sample_time
+    from eha_core.identify.tfest import tfest
+
+    cols = read_columns(args.data, ("t", "u", "y"), name="--data", min_rows=args.n_poles + args.n_zeros + 3)
+    ts = args.ts if args.ts is not None else sample_time(cols["t"], name="--data", path=args.data)
+    try:
+        est = tfest(cols["u"], cols["y"], ts, args.n_poles, args.n_zeros,
+                    initial_condition=args.initial_condition or "zero", input_offset=args.input_offset or "zero",
+                    input_delay=delay, max_delay=args.max_delay)
+    except ValueError as exc:
+        # a delay the record cannot hold (that needs the record's length): name the option
+        message = str(exc)
+        for core_name, option in _DELAY_OPTIONS:
+            if message.startswith(core_name):
+                raise UsageError(option + message[len(core_name):]) from None
+        raise
+    return {**est.to_dict(), "ts": ts}
+
+
 def run_tf(args) -> int:
     if not 1 <= args.n_poles <= MAX_POLES:
         raise UsageError(f"--np = {args.n_poles} is not allowed: use 1 to {MAX_POLES} poles")
@@ -139,19 +198,13 @@ def run_tf(args) -> int:
     _choice("--model", args.model, ("nonlinear", "linear"))
     _choice("--initial-condition", args.initial_condition, ("zero", "estimate"))
     _choice("--input-offset", args.input_offset, ("zero", "estimate"))
+    delay = _checked_delay(args)
     check_input_file("--data", args.data)
     params = parse_params(args.param)
 
     if args.data:
-        from eha_core.data import read_columns, sample_time
-        from eha_core.identify.tfest import tfest
-
-        cols = read_columns(args.data, ("t", "u", "y"), name="--data", min_rows=args.n_poles + args.n_zeros + 3)
-        ts = args.ts if args.ts is not None else sample_time(cols["t"], name="--data", path=args.data)
-        est = tfest(cols["u"], cols["y"], ts, args.n_poles, args.n_zeros,
-                    initial_condition=args.initial_condition or "zero", input_offset=args.input_offset or "zero")
-        out = {**est.to_dict(), "ts": ts}
-        ok = est.success
+        out = _tf_on_data(args, delay)
+        ok = out["success"]
     else:
         from eha_core.experiments import FrequencyExperiment, run_frequency_identification
 
@@ -167,6 +220,10 @@ def run_tf(args) -> int:
         return 0 if ok else 1
     print(tf_text(out["num"], out["den"], "H_hat(s)" if not args.data else "G(s)"))
     print(f"fit {out['fit_percent']:.2f} % (initial condition {out['initial_condition']})")
+    if args.data and args.delay is not None:
+        tau, tau_std = out["input_delay"], out["input_delay_std"]
+        how = "fixed" if tau_std is None else f"estimated, standard error {tau_std:.2g} s"
+        print(f"input delay {tau:.6g} s = {tau / out['ts']:.4g} samples ({how}); G(s) above excludes it")
     if "open_loop" in out:
         print(tf_text(out["open_loop"]["num"], out["open_loop"]["den"], "P_hat(s)"))
         b = out["backout"]

@@ -24,6 +24,14 @@ used by those two modules, and the public ones are re-exported by
   ``scipy.linalg.expm``); then the discrete transfer function
   ``num_z / den_z`` (:func:`state_numerators`, :class:`DiscreteModel`,
   :func:`discretise`) and the exact ZOH simulation :func:`simulate_tf`;
+* an input delay ``tau = (d + f) ts`` (``d`` whole samples, ``0 <= f < 1``,
+  :func:`split_delay`), which need not be a multiple of ``ts``: a held
+  input delayed by a fraction of a sample switches inside a sample
+  interval, so the discretisation has two input vectors,
+  ``Gamma0 = int_0^((1-f) ts) e^(A s) ds B`` applied to ``u[k-d]`` and
+  ``Gamma1 = e^(A (1-f) ts) int_0^(f ts) e^(A s) ds B`` applied to
+  ``u[k-d-1]`` (Franklin, Powell & Workman, *Digital Control of Dynamic
+  Systems*, 3rd ed., 1998, sec. 4.3.4); exact, like the delay-free case;
 * the terms that enter the simulated output linearly, the response to a
   constant input offset and the free response to the initial state
   (:func:`linear_columns`), and their least-squares fit
@@ -31,7 +39,7 @@ used by those two modules, and the public ones are re-exported by
   :mod:`eha_core.identify.tfest` uses to eliminate them (variable projection:
   Golub & Pereyra, SIAM J. Numer. Anal. 10, 1973);
 * MATLAB ``compare``'s fit (:func:`fit_percent`) and the frequency response
-  ``G(j w)`` (:func:`frequency_response`, :class:`FrequencyResponseData`).
+  ``G(j w) e^(-j w tau)`` (:func:`frequency_response`, :class:`FrequencyResponseData`).
 
 Only numpy and scipy are imported here.
 """
@@ -54,6 +62,8 @@ __all__ = [
     "as_samples",
     "as_tf",
     "as_ts",
+    "check_delay",
+    "delayed",
     "discretise",
     "expm_balanced",
     "expm_pade13",
@@ -65,6 +75,7 @@ __all__ = [
     "observability_form",
     "readonly",
     "simulate_tf",
+    "split_delay",
     "state_numerators",
     "zoh_matrices",
 ]
@@ -122,6 +133,20 @@ def as_pair(first, second, names: tuple[str, str] = ("u", "y")) -> tuple[np.ndar
 def as_ts(ts) -> float:
     """The sample time in seconds, a finite number > 0."""
     return positive_number("ts", ts, "must be a finite sample time > 0 s")
+
+
+def check_delay(value, name: str = "input_delay") -> float:
+    """An input delay in seconds: a finite number >= 0 (not a bool)."""
+    allowed = "must be a finite delay >= 0 s"
+    if isinstance(value, (bool, np.bool_)) or isinstance(value, str):
+        raise not_allowed(name, value, allowed)
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise not_allowed(name, value, allowed) from None
+    if not (np.isfinite(out) and out >= 0.0):
+        raise not_allowed(name, value, allowed)
+    return out
 
 
 def _coefficients(value, name: str) -> np.ndarray:
@@ -276,9 +301,44 @@ def state_numerators(ad: np.ndarray, bd: np.ndarray, den_z: np.ndarray,
     return num
 
 
+def split_delay(input_delay: float, ts: float) -> tuple[int, float]:
+    """``(d, f)`` with ``input_delay = (d + f) ts``, ``d`` whole, ``0 <= f < 1``.
+
+    A fraction within 1e-10 of a whole sample is taken as that sample, so a
+    delay written as a multiple of ``ts`` (``3 * 0.01``, not exactly
+    ``0.03 / 0.01 = 3`` in floating point) is a pure shift.
+    """
+    x = input_delay / ts
+    d = int(np.floor(x))
+    f = x - d
+    if f > 1.0 - 1e-10:
+        return d + 1, 0.0
+    if f < 1e-10:
+        return d, 0.0
+    return d, float(f)
+
+
+def delayed(u: np.ndarray, samples: int) -> np.ndarray:
+    """``u`` shifted ``samples`` later along axis 0, zeros before the first sample."""
+    if samples <= 0:
+        return u
+    out = np.zeros_like(u)
+    if samples < u.shape[0]:
+        out[samples:] = u[:u.shape[0] - samples]
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class DiscreteModel:
-    """Exact ZOH equivalent of ``num/den``: state space and ``num_z/den_z``."""
+    """Exact ZOH equivalent of ``num/den`` (with an input delay): state space and ``num_z/den_z``.
+
+    ``num_z / den_z`` (powers of ``z^-1``) acts on the input delayed by
+    ``delay_samples``; with a fractional delay ``num_z`` has one more
+    coefficient than ``den_z`` (the ``Gamma1`` term one sample later, see
+    :func:`discretise`). ``bd`` is the delay-free input vector. The free
+    response (:meth:`free_basis`) is that of the state, which a delay does
+    not touch; the input before the first sample is taken as zero.
+    """
 
     ad: np.ndarray
     bd: np.ndarray
@@ -286,6 +346,7 @@ class DiscreteModel:
     d: float
     num_z: np.ndarray
     den_z: np.ndarray
+    delay_samples: int = 0
 
     @property
     def order(self) -> int:
@@ -293,7 +354,8 @@ class DiscreteModel:
 
     def forced(self, u: np.ndarray) -> np.ndarray:
         """Zero-state response to the ZOH input ``u`` (C speed via lfilter)."""
-        if self.order == 0:
+        u = delayed(u, self.delay_samples)
+        if self.order == 0 and self.num_z.size == 1:
             return self.d * u
         return scipy.signal.lfilter(self.num_z, self.den_z, u)
 
@@ -314,19 +376,47 @@ class DiscreteModel:
         return basis
 
 
-def discretise(num: np.ndarray, den: np.ndarray, ts: float) -> DiscreteModel:
-    """ZOH discretisation of a normalised (monic, proper) transfer function."""
+def discretise(num: np.ndarray, den: np.ndarray, ts: float, input_delay: float = 0.0) -> DiscreteModel:
+    """ZOH discretisation of a normalised (monic, proper) transfer function.
+
+    With ``input_delay = (d + f) ts`` > 0 (seconds, :func:`split_delay`) the
+    model is ``G(s) e^(-s input_delay)``. Over ``[k ts, (k+1) ts)`` the
+    delayed held input is ``u[k-d-1]`` for the first ``f ts`` and ``u[k-d]``
+    after, so ``x[k+1] = Ad x[k] + Gamma0 u[k-d] + Gamma1 u[k-d-1]`` with
+    ``Gamma0 = int_0^((1-f) ts) e^(A s) ds B`` (the augmented exponential at
+    ``(1-f) ts``) and ``Gamma1 = Bd - Gamma0``
+    (``= e^(A (1-f) ts) int_0^(f ts) e^(A s) ds B``); the direct term sees
+    ``u(k ts - tau) = u[k-d-1]``. Exact for a held input, whatever ``f``.
+    ``input_delay`` is not checked here (see :func:`check_delay`).
+    """
     n = den.size - 1
     if n == 0:
         gain = float(num[-1])
         empty = np.zeros((0, 0))
-        return DiscreteModel(empty, np.zeros(0), np.zeros(0), gain,
-                             np.array([gain]), np.array([1.0]))
+        if input_delay == 0.0:
+            return DiscreteModel(empty, np.zeros(0), np.zeros(0), gain,
+                                 np.array([gain]), np.array([1.0]))
+        d_samples, frac = split_delay(input_delay, ts)
+        num_z = np.array([gain]) if frac == 0.0 else np.array([0.0, gain])
+        return DiscreteModel(empty, np.zeros(0), np.zeros(0), gain, num_z, np.array([1.0]), d_samples)
     a_mat, b_vec, c_vec, d = observability_form(num, den)
     ad, bd = zoh_matrices(a_mat, b_vec, ts)
     den_z = np.real(np.poly(np.linalg.eigvals(ad)))
-    num_z = state_numerators(ad, bd, den_z, c_vec[None, :], np.array([d]))[0]
-    return DiscreteModel(ad, bd, c_vec, d, num_z, den_z)
+    if input_delay == 0.0:
+        num_z = state_numerators(ad, bd, den_z, c_vec[None, :], np.array([d]))[0]
+        return DiscreteModel(ad, bd, c_vec, d, num_z, den_z)
+    d_samples, frac = split_delay(input_delay, ts)
+    if frac == 0.0:  # a whole number of samples: a pure shift of the delay-free model
+        num_z = state_numerators(ad, bd, den_z, c_vec[None, :], np.array([d]))[0]
+        return DiscreteModel(ad, bd, c_vec, d, num_z, den_z, d_samples)
+    _, gamma0 = zoh_matrices(a_mat, b_vec, (1.0 - frac) * ts)
+    gamma1 = bd - gamma0
+    num0 = state_numerators(ad, gamma0, den_z, c_vec[None, :], np.array([0.0]))[0]
+    num1 = state_numerators(ad, gamma1, den_z, c_vec[None, :], np.array([d]))[0]
+    num_z = np.zeros(n + 2)
+    num_z[:n + 1] += num0
+    num_z[1:] += num1  # u[k-d-1]: one sample later
+    return DiscreteModel(ad, bd, c_vec, d, num_z, den_z, d_samples)
 
 
 def linear_columns(model: DiscreteModel, n_samples: int, *, offset: bool,
@@ -361,7 +451,7 @@ def fit_linear_terms(columns: np.ndarray, residual: np.ndarray) -> np.ndarray:
     return coef / norms
 
 
-def simulate_tf(num, den, u, ts, initial_state=None) -> np.ndarray:
+def simulate_tf(num, den, u, ts, initial_state=None, input_delay=0.0) -> np.ndarray:
     """Exact zero-order-hold response of a continuous-time transfer function.
 
     The input is held constant between samples (ZOH), so the sampled output
@@ -381,6 +471,11 @@ def simulate_tf(num, den, u, ts, initial_state=None) -> np.ndarray:
         Initial state of the observability canonical form (see
         :mod:`eha_core.identify.validate`; for ``b / A(s)`` it is
         ``[y, y', ...]`` at t = 0). Default: zero.
+    input_delay : float
+        Input delay ``tau >= 0`` in seconds, any multiple of ``ts`` or not:
+        the response is that of ``G(s) e^(-s tau)`` to the held input, exact
+        (see :func:`discretise`); the input before the first sample is
+        zero. Default 0.
 
     Returns
     -------
@@ -395,10 +490,15 @@ def simulate_tf(num, den, u, ts, initial_state=None) -> np.ndarray:
     True
     >>> simulate_tf([1.0], [1.0, 0.0], np.zeros(3), ts=0.1, initial_state=[2.0])
     array([2., 2., 2.])
+
+    An integrator fed a unit step delayed by 1.5 samples:
+
+    >>> simulate_tf([1.0], [1.0, 0.0], np.ones(5), ts=1.0, input_delay=1.5)
+    array([0. , 0. , 0.5, 1.5, 2.5])
     """
     num_n, den_n = as_tf(num, den)
     u_arr = as_samples(u, "u")
-    model = discretise(num_n, den_n, as_ts(ts))
+    model = discretise(num_n, den_n, as_ts(ts), check_delay(input_delay))
     y = model.forced(u_arr)
     if initial_state is not None:
         state_arr = np.atleast_1d(np.asarray(initial_state, dtype=float))
@@ -485,8 +585,8 @@ class FrequencyResponseData:
                    readonly(magnitude_db), readonly(phase_deg))
 
 
-def frequency_response(num, den, w) -> FrequencyResponseData:
-    """Frequency response ``G(j w)`` of a continuous-time transfer function.
+def frequency_response(num, den, w, input_delay=0.0) -> FrequencyResponseData:
+    """Frequency response ``G(j w) e^(-j w tau)`` of a continuous-time transfer function.
 
     Parameters
     ----------
@@ -494,6 +594,10 @@ def frequency_response(num, den, w) -> FrequencyResponseData:
         Coefficients, descending powers of s.
     w : array_like
         Frequencies in rad/s.
+    input_delay : float
+        Delay ``tau >= 0`` in seconds (default 0). Its phase ``-w tau`` is
+        added to the unwrapped phase of ``G`` exactly, so it is right however
+        sparse ``w`` is (unwrapping the delayed response itself would not be).
 
     Returns
     -------
@@ -506,7 +610,11 @@ def frequency_response(num, den, w) -> FrequencyResponseData:
     >>> fr = frequency_response([1.0], [1.0, 1.0], [1.0])
     >>> round(float(fr.magnitude_db[0]), 3), round(float(fr.phase_deg[0]), 3)
     (-3.01, -45.0)
+    >>> fr = frequency_response([1.0], [1.0, 1.0], [1.0], input_delay=np.pi / 4)
+    >>> round(float(fr.magnitude_db[0]), 3), round(float(fr.phase_deg[0]), 3)
+    (-3.01, -90.0)
     """
+    tau = check_delay(input_delay)
     num_n, den_n = as_tf(num, den)
     allowed = "must be a 1-D array of finite frequencies in rad/s"
     try:
@@ -516,4 +624,9 @@ def frequency_response(num, den, w) -> FrequencyResponseData:
     if w_arr.ndim != 1 or not np.all(np.isfinite(w_arr)):
         raise not_allowed("w", w_arr if w_arr.ndim == 1 else f"an array of shape {w_arr.shape}", allowed)
     s = 1j * w_arr
-    return FrequencyResponseData.from_response(w_arr, np.polyval(num_n, s) / np.polyval(den_n, s))
+    fr = FrequencyResponseData.from_response(w_arr, np.polyval(num_n, s) / np.polyval(den_n, s))
+    if tau == 0.0:
+        return fr
+    lag = w_arr * tau
+    return FrequencyResponseData(fr.w, readonly(fr.response * np.exp(-1j * lag)), fr.magnitude_db,
+                                 readonly(fr.phase_deg - np.degrees(lag)))

@@ -63,6 +63,34 @@ Two stages, as MATLAB does it:
    response is ``c`` times the step response) and is eliminated the same
    way, jointly with the initial state.
 
+3. **Input delay** (``input_delay``, MATLAB's ``IODelay``): the model is
+   ``y = G(s) e^(-s tau) (u + c)``, ``tau`` in seconds, not necessarily a
+   multiple of ``ts``. The output-error simulation is exact for a held input
+   delayed by ``tau = (d + f) ts`` (two input vectors, see
+   :func:`eha_core.identify._ctmodels.discretise`), and SRIVC filters the
+   delayed input exactly in the same way (the state-variable filter
+   discretised for it), so a fixed delay changes neither stage's
+   consistency. With ``input_delay="estimate"``:
+
+   - the whole-sample part is searched first, as MATLAB's ``delayest``
+     does: an ARX model (``np`` poles, ``np + 1`` input lags, a constant when
+     the offset is estimated) is fitted by least squares for every delay
+     ``0..max_delay`` on the same samples, and its loss gives the best whole
+     delay ``d``;
+   - SRIVC runs at ``d - 1``, ``d``, ``d + 1`` and the range is extended a
+     sample at a time while the lowest output-error cost lies at one of its
+     ends (ARX is biased by output noise and can be off by more than a
+     sample). Only models that are not markedly unstable are ranked: a delay
+     that is too long cannot be made up and SRIVC ends in unstable models
+     there, so while there are none the search moves to shorter delays. At
+     each delay SRIVC starts from the best model so far (few iterations),
+     and from the default starts too while no stable model has been found;
+   - the output-error stage then refines ``tau`` with the coefficients: it
+     joins the parameter vector (bounded to ``[0, max_delay]``), since the
+     exact simulation is smooth in ``tau``; its standard error
+     (``input_delay_std``) and the coefficients' covariance come from the
+     joint Jacobian.
+
 Several SRIVC starts can converge to different models (the output-error
 criterion may have several minima); the best ``n_refine`` distinct ones are
 refined. The better of the two stages, by cost, is returned, and ``method``
@@ -86,6 +114,8 @@ from ._ctmodels import (
     as_pair,
     as_tf,
     as_ts,
+    check_delay,
+    delayed,
     discretise,
     expm_balanced,
     fit_linear_terms,
@@ -94,13 +124,17 @@ from ._ctmodels import (
     linear_columns,
     readonly,
     simulate_tf,
+    split_delay,
     state_numerators,
+    zoh_matrices,
 )
 
 __all__ = ["TFEstimate", "oe_fit", "tfest"]
 
 _INITIAL_CONDITIONS = ("zero", "estimate")
 _INPUT_OFFSETS = ("zero", "estimate")
+#: Default upper bound of an estimated input delay, as a fraction of the record's duration.
+MAX_DELAY_FRACTION = 0.1
 
 
 # ---------------------------------------------------------------------------
@@ -160,6 +194,14 @@ class TFEstimate:
     srivc_cost : float
         Cost of the SRIVC estimate (NaN if not run).
     n_samples : int
+    input_delay : float
+        Input delay ``tau`` in seconds (0.0 when none): the model is
+        ``y = G(s) e^(-s tau) (u + c)``. Fixed (the option's value) or
+        estimated; ``fit_percent``, ``cost`` and ``covariance`` are computed
+        with it in place.
+    input_delay_std : float or None
+        Standard error of an estimated ``input_delay`` (seconds); None when
+        the delay was fixed.
     """
 
     num: np.ndarray
@@ -186,10 +228,19 @@ class TFEstimate:
     srivc_den: np.ndarray | None
     srivc_cost: float
     n_samples: int
+    input_delay: float = 0.0
+    input_delay_std: float | None = None
 
     @property
     def tf(self):
-        """The estimate as a ``control.TransferFunction`` (imports python-control)."""
+        """The estimate ``G(s)`` as a ``control.TransferFunction`` (imports python-control).
+
+        python-control's ``TransferFunction`` does not carry the delay: with
+        an ``input_delay`` the model is this times ``e^(-s input_delay)``, and
+        the delay is *not* included here (no Pade approximation is substituted
+        behind your back; :func:`control.pade` makes one if you want it).
+        :meth:`simulate` and :meth:`frequency_response` do include it.
+        """
         import control  # lazy: importing python-control costs about 1.4 s
 
         return control.TransferFunction(list(self.num), list(self.den))
@@ -209,10 +260,12 @@ class TFEstimate:
                 "input_offset": None if self.input_offset is None else float(self.input_offset),
                 "param_std": None if self.param_std is None else [float(v) for v in self.param_std],
                 "success": bool(self.success), "message": self.message, "method": self.method,
-                "n_poles": int(self.n_poles), "n_zeros": int(self.n_zeros)}
+                "n_poles": int(self.n_poles), "n_zeros": int(self.n_zeros),
+                "input_delay": float(self.input_delay),
+                "input_delay_std": None if self.input_delay_std is None else float(self.input_delay_std)}
 
     def simulate(self, u, ts=None, initial_state=None, input_offset=None) -> np.ndarray:
-        """Exact ZOH response to ``u`` sampled at ``ts`` (default: ``self.ts``).
+        """Exact ZOH response to ``u`` sampled at ``ts`` (default: ``self.ts``), delayed by ``input_delay``.
 
         ``initial_state`` is an initial state (e.g. ``self.initial_state``); default zero.
         ``input_offset`` is a constant added to ``u`` (input units, e.g.
@@ -228,11 +281,15 @@ class TFEstimate:
             if not np.isfinite(offset):
                 raise not_allowed("input_offset", input_offset, "must be None or a finite number (input units)")
             u = np.asarray(u, dtype=float) + offset
-        return simulate_tf(self.num, self.den, u, self.ts if ts is None else ts, initial_state=initial_state)
+        return simulate_tf(self.num, self.den, u, self.ts if ts is None else ts, initial_state=initial_state,
+                           input_delay=self.input_delay)
 
     def frequency_response(self, w) -> FrequencyResponseData:
-        """Bode data of the estimate at ``w`` rad/s."""
-        return frequency_response(self.num, self.den, w)
+        """Bode data of the estimate at ``w`` rad/s, ``G(j w) e^(-j w input_delay)``.
+
+        The phase includes the delay's ``-w input_delay``.
+        """
+        return frequency_response(self.num, self.den, w, input_delay=self.input_delay)
 
 
 # ---------------------------------------------------------------------------
@@ -283,6 +340,32 @@ def _checked_problem(u, y, ts, n_poles, n_zeros, initial_condition, input_offset
     return n, m, u_arr, y_arr, ts_f, estimate_initial_state, estimate_offset, tol, max_nfev
 
 
+def _check_delay_option(input_delay, max_delay, n_samples: int, ts: float):
+    """``(estimate, fixed_delay_s, max_delay_s)`` from ``input_delay`` and ``max_delay``.
+
+    A delay (fixed or searched) is limited to half the record: beyond that
+    the delayed input leaves too little of the output to fit.
+    """
+    half = 0.5 * n_samples * ts
+    limit = f"at most half the record, N ts / 2 = {half:.6g} s"
+    if isinstance(input_delay, str):
+        if input_delay != "estimate":
+            raise not_allowed("input_delay", input_delay, "use a delay >= 0 s or estimate")
+        if max_delay is None:
+            max_delay_s = MAX_DELAY_FRACTION * n_samples * ts
+        else:
+            max_delay_s = positive_number("max_delay", max_delay, f"must be a delay > 0 s, {limit}")
+            if max_delay_s > half:
+                raise not_allowed("max_delay", max_delay, f"must be {limit}")
+        return True, 0.0, max_delay_s
+    tau = check_delay(input_delay)
+    if tau > half:
+        raise not_allowed("input_delay", input_delay, f"must be {limit}")
+    if max_delay is not None:
+        raise not_allowed("max_delay", max_delay, "bounds an estimated delay: give it with input_delay = estimate")
+    return False, tau, None
+
+
 def _model_coefficients(model, n: int, m: int, name: str) -> np.ndarray:
     """``theta = [a_1..a_n, b_0..b_m]`` from ``(num, den)`` or an object with them."""
     if hasattr(model, "num") and hasattr(model, "den"):
@@ -324,13 +407,20 @@ class _OutputError:
     the initial state (with ``estimate_initial_state``), are eliminated by linear least
     squares in every evaluation (variable projection). Their coefficients,
     ``[c, initial_state...]`` in that order, are the ``linear`` vector.
+
+    The model's input delay is ``input_delay`` (seconds), or, with
+    ``max_delay`` given, the last entry of ``theta`` (estimated, in
+    ``[0, max_delay]``): ``theta = [a_1..a_n, b_0..b_m, tau]``.
     """
 
     def __init__(self, u: np.ndarray, y: np.ndarray, ts: float, n: int, estimate_initial_state: bool,
-                 estimate_offset: bool = False, cancel: CancelToken | None = None):
+                 estimate_offset: bool = False, cancel: CancelToken | None = None, *,
+                 input_delay: float = 0.0, max_delay: float | None = None):
         self.u, self.y, self.ts, self.n = u, y, ts, n
         self.estimate_initial_state = estimate_initial_state
         self.estimate_offset = estimate_offset
+        self.input_delay = input_delay
+        self.max_delay = max_delay
         self.nfev = 0
         # checked at every evaluation (each residual of the output-error stage,
         # each Jacobian column of the covariance) and by every SRIVC iteration:
@@ -340,6 +430,28 @@ class _OutputError:
     @property
     def n_linear(self) -> int:
         return int(self.estimate_offset) + (self.n if self.estimate_initial_state else 0)
+
+    @property
+    def estimate_delay(self) -> bool:
+        return self.max_delay is not None
+
+    def split_delay(self, theta: np.ndarray) -> tuple[np.ndarray, float]:
+        """``(coefficients, delay in s)`` of a parameter vector."""
+        if self.estimate_delay:
+            return theta[:-1], float(theta[-1])
+        return theta, self.input_delay
+
+    def model(self, theta: np.ndarray):
+        """The exact ZOH discretisation at ``theta`` (with its delay)."""
+        coefficients, tau = self.split_delay(theta)
+        num, den = _split(coefficients, self.n)
+        return discretise(num, den, self.ts, tau)
+
+    def scale(self, theta: np.ndarray, n: int, m: int) -> np.ndarray:
+        """:func:`_parameter_scale`, and ``ts`` for an estimated delay (so it is counted in samples)."""
+        coefficients, _ = self.split_delay(theta)
+        scale = _parameter_scale(coefficients, n, m)
+        return np.r_[scale, self.ts] if self.estimate_delay else scale
 
     def split_linear(self, linear):
         """``(initial_state, offset)`` from the ``linear`` coefficients (None when not estimated)."""
@@ -351,8 +463,7 @@ class _OutputError:
 
     def columns(self, theta: np.ndarray) -> np.ndarray:
         """The responses of the linear terms at ``theta``, shape ``(N, n_linear)``."""
-        num, den = _split(theta, self.n)
-        return linear_columns(discretise(num, den, self.ts), self.u.size,
+        return linear_columns(self.model(theta), self.u.size,
                                offset=self.estimate_offset, initial_state=self.estimate_initial_state)
 
     def evaluate(self, theta: np.ndarray, linear: np.ndarray | None = None):
@@ -363,12 +474,13 @@ class _OutputError:
         """
         check(self.cancel)
         self.nfev += 1
-        num, den = _split(theta, self.n)
         if not np.all(np.isfinite(theta)):
             return None, None
+        if self.estimate_delay and not 0.0 <= theta[-1] <= self.max_delay:
+            return None, None  # a finite-difference step out of the bounds
         try:
             with np.errstate(all="ignore"):
-                model = discretise(num, den, self.ts)
+                model = self.model(theta)
                 residual = self.y - model.forced(self.u)
                 coef = None
                 if self.n_linear and np.all(np.isfinite(residual)):
@@ -411,9 +523,16 @@ class _StateVariableFilter:
     One exponential of the block matrix ``[[A ts, B ts, 0], [0, 0, 1], [0, 0, 0]]``
     gives the ZOH input matrix ``G1`` and the ramp matrix ``G2`` of the FOH
     (triangle-hold) discretisation, as in ``scipy.signal.cont2discrete``.
+
+    With ``input_delay = (d + f) ts`` the ZOH signals (the inputs) are
+    filtered as ``s^k / A_f e^(-s input_delay)``, exactly: shifted by ``d``
+    samples, and with a fraction ``f`` split between ``u[k-d]`` and
+    ``u[k-d-1]`` by the input vectors ``Gamma0`` and ``Gamma1 = G1 - Gamma0``
+    of :func:`eha_core.identify._ctmodels.discretise`. The FOH signals (the
+    output, the auxiliary model's output) are not delayed.
     """
 
-    def __init__(self, den_f: np.ndarray, ts: float):
+    def __init__(self, den_f: np.ndarray, ts: float, input_delay: float = 0.0):
         n = den_f.size - 1
         self.den_f = den_f
         a_mat = np.eye(n, k=1)
@@ -427,6 +546,13 @@ class _StateVariableFilter:
         self.den_z = np.real(np.poly(np.linalg.eigvals(ad)))
         ident = np.eye(n)
         self.num_zoh = state_numerators(ad, g1, self.den_z, ident, np.zeros(n))
+        self.delay_samples, self.delay_fraction = (0, 0.0) if input_delay == 0.0 else split_delay(input_delay, ts)
+        if self.delay_fraction:
+            _, gamma0 = zoh_matrices(a_mat, ident[:, -1], (1.0 - self.delay_fraction) * ts)
+            num_delayed = np.zeros((n, n + 2))
+            num_delayed[:, :n + 1] = state_numerators(ad, gamma0, self.den_z, ident, np.zeros(n))
+            num_delayed[:, 1:] += state_numerators(ad, g1 - gamma0, self.den_z, ident, np.zeros(n))
+            self.num_zoh = num_delayed
         self.num_foh = state_numerators(ad, g1 - g2 + ad @ g2, self.den_z, ident, g2)
         # exact samples of the impulse responses of s^k / A_f, k < n: the
         # states' free response from x(0) = e_n (the input vector)
@@ -445,13 +571,21 @@ class _StateVariableFilter:
                                 for num in self.num_impulse])
 
     def apply(self, signals: np.ndarray, hold: str) -> np.ndarray:
-        """Filtered derivatives, shape ``(N, n_signals, n + 1)``: ``[..., k] = s^k/A_f x``."""
+        """Filtered derivatives, shape ``(N, n_signals, n + 1)``: ``[..., k] = s^k/A_f x``.
+
+        ZOH signals are delayed by the filter's ``input_delay``.
+        """
         nums = self.num_zoh if hold == "zoh" else self.num_foh
         n = nums.shape[0]
+        if hold == "zoh" and self.delay_samples:
+            signals = delayed(signals, self.delay_samples)
         out = np.empty(signals.shape + (n + 1,))
         for k in range(n):
             out[..., k] = scipy.signal.lfilter(nums[k], self.den_z, signals, axis=0)
-        out[..., n] = signals - out[..., :n] @ self.den_f[:0:-1]
+        # the top derivative's input term is the (delayed) input at the sample
+        # instant: u(k ts - tau) = u[k-d-1] when the delay has a fraction
+        top = delayed(signals, 1) if hold == "zoh" and self.delay_fraction else signals
+        out[..., n] = top - out[..., :n] @ self.den_f[:0:-1]
         return out
 
 
@@ -514,12 +648,19 @@ def _srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
     itself is not needed here: the output-error criterion that ranks the
     iterates eliminates it by least squares.
 
+    With ``criterion.input_delay`` (fixed) the inputs are filtered delayed
+    (:class:`_StateVariableFilter`). The offset's regressor is then the
+    delayed step through ``B_hat`` (:func:`_offset_regressor` without initial
+    conditions): the impulses of ``B(s)`` applied to the delayed step come at
+    ``t = tau``, outside the span of the initial-condition regressors.
+
     Returns ``(best_theta, best_cost, iterations, converged)``; the best
     iterate by output-error cost is kept (SRIVC may oscillate on poor data).
     """
     check(criterion.cancel)
     kind, value = start
     n_theta = n + m + 1
+    tau = criterion.input_delay
     ic = criterion.estimate_initial_state
     oc = criterion.estimate_offset
     n_extra = int(oc) + (n if ic else 0)
@@ -529,7 +670,7 @@ def _srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
     def extra_regressors(svf, uf_all, num):
         cols = []
         if oc:
-            cols.append(_offset_regressor(uf_all[:, 1], num, m, ic)[:, None])
+            cols.append(_offset_regressor(uf_all[:, 1], num, m, ic and tau == 0.0)[:, None])
         if ic:
             cols.append(svf.impulse_responses(u.size))
         return np.hstack(cols) if cols else np.zeros((u.size, 0))
@@ -537,7 +678,7 @@ def _srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
     if kind == "lambda":
         # LSSVF: least squares with the fixed filter (s + lambda)^n.
         den_f = np.real(np.poly(np.full(n, -value)))
-        svf = _StateVariableFilter(den_f, ts)
+        svf = _StateVariableFilter(den_f, ts, tau)
         uf_all = svf.apply(inputs, "zoh")
         yf = svf.apply(y, "foh")
         phi = np.hstack([_regressors(yf, uf_all[:, 0], n, m),
@@ -558,7 +699,7 @@ def _srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
         check(criterion.cancel)
         num, den = _split(theta, n)
         den_f = _stabilise(den)
-        svf = _StateVariableFilter(den_f, ts)
+        svf = _StateVariableFilter(den_f, ts, tau)
         uf_all = svf.apply(inputs, "zoh")
         uf = uf_all[:, 0]
         extra = extra_regressors(svf, uf_all, num)
@@ -639,6 +780,10 @@ def _covariance(criterion: _OutputError, theta: np.ndarray, scale: np.ndarray,
         step[i] = h
         r_plus, _ = criterion.evaluate((p + step) * scale, linear)
         r_minus, _ = criterion.evaluate((p - step) * scale, linear)
+        if criterion.estimate_delay and i == p.size - 1 and (r_plus is None) != (r_minus is None):
+            # an estimated delay at a bound of its search (0, say): one-sided
+            # difference, ``residual`` being the residual at ``theta`` itself
+            r_plus, r_minus, h = (residual, r_minus, h / 2.0) if r_plus is None else (r_plus, residual, h / 2.0)
         if r_plus is None or r_minus is None:
             return nan
         # residual = y - y_hat, so d(y_hat)/dp = -d(residual)/dp
@@ -673,8 +818,18 @@ def _covariance(criterion: _OutputError, theta: np.ndarray, scale: np.ndarray,
 
 def _oe_refine(criterion: _OutputError, theta0: np.ndarray, n: int, m: int,
                max_nfev: int, tol: float):
-    """``least_squares`` on the exact ZOH output error, from ``theta0``."""
-    scale = _parameter_scale(theta0, n, m)
+    """``least_squares`` on the exact ZOH output error, from ``theta0``.
+
+    An estimated delay (the last parameter) is bounded to
+    ``[0, criterion.max_delay]``; the coefficients are free.
+    """
+    scale = criterion.scale(theta0, n, m)
+    bounds = (-np.inf, np.inf)
+    if criterion.estimate_delay:
+        lower = np.full(theta0.size, -np.inf)
+        upper = np.full(theta0.size, np.inf)
+        lower[-1], upper[-1] = 0.0, criterion.max_delay / scale[-1]
+        bounds = (lower, upper)
 
     def residual(p):
         r, _ = criterion.evaluate(p * scale)
@@ -685,14 +840,16 @@ def _oe_refine(criterion: _OutputError, theta0: np.ndarray, n: int, m: int,
         with np.errstate(over="ignore"):
             res = scipy.optimize.least_squares(
                 residual, theta0 / scale, method="trf", x_scale="jac", jac="2-point",
-                xtol=tol, ftol=tol, gtol=tol, max_nfev=max_nfev,
+                xtol=tol, ftol=tol, gtol=tol, max_nfev=max_nfev, bounds=bounds,
             )
     except ValueError as exc:  # e.g. non-finite residuals at the start point
         return theta0, np.inf, False, f"output-error refinement not possible: {exc}"
     return res.x * scale, float(res.cost), bool(res.success), res.message
 
 
-def _nan_estimate(n, m, ts, n_samples, estimate_initial_state, estimate_offset, message, nit, nfev):
+def _nan_estimate(n, m, ts, n_samples, estimate_initial_state, estimate_offset, message, nit, nfev,
+                  input_delay=0.0):
+    """A failed estimate; ``input_delay`` is the fixed delay, or None when it was to be estimated."""
     p = n + m + 1
     return TFEstimate(
         num=readonly(np.full(m + 1, np.nan)), den=readonly(np.r_[1.0, np.full(n, np.nan)]),
@@ -703,6 +860,8 @@ def _nan_estimate(n, m, ts, n_samples, estimate_initial_state, estimate_offset, 
         message=message, method="none", nit_srivc=nit, nfev_oe=nfev,
         param_std=readonly(np.full(p, np.nan)), covariance=readonly(np.full((p, p), np.nan)),
         srivc_num=None, srivc_den=None, srivc_cost=np.nan, n_samples=n_samples,
+        input_delay=np.nan if input_delay is None else float(input_delay),
+        input_delay_std=np.nan if input_delay is None else None,
     )
 
 
@@ -714,9 +873,20 @@ def _estimate_result(criterion, theta, n, m, ts, success, message, method, nit, 
     if residual is None:
         return _nan_estimate(n, m, ts, criterion.y.size, criterion.estimate_initial_state,
                              criterion.estimate_offset,
-                             message + "; the final model cannot be simulated", nit, nfev)
+                             message + "; the final model cannot be simulated", nit, nfev,
+                             None if criterion.estimate_delay else criterion.input_delay)
     covariance, variance, cov_linear = _covariance(
-        criterion, theta, _parameter_scale(theta, n, m), residual, linear)
+        criterion, theta, criterion.scale(theta, n, m), residual, linear)
+    theta, tau = criterion.split_delay(theta)
+    tau_std = None
+    if criterion.estimate_delay:
+        # the coefficients' block of the joint covariance keeps the delay's
+        # uncertainty in it (a marginal, not a conditional, covariance)
+        tau_std = float(np.sqrt(abs(covariance[-1, -1])))
+        covariance = covariance[:-1, :-1]
+        message += f"; input delay estimated: {tau:.6g} s ({tau / ts:.4g} samples)"
+    if srivc_theta is not None:
+        srivc_theta, _ = criterion.split_delay(srivc_theta)
     initial_state, offset = criterion.split_linear(linear)
     offset_std = None
     if criterion.estimate_offset:
@@ -745,6 +915,7 @@ def _estimate_result(criterion, theta, n, m, ts, success, message, method, nit, 
         srivc_num=None if srivc_num is None else readonly(srivc_num),
         srivc_den=None if srivc_den is None else readonly(srivc_den),
         srivc_cost=float(srivc_cost), n_samples=residual.size,
+        input_delay=float(tau), input_delay_std=tau_std,
     )
 
 
@@ -752,8 +923,8 @@ def _estimate_result(criterion, theta, n, m, ts, success, message, method, nit, 
 # public API
 # ---------------------------------------------------------------------------
 def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_offset="zero",
-          init=None, lambda_svf=None, refine=True, n_refine=2, max_iter=50, max_nfev=None,
-          tol=1e-10, cancel: CancelToken | None = None) -> TFEstimate:
+          input_delay=0.0, max_delay=None, init=None, lambda_svf=None, refine=True, n_refine=2,
+          max_iter=50, max_nfev=None, tol=1e-10, cancel: CancelToken | None = None) -> TFEstimate:
     """Estimate a continuous-time transfer function from sampled data (MATLAB ``tfest``).
 
     SRIVC (refined instrumental variables with state-variable filters) gives
@@ -781,6 +952,18 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
         constant bias at a closed loop's plant input (e.g. a valve whose flow
         gains differ with the sign of the command) is such an offset on the
         reference. ``"zero"`` (default): no offset.
+    input_delay : float or "estimate"
+        Input delay ``tau`` in seconds (MATLAB's ``IODelay``): the model is
+        ``y = G(s) e^(-s tau) (u + c)``, the input before the first sample
+        taken as zero. A number ``>= 0`` (default 0, no delay), not
+        necessarily a multiple of ``ts``, is fixed; ``"estimate"`` searches
+        ``[0, max_delay]`` (whole samples first, then the fraction with the
+        coefficients; see the module docstring). At most half the record.
+        The result's ``input_delay`` (and ``input_delay_std`` when estimated)
+        report it.
+    max_delay : float, optional
+        Upper bound (seconds) of an estimated delay; default a tenth of the
+        record, ``0.1 N ts``. Only with ``input_delay="estimate"``.
     init : (num, den) or transfer function, optional
         A model to start SRIVC from (``n_poles`` poles, at most ``n_zeros``
         zeros), e.g. the linearised physics; tried besides the default starts.
@@ -831,9 +1014,17 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
     (array([ 1.,  6., 20.]), array([20.]))
     >>> round(est.fit_percent, 4)
     100.0
+
+    The same system behind a delay of 3.4 samples, estimated:
+
+    >>> y = simulate_tf([20.0], [1.0, 6.0, 20.0], u, ts, input_delay=3.4 * ts)
+    >>> est = tfest(u, y, ts, n_poles=2, input_delay="estimate")
+    >>> round(est.input_delay / ts, 4), np.round(est.den, 4)
+    (3.4, array([ 1.,  6., 20.]))
     """
     n, m, u_arr, y_arr, ts_f, estimate_initial_state, estimate_offset, tol, max_nfev = _checked_problem(
         u, y, ts, n_poles, n_zeros, initial_condition, input_offset, tol, max_nfev)
+    estimate_delay, fixed_delay, max_delay_s = _check_delay_option(input_delay, max_delay, u_arr.size, ts_f)
     max_iter = positive_integer("max_iter", max_iter)
     if not isinstance(refine, (bool, np.bool_)):
         raise not_allowed("refine", refine, "must be True or False")
@@ -848,23 +1039,20 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
         lambdas = _default_lambdas(u_arr.size, ts_f)
     starts += [("lambda", lam) for lam in lambdas]
     start_names += [f"lambda = {lam:.4g} rad/s" for lam in lambdas]
-    criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_initial_state, estimate_offset, cancel)
-    candidates = []
-    nit_total = 0
-    for name, start in zip(start_names, starts, strict=True):
-        try:
-            theta, cost, nit, converged = _srivc(u_arr, y_arr, ts_f, n, m, start,
-                                                 max_iter, tol, criterion)
-        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
-            continue
-        nit_total += nit
-        if np.isfinite(cost):
-            candidates.append((theta, cost, converged, name, nit))
+    if estimate_delay:
+        criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_initial_state, estimate_offset, cancel,
+                                 max_delay=max_delay_s)
+        candidates, nit_total = _delay_candidates(criterion, m, starts, start_names, max_iter, tol)
+    else:
+        criterion = _OutputError(u_arr, y_arr, ts_f, n, estimate_initial_state, estimate_offset, cancel,
+                                 input_delay=fixed_delay)
+        candidates, nit_total = _srivc_candidates(criterion, m, starts, start_names, max_iter, tol)
     if not candidates:
         return _nan_estimate(
             n, m, ts_f, u_arr.size, estimate_initial_state, estimate_offset,
             "SRIVC failed from every start (singular instrument matrix or unstable "
             "simulation): is the input exciting enough?", nit_total, 0,
+            None if estimate_delay else fixed_delay,
         )
     candidates.sort(key=lambda c: c[1])
     best = candidates[0]
@@ -881,7 +1069,7 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
     # refine the best distinct SRIVC candidates and keep the lowest cost.
     criterion.nfev = 0
     refined = []
-    for cand in _distinct(candidates, n_refine, n, m):
+    for cand in _distinct(candidates, n_refine, n, m, criterion.scale):
         theta_oe, cost_oe, oe_success, oe_msg = _oe_refine(criterion, cand[0], n, m, max_nfev, tol)
         refined.append((cost_oe, theta_oe, oe_success, oe_msg, cand))
     refined = [r for r in refined if np.isfinite(r[0])]
@@ -903,16 +1091,147 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
                             "srivc", nit_total, srivc_theta, srivc_cost)
 
 
-def _distinct(candidates, k: int, n: int, m: int):
+def _srivc_candidates(criterion: _OutputError, m: int, starts, start_names, max_iter: int, tol: float):
+    """SRIVC from every start at the criterion's fixed delay: ``(candidates, iterations)``.
+
+    A candidate is ``(theta, cost, converged, start name, iterations)``; starts
+    that fail or end with an infinite cost give none.
+    """
+    u, y, ts, n = criterion.u, criterion.y, criterion.ts, criterion.n
+    candidates = []
+    nit_total = 0
+    for name, start in zip(start_names, starts, strict=True):
+        try:
+            theta, cost, nit, converged = _srivc(u, y, ts, n, m, start, max_iter, tol, criterion)
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+            continue
+        nit_total += nit
+        if np.isfinite(cost):
+            candidates.append((theta, cost, converged, name, nit))
+    return candidates, nit_total
+
+
+def _arx_delay_losses(u: np.ndarray, y: np.ndarray, n: int, d_max: int, offset: bool,
+                      cancel: CancelToken | None = None) -> np.ndarray:
+    """ARX loss for every whole-sample delay ``d = 0..d_max`` (MATLAB ``delayest``'s approach).
+
+    ``y[k] + a_1 y[k-1] + ... + a_n y[k-n] = b_0 u[k-d-1] + ... + b_n u[k-d-1-n] (+ const)``:
+    the exact ZOH model of ``G(s) e^(-s (d + f) ts)`` (strictly proper) has
+    ``n + 1`` input lags from ``d + 1`` on. Every delay is fitted on the same
+    samples (``k >= d_max + n + 1``), so the losses compare. The output lags
+    (and the constant) are projected out once; each delay then costs one
+    small least-squares problem. ``cancel`` is looked at every 64 delays.
+    """
+    n_b = n + 1
+    k0 = max(n, d_max + n_b)
+    n_rows = y.size - k0
+    base = [-y[k0 - i:y.size - i] for i in range(1, n + 1)]
+    if offset:
+        base.append(np.ones(n_rows))
+    q, _ = np.linalg.qr(np.column_stack(base))
+    target = y[k0:] - q @ (q.T @ y[k0:])
+    losses = np.empty(d_max + 1)
+    for d in range(d_max + 1):
+        if d % 64 == 0:
+            check(cancel)
+        lags = np.column_stack([u[k0 - d - 1 - j:u.size - d - 1 - j] for j in range(n_b)])
+        lags -= q @ (q.T @ lags)
+        coef, *_ = np.linalg.lstsq(lags, target, rcond=None)
+        r = target - lags @ coef
+        losses[d] = r @ r
+    return losses
+
+
+def _is_stable(theta: np.ndarray, n: int, rate: float) -> bool:
+    """No pole of ``theta``'s denominator with a real part above ``rate`` (1/s).
+
+    ``rate`` is about one over the record's length: a pole growing slower
+    than that is indistinguishable from an integrator (which an estimate
+    may put slightly to the right of zero).
+    """
+    poles = np.roots(np.r_[1.0, theta[:n]])
+    return bool(np.all(poles.real <= rate))
+
+
+def _delay_candidates(criterion: _OutputError, m: int, starts, start_names, max_iter: int, tol: float):
+    """SRIVC candidates for an estimated delay, their ``theta`` ending with the delay (s).
+
+    A local search over whole-sample delays on the SRIVC/output-error cost,
+    started at the delay ``d`` of least ARX loss (:func:`_arx_delay_losses`):
+    ``d - 1``, ``d``, ``d + 1`` are tried, then the range is extended by one
+    sample on the side where the lowest cost lies, as long as it lies at an
+    end. ARX is biased by output noise and can be off by more than a sample.
+    A delay that is too long cannot be made up by the model (it would have to
+    anticipate the input), and SRIVC then ends in unstable models whose
+    costs say nothing about the direction to go; a delay that is too short
+    is partly made up by slower poles, and the cost falls towards the true
+    delay. So only models that are not markedly unstable (no pole growing
+    faster than once over the record) are ranked, and while there are none
+    the search moves to shorter delays.
+
+    At each delay SRIVC starts from the best such model found so far (the
+    dynamics barely change with a sample of delay, so few iterations are
+    needed); while there is none, the default starts are tried too.
+    """
+    u, y, ts, n = criterion.u, criterion.y, criterion.ts, criterion.n
+    d_max = int(np.floor(criterion.max_delay / ts + 1e-10))
+    rate = 1.0 / (u.size * ts)
+    d_arx = int(np.argmin(_arx_delay_losses(u, y, n, d_max, criterion.estimate_offset, criterion.cancel)))
+    candidates, stable = [], []
+    stable_cost = {}  # lowest cost of a stable model at each delay tried (inf: none)
+    nit_total = 0
+
+    def run(d: int) -> None:
+        nonlocal nit_total
+        best = min(stable or candidates, key=lambda c: c[1]) if candidates else None
+        d_starts, d_names = [], []
+        if best is not None:
+            d_starts.append(("model", best[0][:-1]))
+            d_names.append(f"the estimate at a delay of {round(best[0][-1] / ts)} samples")
+        if not stable:
+            d_starts += starts
+            d_names += start_names
+        fixed = _OutputError(u, y, ts, n, criterion.estimate_initial_state, criterion.estimate_offset,
+                             criterion.cancel, input_delay=d * ts)
+        found, nit = _srivc_candidates(fixed, m, d_starts, d_names, max_iter, tol)
+        nit_total += nit
+        found = [(np.r_[c[0], d * ts], c[1], c[2], f"{c[3]} (delay {d} samples)", c[4]) for c in found]
+        candidates.extend(found)
+        found_stable = [c for c in found if _is_stable(c[0], n, rate)]
+        stable.extend(found_stable)
+        stable_cost[d] = min((c[1] for c in found_stable), default=np.inf)
+
+    for d in (d_arx, d_arx - 1, d_arx + 1):
+        if 0 <= d <= d_max:
+            run(d)
+    while True:
+        lo, hi = min(stable_cost), max(stable_cost)
+        lowest = min(stable_cost, key=stable_cost.get)
+        if not np.isfinite(stable_cost[lowest]):
+            if lo == 0:
+                break  # unstable at every delay down to 0: rank what there is by cost
+            run(lo - 1)
+        elif lowest == lo and lo > 0:
+            run(lo - 1)
+        elif lowest == hi and hi < d_max:
+            run(hi + 1)
+        else:
+            break
+    return candidates, nit_total
+
+
+def _distinct(candidates, k: int, n: int, m: int, scale=_parameter_scale):
     """Up to ``k`` candidates (sorted by cost) whose coefficients differ by > 1 %.
 
-    Relative to :func:`_parameter_scale`, whose floors keep a near-zero
-    coefficient (an integrator's ``a_n``) from making two copies of the same
-    model look distinct.
+    Relative to ``scale`` (default :func:`_parameter_scale`), whose floors keep
+    a near-zero coefficient (an integrator's ``a_n``) from making two copies
+    of the same model look distinct; with a delay in the parameters,
+    :meth:`_OutputError.scale` counts it in samples, so candidates a sample
+    apart are distinct.
     """
     chosen = []
     for cand in candidates:
-        if all(np.max(np.abs(cand[0] - c[0]) / _parameter_scale(c[0], n, m)) > 0.01
+        if all(np.max(np.abs(cand[0] - c[0]) / scale(c[0], n, m)) > 0.01
                for c in chosen):
             chosen.append(cand)
         if len(chosen) == k:

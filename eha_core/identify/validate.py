@@ -42,6 +42,7 @@ from ._ctmodels import (
     as_pair,
     as_tf,
     as_ts,
+    check_delay,
     discretise,
     fit_linear_terms,
     fit_percent,
@@ -84,6 +85,8 @@ class CompareResult:
     input_offset : float or None
         Constant input offset ``c`` used, in input units (``y_hat`` is the
         response to ``u + c``); None when no offset was applied.
+    input_delay : float
+        Input delay used, in seconds (0.0 when none).
     """
 
     y_hat: np.ndarray
@@ -91,6 +94,7 @@ class CompareResult:
     initial_condition: str
     initial_state: np.ndarray | None
     input_offset: float | None = None
+    input_delay: float = 0.0
 
 
 def _check_compare_offset(input_offset):
@@ -111,7 +115,7 @@ def _check_compare_offset(input_offset):
                       "use zero, estimate, None or a finite number (input units)")
 
 
-def compare(num, den, u, y, ts, initial_condition="zero", input_offset="zero") -> CompareResult:
+def compare(num, den, u, y, ts, initial_condition="zero", input_offset="zero", input_delay=0.0) -> CompareResult:
     """Simulate a transfer function on data and report MATLAB's fit.
 
     Parameters
@@ -133,6 +137,11 @@ def compare(num, den, u, y, ts, initial_condition="zero", input_offset="zero") -
         An offset estimated on one record rarely holds on another (it stands
         for effects such as a valve's asymmetry that depend on the
         excitation), so validation data usually need their own.
+    input_delay : float
+        Input delay ``tau >= 0`` in seconds (e.g. a ``TFEstimate.input_delay``):
+        the model is ``y = G(s) e^(-s tau) (u + c)``, simulated exactly for the
+        held input (any ``tau``, not only multiples of ``ts``), the input
+        before the first sample taken as zero. Default 0.
 
     Returns
     -------
@@ -152,11 +161,15 @@ def compare(num, den, u, y, ts, initial_condition="zero", input_offset="zero") -
     >>> res = compare([1.0], [1.0, 1.0], u, y, 0.1, input_offset="estimate")
     >>> round(res.fit_percent, 6), round(res.input_offset, 6)
     (100.0, -0.2)
+    >>> y = simulate_tf([1.0], [1.0, 1.0], u, 0.1, input_delay=0.25)
+    >>> round(compare([1.0], [1.0, 1.0], u, y, 0.1, input_delay=0.25).fit_percent, 6)
+    100.0
     """
     num_n, den_n = as_tf(num, den)
     u_arr, y_arr = as_pair(u, y, ("u", "y"))
     estimate_offset, offset = _check_compare_offset(input_offset)
-    model = discretise(num_n, den_n, as_ts(ts))
+    tau = check_delay(input_delay)
+    model = discretise(num_n, den_n, as_ts(ts), tau)
     initial_state = None
     estimate_initial_state = False
     allowed = f"use zero, estimate or an array of shape ({model.order},), one initial state per pole"
@@ -196,6 +209,7 @@ def compare(num, den, u, y, ts, initial_condition="zero", input_offset="zero") -
         initial_condition=label,
         initial_state=None if initial_state is None else readonly(initial_state),
         input_offset=offset,
+        input_delay=tau,
     )
 
 

@@ -1,0 +1,232 @@
+"""Input delay of tfest (MATLAB's IODelay): exact simulation, fixed and estimated delays."""
+
+import numpy as np
+import pytest
+import scipy.signal
+
+from eha_core.identify._ctmodels import frequency_response, simulate_tf
+from eha_core.identify.tfest import TFEstimate, tfest
+from eha_core.identify.validate import compare
+
+TS = 0.01
+NUM, DEN = [400.0], [1.0, 16.0, 400.0]  # 20 rad/s, damping 0.4
+#: the paper's closed loop H(s) (eq. 24): a pole at -390 rad/s, 0.26 samples, trades off with a delay
+H_NUM, H_DEN = [2437.0], [1.0, 430.1, 1.721e4, 2437.0]
+
+
+def rich_input(n=1000, hold=5, seed=0):
+    """A random level held for ``hold`` samples: broadband up to about a tenth of Nyquist and beyond."""
+    rng = np.random.default_rng(seed)
+    return np.repeat(rng.standard_normal(n // hold), hold)
+
+
+def brute_force(num, den, u, ts, tau, upsample=40):
+    """lsim on a finely sampled, delayed, held input (the delay a whole number of fine steps)."""
+    shift = tau / ts * upsample
+    assert abs(shift - round(shift)) < 1e-9
+    fine = np.repeat(u, upsample)
+    delayed = np.r_[np.zeros(round(shift)), fine[:fine.size - round(shift)]]
+    t = np.arange(fine.size) * ts / upsample
+    _, y, _ = scipy.signal.lsim((num, den), delayed, t, interp=False)
+    return y[::upsample]
+
+
+# -- simulation ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("num, den, tau_samples", [
+    (NUM, DEN, 3.4),                     # the brief's case
+    (NUM, DEN, 0.375),                   # less than a sample
+    ([2.0, 3.0, 20.0], [1.0, 6.0, 20.0], 3.4),  # a direct term: it sees u[k-d-1]
+    ([5.0], [1.0, 2.0, 0.0], 2.95),      # an integrator
+    (NUM, DEN, 7.0),                     # a whole number of samples
+])
+def test_simulate_with_a_delay_equals_a_brute_force_reference(num, den, tau_samples):
+    u = rich_input(300)
+    y = simulate_tf(num, den, u, TS, input_delay=tau_samples * TS)
+    ref = brute_force(num, den, u, TS, tau_samples * TS)
+    np.testing.assert_allclose(y, ref, rtol=0, atol=1e-11 * np.max(np.abs(ref)))
+
+
+def test_a_whole_sample_delay_is_an_exact_shift_and_zero_changes_nothing():
+    u = rich_input(300)
+    y0 = simulate_tf(NUM, DEN, u, TS)
+    # 3 * 0.01 / 0.01 is 2.9999999999999996 in floating point: still a pure shift
+    np.testing.assert_array_equal(simulate_tf(NUM, DEN, u, TS, input_delay=3 * TS), np.r_[np.zeros(3), y0[:-3]])
+    np.testing.assert_array_equal(simulate_tf(NUM, DEN, u, TS, input_delay=0.0), y0)
+    np.testing.assert_array_equal(simulate_tf(NUM, DEN, u, TS, input_delay=500 * TS), np.zeros(u.size))
+
+
+def test_the_delay_acts_on_the_input_not_on_the_initial_state():
+    u = rich_input(300)
+    y = simulate_tf(NUM, DEN, u, TS, initial_state=[0.3, -1.0], input_delay=2.5 * TS)
+    free = simulate_tf(NUM, DEN, np.zeros(u.size), TS, initial_state=[0.3, -1.0])
+    np.testing.assert_allclose(y - free, simulate_tf(NUM, DEN, u, TS, input_delay=2.5 * TS), atol=1e-13)
+
+
+def test_the_frequency_response_phase_includes_minus_w_tau():
+    w = np.logspace(-1, 3, 200)
+    tau = 3.4 * TS
+    plain = frequency_response(NUM, DEN, w)
+    delayed = frequency_response(NUM, DEN, w, input_delay=tau)
+    np.testing.assert_allclose(delayed.phase_deg, plain.phase_deg - np.degrees(w * tau), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(delayed.response, plain.response * np.exp(-1j * w * tau), rtol=1e-13)
+    np.testing.assert_array_equal(delayed.magnitude_db, plain.magnitude_db)
+    # right even where the points are too sparse to unwrap the delayed response: -360 deg per step
+    sparse = frequency_response(NUM, DEN, [1.0, 1.0 + 2 * np.pi / tau], input_delay=tau)
+    assert sparse.phase_deg[1] - sparse.phase_deg[0] < -360.0
+
+
+# -- estimation ----------------------------------------------------------------------------
+
+def test_delay_zero_gives_exactly_the_delay_free_estimate():
+    u = rich_input()
+    rng = np.random.default_rng(1)
+    y = simulate_tf(NUM, DEN, u + 0.1, TS) + 0.01 * rng.standard_normal(u.size)
+    kwargs = {"initial_condition": "estimate", "input_offset": "estimate"}
+    plain = tfest(u, y, TS, 2, **kwargs)
+    zero = tfest(u, y, TS, 2, input_delay=0.0, **kwargs)
+    for name in ("num", "den", "covariance", "initial_state"):
+        np.testing.assert_array_equal(getattr(zero, name), getattr(plain, name))
+    assert (zero.fit_percent, zero.input_offset, zero.message) == (plain.fit_percent, plain.input_offset,
+                                                                   plain.message)
+    assert plain.input_delay == 0.0 and plain.input_delay_std is None
+    np.testing.assert_array_equal(plain.simulate(u), simulate_tf(plain.num, plain.den, u, TS))
+
+
+@pytest.mark.parametrize("refine", [True, False])
+def test_a_fixed_correct_delay_gives_the_true_coefficients(refine):
+    u = rich_input()
+    tau = 3.4 * TS
+    y = simulate_tf(NUM, DEN, u, TS, input_delay=tau)
+    est = tfest(u, y, TS, 2, input_delay=tau, refine=refine)
+    # SRIVC alone is exact too: the delayed input is filtered exactly
+    np.testing.assert_allclose(est.den, DEN, rtol=1e-8)
+    np.testing.assert_allclose(est.num, NUM, rtol=1e-8)
+    assert est.input_delay == tau and est.input_delay_std is None
+    assert est.fit_percent == pytest.approx(100.0, abs=1e-6)
+    # without the delay the same data fit worse
+    assert tfest(u, y, TS, 2).fit_percent < 99.0
+
+
+def test_a_fixed_delay_with_a_zero_an_offset_and_an_initial_state():
+    u = rich_input()
+    num, den, tau = [3.0, 20.0], [1.0, 6.0, 20.0], 2.6 * TS
+    y = simulate_tf(num, den, u - 0.3, TS, initial_state=[0.5, 0.0], input_delay=tau)
+    est = tfest(u, y, TS, 2, 1, initial_condition="estimate", input_offset="estimate", input_delay=tau)
+    np.testing.assert_allclose(est.den, den, rtol=1e-7)
+    np.testing.assert_allclose(est.num, num, rtol=1e-7)
+    assert est.input_offset == pytest.approx(-0.3, abs=1e-7)
+    np.testing.assert_allclose(est.initial_state, [0.5, 0.0], atol=1e-7)
+
+
+@pytest.mark.parametrize("tau_samples", [3.4, 7.0, 0.0])
+def test_an_estimated_delay_is_exact_on_noise_free_data(tau_samples):
+    u = rich_input()
+    y = simulate_tf(NUM, DEN, u, TS, input_delay=tau_samples * TS)
+    est = tfest(u, y, TS, 2, input_delay="estimate")
+    assert est.success
+    assert abs(est.input_delay / TS - tau_samples) < 1e-4
+    np.testing.assert_allclose(est.den, DEN, rtol=1e-6)
+    np.testing.assert_allclose(est.num, NUM, rtol=1e-6)
+    assert est.input_delay_std is not None and est.input_delay_std < 1e-3 * TS
+    assert "input delay estimated" in est.message
+
+
+@pytest.mark.parametrize("tau_samples, seed", [(3.4, 2), (7.0, 3)])
+def test_an_estimated_delay_with_output_noise(tau_samples, seed):
+    u = rich_input(seed=seed)
+    y0 = simulate_tf(NUM, DEN, u, TS, input_delay=tau_samples * TS)
+    y = y0 + 0.05 * np.std(y0) * np.random.default_rng(seed).standard_normal(u.size)
+    est = tfest(u, y, TS, 2, input_delay="estimate")
+    error = est.input_delay / TS - tau_samples
+    assert abs(error) < 0.2       # well within one sample; about 0.01 in practice
+    assert abs(error) < 5 * est.input_delay_std / TS   # and the standard error is honest
+    np.testing.assert_allclose(est.den, DEN, rtol=0.02)
+
+
+def stiff_case_sines():
+    rng = np.random.default_rng(3)
+    k = np.arange(1000)
+    u = sum(np.sin(2 * np.pi * f * k * TS + rng.uniform(0, 6)) for f in np.linspace(0.1, 20, 30)) / 5
+    y0 = simulate_tf(H_NUM, H_DEN, u + 0.2, TS, initial_state=[0.05, 0, 0], input_delay=3.4 * TS)
+    rng.standard_normal(k.size)
+    return u, y0 + 0.02 * np.std(y0) * rng.standard_normal(k.size)
+
+
+def stiff_case_held():
+    rng = np.random.default_rng(1)
+    u = np.repeat(rng.standard_normal(200), 5)
+    y0 = simulate_tf(H_NUM, H_DEN, u, TS, input_delay=3.4 * TS)
+    return u, y0 + 0.05 * np.std(y0) * rng.standard_normal(u.size)
+
+
+@pytest.mark.parametrize("case", [stiff_case_sines, stiff_case_held])
+def test_a_delay_traded_off_against_a_fast_pole_is_within_a_sample(case):
+    # With noise, ARX puts these delays at 5 samples (3.4 true); too long a
+    # delay makes SRIVC end in unstable models whose costs point the wrong
+    # way (the second case once walked up to 12 samples): the whole-sample
+    # search must walk down to the stable ones.
+    u, y = case()
+    est = tfest(u, y, TS, 3, initial_condition="estimate", input_offset="estimate", input_delay="estimate")
+    assert est.success
+    assert abs(est.input_delay / TS - 3.4) < 1.0
+    assert np.all(est.poles().real < 0)
+    assert est.fit_percent > 90.0  # the noise alone keeps it under 95 %
+
+
+def test_the_estimate_carries_its_delay_to_simulate_frequency_response_compare_and_to_dict():
+    u = rich_input()
+    tau = 3.4 * TS
+    y = simulate_tf(NUM, DEN, u, TS, input_delay=tau)
+    est = tfest(u, y, TS, 2, input_delay="estimate")
+    np.testing.assert_allclose(est.simulate(u), y, atol=1e-9)
+    w = np.array([1.0, 10.0, 100.0])
+    np.testing.assert_allclose(est.frequency_response(w).phase_deg,
+                               frequency_response(est.num, est.den, w).phase_deg - np.degrees(w * est.input_delay))
+    assert compare(est.num, est.den, u, y, TS, input_delay=est.input_delay).fit_percent == pytest.approx(100, abs=1e-6)
+    assert compare(est.num, est.den, u, y, TS).fit_percent < 99.0
+    assert compare(est.num, est.den, u, y, TS, input_delay=tau).input_delay == tau
+    data = est.to_dict()
+    assert data["input_delay"] == pytest.approx(tau, abs=1e-9) and data["input_delay_std"] >= 0.0
+    assert tfest(u, y, TS, 2, input_delay=tau).to_dict()["input_delay_std"] is None
+    assert "does not" in TFEstimate.tf.__doc__ and "delay" in TFEstimate.tf.__doc__
+
+
+def test_max_delay_bounds_the_search():
+    u = rich_input()
+    y = simulate_tf(NUM, DEN, u, TS, input_delay=7.0 * TS)
+    est = tfest(u, y, TS, 2, input_delay="estimate", max_delay=4 * TS)
+    assert est.input_delay <= 4 * TS + 1e-15
+
+
+def test_a_failed_estimate_of_the_delay_is_data():
+    est = tfest(np.zeros(200), np.zeros(200), TS, 2, input_delay="estimate")
+    assert not est.success and np.isnan(est.input_delay) and np.isnan(est.input_delay_std)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"input_delay": -0.01}, "input_delay = -0.01 is not allowed: must be a finite delay >= 0 s"),
+    ({"input_delay": np.nan}, "input_delay = nan is not allowed: must be a finite delay >= 0 s"),
+    ({"input_delay": True}, "input_delay = True is not allowed: must be a finite delay >= 0 s"),
+    ({"input_delay": "soon"}, "input_delay = soon is not allowed: use a delay >= 0 s or estimate"),
+    ({"input_delay": 1.5}, "input_delay = 1.5 is not allowed: must be at most half the record, "
+                           "N ts / 2 = 1 s"),
+    ({"input_delay": 0.02, "max_delay": 0.1}, "max_delay = 0.1 is not allowed: bounds an estimated delay: "
+                                              "give it with input_delay = estimate"),
+    ({"input_delay": "estimate", "max_delay": 0}, "max_delay = 0 is not allowed: must be a delay > 0 s"),
+    ({"input_delay": "estimate", "max_delay": 2.0}, "max_delay = 2 is not allowed: must be at most half"),
+])
+def test_bad_delays_are_refused_with_their_name(kwargs, message):
+    u = rich_input(200)
+    with pytest.raises(ValueError) as info:
+        tfest(u, u, TS, 2, **kwargs)
+    assert str(info.value).startswith(message)
+
+
+def test_bad_delays_elsewhere():
+    with pytest.raises(ValueError, match=r"^input_delay = -1 is not allowed"):
+        simulate_tf(NUM, DEN, np.ones(5), TS, input_delay=-1)
+    with pytest.raises(ValueError, match=r"^input_delay = x is not allowed"):
+        compare(NUM, DEN, np.ones(5), np.ones(5), TS, input_delay="x")
+    with pytest.raises(ValueError, match=r"^input_delay = inf is not allowed"):
+        frequency_response(NUM, DEN, [1.0], input_delay=np.inf)
