@@ -19,7 +19,7 @@ import warnings
 from eha_core.data import DataError
 from eha_core.params import ParameterError
 
-from . import exercise, identify, idinput, linearize, reproduce, serve, simulate
+from . import exercise, identify, idinput, linearize, reproduce, serve, simulate, study
 from .common import EXIT_USAGE, Parser, UsageError
 
 __all__ = ["main", "build_parser", "EXIT_USAGE", "UsageError"]
@@ -29,7 +29,7 @@ def build_parser() -> Parser:
     parser = Parser(prog="eha", description="Electro-hydraulic actuator: simulation, identification and the "
                                             "classroom app.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
-    for module in (simulate, linearize, idinput, identify, reproduce, serve, exercise):
+    for module in (simulate, linearize, idinput, identify, reproduce, serve, exercise, study):
         module.add_parser(sub)
     return parser
 

@@ -1,0 +1,212 @@
+"""``eha study lse|tf``: one experiment repeated over many noise seeds (:mod:`eha_core.study`).
+
+Shows whether an estimator's standard errors are honest: per parameter, the
+mean and spread of the estimates over the seeds, the mean reported standard
+error, and the coverage (the fraction of seeds whose 95 % interval holds the
+nominal value). The arguments are checked before the estimators (scipy,
+numba) are imported: a typo is refused at once.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+from .common import PARAM_HELP, Parser, UsageError, check_range, json_text, parse_params
+
+#: The sensors the least squares reads, with their SI units (for --noise).
+SENSOR_UNITS = {"x": "m", "v": "m/s", "p1": "Pa", "p2": "Pa"}
+#: Record length of the least squares at most [s] (as eha identify lse).
+MAX_T_END = 600.0
+
+
+def add_parser(sub) -> None:
+    from eha_core.signals import SIGNAL_GRAMMAR
+    from eha_core.study import DEFAULT_WORKERS, MAX_SEEDS, MAX_WORKERS
+
+    st = sub.add_parser("study", help="repeat an identification over many noise seeds: spread and coverage")
+    stsub = st.add_subparsers(dest="method", metavar="METHOD", parser_class=Parser)
+    st.set_defaults(handler=_missing_method)
+
+    def common(p):
+        p.add_argument("--seeds", type=int, required=True, help=f"number of runs, 1 to {MAX_SEEDS}")
+        p.add_argument("--first-seed", type=int, default=0, help="seed of the first run (default 0); run i has "
+                                                                 "seed first + i")
+        p.add_argument("--workers", type=int, default=DEFAULT_WORKERS,
+                       help=f"threads, 1 to {MAX_WORKERS} (default {DEFAULT_WORKERS})")
+        p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help=PARAM_HELP)
+        p.add_argument("--json", action="store_true",
+                       help="print JSON: every seed's estimates, and coverage, mean, std, nominal, n_seeds, settings")
+
+    le = stsub.add_parser("lse", help="least squares (eqs. 15-18) over many disturbance seeds",
+                          description="Least squares repeated over seeds: the nonlinear model under the "
+                                      "disturbance, u = 6 sin(4 pi t) for 5 s at 1 kHz; seed k draws the noise as "
+                                      "eha identify lse --seed k.", epilog=SIGNAL_GRAMMAR)
+    common(le)
+    le.add_argument("--disturbance", default="white:1000",
+                    help="load disturbance d(t) as signal text, default white:1000 (the paper's white noise); a "
+                         "noise term takes the run's seed, so give it none")
+    le.add_argument("--disturbance-model", default="constant",
+                    help="constant (the paper's d0) or harmonic[:FREQ_HZ] (d0 + a sinusoid)")
+    le.add_argument("--model", default="nonlinear", help="the plant: nonlinear (the only one the least squares' "
+                                                         "equations hold for)")
+    le.add_argument("--noise", action="append", default=[], metavar="SENSOR=SIGMA",
+                    help="white sensor noise, SI units, repeatable: x [m], v [m/s], p1, p2 [Pa], e.g. p1=1e4")
+    le.add_argument("--t-end", type=float, default=5.0, help=f"record length [s] (default 5, at most "
+                                                             f"{MAX_T_END:g})")
+    le.set_defaults(handler=run_study_command, kind="lse")
+
+    tf = stsub.add_parser("tf", help="transfer-function estimate (eqs. 19-25) over many excitation seeds",
+                          description="The paper's closed-loop experiment repeated over seeds: seed k draws the "
+                                      "idinput excitation (as eha identify tf --seed k) and the position noise. "
+                                      "Nominal values: the linearised H(s) of eq. 24, the truth for the linear "
+                                      "plant, a reference for the nonlinear one.")
+    common(tf)
+    tf.add_argument("--model", default="nonlinear", help="the plant in the loop: nonlinear (default) or linear")
+    tf.add_argument("--noise", default="1e-4", metavar="SIGMA",
+                    help="standard deviation of the white noise on the recorded position [m] (default 1e-4)")
+    tf.set_defaults(handler=run_study_command, kind="tf")
+
+
+def _missing_method(args) -> int:
+    raise UsageError("study needs a METHOD: lse or tf (eha study --help tells more)")
+
+
+def _sensor_noise(items) -> dict[str, float]:
+    """``--noise SENSOR=SIGMA`` assignments (least squares)."""
+    noise = {}
+    usage = ("give SENSOR=SIGMA, SENSOR one of " + ", ".join(f"{k} [{u}]" for k, u in SENSOR_UNITS.items())
+             + ", e.g. --noise p1=1e4; repeat for more sensors")
+    for item in items:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        try:
+            sigma = float(text)
+        except ValueError:
+            sigma = math.nan
+        if not sep or name not in SENSOR_UNITS:
+            raise UsageError(f"--noise = {item} is not allowed: {usage}")
+        if not (math.isfinite(sigma) and sigma >= 0):
+            raise UsageError(f"--noise = {item} is not allowed: the standard deviation must be a number >= 0 "
+                             f"{SENSOR_UNITS[name]}")
+        noise[name] = sigma
+    return noise
+
+
+def _position_noise(text: str) -> float:
+    try:
+        sigma = float(text)
+    except ValueError:
+        sigma = math.nan
+    if not (math.isfinite(sigma) and sigma >= 0):
+        raise UsageError(f"--noise = {text} is not allowed: give the position noise's standard deviation, a number "
+                         ">= 0 m (e.g. 1e-4)")
+    return sigma
+
+
+#: Core names of StudyConfig's fields -> the options that set them (for its messages).
+_OPTIONS = {"disturbance": "--disturbance", "disturbance_model": "--disturbance-model", "t_end": "--t-end"}
+
+
+def _config(args):
+    """The checked :class:`~eha_core.study.StudyConfig` (light imports only: no scipy yet)."""
+    from eha_core.experiments import FrequencyExperiment
+    from eha_core.identify.disturbance import parse_disturbance_model
+    from eha_core.signals import parse_signal
+    from eha_core.study import MAX_SEEDS, MAX_WORKERS, StudyConfig
+
+    check_range("--seeds", args.seeds, 1, MAX_SEEDS, "seeds")
+    check_range("--workers", args.workers, 1, MAX_WORKERS, "threads")
+    check_range("--first-seed", args.first_seed, 0, 2**32 - 1 - MAX_SEEDS)
+    if args.kind == "lse":
+        if args.model != "nonlinear":
+            raise UsageError(f"--model = {args.model} is not allowed: the least squares identifies the nonlinear "
+                             "model's parameters (eqs. 15-18); use nonlinear, or eha study tf for the linear plant")
+        if not (math.isfinite(args.t_end) and 0 < args.t_end <= MAX_T_END):
+            raise UsageError(f"--t-end = {args.t_end:g} is not allowed: use a record length in (0, {MAX_T_END:g}] s")
+        model, freq = parse_disturbance_model(args.disturbance_model, name="--disturbance-model")
+        parse_signal(args.disturbance, name="--disturbance")
+        kwargs = {"disturbance": args.disturbance, "disturbance_model": model, "disturbance_freq_hz": freq,
+                  "sensor_noise": _sensor_noise(args.noise), "t_end": args.t_end}
+    else:
+        if args.model not in ("nonlinear", "linear"):
+            raise UsageError(f"--model = {args.model} is not allowed: use nonlinear or linear")
+        kwargs = {"experiment": FrequencyExperiment(model=args.model), "noise_m": _position_noise(args.noise)}
+    try:
+        return StudyConfig(args.kind, n_seeds=args.seeds, first_seed=args.first_seed, **kwargs)
+    except ValueError as exc:
+        # the core names its field; the user typed the option
+        text = str(exc)
+        for name, option in _OPTIONS.items():
+            if text.startswith(f"{name} = "):
+                text = option + text[len(name):]
+                break
+        raise UsageError(text) from None
+
+
+def run_study_command(args) -> int:
+    config = _config(args)
+    params = parse_params(args.param)
+
+    from eha_core.study import run_study
+
+    progress = _Progress(config.n_seeds) if sys.stderr.isatty() and not args.json else None
+    try:
+        res = run_study(config, params, workers=args.workers, progress=progress)
+    finally:
+        if progress is not None:
+            progress.close()
+    if args.json:
+        print(json_text(res.to_dict()))
+    else:
+        print(summary_text(res))
+    if res.n_failed:
+        print(f"eha study {config.kind}: warning: {res.message}", file=sys.stderr)
+    return 0 if res.n_failed == 0 else 1
+
+
+class _Progress:
+    """A progress line on stderr (a terminal only), rewritten in place."""
+
+    def __init__(self, total: int):
+        self.total, self.shown = total, False
+
+    def __call__(self, done: int, total: int) -> None:
+        print(f"\reha study: {done}/{total} seeds", end="", file=sys.stderr, flush=True)
+        self.shown = True
+
+    def close(self) -> None:
+        if self.shown:
+            print(file=sys.stderr)
+
+
+def summary_text(res) -> str:
+    """The study as a table: parameter, nominal, mean, std, mean reported std error, coverage."""
+    cfg = res.config
+    last = cfg.first_seed + cfg.n_seeds - 1
+    if cfg.kind == "lse":
+        what = (f"least squares, disturbance {cfg.disturbance}, disturbance model {cfg.disturbance_model}"
+                + (f", sensor noise {', '.join(f'{k}={v:g}' for k, v in cfg.sensor_noise)}" if cfg.sensor_noise
+                   else ""))
+    else:
+        what = (f"transfer function H(s) = b0 / (s^3 + a1 s^2 + a2 s + a3), {cfg.model} plant, "
+                f"position noise {cfg.noise_m:g} m")
+    lines = [f"study: {what}",
+             f"seeds {cfg.first_seed}-{last}: {res.n_completed} completed, {res.n_failed} failed, "
+             f"{res.workers} workers, {res.elapsed_s:.2f} s ({res.seconds_per_seed:.4f} s per seed)",
+             f"nominal: {res.reference}",
+             f"{'parameter':10s}{'nominal':>14s}{'mean':>14s}{'std':>12s}{'mean std err':>14s}{'coverage':>10s}"]
+
+    def num(v, width, fmt=".6g"):
+        return f"{'-':>{width}s}" if v is None or not math.isfinite(v) else f"{v:{width}{fmt}}"
+
+    for k in res.parameters:
+        lines.append(f"{k:10s}{num(res.nominal.get(k), 14)}{num(res.mean[k], 14)}{num(res.std[k], 12, '.4g')}"
+                     f"{num(res.mean_std_error[k], 14, '.4g')}{num(res.coverage.get(k), 10, '.3f')}")
+    if res.n_successful:
+        lo, hi = res.coverage_band()
+        lines.append(f"coverage: the fraction of seeds whose 95 % interval holds the nominal value; honest intervals "
+                     f"give {lo:.3f}-{hi:.3f} in 99 % of studies of {res.n_successful} seeds")
+    if res.message != "ok":
+        lines.append(f"note: {res.message}")
+    return "\n".join(lines)
