@@ -6,11 +6,12 @@ import panel as pn
 
 from ..state import AppState
 from ..tasks import SessionRunner, apply_locked, frozen_models
+from .board import ModelBoard
 from .frequency import FREQ_DEFAULTS, FREQ_FORM, FrequencyPanel, parse_freq
 from .least_squares import LSE_DEFAULTS, LSE_FORM, LeastSquaresPanel, LseRequest, parse_lse
 
-__all__ = ["IdentificationTab", "LeastSquaresPanel", "FrequencyPanel", "LseRequest", "LSE_FORM", "LSE_DEFAULTS",
-           "FREQ_FORM", "FREQ_DEFAULTS", "parse_lse", "parse_freq"]
+__all__ = ["IdentificationTab", "LeastSquaresPanel", "FrequencyPanel", "ModelBoard", "LseRequest", "LSE_FORM",
+           "LSE_DEFAULTS", "FREQ_FORM", "FREQ_DEFAULTS", "parse_lse", "parse_freq"]
 
 
 class IdentificationTab(pn.viewable.Viewer):
@@ -25,20 +26,41 @@ class IdentificationTab(pn.viewable.Viewer):
         self.state = state
         self.runner = runner if runner is not None else SessionRunner(state)
         self._query = query
+        # every estimate of the session lands on the board (built, with its figures, when first shown)
+        self.board = ModelBoard(state, self.runner, query)
         self.lse = LeastSquaresPanel(state, self.runner, query)
+        self.lse.board = self.board
         self.freq: FrequencyPanel | None = None
         self._freq_slot = pn.Column(pn.pane.HTML("<p class='eha-note'>Preparing the frequency domain…</p>"),
                                     sizing_mode="stretch_width")
+        self._board_slot = pn.Column(pn.pane.HTML("<p class='eha-note'>Preparing the model board…</p>"),
+                                     sizing_mode="stretch_width")
         self.tabs = pn.Tabs(("Time domain: least squares", self.lse),
                             ("Frequency domain: transfer function", self._freq_slot),
+                            ("Model board", self._board_slot),
                             dynamic=False, sizing_mode="stretch_width", css_classes=["eha-ident-tabs"])
-        self.tabs.param.watch(lambda e: apply_locked(self.frequency_panel) if e.new == 1 else None, "active")
+        self.tabs.param.watch(self._on_tab, "active")
+
+    def _on_tab(self, event) -> None:
+        if event.new == 1:
+            apply_locked(self.frequency_panel)
+        elif event.new == 2:
+            apply_locked(self.board_panel)
+
+    def board_panel(self) -> ModelBoard:
+        """The model board, with its figures built now if never shown."""
+        if not self.board.built:
+            with frozen_models():
+                self.board.build()
+                self._board_slot.objects = [self.board]
+        return self.board
 
     def frequency_panel(self) -> FrequencyPanel:
         """The frequency-domain panel, built now if never shown."""
         if self.freq is None:
             with frozen_models():
                 self.freq = FrequencyPanel(self.state, self.runner, self._query)
+                self.freq.board = self.freq.record.board = self.board
                 self._freq_slot.objects = [self.freq]
         return self.freq
 

@@ -191,6 +191,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         self.own_data_key = None
         self.last_data = None               # the data behind the table and the plot (for downloads)
         self.last_resim = None              # the plot's re-simulation with the estimates
+        self.board = None                   # the model board each run is put on (set by the tab)
         self._upload = None
         self.upload = pn.widgets.FileInput(accept=".csv,.mat", width=260, css_classes=["eha-lse-upload"],
                                            multiple=False)
@@ -486,6 +487,10 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                 self.figure.update(view)
             self.view.shown(key)
             self._inputs_changed()          # typed while it computed
+            if self.board is not None and res.success:
+                what = (f"your data {own.source}" if own is not None else
+                        f"{SCENARIOS.get(req.scenario, req.scenario)}, {req.model} model")
+                self.board.add_lse(res, params, self.state.kp, f"least squares ({what}) → eq. 24")
 
         return self.runner.run("least squares", compute, show, fail=self._fail, busy=[self.area], note=self._note)
 

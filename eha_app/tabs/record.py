@@ -15,6 +15,8 @@ from collections.abc import Callable
 import numpy as np
 import panel as pn
 
+from eha_core.board import BoardModel
+
 from .. import plots
 from ..exports import bode_csv, tf_estimate_bytes
 from ..form import Field, Form, Group
@@ -53,6 +55,7 @@ class RecordPanel:
         self._mapping: dict | None = None
         self.prepared = None
         self.result = None
+        self.board = None                   # the model board each estimate is put on (set by the tab)
         self.note = pn.pane.HTML(
             "<span class='eha-note'>Or estimate H(s) from your own record: a CSV or .mat file with t, u, y "
             "(or t, r, x), in SI or with units in the header. Its first two thirds estimate, the rest "
@@ -234,6 +237,13 @@ class RecordPanel:
             self.area.visible = True
             self.view.shown(key)
             self.inputs_changed()
+            e = rec.estimate
+            if self.board is not None and e.success and np.all(np.isfinite(e.den)):
+                self.board.add(BoardModel(
+                    name=self.board.next_name("R"), kind="record", estimate=e, num=e.num, den=e.den,
+                    input_delay=getattr(e, "input_delay", 0.0), ts=rec.ts,
+                    description=f"{name}: {e.n_poles} poles, {e.n_zeros} zeros, t ∈ [{rec.prepared.t_from:g}, "
+                                f"{rec.prepared.t_to:g}] s, detrend {rec.detrend}; fit {e.fit_percent:.1f} %"))
 
         return self.runner.run("estimate from your record", compute, show, fail=self._fail, note=self._note)
 

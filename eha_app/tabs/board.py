@@ -1,0 +1,361 @@
+"""Tab 3, model board: every estimate of the session, side by side.
+
+Each transfer-function estimate (frequency experiment or own record) and each
+least-squares run (as eq. 24's H(s) with its estimates) lands here with a
+short name; the references (eq. 24 with the actuator's values, the paper's Ĥ)
+are always offered. The student ticks models to overlay them, one colour per
+model, in four views: the fit on one validation record (MATLAB ``compare``,
+with the residual tests' verdicts), the Bode diagram with 95 % bands, the step
+response with its figures (and the nonlinear plant's under the same
+controller), and the poles and zeros with their 95 % regions. Models can be
+renamed and deleted.
+
+The core computes each model's curves once, in a worker, when it is added
+(:func:`eha_core.board.model_views`); ticking only replaces the views' data.
+"""
+
+from __future__ import annotations
+
+import html
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+import panel as pn
+
+from eha_core.board import (
+    BoardModel,
+    compare_on_record,
+    lse_model,
+    model_views,
+    nonlinear_step,
+    reference_models,
+    validation_record,
+)
+
+from .. import board_plots
+from ..form import Field, Form, Group, parse_fields
+from ..freshness import ResultView
+from ..layout import side_by_side
+from ..state import AppState
+from ..tasks import SessionRunner
+
+__all__ = ["ModelBoard", "BOARD_FORM", "MAX_MODELS"]
+
+#: Models the board holds at most (beside the references): a student deletes one to keep more.
+MAX_MODELS = 12
+BOARD_FORM = (Group("Comparison", (
+    Field("board_seed", "validation seed", "integer", lo=0, hi=10**6, short="validation seed",
+          tip="seed of the idinput excitation of the validation record: a closed-loop experiment on tab 1's "
+              "actuator that none of the models was estimated from (unless you used this seed)"),
+    Field("board_step", "step of r", "number", unit="mm", lo=0.01, hi=200.0, short="step of r",
+          tip="height of the reference step for the step responses"),
+)),)
+BOARD_DEFAULTS = {"board_seed": "1000", "board_step": "10"}
+_FIELDS = {f.name: f for g in BOARD_FORM for f in g.fields}
+_VIEWS = (("Fit on validation data", "fit"), ("Bode", "bode"), ("Step response", "step"),
+          ("Poles and zeros", "pz"))
+
+
+@dataclass
+class BoardEntry:
+    """A model on the board, as the student sees it (name editable, ticked or not)."""
+
+    key: int
+    model: BoardModel
+    color: str
+    name: str
+    ticked: bool = True
+
+    @property
+    def kind(self) -> str:
+        return self.model.kind
+
+
+class ModelBoard(pn.viewable.Viewer):
+    """The model board of one session (see the module docstring)."""
+
+    def __init__(self, state: AppState, runner: SessionRunner, query: dict | None = None, **kwargs):
+        super().__init__(**kwargs)
+        self.state = state
+        self.runner = runner
+        self._keys = itertools.count(1)
+        self._counters: dict[str, itertools.count] = {}
+        self.entries: list[BoardEntry] = []
+        self.views: dict = {}           # key -> ModelViews
+        self.fits: dict = {}            # key -> RecordComparison on the current record
+        self.record = None
+        self.record_key = None
+        self.plant = None               # the nonlinear plant's step response
+        self.figures: dict = {}
+        self.built = False
+        texts = dict(BOARD_DEFAULTS)
+        texts.update({k: v for k, v in (query or {}).items() if k in _FIELDS})
+        self.form = Form(spec=[g.to_spec() for g in BOARD_FORM], values=texts, url_defaults=BOARD_DEFAULTS,
+                         width=270, css_classes=["eha-board-form"], margin=(5, 10))
+        self.form.param.watch(lambda _e: self._settings_changed(), "values")
+        self.bands = pn.widgets.Checkbox(label="95 % bands on the Bode diagram", value=True, width=260,
+                                         css_classes=["eha-board-bands"])
+        self.bands.param.watch(lambda _e: self.refresh(), "value")
+        self.list = pn.Column(width=280, css_classes=["eha-board-list"])
+        self.note = pn.pane.HTML("", width=270, css_classes=["eha-board-note"])
+        self.tables = {key: pn.pane.HTML("", sizing_mode="stretch_width", css_classes=[f"eha-board-{key}-table"])
+                       for _, key in _VIEWS}
+        self._slots = {key: pn.Column(pn.pane.HTML("<p class='eha-note'>Preparing…</p>"), min_height=200,
+                                      sizing_mode="stretch_width") for _, key in _VIEWS}
+        self.view_tabs = pn.Tabs(*((title, pn.Column(self._slots[key], self.tables[key],
+                                                     sizing_mode="stretch_width")) for title, key in _VIEWS),
+                                 dynamic=False, sizing_mode="stretch_width", css_classes=["eha-board-views"])
+        self.area = pn.Column(self.view_tabs, sizing_mode="stretch_width")
+        self.record_view = ResultView("board-record", self.area,
+                                      run_hint="The board updates it by itself in a moment.")
+        self._references()
+        state.param.watch(lambda _e: self._plant_changed(), ["params", "kp"])
+
+    # -- models ------------------------------------------------------------------------------
+    def _color(self) -> str:
+        used = {e.color for e in self.entries}
+        return next((c for c in board_plots.BOARD_COLORS if c not in used), board_plots.BOARD_COLORS[0])
+
+    def _references(self) -> None:
+        """eq. 24 (unless an exercise hides the values it is made of) and the paper's Ĥ."""
+        old = {e.model.name: e for e in self.entries if e.kind == "reference"}
+        refs = reference_models(self.state.params, self.state.kp, linearised=not self.state.hidden)
+        for ref in refs:
+            entry = old.pop(ref.name, None)
+            if entry is None:
+                self.entries.insert(len([e for e in self.entries if e.kind == "reference"]),
+                                    BoardEntry(next(self._keys), ref, self._color(), ref.name,
+                                               ticked=ref.name.startswith("H(s)")))
+            else:
+                entry.model = ref
+                self.views.pop(entry.key, None)
+                self.fits.pop(entry.key, None)
+
+    def next_name(self, prefix: str) -> str:
+        return f"{prefix}{next(self._counters.setdefault(prefix, itertools.count(1)))}"
+
+    def add(self, model: BoardModel) -> BoardEntry | None:
+        """Put ``model`` on the board, ticked; its views are computed in a worker."""
+        if len([e for e in self.entries if e.kind != "reference"]) >= MAX_MODELS:
+            self.note.object = (f"<span class='eha-warn'>The board holds {MAX_MODELS} models: delete one to keep "
+                                f"{html.escape(model.name)}.</span>")
+            return None
+        entry = BoardEntry(next(self._keys), model, self._color(), model.name)
+        self.entries.append(entry)
+        self.note.object = ""
+        self._compute(entry)
+        self._rebuild_list()
+        return entry
+
+    def add_lse(self, result, params, kp: float, description: str) -> None:
+        """A least-squares run as eq. 24's H(s) with its estimates (in a worker: it linearises)."""
+        name = self.next_name("LS")
+
+        def compute(_token):
+            return lse_model(result, params, kp, name, description)
+
+        def show(model, _job):
+            self.add(model)
+
+        def fail(message):
+            self.note.object = (f"<span class='eha-warn'>{html.escape(name)} is not on the board: its estimates "
+                                f"are not physical ({html.escape(message)}).</span>")
+
+        SessionRunner((self.runner.owner, "board-lse", name), self.runner.queue).run(
+            "least squares for the board", compute, show, fail=fail)
+
+    def _compute(self, entry: BoardEntry) -> None:
+        record, model = self.record, entry.model
+
+        def compute(_token):
+            views = model_views(model)
+            fit = compare_on_record(model, record) if record is not None else None
+            return views, fit, record
+
+        def show(out, _job):
+            views, fit, rec = out
+            if entry not in self.entries or entry.model is not model:
+                return
+            self.views[entry.key] = views
+            if fit is not None and rec is self.record:
+                self.fits[entry.key] = fit
+            self.refresh()
+
+        SessionRunner((self.runner.owner, "board", entry.key), self.runner.queue).run(
+            f"board: {model.name}", compute, show, fail=lambda m: self._fail(entry, m))
+
+    def _fail(self, entry: BoardEntry, message: str) -> None:
+        self.note.object = f"<span class='eha-warn'>{html.escape(entry.name)}: {html.escape(message)}</span>"
+
+    def delete(self, entry: BoardEntry) -> None:
+        if entry.kind == "reference":
+            return
+        self.entries.remove(entry)
+        self.views.pop(entry.key, None)
+        self.fits.pop(entry.key, None)
+        self._rebuild_list()
+        self.refresh()
+
+    def rename(self, entry: BoardEntry, name: str) -> None:
+        name = " ".join(str(name).split())[:40]
+        if not name:
+            return
+        entry.name = name
+        self.refresh()
+
+    def tick(self, entry: BoardEntry, ticked: bool) -> None:
+        entry.ticked = bool(ticked)
+        self.refresh()
+
+    def ticked(self) -> list[BoardEntry]:
+        return [e for e in self.entries if e.ticked]
+
+    # -- the list ---------------------------------------------------------------------------------
+    def _rebuild_list(self) -> None:
+        rows = []
+        for e in self.entries:
+            box = pn.widgets.Checkbox(value=e.ticked, width=22, margin=(8, 0, 0, 5),
+                                      css_classes=[f"eha-board-tick-{e.key}", "eha-board-tick"])
+            box.param.watch(lambda ev, e=e: self.tick(e, ev.new), "value")
+            swatch = pn.pane.HTML(f"<span style='display:inline-block;width:14px;height:14px;background:{e.color};"
+                                  f"border-radius:3px;margin-top:9px'></span>", width=18, margin=(0, 2))
+            name = pn.widgets.TextInput(value=e.name, width=110, margin=(3, 3),
+                                        css_classes=[f"eha-board-name-{e.key}", "eha-board-name"])
+            name.param.watch(lambda ev, e=e: self.rename(e, ev.new), "value")
+            parts = [box, swatch, name]
+            if e.kind != "reference":
+                drop = pn.widgets.Button(label="✕", width=30, margin=(3, 3), description=f"delete {e.name}",
+                                         css_classes=[f"eha-board-delete-{e.key}", "eha-board-delete"])
+                drop.on_click(lambda _ev, e=e: self.delete(e))
+                parts.append(drop)
+            desc = pn.pane.HTML(f"<span class='eha-note'>{html.escape(e.model.description)}</span>",
+                                width=270, margin=(0, 10, 6, 48), styles={"font-size": "11px"})
+            rows.append(pn.Column(pn.Row(*parts, width=280), desc, width=280, margin=0))
+        if len(self.entries) <= 2:
+            rows.append(pn.pane.HTML("<p class='eha-note'>Estimates land here as you make them: run a "
+                                     "transfer-function estimate, one from your own record, or the least "
+                                     "squares.</p>", width=270))
+        self.list.objects = rows
+
+    # -- the validation record and the nonlinear plant -------------------------------------------
+    def settings(self) -> tuple[dict, dict]:
+        return parse_fields(_FIELDS.values(), self.form.values)
+
+    def _settings_changed(self) -> None:
+        values, errors = self.settings()
+        self.form.errors = errors
+        if not errors:
+            self.update_record()
+
+    def _plant_changed(self) -> None:
+        self._references()
+        for e in self.entries:
+            if e.key not in self.views:
+                self._compute(e)
+        self.update_record()
+
+    def update_record(self) -> None:
+        """The validation record, every model's fit on it, and the nonlinear plant's step (in a worker)."""
+        values, errors = self.settings()
+        if errors or not self.state.valid or not self.built:
+            return
+        params, kp = self.state.params, self.state.kp
+        seed, amplitude = values["board_seed"], values["board_step"] * 1e-3
+        key = (params, kp, seed, amplitude)
+        self.record_view.inputs_changed(key, updating=True)
+        models = [(e.key, e.model) for e in self.entries]
+
+        def compute(token):
+            record = validation_record(params, kp=kp, seed=seed, cancel=token)
+            fits = {k: compare_on_record(m, record) for k, m in models}
+            return record, fits, nonlinear_step(params, kp, amplitude, cancel=token)
+
+        def show(out, _job):
+            self.record, fits, self.plant = out
+            self.record_key = key
+            self.fits = fits
+            for e in self.entries:          # added while it computed
+                if e.key not in fits:
+                    self._compute(e)
+            self.refresh()
+            self.record_view.shown(key)
+
+        SessionRunner((self.runner.owner, "board-record"), self.runner.queue).run(
+            "board: validation record", compute, show, fail=lambda m: setattr(self.note, "object", m))
+
+    # -- drawing ---------------------------------------------------------------------------------
+    def build(self) -> None:
+        """Build the figures (first shown) and compute what is missing."""
+        if self.built:
+            return
+        self.built = True
+        self.figures = {"fit": board_plots.BoardFitFigure(), "bode": board_plots.BoardBodeFigure(),
+                        "step": board_plots.BoardStepFigure(), "pz": board_plots.PoleZeroFigure()}
+        for key, fig in self.figures.items():
+            self._slots[key].objects = [pn.pane.Bokeh(fig.layout, sizing_mode="stretch_width")]
+        self._rebuild_list()
+        for e in self.entries:
+            if e.key not in self.views:
+                self._compute(e)
+        self.update_record()
+
+    def refresh(self) -> None:
+        """Redraw every view from the cached curves of the ticked models (no computation)."""
+        if not self.built:
+            return
+        entries = self.ticked()
+        amplitude = (self.settings()[0].get("board_step") or 10.0) * 1e-3
+        self.figures["fit"].update(self.record, entries, self.fits)
+        self.figures["bode"].update(entries, self.views, bands=self.bands.value)
+        self.figures["step"].update(entries, self.views, self.plant, amplitude)
+        self.figures["pz"].update(entries, self.views)
+        self.tables["fit"].object = self._fit_table(entries)
+        self.tables["step"].object = self._step_table(entries, amplitude)
+
+    def _fit_table(self, entries) -> str:
+        if self.record is None:
+            return ""
+        rows = []
+        for e in entries:
+            fit = self.fits.get(e.key)
+            if fit is None:
+                continue
+            verdicts = ""
+            if fit.assessment is not None:
+                verdicts = "".join(f"<div>{'✓' if v.passed else '✗'} {html.escape(v.sentence)}</div>"
+                                   for v in fit.assessment.verdicts)
+            rows.append(f"<tr><td><span style='color:{e.color}'>■</span> {html.escape(e.name)}</td>"
+                        f"<td>{fit.fit_percent:.2f} %</td><td style='font-size:12px'>{verdicts}</td></tr>")
+        seed = self.record_key[2] if self.record_key else ""
+        return ("<table class='eha-table eha-board-fits'><tr><th>model</th><th>fit</th><th>residual tests on the "
+                "validation record</th></tr>" + "".join(rows) + "</table>"
+                f"<p class='eha-note'>Validation record: a closed-loop experiment on tab 1's actuator (idinput "
+                f"sine, seed {seed}, N = 1000, Ts = 0.01 s). Each model's initial state and input offset are "
+                "fitted to it (MATLAB's compare); fit = 100 (1 − ‖x − x̂‖ / ‖x − mean x‖).</p>")
+
+    def _step_table(self, entries, amplitude: float) -> str:
+        rows = []
+        items = [(e.name, e.color, self.views[e.key].step) for e in entries if e.key in self.views]
+        if self.plant is not None:
+            items.append(("nonlinear plant", "#333333", self.plant))
+
+        def cell(v, fmt="{:.3g}"):
+            return fmt.format(v) if v is not None and np.isfinite(v) else "—"
+
+        for name, color, s in items:
+            i = s.info
+            rows.append(f"<tr><td><span style='color:{color}'>■</span> {html.escape(name)}</td>"
+                        f"<td>{cell(i.rise_time_s)}</td><td>{cell(i.overshoot_percent, '{:.2f}')}</td>"
+                        f"<td>{cell(i.settling_time_s)}</td><td>{cell(i.steady_state * amplitude * 1e3)}</td>"
+                        f"<td>{html.escape('' if s.message == 'ok' else s.message)}</td></tr>")
+        return ("<table class='eha-table eha-board-steps'><tr><th>model</th><th>rise time 10-90 % [s]</th>"
+                "<th>overshoot [%]</th><th>settling time 2 % [s]</th><th>final x [mm]</th><th></th></tr>"
+                + "".join(rows) + "</table><p class='eha-note'>Rise, overshoot and settling as python-control's "
+                "step_info; a model's figures are taken against its DC gain, the plant's against its last "
+                "sample (60 s).</p>")
+
+    def __panel__(self):
+        controls = pn.Column(self.form, self.bands, self.note, self.list, width=290)
+        results = pn.Column(self.record_view.banner, self.area, sizing_mode="stretch_width", min_width=440)
+        return side_by_side(controls, results)

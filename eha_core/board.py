@@ -1,0 +1,193 @@
+"""A board of candidate models of the closed loop r -> x, compared the way a course compares them.
+
+Every model is a continuous-time H(s) from the reference r to the position x
+(the paper's eqs. 19-25), possibly with an input delay: a transfer-function
+estimate, one from a student's own record, the linearised H(s) of eq. 24 built
+from a least-squares run's estimates (eqs. 15-18 give M, B, Af, beta_e), or a
+reference (eq. 24 with the actuator's values, the paper's Ĥ of eq. 25).
+
+For each model :func:`model_views` computes, once, what the views draw: the
+Bode diagram with a 95 % band when the model has a covariance, poles and zeros
+with their 95 % regions, and the step response with its figures. All models
+are compared on one validation record (:func:`validation_record`, a fresh
+closed-loop experiment) by :func:`compare_on_record`, with MATLAB ``compare``
+semantics: each model's initial state (and input offset) fitted to the record.
+
+>>> from eha_core.linear import linearize
+>>> h = reference_models()[0]
+>>> v = model_views(h)
+>>> round(v.step.info.steady_state, 3), v.band is None, len(v.pz.poles)
+(1.0, True, 3)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._checks import not_allowed
+from .cancel import CancelToken, check
+from .params import ActuatorParams
+
+__all__ = ["BoardModel", "ModelViews", "RecordComparison", "model_views", "compare_on_record", "validation_record",
+           "reference_models", "lse_model", "BOARD_W", "STEP_T", "nonlinear_step"]
+
+#: Frequencies of the board's Bode diagrams [rad/s]: 0.01 to the Nyquist frequency of Ts = 0.01 s.
+BOARD_W = np.logspace(-2, math.log10(math.pi / 0.01), 300)
+#: Time grid of the step responses [s]: the paper's closed loop settles in about 30 s (its slow pole
+#: near -0.14 rad/s), 60 s shows it settled.
+STEP_T = np.arange(3001) * 0.02
+
+
+@dataclass(frozen=True, eq=False)
+class BoardModel:
+    """One model of the closed loop r -> x.
+
+    ``kind``: ``"tf"`` (estimated from the frequency experiment), ``"record"``
+    (from a student's file), ``"lse"`` (eq. 24 with a least-squares run's
+    estimates), ``"reference"``. ``estimate`` (a
+    :class:`~eha_core.identify.tfest.TFEstimate`) gives the covariance behind
+    the regions and bands; None for a model without one.
+    """
+
+    name: str
+    kind: str
+    description: str
+    num: np.ndarray
+    den: np.ndarray
+    input_delay: float = 0.0
+    estimate: object | None = None
+    ts: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class ModelViews:
+    """What the board draws of one model (computed once, when it is added)."""
+
+    w: np.ndarray
+    magnitude_db: np.ndarray
+    phase_deg: np.ndarray
+    band: object | None           # BodeBand (95 %) or None
+    pz: object                    # PoleZeroMap
+    step: object                  # StepResponse of a unit step (the figures are those of the unit step)
+    stable: bool
+
+
+@dataclass(frozen=True, eq=False)
+class RecordComparison:
+    """A model on the validation record: its output, the fit, and the residual tests with their verdicts."""
+
+    y_hat: np.ndarray
+    fit_percent: float
+    assessment: object | None     # ResidualAssessment of x - y_hat against r (None if not simulable)
+
+
+def _coefficients(model: BoardModel):
+    return np.asarray(model.num, dtype=float), np.asarray(model.den, dtype=float)
+
+
+def model_views(model: BoardModel, *, w=BOARD_W, step_t=STEP_T, level: float = 0.95, n_draws: int = 300,
+                seed: int = 0) -> ModelViews:
+    """Bode curve (and band), pole-zero map (with regions) and unit step response of ``model``."""
+    from .identify._ctmodels import frequency_response, simulate_tf
+    from .identify.step import StepResponse, step_info
+    from .identify.uncertainty import bode_band, pole_zero_regions, reference_roots
+
+    num, den = _coefficients(model)
+    fr = frequency_response(num, den, w, input_delay=model.input_delay)
+    est = model.estimate
+    has_cov = est is not None and np.all(np.isfinite(est.covariance)) and est.covariance.size > 0
+    band = bode_band(est, w, level=level, n_draws=n_draws, seed=seed) if has_cov else None
+    if has_cov:
+        pz = pole_zero_regions(est, level=level, name=model.name)
+    else:
+        # a model without a covariance has no region, and nothing to call weakly determined
+        pz = reference_roots(num, den, ts=None, name=model.name)
+    poles = np.roots(den)
+    stable = bool(np.all(poles.real < 0))
+    step = np.asarray(step_t, dtype=float)
+    y = simulate_tf(num, den, np.ones(step.size), float(step[1] - step[0]), input_delay=model.input_delay)
+    gain = float(num[-1] / den[-1]) if den[-1] != 0 else math.inf
+    info = step_info(step, y, gain if math.isfinite(gain) else None)
+    message = "ok" if stable else "the model is unstable: the figures mean little"
+    response = StepResponse(name=model.name, t=step, y=y, amplitude=1.0, info=info, source="transfer function",
+                            message=message)
+    return ModelViews(w=np.asarray(w), magnitude_db=fr.magnitude_db, phase_deg=fr.phase_deg, band=band, pz=pz,
+                      step=response, stable=stable)
+
+
+def validation_record(params: ActuatorParams | None = None, *, kp: float = 10.0, seed: int = 1,
+                      n_samples: int = 1000, ts: float = 0.01, model: str = "nonlinear",
+                      cancel: CancelToken | None = None):
+    """A fresh closed-loop experiment (the paper's idinput sine excitation, ``seed``) to compare models on.
+
+    Returns the :class:`~eha_core.simulate.SimulationResult` (``t``, ``r``, ``x``, ...).
+    """
+    from .experiments import FrequencyExperiment
+
+    if not isinstance(seed, (int, np.integer)) or not 0 <= seed <= 10**6:
+        raise not_allowed("seed", seed, "must be a whole number in [0, 1000000]")
+    cfg = FrequencyExperiment(n_samples=n_samples, ts=ts, seed=int(seed), kp=kp, model=model)
+    data = cfg.closed_loop(params if params is not None else ActuatorParams(), cfg.excitation(), cancel)
+    if not data.success:
+        raise RuntimeError(f"the validation experiment failed: {data.message}")
+    return data
+
+
+def compare_on_record(model: BoardModel, record) -> RecordComparison:
+    """``model`` on the record (MATLAB ``compare``: initial state and input offset fitted), with the
+    residual tests of its error against the reference and their verdict sentences."""
+    from .identify.assessment import assess_residuals
+    from .identify.validate import compare, residual_analysis
+
+    num, den = _coefficients(model)
+    ts = float(record.t[1] - record.t[0])
+    res = compare(num, den, record.r, record.x, ts, initial_condition="estimate", input_offset="estimate",
+                  input_delay=model.input_delay)
+    assessment = None
+    if np.all(np.isfinite(res.y_hat)):
+        assessment = assess_residuals(residual_analysis(record.x - res.y_hat, record.r))
+    return RecordComparison(y_hat=res.y_hat, fit_percent=float(res.fit_percent), assessment=assessment)
+
+
+def reference_models(params: ActuatorParams | None = None, kp: float = 10.0, *,
+                     linearised: bool = True) -> list[BoardModel]:
+    """The references: eq. 24's H(s) with the actuator's values (unless ``linearised`` is False, e.g.
+    when an exercise hides them) and the paper's Ĥ(s) of eq. 25."""
+    from .experiments import PAPER_EQ25
+    from .linear import linearize
+
+    out = []
+    if linearised:
+        num, den = linearize(params if params is not None else ActuatorParams()).closed_loop_coeffs(kp)
+        out.append(BoardModel(name="H(s) eq. 24", kind="reference",
+                              description=f"linearised at v = 0, Kp = {kp:g} V/m", num=np.asarray(num),
+                              den=np.asarray(den), ts=0.01))
+    out.append(BoardModel(name="Ĥ paper", kind="reference", description="the paper's estimate, eq. 25",
+                          num=np.asarray(PAPER_EQ25[0], dtype=float), den=np.asarray(PAPER_EQ25[1], dtype=float),
+                          ts=0.01))
+    return out
+
+
+def lse_model(result, params: ActuatorParams, kp: float, name: str, description: str) -> BoardModel:
+    """Eq. 24's H(s) with a least-squares run's estimates of M, B, Af, beta_e (the rest as measured).
+
+    Raises :class:`~eha_core.params.ParameterError` when an estimate is not physical (e.g. B < 0).
+    """
+    from .linear import linearize
+
+    est = result.estimated_params(params)
+    num, den = linearize(est).closed_loop_coeffs(kp)
+    return BoardModel(name=name, kind="lse", description=description, num=np.asarray(num), den=np.asarray(den),
+                      ts=float(result.ts))
+
+
+def nonlinear_step(params: ActuatorParams, kp: float, amplitude_m: float, *, cancel: CancelToken | None = None):
+    """The nonlinear plant's step response under the same controller, on :data:`STEP_T`'s horizon."""
+    from .identify.step import nonlinear_step_response
+
+    check(cancel)
+    return nonlinear_step_response(params, amplitude_m=amplitude_m, t_end_s=float(STEP_T[-1]), dt_s=0.01, kp=kp,
+                                   ts=0.01, cancel=cancel)

@@ -1,0 +1,99 @@
+"""The model board: estimates land on it, are compared on one validation record, ticked, renamed, deleted."""
+
+import numpy as np
+import pytest
+
+from eha_app.state import AppState
+from eha_app.tabs.identification import IdentificationTab
+
+
+@pytest.fixture
+def tab():
+    t = IdentificationTab(AppState())
+    t.board_panel()
+    return t
+
+
+def _names(board):
+    return [e.name for e in board.entries]
+
+
+def test_the_references_are_there_and_compared_on_the_validation_record(tab):
+    board = tab.board
+    assert _names(board) == ["H(s) eq. 24", "Ĥ paper"]
+    assert [e.ticked for e in board.entries] == [True, False]
+    assert board.record is not None and board.record.t.size == 1000
+    fits = {e.name: board.fits[e.key].fit_percent for e in board.entries}
+    assert 60 < fits["H(s) eq. 24"] < 95                       # the linearised model misses the friction
+    assert board.record_view.status == "current"
+    fig = board.figures["fit"]
+    assert len(fig.models.data["xs"]) == 1                     # only the ticked one is drawn
+    assert "H(s) eq. 24" in fig.legend.text and "Ĥ paper" not in fig.legend.text
+    assert "H(s) eq. 24" in board.tables["fit"].object and "validation record" in board.tables["fit"].object
+    # the nonlinear plant under the same controller, with its figures, beside the models
+    assert board.plant is not None and "nonlinear plant" in board.tables["step"].object
+
+
+def test_estimates_land_on_the_board_and_tick_rename_delete(tab):
+    board = tab.board
+    tab.lse.run()
+    freq = tab.frequency_panel()
+    source = IdentificationTab(AppState()).frequency_panel()
+    source.run()
+    record = freq.record
+    record.upload.filename = "loop.csv"
+    record.upload.value = source.data_bytes("csv")
+    record.run()
+    assert _names(board) == ["H(s) eq. 24", "Ĥ paper", "LS1", "R1"]
+    ls1, r1 = board.entries[2], board.entries[3]
+    assert ls1.kind == "lse" and "least squares" in ls1.model.description
+    # noise-free least squares: eq. 24 with the estimates is eq. 24 itself
+    np.testing.assert_allclose(ls1.model.den, board.entries[0].model.den, rtol=1e-4)
+    assert board.views[r1.key].band is not None and board.views[ls1.key].band is None
+    assert board.fits[r1.key].fit_percent > 85
+    bode = board.figures["bode"]
+    assert len(bode.curves.data["xs"]) == 3 and len(bode.mag_band.data["xs"]) == 1
+    board.tick(board.entries[0], False)
+    assert len(bode.curves.data["xs"]) == 2 and "H(s) eq. 24" not in bode.legend.text
+    board.rename(r1, "my record")
+    assert "my record" in board.figures["step"].legend.text and "my record" in board.tables["fit"].object
+    board.delete(ls1)
+    assert _names(board) == ["H(s) eq. 24", "Ĥ paper", "my record"]
+    assert len(board.figures["pz"].poles.data["x"]) == 3        # R1's three poles only
+    board.delete(board.entries[0])                             # a reference stays
+    assert len(board.entries) == 3
+
+
+def test_a_weakly_determined_pole_is_shown_not_hidden(tab):
+    from eha_core.board import BoardModel
+    from eha_core.experiments import FrequencyExperiment, run_frequency_identification
+
+    fi = run_frequency_identification(config=FrequencyExperiment(model="linear"))
+    e = fi.estimate
+    entry = tab.board.add(BoardModel(name="H1", kind="tf", description="linear plant", num=e.num, den=e.den,
+                                     estimate=e, ts=0.01))
+    flagged = [r for r in tab.board.views[entry.key].pz.poles if r.weakly_determined]
+    assert len(flagged) == 1 and -500 < flagged[0].location.real < -300     # the pole near -385 rad/s
+    pz = tab.board.figures["pz"]
+    assert len(pz.flagged.data["x"]) == 1 and "weakly determined" in pz.note.text
+    assert len(pz.nyquist.data["x"]) > 0 and "π/Ts = 314 rad/s" in pz.note.text
+    assert len(pz.regions.data["xs"]) == 3
+
+
+def test_step_table_figures_are_the_cores(tab):
+    board = tab.board
+    view = board.views[board.entries[0].key]
+    table = board.tables["step"].object
+    assert f"{view.step.info.rise_time_s:.3g}" in table and f"{board.plant.info.rise_time_s:.3g}" in table
+    board.form.values = {**board.form.values, "board_step": "20"}
+    assert board.figures["step"].reference.location == pytest.approx(20.0)
+    board.form.values = {**board.form.values, "board_step": "-1"}
+    assert board.form.errors["board_step"] == "step of r = -1 is not allowed: must lie in [0.01, 200] mm"
+
+
+def test_an_exercise_board_has_no_eq24():
+    state = AppState()
+    state.secret = {"M": 4000.0, "B": 1000.0}
+    t = IdentificationTab(state)
+    t.board_panel()
+    assert _names(t.board) == ["Ĥ paper"]
