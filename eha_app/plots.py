@@ -676,6 +676,8 @@ class LseFitFigure:
         self.right.line("t", "p1", source=self.measured, color="#333333", line_width=2)
         self.resim_item = LegendItem(label="re-simulated with the estimates", renderers=[self.resim_renderers[0]])
         _legend_above(self.left, [LegendItem(label="measured", renderers=[m0]), self.resim_item])
+        for fig in (self.left, self.right):
+            fig.min_width = 200     # two side by side in the results column of an 800 px page
         _lean(self.left, self.right)
         self.layout = row(self.left, self.right, sizing_mode="stretch_width")
 
