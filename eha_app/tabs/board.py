@@ -328,7 +328,8 @@ class ModelBoard(pn.viewable.Viewer):
             rows.append(f"<tr><td><span style='color:{e.color}'>■</span> {html.escape(e.name)}</td>"
                         f"<td>{fit.fit_percent:.2f} %</td><td style='font-size:12px'>{verdicts}</td></tr>")
         seed = self.record_key[2] if self.record_key else ""
-        return ("<div style='overflow-x:auto'><table class='eha-table eha-board-fits'><tr><th>model</th><th>fit</th><th>residual tests on the "
+        return ("<div style='overflow-x:auto'><table class='eha-table eha-board-fits'><tr><th>model</th>"
+                "<th>fit</th><th>residual tests on the "
                 "validation record</th></tr>" + "".join(rows) + "</table></div>"
                 f"<p class='eha-note'>Validation record: a closed-loop experiment on tab 1's actuator (idinput "
                 f"sine, seed {seed}, N = 1000, Ts = 0.01 s). Each model's initial state and input offset are "
@@ -349,7 +350,8 @@ class ModelBoard(pn.viewable.Viewer):
                         f"<td>{cell(i.rise_time_s)}</td><td>{cell(i.overshoot_percent, '{:.2f}')}</td>"
                         f"<td>{cell(i.settling_time_s)}</td><td>{cell(i.steady_state * amplitude * 1e3)}</td>"
                         f"<td>{html.escape('' if s.message == 'ok' else s.message)}</td></tr>")
-        return ("<div style='overflow-x:auto'><table class='eha-table eha-board-steps'><tr><th>model</th><th>rise time 10-90 % [s]</th>"
+        return ("<div style='overflow-x:auto'><table class='eha-table eha-board-steps'><tr><th>model</th>"
+                "<th>rise time 10-90 % [s]</th>"
                 "<th>overshoot [%]</th><th>settling time 2 % [s]</th><th>final x [mm]</th><th></th></tr>"
                 + "".join(rows) + "</table></div><p class='eha-note'>Rise, overshoot and settling as python-control's "
                 "step_info; a model's figures are taken against its DC gain, the plant's against its last "

@@ -9,6 +9,7 @@ from ..tasks import SessionRunner, apply_locked, frozen_models
 from .board import ModelBoard
 from .frequency import FREQ_DEFAULTS, FREQ_FORM, FrequencyPanel, parse_freq
 from .least_squares import LSE_DEFAULTS, LSE_FORM, LeastSquaresPanel, LseRequest, parse_lse
+from .study import StudyPanel
 
 __all__ = ["IdentificationTab", "LeastSquaresPanel", "FrequencyPanel", "ModelBoard", "LseRequest", "LSE_FORM",
            "LSE_DEFAULTS", "FREQ_FORM", "FREQ_DEFAULTS", "parse_lse", "parse_freq"]
@@ -35,9 +36,13 @@ class IdentificationTab(pn.viewable.Viewer):
                                     sizing_mode="stretch_width")
         self._board_slot = pn.Column(pn.pane.HTML("<p class='eha-note'>Preparing the model board…</p>"),
                                      sizing_mode="stretch_width")
+        self.study: StudyPanel | None = None
+        self._study_slot = pn.Column(pn.pane.HTML("<p class='eha-note'>Preparing the study…</p>"),
+                                     sizing_mode="stretch_width")
         self.tabs = pn.Tabs(("Time domain: least squares", self.lse),
                             ("Frequency domain: transfer function", self._freq_slot),
                             ("Model board", self._board_slot),
+                            ("Study over seeds", self._study_slot),
                             dynamic=False, sizing_mode="stretch_width", css_classes=["eha-ident-tabs"])
         self.tabs.param.watch(self._on_tab, "active")
 
@@ -46,6 +51,16 @@ class IdentificationTab(pn.viewable.Viewer):
             apply_locked(self.frequency_panel)
         elif event.new == 2:
             apply_locked(self.board_panel)
+        elif event.new == 3:
+            apply_locked(self.study_panel)
+
+    def study_panel(self) -> StudyPanel:
+        """The study, built now if never shown."""
+        if self.study is None:
+            with frozen_models():
+                self.study = StudyPanel(self.state, self.runner, self._query)
+                self._study_slot.objects = [self.study]
+        return self.study
 
     def board_panel(self) -> ModelBoard:
         """The model board, with its figures built now if never shown."""

@@ -1,0 +1,260 @@
+"""Tab 3, study: one experiment repeated over many noise seeds.
+
+The least squares under a chosen disturbance, or the transfer-function
+estimate, run for N seeds (:func:`eha_core.study.run_study`) in a worker, with
+a progress bar and a cancel button; the page stays live. It shows each
+estimate's distribution against the nominal value, the mean, the spread and
+how often the 95 % interval covered the truth: one run's 10 % error in B under
+white noise (the paper's Table 4) is one draw from a wide distribution.
+
+Not offered in an exercise: every figure is drawn against the true values.
+"""
+
+from __future__ import annotations
+
+import html
+import time
+
+import numpy as np
+import panel as pn
+from bokeh.layouts import gridplot
+from bokeh.models import ColumnDataSource, Span
+
+from eha_core.experiments import FrequencyExperiment
+
+from .. import plots
+from ..form import Field, Form, Group, parse_fields
+from ..layout import side_by_side
+from ..state import AppState
+from ..tasks import SessionRunner, apply_locked, served_document
+
+__all__ = ["StudyPanel", "STUDY_FORM", "STUDY_DEFAULTS", "MAX_APP_SEEDS"]
+
+#: Seeds a study in the app runs at most (the command line allows 1000).
+MAX_APP_SEEDS = 500
+STUDY_FORM = (Group("Study over noise seeds", (
+    Field("study_kind", "experiment", "select", options=(("lse", "least squares (eqs. 15-18)"),
+                                                         ("tf", "transfer function (eqs. 19-25)")),
+          short="experiment"),
+    Field("study_seeds", "seeds N", "integer", lo=2, hi=MAX_APP_SEEDS, short="seeds N"),
+    Field("study_first", "first seed", "integer", lo=0, hi=10**6, short="first seed"),
+    Field("study_white", "white force noise σ", "number", unit="N", lo=0.0, hi=1e5, short="white force noise σ",
+          tip="least squares: the load disturbance d(t) is white noise of this σ (Table 4's 'white noise')"),
+    Field("study_dmodel", "disturbance model", "select", options=(("constant", "constant d0 (the paper's)"),
+                                                                   ("harmonic", "d0 + a sinusoid")),
+          short="disturbance model"),
+    Field("study_model", "model in the loop", "select", options=(("linear", "linearised (H(s) is the truth)"),
+                                                                  ("nonlinear", "nonlinear (H(s) a reference)")),
+          short="model in the loop"),
+    Field("study_noise", "position noise σ", "number", unit="mm", lo=0.0, hi=10.0, short="position noise σ",
+          tip="transfer function: white noise added to the recorded x"),
+)),)
+STUDY_DEFAULTS = {"study_kind": "lse", "study_seeds": "100", "study_first": "0", "study_white": "1000",
+                  "study_dmodel": "constant", "study_model": "linear", "study_noise": "0.1"}
+_FIELDS = {f.name: f for g in STUDY_FORM for f in g.fields}
+_LSE_ONLY = ("study_white", "study_dmodel")
+_TF_ONLY = ("study_model", "study_noise")
+#: At most this many progress updates a second reach the page.
+_PROGRESS_HZ = 8.0
+
+
+def study_hidden(texts: dict) -> list[str]:
+    return list(_TF_ONLY if texts.get("study_kind", "lse") == "lse" else _LSE_ONLY)
+
+
+class StudyFigure:
+    """One histogram per parameter: estimates minus the nominal value (in % of it, or in its unit
+    when it is zero), the nominal value (dashed) and the mean (solid)."""
+
+    def __init__(self, names: tuple[str, ...], *, width: int = plots.FIGURE_WIDTH):
+        self.names = names
+        self.sources, self.means, self.figs = {}, {}, []
+        for name in names:
+            src = ColumnDataSource(data={"left": [], "right": [], "top": []})
+            fig = plots._figure(width=max(width // 3, 240), height=200, title=name,
+                                x_axis_label="estimate − nominal [%]", y_axis_label="seeds")
+            fig.min_width = 200
+            fig.quad(left="left", right="right", bottom=0, top="top", source=src, fill_color=plots.CASE_COLORS[0],
+                     fill_alpha=0.5, line_color="white")
+            fig.add_layout(Span(location=0.0, dimension="height", line_color="#333333", line_dash="dashed",
+                                line_width=2))
+            mean = Span(location=0.0, dimension="height", line_color=plots.CASE_COLORS[1], line_width=2)
+            fig.add_layout(mean)
+            self.sources[name], self.means[name] = src, mean
+            self.figs.append(fig)
+        plots._lean(*self.figs)
+        self.layout = gridplot(self.figs, ncols=3, sizing_mode="stretch_width", toolbar_location=None)
+
+    def update(self, result) -> None:
+        for name, fig in zip(self.names, self.figs, strict=True):
+            values = result.values(name)
+            values = values[np.isfinite(values)]
+            nominal = result.nominal.get(name, np.nan)
+            relative = np.isfinite(nominal) and nominal != 0
+            shown = (values / nominal - 1) * 100 if relative else values
+            if shown.size:
+                counts, edges = np.histogram(shown, bins=min(30, max(5, shown.size // 4)))
+                self.sources[name].data = {"left": edges[:-1].tolist(), "right": edges[1:].tolist(),
+                                           "top": counts.tolist()}
+                self.means[name].location = float(shown.mean())
+            fig.xaxis.axis_label = "estimate − nominal [%]" if relative else "estimate − nominal"
+            cov = result.coverage.get(name, np.nan)
+            std = np.std(shown, ddof=1) if shown.size > 1 else np.nan
+            fig.title.text = (f"{name}: mean {shown.mean():+.2f}{' %' if relative else ''}, spread "
+                              f"{std:.2f}{' %' if relative else ''}, covered {cov * 100:.0f} %"
+                              if shown.size else name)
+
+
+class StudyPanel(pn.viewable.Viewer):
+    """A study of one session (see the module docstring)."""
+
+    def __init__(self, state: AppState, runner: SessionRunner, query: dict | None = None, **kwargs):
+        super().__init__(**kwargs)
+        self.state = state
+        self.runner = SessionRunner((runner.owner, "study"), runner.queue)
+        self.result = None
+        self._token = None
+        self.figure: StudyFigure | None = None
+        texts = dict(STUDY_DEFAULTS)
+        texts.update({k: v for k, v in (query or {}).items() if k in _FIELDS})
+        self.form = Form(spec=[g.to_spec() for g in STUDY_FORM], values=texts, url_defaults=STUDY_DEFAULTS,
+                         width=270, css_classes=["eha-study-form"], margin=(5, 10))
+        self.form.param.watch(lambda _e: self._update_enabled(), "values")
+        self.button = pn.widgets.Button(label="Run the study", color="primary", width=260,
+                                        css_classes=["eha-run-study"])
+        self.button.on_click(lambda _e: self.run())
+        self.cancel_button = pn.widgets.Button(label="Cancel", width=260, disabled=True,
+                                               css_classes=["eha-cancel-study"])
+        self.cancel_button.on_click(lambda _e: self.cancel())
+        self.progress = pn.indicators.Progress(value=0, max=100, width=260, visible=False,
+                                               css_classes=["eha-study-progress"])
+        self.status = pn.pane.HTML("", width=270, css_classes=["eha-study-status"])
+        self.summary = pn.pane.HTML(
+            "<p>Run one experiment over many noise seeds to see how much a single estimate can be trusted: the "
+            "spread of each estimate, and how often its 95 % interval covers the truth.</p>",
+            sizing_mode="stretch_width", css_classes=["eha-study-summary"])
+        self.plot = pn.Column(sizing_mode="stretch_width", css_classes=["eha-study-plot"])
+        self.exercise_note = pn.pane.HTML(
+            "<p class='eha-warn'>Not in an exercise: a study draws every estimate against the true values.</p>",
+            visible=bool(state.hidden), width=270)
+        state.param.watch(self._update_enabled, "valid")
+        self._update_enabled()
+
+    def config(self):
+        """The study the form describes (None if invalid), and a message per invalid field."""
+        from eha_core.study import StudyConfig
+
+        texts = self.form.values
+        values, errors = parse_fields(_FIELDS.values(), texts, skip=set(study_hidden(texts)))
+        if errors:
+            return None, errors
+        if values["study_kind"] == "lse":
+            sigma = values["study_white"]
+            cfg = StudyConfig("lse", n_seeds=values["study_seeds"], first_seed=values["study_first"],
+                              disturbance=f"white:{sigma:g}" if sigma > 0 else "none",
+                              disturbance_model=values["study_dmodel"])
+        else:
+            cfg = StudyConfig("tf", n_seeds=values["study_seeds"], first_seed=values["study_first"],
+                              experiment=FrequencyExperiment(model=values["study_model"], kp=self.state.kp),
+                              noise_m=values["study_noise"] * 1e-3)
+        return cfg, {}
+
+    def _update_enabled(self, *_events) -> None:
+        cfg, errors = self.config()
+        self.form.errors = errors
+        self.form.hidden = study_hidden(self.form.values)
+        self.button.disabled = cfg is None or not self.state.valid or bool(self.state.hidden)
+
+    def run(self):
+        from eha_core.study import run_study
+
+        cfg, _ = self.config()
+        if cfg is None or not self.state.valid or self.state.hidden:
+            return None
+        params = self.state.params
+        doc = served_document()
+        last = [0.0]
+
+        def progress(done, total):
+            now = time.perf_counter()
+            if done < total and now - last[0] < 1.0 / _PROGRESS_HZ:
+                return
+            last[0] = now
+            apply_locked(lambda: self._show_progress(done, total), doc)
+
+        def compute(token):
+            self._token = token         # the cancel button's way to the running study
+            # one worker of the server's pool: a class shares the cores fairly (run_study's own pool
+            # would take a second thread behind the queue's back)
+            return run_study(cfg, params, workers=1, progress=progress, cancel=token)
+
+        def show(result, job):
+            self.result = result
+            self._draw(result, job)
+            self._running(False)
+
+        def fail(message):
+            self.status.object = f"<span class='eha-warn'>The study failed: {html.escape(message)}</span>"
+            self._running(False)
+
+        self._running(True)
+        self._show_progress(0, cfg.n_seeds)
+        return self.runner.run("study", compute, show, fail=fail, note=self._note)
+
+    def cancel(self) -> None:
+        """Stop the study: a running one returns the seeds done, a waiting one never starts."""
+        if self._token is not None:
+            self._token.cancel("the study was cancelled")
+        self.runner.cancel("the study was cancelled")
+
+    def _note(self, text: str) -> None:
+        if text:
+            self.status.object = f"<span class='eha-note'>{html.escape(text)}</span>"
+            if text.startswith("Stopped"):
+                self._running(False)
+
+    def _running(self, on: bool) -> None:
+        self.button.disabled = on or self.config()[0] is None
+        self.cancel_button.disabled = not on
+        self.progress.visible = on
+
+    def _show_progress(self, done: int, total: int) -> None:
+        self.progress.max = total
+        self.progress.value = done
+        self.status.object = f"<span class='eha-note'>{done} of {total} seeds…</span>"
+
+    def _draw(self, result, job) -> None:
+        names = tuple(result.parameters)
+        if self.figure is None or self.figure.names != names:
+            self.figure = StudyFigure(names)
+            self.plot.objects = [pn.pane.Bokeh(self.figure.layout, sizing_mode="stretch_width")]
+        self.figure.update(result)
+        lo, hi = result.coverage_band()
+        rows = []
+        for n in names:
+            nom = result.nominal.get(n, np.nan)
+            cov = result.coverage.get(n, np.nan)
+            honest = lo <= cov <= hi
+            rows.append(f"<tr><td>{html.escape(n)}</td><td>{nom:.5g}</td><td>{result.mean[n]:.5g}</td>"
+                        f"<td>{result.std[n]:.3g}</td><td>{result.mean_std_error[n]:.3g}</td>"
+                        f"<td>{cov * 100:.1f} % {'✓' if honest else '✗'}</td></tr>")
+        done = (f"{result.n_completed} of {result.n_requested} seeds" + (" (cancelled)" if result.cancelled else "")
+                + f" in {result.elapsed_s:.1f} s")
+        self.status.object = f"<span class='eha-ok'>{done}.</span>"
+        self.summary.object = (
+            f"<p>{html.escape(result.reference)}</p>"
+            "<table class='eha-table eha-study-table'><tr><th>parameter</th><th>nominal</th><th>mean</th>"
+            "<th>spread (std)</th><th>mean reported std error</th><th>95 % interval covered the truth</th></tr>"
+            + "".join(rows) + "</table>"
+            f"<p class='eha-note'>{done}. An honest 95 % interval covers the truth in {lo * 100:.1f}-"
+            f"{hi * 100:.1f} % of {result.n_successful} seeds (binomial, 99 %): ✓ inside that range, ✗ outside. "
+            "Where the spread is larger than the reported standard error, a single run's interval is too "
+            "narrow.</p>")
+        if result.message:
+            self.summary.object += f"<p class='eha-note'>{html.escape(result.message)}</p>"
+
+    def __panel__(self):
+        controls = pn.Column(self.exercise_note, self.form, self.button, self.cancel_button, self.progress,
+                             self.status, width=290)
+        results = pn.Column(self.summary, self.plot, sizing_mode="stretch_width", min_width=440)
+        return side_by_side(controls, results)

@@ -1,0 +1,71 @@
+"""The study in the app: the same numbers as the core's, a cancel that keeps what was done, no study in an exercise."""
+
+import numpy as np
+import pytest
+
+from eha_app.state import AppState
+from eha_app.tabs.identification import IdentificationTab
+
+
+def test_a_least_squares_study_shows_the_cores_figures():
+    from eha_core.study import StudyConfig, run_study
+
+    panel = IdentificationTab(AppState()).study_panel()
+    panel.form.values = {**panel.form.values, "study_seeds": "12"}
+    panel.run()
+    res = panel.result
+    direct = run_study(StudyConfig("lse", n_seeds=12, disturbance="white:1000"), workers=1)
+    assert res.n_completed == 12 and not res.cancelled
+    for name in res.parameters:
+        np.testing.assert_allclose(res.values(name), direct.values(name), rtol=1e-12)
+        assert res.coverage[name] == direct.coverage[name]
+    assert panel.figure.names == res.parameters
+    assert sum(panel.figure.sources["B"].data["top"]) == 12
+    assert "covered" in panel.figure.figs[1].title.text and "12 of 12 seeds" in panel.status.object
+    assert "95 % interval covered the truth" in panel.summary.object
+    assert not panel.progress.visible and not panel.button.disabled and panel.cancel_button.disabled
+
+
+def test_a_cancelled_study_keeps_the_seeds_done():
+    panel = IdentificationTab(AppState()).study_panel()
+    panel.form.values = {**panel.form.values, "study_seeds": "40"}
+    calls = []
+    original = panel._show_progress
+
+    def progress(done, total):
+        calls.append(done)
+        original(done, total)
+        if done >= 3:
+            panel.cancel()
+
+    panel._show_progress = progress
+    panel.run()
+    res = panel.result
+    assert res.cancelled and 3 <= res.n_completed < 40
+    assert "(cancelled)" in panel.status.object
+
+
+def test_the_form_checks_and_switches_fields():
+    panel = IdentificationTab(AppState()).study_panel()
+    assert "study_noise" in panel.form.hidden and "study_white" not in panel.form.hidden
+    panel.form.values = {**panel.form.values, "study_kind": "tf"}
+    assert "study_white" in panel.form.hidden and "study_noise" not in panel.form.hidden
+    panel.form.values = {**panel.form.values, "study_seeds": "5000"}
+    assert panel.form.errors["study_seeds"].startswith("seeds N = 5000 is not allowed")
+    assert panel.button.disabled
+
+
+def test_no_study_in_an_exercise():
+    state = AppState()
+    state.secret = {"M": 4000.0}
+    panel = IdentificationTab(state).study_panel()
+    assert panel.button.disabled and panel.exercise_note.visible
+    assert panel.run() is None
+
+
+@pytest.mark.parametrize("model", ["linear"])
+def test_a_transfer_function_study(model):
+    panel = IdentificationTab(AppState()).study_panel()
+    panel.form.values = {**panel.form.values, "study_kind": "tf", "study_seeds": "3", "study_model": model}
+    panel.run()
+    assert panel.result.parameters == ("a1", "a2", "a3", "b0") and panel.result.n_completed == 3
