@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import io
 
+import numpy as np
 import panel as pn
 
+from eha_core.board import BoardModel
 from eha_core.experiments import (
     FrequencyExperiment,
     run_frequency_identification,
@@ -193,6 +195,7 @@ class FrequencyPanel(pn.viewable.Viewer):
         self._shown = {"excitation"}
         self.figure_tabs.param.watch(self._on_figure_tab, "active")
         self.record = RecordPanel(runner, lambda: self.config()[0], note=self._note, fail=self._fail)
+        self.board = None                   # the model board each estimate is put on (set by the tab)
         self.form.param.watch(lambda _e: self.record.inputs_changed(), "values")
         state.param.watch(self._update_enabled, "valid")
         state.param.watch(self._on_config, ["params", "kp", "valid"])
@@ -367,6 +370,13 @@ class FrequencyPanel(pn.viewable.Viewer):
             for name, view in self.views.items():
                 view.shown(self.excitation_key(cfg) if name == "excitation" else run_key)
             self._mark(self.config()[0], preview_queued=False)      # typed while it computed
+            e = fi.estimate
+            if self.board is not None and e.success and np.all(np.isfinite(e.den)):
+                self.board.add(BoardModel(
+                    name=self.board.next_name("H"), kind="tf", estimate=e, num=e.num, den=e.den,
+                    input_delay=getattr(e, "input_delay", 0.0), ts=cfg.ts,
+                    description=f"{e.n_poles} poles, {e.n_zeros} zeros; idinput {cfg.signal_type} seed {cfg.seed}, "
+                                f"N {cfg.n_samples}, {cfg.model} plant; fit {e.fit_percent:.1f} %"))
 
         return self.runner.run("frequency experiment", compute, show, fail=self._fail, busy=[self.area],
                                note=self._note)

@@ -97,3 +97,14 @@ def test_an_exercise_board_has_no_eq24():
     t = IdentificationTab(state)
     t.board_panel()
     assert _names(t.board) == ["Ĥ paper"]
+
+
+def test_the_frequency_experiment_lands_on_the_board(tab):
+    freq = tab.frequency_panel()
+    freq.run()
+    h1 = next(e for e in tab.board.entries if e.name == "H1")
+    assert h1.kind == "tf" and "seed 0" in h1.model.description
+    np.testing.assert_array_equal(h1.model.den, freq.result.estimate.den)
+    view = tab.board.views[h1.key]
+    assert view.band is not None and len(view.pz.poles) == 3
+    assert tab.board.fits[h1.key].fit_percent > 90         # a fresh record: the estimate carries over
