@@ -191,8 +191,9 @@ class PoleZeroFigure:
         self.flagged = ColumnDataSource(data={"x": [], "y": []})
         self.regions = ColumnDataSource(data={"xs": [], "ys": [], "color": []})
         self.nyquist = ColumnDataSource(data={"x": [], "y": []})
+        # one scale on both axes: a region's shape and the Nyquist circle are drawn true
         self.fig = _figure(width=width, height=height, x_axis_label="Re s [rad/s]", y_axis_label="Im s [rad/s]",
-                           title="Poles (×) and zeros (○) with their 95 % regions")
+                           title="Poles (×) and zeros (○) with their 95 % regions", match_aspect=True)
         self.fig.patches("xs", "ys", source=self.regions, fill_color="color", fill_alpha=0.18, line_color="color",
                          line_alpha=0.6)
         self.fig.line("x", "y", source=self.nyquist, color="#999999", line_dash="dashed")
@@ -254,6 +255,9 @@ class PoleZeroFigure:
             self.nyquist.data = {"x": [], "y": []}
         self.legend.text = board_legend(entries)
         text = ("Ringed in red: a root the data determine weakly. " + " ".join(notes)) if notes else ""
+        if any(e.kind in ("tf", "record") for e in entries):
+            text += (" A region assumes the estimate's residuals are white noise: where the residual test on "
+                     "the fit view fails, the regions are too small. Zoom in with the box-zoom tool to see the small ones.")
         if nyquist is not None:
             text += (f" Dashed: |s| = π/Ts = {nyquist:.0f} rad/s (the Nyquist frequency); a pole beyond it decays "
                      "within about one sample.")

@@ -220,7 +220,7 @@ class ModelBoard(pn.viewable.Viewer):
             box.param.watch(lambda ev, e=e: self.tick(e, ev.new), "value")
             swatch = pn.pane.HTML(f"<span style='display:inline-block;width:14px;height:14px;background:{e.color};"
                                   f"border-radius:3px;margin-top:9px'></span>", width=18, margin=(0, 2))
-            name = pn.widgets.TextInput(value=e.name, width=110, margin=(3, 3),
+            name = pn.widgets.TextInput(value=e.name, width=150, margin=(3, 3),
                                         css_classes=[f"eha-board-name-{e.key}", "eha-board-name"])
             name.param.watch(lambda ev, e=e: self.rename(e, ev.new), "value")
             parts = [box, swatch, name]
