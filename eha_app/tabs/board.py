@@ -230,7 +230,7 @@ class ModelBoard(pn.viewable.Viewer):
                 drop.on_click(lambda _ev, e=e: self.delete(e))
                 parts.append(drop)
             desc = pn.pane.HTML(f"<span class='eha-note'>{html.escape(e.model.description)}</span>",
-                                width=270, margin=(0, 10, 6, 48), styles={"font-size": "11px"})
+                                width=200, margin=(0, 10, 6, 44), styles={"font-size": "11px"})
             rows.append(pn.Column(pn.Row(*parts, width=280), desc, width=280, margin=0))
         if len(self.entries) <= 2:
             rows.append(pn.pane.HTML("<p class='eha-note'>Estimates land here as you make them: run a "
