@@ -100,9 +100,9 @@ class StudyFigure:
             fig.xaxis.axis_label = "estimate − nominal [%]" if relative else "estimate − nominal"
             cov = result.coverage.get(name, np.nan)
             std = np.std(shown, ddof=1) if shown.size > 1 else np.nan
-            fig.title.text = (f"{name}: mean {shown.mean():+.2f}{' %' if relative else ''}, spread "
-                              f"{std:.2f}{' %' if relative else ''}, covered {cov * 100:.0f} %"
-                              if shown.size else name)
+            unit = " %" if relative else ""
+            fig.title.text = (f"{name}: mean {shown.mean():+.3g}{unit}, spread {std:.3g}{unit}, covered "
+                              f"{cov * 100:.0f} %" if shown.size else name)
 
 
 class StudyPanel(pn.viewable.Viewer):
@@ -235,14 +235,14 @@ class StudyPanel(pn.viewable.Viewer):
             nom = result.nominal.get(n, np.nan)
             cov = result.coverage.get(n, np.nan)
             honest = lo <= cov <= hi
-            rows.append(f"<tr><td>{html.escape(n)}</td><td>{nom:.5g}</td><td>{result.mean[n]:.5g}</td>"
+            rows.append(f"<tr><td>{html.escape(n)}</td><td>{nom:.6g}</td><td>{result.mean[n]:.6g}</td>"
                         f"<td>{result.std[n]:.3g}</td><td>{result.mean_std_error[n]:.3g}</td>"
                         f"<td>{cov * 100:.1f} % {'✓' if honest else '✗'}</td></tr>")
         done = (f"{result.n_completed} of {result.n_requested} seeds" + (" (cancelled)" if result.cancelled else "")
                 + f" in {result.elapsed_s:.1f} s")
         self.status.object = f"<span class='eha-ok'>{done}.</span>"
         self.summary.object = (
-            f"<p>{html.escape(result.reference)}</p>"
+            f"<p>Nominal values: {html.escape(result.reference)}.</p>"
             "<table class='eha-table eha-study-table'><tr><th>parameter</th><th>nominal</th><th>mean</th>"
             "<th>spread (std)</th><th>mean reported std error</th><th>95 % interval covered the truth</th></tr>"
             + "".join(rows) + "</table>"
@@ -250,7 +250,7 @@ class StudyPanel(pn.viewable.Viewer):
             f"{hi * 100:.1f} % of {result.n_successful} seeds (binomial, 99 %): ✓ inside that range, ✗ outside. "
             "Where the spread is larger than the reported standard error, a single run's interval is too "
             "narrow.</p>")
-        if result.message:
+        if result.message and result.message != "ok":
             self.summary.object += f"<p class='eha-note'>{html.escape(result.message)}</p>"
 
     def __panel__(self):
