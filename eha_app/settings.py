@@ -15,7 +15,7 @@ from eha_core.params import PARAM_NAMES
 __all__ = ["FORMAT", "collect", "apply", "SettingsError"]
 
 FORMAT = "eha-settings/1"
-_SECTIONS = ("parameters", "simulation", "least_squares", "frequency")
+_SECTIONS = ("parameters", "simulation", "least_squares", "frequency", "board", "study")
 
 
 class SettingsError(ValueError):
@@ -23,10 +23,13 @@ class SettingsError(ValueError):
 
 
 def _defaults():
+    from .tabs.board import BOARD_DEFAULTS
     from .tabs.identification import FREQ_DEFAULTS, LSE_DEFAULTS
     from .tabs.simulation import DEFAULT_TEXTS
+    from .tabs.study import STUDY_DEFAULTS
 
-    return {"simulation": DEFAULT_TEXTS, "least_squares": LSE_DEFAULTS, "frequency": FREQ_DEFAULTS}
+    return {"simulation": DEFAULT_TEXTS, "least_squares": LSE_DEFAULTS, "frequency": FREQ_DEFAULTS,
+            "board": BOARD_DEFAULTS, "study": STUDY_DEFAULTS}
 
 
 def _tabs(page):
@@ -35,7 +38,9 @@ def _tabs(page):
     ident = built.get(2)
     return {"simulation": sim.form if sim is not None else None,
             "least_squares": ident.lse.form if ident is not None else None,
-            "frequency": ident.freq.form if ident is not None and ident.freq is not None else None}
+            "frequency": ident.freq.form if ident is not None and ident.freq is not None else None,
+            "board": ident.board.form if ident is not None else None,
+            "study": ident.study.form if ident is not None and ident.study is not None else None}
 
 
 def collect(page) -> dict:
