@@ -149,6 +149,16 @@ def test_the_secret_never_reaches_a_students_browser(browser, tmp_path):
         page.get_by_role("button", name="Estimate from your record").click()
         page.wait_for_selector(".eha-freq-record-summary >> text=Validated on the last", timeout=90_000)
         pages.append(page.content())
+        # the model board: the student's estimates and the paper's Ĥ, never eq. 24 (made of hidden values)
+        page.locator(".bk-tab", has_text="Model board").first.click()
+        for name in ("LS1", "H1", "R1"):
+            page.wait_for_selector(f".eha-board-fits >> text={name}", timeout=60_000)
+        for view in ("Bode", "Step response", "Poles and zeros"):
+            page.locator(".eha-board-views .bk-tab", has_text=view).first.click()
+        page.wait_for_selector(".eha-board-steps >> text=nonlinear plant", timeout=60_000)
+        fits = text_of(page, ".eha-board-fit-table")
+        assert "LS1" in fits and "H(s) eq. 24" not in fits
+        pages.append(page.content())
         page.locator(".bk-header .bk-tab", has_text="1. Parameters").first.click()
         page.wait_for_selector(".eha-hidden-note")
         pages.append(page.content())
