@@ -23,7 +23,7 @@ from .connection import ConnectionWatch
 from .state import AppState
 from .tables import CSS
 from .tabs.parameters import ParametersTab
-from .tasks import SessionRunner, apply_locked, frozen_models, served_document
+from .tasks import SessionRunner, apply_locked, frozen_models, layout_once_per_message, served_document
 
 __all__ = ["create_app", "warm_up", "CSS", "TAB_NAMES"]
 
@@ -155,6 +155,8 @@ def create_app(state: AppState | None = None, *, query: dict | None = None, runn
     from .tabs.simulation import SimulationTab
 
     _session_style()
+    # before the page is sent (an exercise's runner is made only after the student's id)
+    layout_once_per_message(served_document())
     query = {str(k): str(v) for k, v in (query or {}).items()}
     state = state if state is not None else AppState()
     exercise = current_exercise()

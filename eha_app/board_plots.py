@@ -257,7 +257,8 @@ class PoleZeroFigure:
         text = ("Ringed in red: a root the data determine weakly. " + " ".join(notes)) if notes else ""
         if any(e.kind in ("tf", "record") for e in entries):
             text += (" A region assumes the estimate's residuals are white noise: where the residual test on "
-                     "the fit view fails, the regions are too small. Zoom in with the box-zoom tool to see the small ones.")
+                     "the fit view fails, the regions are too small. Zoom in with the box-zoom tool to see the "
+                     "small ones.")
         if nyquist is not None:
             text += (f" Dashed: |s| = π/Ts = {nyquist:.0f} rad/s (the Nyquist frequency); a pole beyond it decays "
                      "within about one sample.")

@@ -8,13 +8,20 @@ the document's lock, with the document's events held and combined: the
 browser receives one message per result instead of one per changed property
 (a first "Compare both" used to send 76).
 
-Two details learnt the hard way:
+Three details learnt the hard way:
 
 - Panel must know which session it updates: the callback runs under
   ``set_curdoc(doc)`` (with a bare Bokeh next-tick callback about one update
   in 25 never reached the browser).
 - The document is captured when the user's event arrives; by the time a
   result is ready Panel's "current document" may belong to another session.
+- One message is not one layout: the browser (Bokeh's BokehJS) lays out the
+  whole page again, synchronously, for every changed property that can move
+  something (a class, a visibility, a size), 60-150 ms each on tab 3. The
+  twelve out-of-date marks a frequency-domain result clears cost the browser
+  a second. :func:`layout_once_per_message` makes it lay the page out once per
+  message instead (installed on every served session's page by
+  :class:`SessionRunner`).
 
 Without a server (tests, a notebook) the computation runs at once in the
 calling thread and its result is shown directly.
@@ -26,6 +33,7 @@ import collections
 import logging
 import threading
 import time
+import weakref
 from collections.abc import Callable, Hashable, Sequence
 from contextlib import contextmanager
 from functools import partial
@@ -39,7 +47,8 @@ from eha_core.cancel import Cancelled, CancelToken
 
 from .jobs import Job, JobQueue, default_queue
 
-__all__ = ["SessionRunner", "PageUpdates", "apply_locked", "frozen_models", "LOADING_DELAY_S", "served_document"]
+__all__ = ["SessionRunner", "PageUpdates", "apply_locked", "frozen_models", "held", "layout_once_per_message",
+           "LOADING_DELAY_S", "served_document"]
 
 log = logging.getLogger("eha_app")
 
@@ -65,6 +74,76 @@ def frozen_models():
         return
     with doc.models.freeze():
         yield
+
+
+@contextmanager
+def held():
+    """Send the session's changes of a block as one message (events held and combined, the
+    model graph recomputed once); no-op without a server. For changes made outside
+    :func:`apply_locked`, e.g. in a watcher of a widget the student typed into."""
+    doc = served_document()
+    if doc is None:
+        yield
+        return
+    with hold(doc), doc.models.freeze():
+        yield
+
+
+#: BokehJS, when the page is ready: while the document applies one message from the
+#: server, a layout invalidated anywhere is only noted, by its root; each noted root is
+#: laid out once when the whole message is applied, before the browser paints. Without
+#: it every changed class or visibility lays out the whole page at once (BokehJS 3.9:
+#: ``LayoutDOMView.invalidate_layout``). If BokehJS's internals are not found it does nothing.
+_LAYOUT_ONCE_JS = """
+const doc = cb_obj;
+if (doc == null || doc.__eha_layout_once || typeof doc._apply_json_patch !== "function") { return; }
+let proto = null;
+try {
+  const column = Bokeh.Models.get("Column");
+  proto = column != null ? column.prototype.default_view.prototype : null;
+  while (proto != null && proto.constructor.__name__ !== "LayoutDOMView") { proto = Object.getPrototypeOf(proto); }
+} catch (e) { proto = null; }
+if (proto == null || typeof proto.invalidate_layout !== "function") { return; }
+doc.__eha_layout_once = true;
+const LayoutDOMView = proto.constructor;
+const invalidate = proto.invalidate_layout;
+if (!invalidate.__eha_deferring) {
+  const deferring = function () {
+    const pending = window.__eha_layout_pending;
+    if (pending != null && !(this.parent instanceof LayoutDOMView)) { pending.add(this); return; }
+    return invalidate.call(this);
+  };
+  deferring.__eha_deferring = true;
+  proto.invalidate_layout = deferring;
+}
+const apply = doc._apply_json_patch;
+doc._apply_json_patch = function (...args) {
+  if (window.__eha_layout_pending != null) { return apply.apply(this, args); }
+  const pending = window.__eha_layout_pending = new Set();
+  try {
+    return apply.apply(this, args);
+  } finally {
+    window.__eha_layout_pending = null;
+    for (const view of pending) {
+      try { view.invalidate_layout(); } catch (e) { console.error(e); }
+    }
+  }
+};
+"""
+
+_layout_once_docs: weakref.WeakSet = weakref.WeakSet()
+
+
+def layout_once_per_message(doc) -> None:
+    """Have the browser lay out ``doc``'s page once per message from the server (see
+    :data:`_LAYOUT_ONCE_JS`). Call it before the page is sent (it runs when the page is
+    ready); once per document is enough, more calls do nothing."""
+    if doc is None or doc in _layout_once_docs:
+        return
+    from bokeh.models import CustomJS
+
+    _layout_once_docs.add(doc)
+    doc.js_on_event("document_ready", CustomJS(code=_LAYOUT_ONCE_JS))
 
 
 class PageUpdates:
@@ -183,6 +262,8 @@ class SessionRunner:
     def __init__(self, owner: Hashable, queue: JobQueue | None = None):
         self.owner = owner
         self._queue = queue
+        # the first runner of a session is made with its page, before the page is sent
+        layout_once_per_message(served_document())
 
     @property
     def queue(self) -> JobQueue:

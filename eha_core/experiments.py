@@ -472,6 +472,8 @@ class FrequencyIdentification:
     estimation data), ``theoretical_comparison`` (eq. 24's, its initial state
     estimated) and ``bode``. When the estimation fails (``success`` False,
     ``message`` says why), those and ``validation`` and ``residuals`` are None.
+    ``timings``: seconds per stage (``experiment``, ``tfest``, ``spectral``,
+    ``validation_experiment``, ``analysis``); tfest takes most of the time.
     """
 
     config: FrequencyExperiment
@@ -582,14 +584,19 @@ def run_frequency_identification(params: ActuatorParams | None = None,
     timings["tfest"] = time.perf_counter() - t0
 
     check(cancel)
+    t0 = time.perf_counter()
     freqs = excitation.freqs if excitation.freqs.size else None
     data_response = data_frequency_response(data.r, data.x, config.ts, period=_design_period(excitation),
                                             freqs=freqs, band=config.band)
+    timings["spectral"] = time.perf_counter() - t0
 
     check(cancel)
+    t0 = time.perf_counter()
     validation_excitation = config.excitation(config.validation_seed if config.validation_seed is not None
                                               else excitation.seed + 1)
     validation_data = config.closed_loop(params, validation_excitation, cancel)
+    timings["validation_experiment"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     open_loop = back = validation = residuals = y_hat = theory = bode = None
     if est.success and np.all(np.isfinite(est.den)):
         # compare and the residuals simulate the estimate once each (as one
@@ -607,6 +614,7 @@ def run_frequency_identification(params: ActuatorParams | None = None,
         if (config.n_poles, config.n_zeros) == (3, 0):
             open_loop = open_loop_from_closed(est.num, est.den, config.kp)
             back = backout(*open_loop, params, lin.op, std_h=est.param_std, kp=config.kp)
+    timings["analysis"] = time.perf_counter() - t0      # validation, residuals, eq. 24, Bode, back-out
     return FrequencyIdentification(
         config=config, params=params, linear=lin, excitation=excitation, data=data, estimate=est,
         theoretical=theoretical, open_loop=open_loop, backout=back, data_response=data_response, residuals=residuals,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+from functools import partial
 
 import numpy as np
 import panel as pn
@@ -26,7 +27,7 @@ from ..tables import (
     estimate_alert,
     freq_summary_html,
 )
-from ..tasks import SessionRunner, apply_locked
+from ..tasks import SessionRunner, apply_locked, held
 from .record import RecordPanel
 
 __all__ = ["FrequencyPanel", "FREQ_FORM", "FREQ_DEFAULTS", "parse_freq"]
@@ -264,6 +265,12 @@ class FrequencyPanel(pn.viewable.Viewer):
         self.error.visible = bool(self.error.object)
 
     def _on_config(self, *_events) -> None:
+        # the marks of seven views, the form and the note: one message, not twenty (each one
+        # lays out the page in the browser)
+        with held():
+            self._config_changed()
+
+    def _config_changed(self) -> None:
         cfg, errors = self.config()
         self.config_errors = errors
         self.form.hidden = freq_hidden(self.form.values)
@@ -372,11 +379,12 @@ class FrequencyPanel(pn.viewable.Viewer):
             self._mark(self.config()[0], preview_queued=False)      # typed while it computed
             e = fi.estimate
             if self.board is not None and e.success and np.all(np.isfinite(e.den)):
-                self.board.add(BoardModel(
+                # the board's list is rebuilt in a page update of its own: the result goes out first
+                apply_locked(partial(self.board.add, BoardModel(
                     name=self.board.next_name("H"), kind="tf", estimate=e, num=e.num, den=e.den,
                     input_delay=getattr(e, "input_delay", 0.0), ts=cfg.ts,
                     description=f"{e.n_poles} poles, {e.n_zeros} zeros; idinput {cfg.signal_type} seed {cfg.seed}, "
-                                f"N {cfg.n_samples}, {cfg.model} plant; fit {e.fit_percent:.1f} %"))
+                                f"N {cfg.n_samples}, {cfg.model} plant; fit {e.fit_percent:.1f} %")))
 
         return self.runner.run("frequency experiment", compute, show, fail=self._fail, busy=[self.area],
                                note=self._note)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import html
 import io
 from collections.abc import Callable
+from functools import partial
 
 import numpy as np
 import panel as pn
@@ -24,7 +25,7 @@ from ..formatting import tf_html
 from ..freshness import ResultView
 from ..glossary import term
 from ..tables import estimate_alert, estimation_sentences
-from ..tasks import SessionRunner
+from ..tasks import SessionRunner, apply_locked
 from .uploads import ColumnMapping, check_size
 
 __all__ = ["RecordPanel", "RECORD_COLUMNS"]
@@ -239,11 +240,11 @@ class RecordPanel:
             self.inputs_changed()
             e = rec.estimate
             if self.board is not None and e.success and np.all(np.isfinite(e.den)):
-                self.board.add(BoardModel(
+                apply_locked(partial(self.board.add, BoardModel(
                     name=self.board.next_name("R"), kind="record", estimate=e, num=e.num, den=e.den,
                     input_delay=getattr(e, "input_delay", 0.0), ts=rec.ts,
                     description=f"{name}: {e.n_poles} poles, {e.n_zeros} zeros, t ∈ [{rec.prepared.t_from:g}, "
-                                f"{rec.prepared.t_to:g}] s, detrend {rec.detrend}; fit {e.fit_percent:.1f} %"))
+                                f"{rec.prepared.t_to:g}] s, detrend {rec.detrend}; fit {e.fit_percent:.1f} %")))
 
         return self.runner.run("estimate from your record", compute, show, fail=self._fail, note=self._note)
 
