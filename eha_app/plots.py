@@ -349,6 +349,7 @@ class FrequencyView:
     band: float = float("nan")
     whiteness_title: str = ""
     independence_title: str = ""
+    residual_sentences: tuple[str, ...] = ()      # one verdict per test, from the core's assessment
 
 
 def _band_edge(edge, magnitude_db, side: int):
@@ -402,6 +403,7 @@ def frequency_view(fi, hidden=()) -> FrequencyView:
     e, theo, bode = fi.estimate, fi.theoretical_comparison, fi.bode
     vd, v = fi.validation_data, fi.validation
     ra = fi.residuals
+    verdict = fi.residual_assessment
     view = FrequencyView(
         **base, fit_ok=True, y_hat_mm=fi.estimate_output * 1e3, y_theory_mm=theo.y_hat * 1e3,
         fit_label=f"estimated H(s): fit {e.fit_percent:.1f} %",
@@ -420,9 +422,9 @@ def frequency_view(fi, hidden=()) -> FrequencyView:
         lags=np.asarray(ra.lags), autocorrelation=np.asarray(ra.autocorrelation),
         cross_lags=np.asarray(ra.cross_lags), cross_correlation=np.asarray(ra.cross_correlation),
         band=float(ra.confidence_bound),
-        whiteness_title=f"Residual autocorrelation ({'inside' if ra.whiteness_ok else 'outside'} the 99 % band)",
-        independence_title=(f"Cross-correlation r → residual "
-                            f"({'inside' if ra.independence_ok else 'outside'} the 99 % band)"),
+        whiteness_title=f"Residual autocorrelation: {'passes' if verdict.whiteness.passed else 'fails'}",
+        independence_title=f"Cross-correlation r → residual: {'passes' if verdict.independence.passed else 'fails'}",
+        residual_sentences=verdict.sentences,
     )
     if hidden:
         nan = np.full_like
@@ -470,6 +472,7 @@ class ClosedLoopFigure:
                                                 ("u", "u [V]", "Command u = Kp (r − x)", CASE_COLORS[1], True)):
             fig = _figure(width=width // 3, height=height, x_range=x_range, x_axis_label="t [s]",
                           y_axis_label=ylabel, title=title)
+            fig.min_width = 150     # three side by side in the results column of an 800 px page
             if step:
                 fig.step("t", key, source=self.source, mode="after", color=color, alpha=0.8)
             else:
@@ -613,15 +616,20 @@ class ResidualFigure:
             fig.scatter("lag", "c", source=src, color=color, size=4)
             self.sources.append(src)
             self.bands.append(band)
+            fig.min_width = 200     # two side by side in the results column of an 800 px page
             self.figs.append(fig)
+        self.verdicts = Div(text="", sizing_mode="stretch_width", css_classes=["eha-residual-verdicts"],
+                            styles={"font-size": "13px"})
         _lean(*self.figs)
-        self.layout = row(*self.figs, sizing_mode="stretch_width")
+        self.layout = column(row(*self.figs, sizing_mode="stretch_width"), self.verdicts, sizing_mode="stretch_width")
 
     def update(self, view: FrequencyView) -> None:
         if not view.fit_ok:
             for src in self.sources:
                 src.data = {"lag": _f32([]), "c": _f32([]), "zero": _f32([])}
+            self.verdicts.text = ""
             return
+        self.verdicts.text = "".join(f"<p>{html.escape(sentence)}</p>" for sentence in view.residual_sentences)
         for src, band, fig, lags, c, title in (
                 (self.sources[0], self.bands[0], self.figs[0], view.lags, view.autocorrelation, view.whiteness_title),
                 (self.sources[1], self.bands[1], self.figs[1], view.cross_lags, view.cross_correlation,

@@ -239,6 +239,13 @@ def freq_summary_html(fi, hidden=()) -> str:
     plant = "nonlinear" if fi.config.model == "nonlinear" else "linearised"
     parts = [tf_html("Ĥ(s)", e.num, e.den, f"estimated from the {plant} model's data; "
                      f"{term('fit', f'fit {e.fit_percent:.2f} %')}")]
+    delay = getattr(e, "input_delay", 0.0) or 0.0
+    if delay or fi.config.input_delay == "estimate":
+        how = ("estimated" + (f", standard error {e.input_delay_std * 1e3:.3g} ms"
+                              if e.input_delay_std is not None and np.isfinite(e.input_delay_std) else "")
+               if fi.config.input_delay == "estimate" else "fixed")
+        parts.append(f"<p>with an input delay e<sup>−sτ</sup>, τ = <b>{delay * 1e3:.4g} ms</b> = "
+                     f"{delay / fi.config.ts:.3g} samples ({how}).</p>")
     if not hidden:
         parts.append(tf_html("H(s)", theo_num, theo_den,
                              f"linearised at v = 0, eq. 24, K<sub>p</sub> = {fi.config.kp:g} V/m"))

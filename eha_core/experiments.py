@@ -289,7 +289,9 @@ class FrequencyExperiment:
     with the sign of u, which in the loop acts exactly as a constant offset of
     r, and a model without it must mimic the resulting drift with a spurious
     slow pole. ``validation_seed`` (default seed + 1) draws the fresh
-    excitation of Fig. 13.
+    excitation of Fig. 13. ``input_delay``: the model's input delay, in
+    seconds (0: none, the paper's) or ``"estimate"`` (like MATLAB's iodelay,
+    searched up to 10 % of the record).
     """
 
     n_samples: int = 1000
@@ -307,6 +309,7 @@ class FrequencyExperiment:
     n_zeros: int = 0
     initial_condition: str = "estimate"
     input_offset: str = "estimate"
+    input_delay: float | str = 0.0
 
     def __post_init__(self):
         def bad(name, allowed):
@@ -331,6 +334,11 @@ class FrequencyExperiment:
         for name in ("initial_condition", "input_offset"):
             if getattr(self, name) not in ("zero", "estimate"):
                 raise bad(name, "use zero or estimate")
+        d = self.input_delay
+        if d != "estimate" and (isinstance(d, (bool, str)) or not isinstance(d, (int, float)) or not math.isfinite(d)
+                                or not 0 <= d <= 0.5 * self.n_samples * self.ts):
+            raise bad("input_delay", f"must be a time in [0, {0.5 * self.n_samples * self.ts:g}] s (half the "
+                                     "record), or estimate")
 
     def excitation(self, seed: int | None = None):
         """The reference signal (an :class:`~eha_core.excitation.Excitation`)."""
@@ -506,6 +514,14 @@ class FrequencyIdentification:
         return self.data_response.response
 
     @property
+    def residual_assessment(self):
+        """The residual tests with a verdict each
+        (:func:`~eha_core.identify.assessment.assess_residuals`), or None without residuals."""
+        from .identify.assessment import assess_residuals
+
+        return None if self.residuals is None else assess_residuals(self.residuals)
+
+    @property
     def peak_speed(self) -> float:
         """The largest piston speed during the experiment [m/s]."""
         return float(np.abs(self.data.v).max())
@@ -580,7 +596,7 @@ def run_frequency_identification(params: ActuatorParams | None = None,
     t0 = time.perf_counter()
     est = tfest(data.r, data.x, config.ts, config.n_poles, config.n_zeros,
                 initial_condition=config.initial_condition, input_offset=config.input_offset, init=init,
-                cancel=cancel)
+                input_delay=config.input_delay, cancel=cancel)
     timings["tfest"] = time.perf_counter() - t0
 
     check(cancel)
@@ -603,7 +619,8 @@ def run_frequency_identification(params: ActuatorParams | None = None,
         # tfest residual): checks between them are enough
         check(cancel)
         validation = compare(est.num, est.den, validation_data.r, validation_data.x, config.ts,
-                             initial_condition=config.initial_condition, input_offset=config.input_offset)
+                             initial_condition=config.initial_condition, input_offset=config.input_offset,
+                             input_delay=est.input_delay)
         check(cancel)
         y_hat = est.simulate(data.r, initial_state=est.initial_state, input_offset=est.input_offset)
         residuals = residual_analysis(data.x - y_hat, data.r)

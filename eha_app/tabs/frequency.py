@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import math
 from functools import partial
 
 import numpy as np
@@ -60,12 +61,16 @@ FREQ_FORM = (
               short="initial condition", tip=GLOSSARY["initial condition"]),
         Field("input_offset", "input offset", "select", options=(("estimate", "estimate"), ("zero", "zero")),
               short="input offset", tip=GLOSSARY["input offset"]),
+        Field("input_delay", "input delay", "text", unit="s", placeholder="0, a time, or estimate",
+              short="input delay",
+              tip="a dead time of the model's input (MATLAB's iodelay): 0 for none, a time in s, or estimate"),
     )),
 )
 _FREQ_FIELDS = {f.name: f for g in FREQ_FORM for f in g.fields}
 _CONFIG_NAME = {"signal_type": "signal_type", "n_samples": "n_samples", "freq_seed": "seed", "ts": "ts",
                 "model": "model", "n_poles": "n_poles", "n_zeros": "n_zeros",
-                "initial_condition": "initial_condition", "input_offset": "input_offset"}
+                "initial_condition": "initial_condition", "input_offset": "input_offset",
+                "input_delay": "input_delay"}
 _DEFAULT_CONFIG = FrequencyExperiment()
 FREQ_DEFAULTS = {
     "signal_type": _DEFAULT_CONFIG.signal_type, "n_samples": str(_DEFAULT_CONFIG.n_samples),
@@ -76,6 +81,7 @@ FREQ_DEFAULTS = {
     "ts": f"{_DEFAULT_CONFIG.ts:g}", "model": _DEFAULT_CONFIG.model,
     "n_poles": str(_DEFAULT_CONFIG.n_poles), "n_zeros": str(_DEFAULT_CONFIG.n_zeros),
     "initial_condition": _DEFAULT_CONFIG.initial_condition, "input_offset": _DEFAULT_CONFIG.input_offset,
+    "input_delay": "0",
 }
 
 
@@ -92,13 +98,32 @@ def _field_of_message(message: str) -> str | None:
     return {"band": "band_lo", "range": "range_lo", "sinedata": "n_sines"}.get(head)
 
 
+def _parse_delay(text) -> tuple[float | str, str]:
+    """The input delay field: blank or 0 (none), a time in s, or "estimate"; and its message."""
+    raw = str(text).strip()
+    if raw.lower() in ("", "0", "none"):
+        return 0.0, ""
+    if raw.lower() in ("estimate", "est"):
+        return "estimate", ""
+    try:
+        value = float(raw.replace(",", "."))
+        if not (math.isfinite(value) and value >= 0):
+            raise ValueError
+    except ValueError:
+        return 0.0, f"input delay = {raw} is not allowed: enter a time >= 0 s, or estimate"
+    return value, ""
+
+
 def parse_freq(texts: dict, kp: float = _DEFAULT_CONFIG.kp) -> tuple[FrequencyExperiment | None, dict]:
     """The experiment the form describes (None if invalid), and a message per invalid field ("" for the rest).
 
     ``kp`` is the controller gain: tab 1's, the one H(s) is shown with everywhere.
     """
     hidden = set(freq_hidden(texts))
-    values, errors = parse_fields(_FREQ_FIELDS.values(), texts, skip=hidden)
+    values, errors = parse_fields(_FREQ_FIELDS.values(), texts, skip=hidden | {"input_delay"})
+    delay, delay_error = _parse_delay(texts.get("input_delay", "0"))
+    if delay_error:
+        errors["input_delay"] = delay_error
     if errors:
         return None, errors
     d = _DEFAULT_CONFIG
@@ -110,9 +135,12 @@ def parse_freq(texts: dict, kp: float = _DEFAULT_CONFIG.kp) -> tuple[FrequencyEx
                       values.get("grid_skip", d.sinedata[2])),
             seed=values["freq_seed"], kp=kp, model=values["model"], n_poles=values["n_poles"],
             n_zeros=values["n_zeros"], initial_condition=values["initial_condition"],
-            input_offset=values["input_offset"])
+            input_offset=values["input_offset"], input_delay=delay)
     except (ValueError, TypeError) as exc:
         message = " ".join(str(exc).split())
+        if message.startswith("input_delay = "):       # the field's name and the text as typed
+            return None, {"input_delay": f"input delay = {str(texts.get('input_delay', '')).strip()} is not "
+                                         f"allowed: {message.split(' is not allowed: ', 1)[1]}"}
         return None, {_field_of_message(message) or "": message}
     return cfg, {}
 
@@ -316,7 +344,7 @@ class FrequencyPanel(pn.viewable.Viewer):
         fi = self.result
         settings = {k: getattr(fi.config, k) for k in (
             "signal_type", "n_samples", "seed", "ts", "kp", "model", "n_poles", "n_zeros", "initial_condition",
-            "input_offset")}
+            "input_offset", "input_delay")}
         return tf_estimate_bytes(fi.estimate, kind, settings=settings, fits={
             "fit_percent": fi.estimate.fit_percent,
             "validation_fit_percent": None if fi.validation is None else fi.validation.fit_percent})

@@ -200,3 +200,28 @@ def test_sensor_noise_on_the_simulation_is_seeded_and_said():
     np.testing.assert_array_equal(tab.results[0].p1, noisy.p1)  # the same seed, the same draw
     tab.form.values = {**tab.form.values, "sensor_p": "-1"}
     assert "sensor σ p = -1 is not allowed" in tab.form.errors["sensor_p"]
+
+
+def test_the_frequency_experiment_with_an_input_delay_and_residual_verdicts():
+    from eha_app.tabs.frequency import FREQ_DEFAULTS, parse_freq
+
+    cfg, errors = parse_freq({**FREQ_DEFAULTS,
+                              "input_delay": "estimate", "model": "linear"})
+    assert not errors and cfg.input_delay == "estimate"
+    _, errors = parse_freq({**FREQ_DEFAULTS,
+                            "input_delay": "-2"})
+    assert errors["input_delay"] == "input delay = -2 is not allowed: enter a time >= 0 s, or estimate"
+    _, errors = parse_freq({**FREQ_DEFAULTS,
+                            "input_delay": "99"})
+    assert errors["input_delay"] == ("input delay = 99 is not allowed: must be a time in [0, 5] s (half the "
+                                     "record), or estimate")
+    panel = IdentificationTab(AppState()).frequency_panel()
+    panel.form.values = {**panel.form.values, "input_delay": "estimate", "model": "linear"}
+    panel.run()
+    e = panel.result.estimate
+    assert 0 <= e.input_delay < 0.01                      # the linear loop has no dead time: under a sample
+    assert "input delay" in panel.summary.object and "(estimated" in panel.summary.object
+    panel._shown.add("residuals")
+    panel._draw("residuals")
+    verdicts = panel.figures["residuals"].verdicts.text
+    assert verdicts.count("<p>") == 2 and "lags outside the 99 % band" in verdicts

@@ -61,3 +61,18 @@ def test_on_the_linearised_plant_the_s2_coefficient_is_the_linearised_one():
 def test_bad_configuration(kwargs, words):
     with pytest.raises(ValueError, match=words):
         FrequencyExperiment(**kwargs)
+
+
+def test_the_experiment_takes_an_input_delay_and_says_how_its_residuals_fare():
+    from eha_core.experiments import FrequencyExperiment, run_frequency_identification
+
+    fi = run_frequency_identification(config=FrequencyExperiment(model="linear", input_delay=0.02))
+    e = fi.estimate
+    assert e.input_delay == 0.02 and e.input_delay_std is None
+    assert fi.validation.input_delay == 0.02 and fi.validation.fit_percent > 80
+    verdicts = fi.residual_assessment.verdicts
+    assert len(verdicts) == 2 and all(v.sentence for v in verdicts)
+    with pytest.raises(ValueError, match=r"input_delay = -1 is not allowed"):
+        FrequencyExperiment(input_delay=-1)
+    with pytest.raises(ValueError, match=r"input_delay = soon is not allowed"):
+        FrequencyExperiment(input_delay="soon")
