@@ -197,8 +197,7 @@ def create_app(state: AppState | None = None, *, query: dict | None = None, runn
     if served_document() is not None:
         def closed(_context):
             # nobody will see these results: free the workers for the others
-            jobs = (runner.queue.cancel_owner(runner.owner, "the page was closed")
-                    + runner.queue.cancel_owner((runner.owner, "preview"), "the page was closed"))
+            jobs = runner.cancel_all("the page was closed")
             if jobs:
                 log.info("a page was closed: cancelled %s", ", ".join(j.label for j in jobs))
         pn.state.on_session_destroyed(closed)

@@ -20,7 +20,7 @@ __all__ = ["BOARD_COLORS", "board_legend", "BoardFitFigure", "BoardBodeFigure", 
            "PoleZeroFigure"]
 
 BOARD_COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf",
-                "#bcbd22", "#7f7f7f", "#393b79", "#ad494a")
+                "#bcbd22", "#7f7f7f", "#393b79", "#ad494a", "#637939", "#843c39")
 
 
 def board_legend(entries, extra: tuple[tuple[str, str, str], ...] = ()) -> str:
@@ -158,7 +158,7 @@ class BoardStepFigure:
         scale = amplitude_m * 1e3
         for e in entries:
             v = views.get(e.key)
-            if v is None:
+            if v is None or not np.all(np.isfinite(v.step.y)):
                 continue
             t, y = decimate(v.step.t, v.step.y * scale)
             xs.append(t)

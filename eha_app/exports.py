@@ -24,6 +24,19 @@ def _finite(v) -> float | None:
     return v if np.isfinite(v) else None
 
 
+def _no_nan(value):
+    """``value`` with every non-finite float as None, numpy scalars as Python numbers."""
+    if isinstance(value, dict):
+        return {k: _no_nan(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_no_nan(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return _finite(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
 def tf_estimate_rows(estimate) -> list[dict]:
     """One row per coefficient of H(s) = (b0 s^m + ... + bm) / (s^n + a1 s^(n-1) + ... + an):
     its value, standard error and 95 % interval (``param_std`` is ordered ``[den[1:], num]``)."""
@@ -57,9 +70,10 @@ def tf_estimate_bytes(estimate, kind: str, *, settings: dict | None = None, fits
     the settings it was made with and its fit percentages)."""
     rows = tf_estimate_rows(estimate)
     if kind == "json":
-        out = {"estimate": estimate.to_dict(), "coefficients": rows, "settings": settings or {},
+        out = {"estimate": _no_nan(estimate.to_dict()), "coefficients": rows, "settings": _no_nan(settings or {}),
                **{k: _finite(v) if v is not None else None for k, v in (fits or {}).items()}}
-        return json.dumps(out, indent=1, default=float).encode()
+        # strict JSON (a NaN would break a JavaScript or MATLAB reader): a missing number is null
+        return json.dumps(out, indent=1, allow_nan=False).encode()
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
     w.writeheader()

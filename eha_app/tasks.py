@@ -262,8 +262,28 @@ class SessionRunner:
     def __init__(self, owner: Hashable, queue: JobQueue | None = None):
         self.owner = owner
         self._queue = queue
+        self._root = self
+        self._subs: set = set()
         # the first runner of a session is made with its page, before the page is sent
         layout_once_per_message(served_document())
+
+    def sub(self, name: str) -> SessionRunner:
+        """A runner of the same session whose requests do not replace this one's (a preview, the
+        model board, a study): its owner is ``(owner, name)``, cancelled by :meth:`cancel_all`."""
+        child = SessionRunner((self.owner, name), self._queue)
+        child._root = self._root
+        self._root._subs.add(child.owner)
+        return child
+
+    def cancel_all(self, reason: str = "cancelled") -> list[Job]:
+        """Cancel every computation of the session, its sub-runners' included (its page was closed).
+
+        The queue forgets the owners too: nothing of a closed session stays referenced."""
+        root = self._root
+        jobs = root.queue.cancel_owner(root.owner, reason)
+        for owner in list(root._subs):
+            jobs += root.queue.cancel_owner(owner, reason)
+        return jobs
 
     @property
     def queue(self) -> JobQueue:

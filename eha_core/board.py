@@ -60,6 +60,7 @@ class BoardModel:
     input_delay: float = 0.0
     estimate: object | None = None
     ts: float | None = None
+    kp: float | None = None       # the controller gain of the loop it describes (None: any)
 
 
 @dataclass(frozen=True, eq=False)
@@ -181,7 +182,7 @@ def lse_model(result, params: ActuatorParams, kp: float, name: str, description:
     est = result.estimated_params(params)
     num, den = linearize(est).closed_loop_coeffs(kp)
     return BoardModel(name=name, kind="lse", description=description, num=np.asarray(num), den=np.asarray(den),
-                      ts=float(result.ts))
+                      ts=float(result.ts), kp=float(kp))
 
 
 def nonlinear_step(params: ActuatorParams, kp: float, amplitude_m: float, *, cancel: CancelToken | None = None):

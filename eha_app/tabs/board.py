@@ -26,7 +26,6 @@ import panel as pn
 from eha_core.board import (
     BoardModel,
     compare_on_record,
-    lse_model,
     model_views,
     nonlinear_step,
     reference_models,
@@ -87,6 +86,11 @@ class ModelBoard(pn.viewable.Viewer):
         self.record = None
         self.record_key = None
         self.plant = None               # the nonlinear plant's step response
+        self.plant_key = None
+        # the board's jobs: its requests never replace the tabs' own, and close with the page
+        self.views_runner = runner.sub("board views")
+        self.record_runner = runner.sub("board record")
+        self.plant_runner = runner.sub("board plant")
         self.figures: dict = {}
         self.built = False
         texts = dict(BOARD_DEFAULTS)
@@ -127,7 +131,7 @@ class ModelBoard(pn.viewable.Viewer):
                 self.entries.insert(len([e for e in self.entries if e.kind == "reference"]),
                                     BoardEntry(next(self._keys), ref, self._color(), ref.name,
                                                ticked=ref.name.startswith("H(s)")))
-            else:
+            elif entry.model.num.tolist() != ref.num.tolist() or entry.model.den.tolist() != ref.den.tolist():
                 entry.model = ref
                 self.views.pop(entry.key, None)
                 self.fits.pop(entry.key, None)
@@ -136,57 +140,60 @@ class ModelBoard(pn.viewable.Viewer):
         return f"{prefix}{next(self._counters.setdefault(prefix, itertools.count(1)))}"
 
     def add(self, model: BoardModel) -> BoardEntry | None:
-        """Put ``model`` on the board, ticked; its views are computed in a worker."""
+        """Put ``model`` on the board, ticked if it is stable (an unstable one's curves would flatten the
+        others'); its views are computed in a worker."""
         if len([e for e in self.entries if e.kind != "reference"]) >= MAX_MODELS:
             self.note.object = (f"<span class='eha-warn'>The board holds {MAX_MODELS} models: delete one to keep "
                                 f"{html.escape(model.name)}.</span>")
             return None
-        entry = BoardEntry(next(self._keys), model, self._color(), model.name)
+        stable = bool(np.all(np.roots(np.asarray(model.den, dtype=float)).real < 0))
+        entry = BoardEntry(next(self._keys), model, self._color(), model.name, ticked=stable)
         self.entries.append(entry)
-        self.note.object = ""
-        self._compute(entry)
+        self.note.object = ("" if stable else f"<span class='eha-warn'>{html.escape(model.name)} is unstable: "
+                                              "it is on the board unticked.</span>")
+        self._compute_missing()
         self._rebuild_list()
         return entry
 
-    def add_lse(self, result, params, kp: float, description: str) -> None:
-        """A least-squares run as eq. 24's H(s) with its estimates (in a worker: it linearises)."""
-        name = self.next_name("LS")
+    def _compute_missing(self) -> None:
+        """The views (and the fit on the current record) of every model that has none, in one job:
+        a newer request replaces a waiting one, and takes its models along."""
+        if not self.built:
+            return
+        todo = [(e, e.model) for e in self.entries if e.key not in self.views]
+        if not todo:
+            return
+        record = self.record
 
         def compute(_token):
-            return lse_model(result, params, kp, name, description)
-
-        def show(model, _job):
-            self.add(model)
-
-        def fail(message):
-            self.note.object = (f"<span class='eha-warn'>{html.escape(name)} is not on the board: its estimates "
-                                f"are not physical ({html.escape(message)}).</span>")
-
-        SessionRunner((self.runner.owner, "board-lse", name), self.runner.queue).run(
-            "least squares for the board", compute, show, fail=fail)
-
-    def _compute(self, entry: BoardEntry) -> None:
-        record, model = self.record, entry.model
-
-        def compute(_token):
-            views = model_views(model)
-            fit = compare_on_record(model, record) if record is not None else None
-            return views, fit, record
+            out = []
+            for entry, model in todo:
+                try:
+                    views = model_views(model)
+                    fit = compare_on_record(model, record) if record is not None else None
+                    out.append((entry, model, views, fit, ""))
+                except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+                    out.append((entry, model, None, None, " ".join(str(exc).split())))
+            return out
 
         def show(out, _job):
-            views, fit, rec = out
-            if entry not in self.entries or entry.model is not model:
-                return
-            self.views[entry.key] = views
-            if fit is not None and rec is self.record:
-                self.fits[entry.key] = fit
+            for entry, model, views, fit, error in out:
+                if entry not in self.entries or entry.model is not model:
+                    continue                    # deleted, or rebuilt, while it computed
+                if error:
+                    self._fail(entry, error)
+                    entry.ticked = False
+                    continue
+                self.views[entry.key] = views
+                if fit is not None and record is self.record:
+                    self.fits[entry.key] = fit
             self.refresh()
 
-        SessionRunner((self.runner.owner, "board", entry.key), self.runner.queue).run(
-            f"board: {model.name}", compute, show, fail=lambda m: self._fail(entry, m))
+        self.views_runner.run("board: model views", compute, show, fail=lambda m: self._fail(None, m))
 
-    def _fail(self, entry: BoardEntry, message: str) -> None:
-        self.note.object = f"<span class='eha-warn'>{html.escape(entry.name)}: {html.escape(message)}</span>"
+    def _fail(self, entry: BoardEntry | None, message: str) -> None:
+        who = f"{html.escape(entry.name)}: " if entry is not None else ""
+        self.note.object = f"<span class='eha-warn'>{who}{html.escape(message)}</span>"
 
     def delete(self, entry: BoardEntry) -> None:
         if entry.kind == "reference":
@@ -250,39 +257,94 @@ class ModelBoard(pn.viewable.Viewer):
 
     def _plant_changed(self) -> None:
         self._references()
-        for e in self.entries:
-            if e.key not in self.views:
-                self._compute(e)
+        self._compute_missing()
         self.update_record()
 
-    def update_record(self) -> None:
-        """The validation record, every model's fit on it, and the nonlinear plant's step (in a worker)."""
+    def record_inputs(self):
+        """(record key, plant key) of the current inputs, or None when they are not valid."""
         values, errors = self.settings()
-        if errors or not self.state.valid or not self.built:
-            return
+        if errors or not self.state.valid:
+            return None
         params, kp = self.state.params, self.state.kp
-        seed, amplitude = values["board_seed"], values["board_step"] * 1e-3
-        key = (params, kp, seed, amplitude)
-        self.record_view.inputs_changed(key, updating=True)
-        models = [(e.key, e.model) for e in self.entries]
+        return (params, kp, values["board_seed"]), (params, kp, values["board_step"] * 1e-3)
+
+    def update_record(self) -> None:
+        """The validation record with every model's fit on it, and the nonlinear plant's step: two jobs,
+        each re-run only when its own inputs change."""
+        if not self.built:
+            return
+        keys = self.record_inputs()
+        if keys is None:
+            self.record_view.inputs_changed(None, why="" if self.state.valid else "a parameter on tab 1 is not "
+                                                                                  "valid")
+            return
+        record_key, plant_key = keys
+        if (record_key, plant_key) == (self.record_key, self.plant_key):
+            self._mark_record()
+            return
+        self.record_view.inputs_changed(keys, updating=True)
+        if record_key != self.record_key:
+            self._run_record(record_key)
+        if plant_key != self.plant_key:
+            self._run_plant(plant_key)
+
+    def _mark_record(self) -> None:
+        keys = self.record_inputs()
+        if keys is not None and keys == (self.record_key, self.plant_key):
+            self.record_view.shown(keys)
+
+    def _run_record(self, key) -> None:
+        params, kp, seed = key
+        models = [(e, e.model) for e in self.entries if e.key in self.views]
 
         def compute(token):
             record = validation_record(params, kp=kp, seed=seed, cancel=token)
-            fits = {k: compare_on_record(m, record) for k, m in models}
-            return record, fits, nonlinear_step(params, kp, amplitude, cancel=token)
+            fits = {}
+            for entry, model in models:
+                try:
+                    fits[entry.key] = compare_on_record(model, record)
+                except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+                    continue                    # that model's row says it could not be compared
+            return record, fits
 
         def show(out, _job):
-            self.record, fits, self.plant = out
+            keys = self.record_inputs()
+            if keys is None or keys[0] != key:
+                return                          # the inputs changed again: a newer request follows
+            self.record, self.fits = out
             self.record_key = key
-            self.fits = fits
-            for e in self.entries:          # added while it computed
-                if e.key not in fits:
-                    self._compute(e)
+            for e in self.entries:              # added while it computed: their views again, with the fit
+                if e.key in self.views and e.key not in self.fits:
+                    self.views.pop(e.key, None)
+            self._compute_missing()
             self.refresh()
-            self.record_view.shown(key)
+            self._mark_record()
 
-        SessionRunner((self.runner.owner, "board-record"), self.runner.queue).run(
-            "board: validation record", compute, show, fail=lambda m: setattr(self.note, "object", m))
+        def fail(message):
+            self.note.object = (f"<span class='eha-warn'>The validation record failed: {html.escape(message)}"
+                                "</span>")
+            self.record_view.inputs_changed(self.record_inputs(), why="the validation record failed")
+
+        self.record_runner.run("board: validation record", compute, show, fail=fail)
+
+    def _run_plant(self, key) -> None:
+        params, kp, amplitude = key
+
+        def compute(token):
+            return nonlinear_step(params, kp, amplitude, cancel=token)
+
+        def show(plant, _job):
+            keys = self.record_inputs()
+            if keys is None or keys[1] != key:
+                return
+            self.plant, self.plant_key = plant, key
+            self.refresh()
+            self._mark_record()
+
+        def fail(message):
+            self.note.object = f"<span class='eha-warn'>The plant's step failed: {html.escape(message)}</span>"
+
+        self.plant_runner.run("board: the plant's step", compute, show, fail=fail)
 
     # -- drawing ---------------------------------------------------------------------------------
     def build(self) -> None:
@@ -295,9 +357,7 @@ class ModelBoard(pn.viewable.Viewer):
         for key, fig in self.figures.items():
             self._slots[key].objects = [pn.pane.Bokeh(fig.layout, sizing_mode="stretch_width")]
         self._rebuild_list()
-        for e in self.entries:
-            if e.key not in self.views:
-                self._compute(e)
+        self._compute_missing()
         self.update_record()
 
     def refresh(self) -> None:
@@ -325,8 +385,13 @@ class ModelBoard(pn.viewable.Viewer):
             if fit.assessment is not None:
                 verdicts = "".join(f"<div>{'✓' if v.passed else '✗'} {html.escape(v.sentence)}</div>"
                                    for v in fit.assessment.verdicts)
+            if e.model.kp is not None and e.model.kp != self.state.kp:
+                verdicts += (f"<div class='eha-warn'>Built for Kp = {e.model.kp:g} V/m; the record's loop has "
+                             f"Kp = {self.state.kp:g} V/m (tab 1): a low fit says so, not that the model is "
+                             "wrong.</div>")
+            fit_text = f"{fit.fit_percent:.2f} %" if np.isfinite(fit.fit_percent) else "—"
             rows.append(f"<tr><td><span style='color:{e.color}'>■</span> {html.escape(e.name)}</td>"
-                        f"<td>{fit.fit_percent:.2f} %</td><td style='font-size:12px'>{verdicts}</td></tr>")
+                        f"<td>{fit_text}</td><td style='font-size:12px'>{verdicts}</td></tr>")
         seed = self.record_key[2] if self.record_key else ""
         return ("<div style='overflow-x:auto'><table class='eha-table eha-board-fits'><tr><th>model</th>"
                 "<th>fit</th><th>residual tests on the "

@@ -162,7 +162,7 @@ class FrequencyPanel(pn.viewable.Viewer):
         self.state = state
         self.runner = runner
         # the excitation preview is a job of its own: typing N must not wait behind an experiment
-        self.preview_runner = SessionRunner((runner.owner, "preview"), runner._queue)
+        self.preview_runner = runner.sub("preview")
         self.result = None
         self.view: plots.FrequencyView | None = None
         self.preview = None
@@ -410,9 +410,10 @@ class FrequencyPanel(pn.viewable.Viewer):
                 # the board's list is rebuilt in a page update of its own: the result goes out first
                 apply_locked(partial(self.board.add, BoardModel(
                     name=self.board.next_name("H"), kind="tf", estimate=e, num=e.num, den=e.den,
-                    input_delay=getattr(e, "input_delay", 0.0), ts=cfg.ts,
+                    input_delay=getattr(e, "input_delay", 0.0), ts=cfg.ts, kp=cfg.kp,
                     description=f"{e.n_poles} poles, {e.n_zeros} zeros; idinput {cfg.signal_type} seed {cfg.seed}, "
-                                f"N {cfg.n_samples}, {cfg.model} plant; fit {e.fit_percent:.1f} %")))
+                                f"N {cfg.n_samples}, {cfg.model} plant, Kp = {cfg.kp:g} V/m; fit "
+                                f"{e.fit_percent:.1f} %")))
 
         return self.runner.run("frequency experiment", compute, show, fail=self._fail, busy=[self.area],
                                note=self._note)

@@ -3,15 +3,18 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import html
 import io
 import json
 import math
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 import panel as pn
 
+from eha_core.board import lse_model
 from eha_core.experiments import (
     LSE_INPUT,
     LSE_INPUT_RICH,
@@ -38,7 +41,7 @@ from ..tables import (
     lse_table_html,
     table4_html,
 )
-from ..tasks import SessionRunner
+from ..tasks import SessionRunner, apply_locked
 from .uploads import ColumnMapping, check_size
 
 __all__ = ["LeastSquaresPanel", "LseRequest", "LSE_FORM", "LSE_DEFAULTS", "parse_lse"]
@@ -446,6 +449,18 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         scenario = req.scenario if req.excitation == "paper" else None
 
         own = self.windowed() if self.own_data is not None else None
+        kp = self.state.kp
+        what = (f"your data {own.source}" if own is not None else
+                f"{SCENARIOS.get(req.scenario, req.scenario)}, {req.model} model")
+
+        def board_model(res):
+            """The run as the board shows it: eq. 24 with its estimates (None if they are not physical)."""
+            if self.board is None or not res.success:
+                return None
+            try:
+                return lse_model(res, params, kp, "LS", f"least squares ({what}) → eq. 24, Kp = {kp:g} V/m")
+            except ParameterError:
+                return None
 
         def compute(token):
             if own is not None:     # the student's measurements: nothing to simulate
@@ -453,7 +468,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                                    cancel=token)
                 return res, plots.lse_view(own, None), (f"Your data ({html.escape(own.source)}, {own.t.size} "
                                                         "samples): the model is not re-simulated (the input is "
-                                                        "known only at its samples)."), own, None
+                                                        "known only at its samples)."), own, None, board_model(res)
             d = req.disturbance()
             data = lse_data(params, d, u=u, t_end=t_end, seed=req.seed, measurement_noise=req.measurement_noise(),
                             cancel=token)
@@ -464,10 +479,10 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                 resim_error = ""
             except ParameterError as exc:
                 resim, resim_error = None, f"No re-simulation: the estimate is not physical ({exc})."
-            return res, plots.lse_view(data, resim), resim_error, data, resim
+            return res, plots.lse_view(data, resim), resim_error, data, resim, board_model(res)
 
         def show(out, job):
-            res, view, resim_error, data, resim = out
+            res, view, resim_error, data, resim, model = out
             self.result = res
             self.last_data, self.last_resim = data, resim
             for d in self.downloads:
@@ -487,10 +502,9 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                 self.figure.update(view)
             self.view.shown(key)
             self._inputs_changed()          # typed while it computed
-            if self.board is not None and res.success:
-                what = (f"your data {own.source}" if own is not None else
-                        f"{SCENARIOS.get(req.scenario, req.scenario)}, {req.model} model")
-                self.board.add_lse(res, params, self.state.kp, f"least squares ({what}) → eq. 24")
+            if model is not None:
+                # the board's list is rebuilt in a page update of its own: the result goes out first
+                apply_locked(partial(self.board.add, dataclasses.replace(model, name=self.board.next_name("LS"))))
 
         return self.runner.run("least squares", compute, show, fail=self._fail, busy=[self.area], note=self._note)
 

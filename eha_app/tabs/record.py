@@ -48,10 +48,11 @@ class RecordPanel:
                  note: Callable[[str], None], fail: Callable[[str], None]):
         self.runner = runner
         # previews of the preprocessing are jobs of their own: they must not replace an estimate
-        self.preview_runner = SessionRunner((runner.owner, "record preview"), runner._queue)
+        self.preview_runner = runner.sub("record preview")
         self.orders = orders
         self._note, self._fail = note, fail
         self.columns: tuple[np.ndarray, np.ndarray, np.ndarray, str] | None = None    # t, u, y, file name
+        self._uploads = 0
         self._upload: tuple[bytes, str] | None = None
         self._mapping: dict | None = None
         self.prepared = None
@@ -103,8 +104,8 @@ class RecordPanel:
         cfg = self.orders()
         if self.columns is None or cfg is None or self.window_form.errors:
             return None
-        return (self.columns[3], self.columns[0].size, self.window(), self.detrend.value, cfg.n_poles, cfg.n_zeros,
-                cfg.initial_condition, cfg.input_offset)
+        return (self._uploads, self.columns[3], self.columns[0].size, self.window(), self.detrend.value, cfg.n_poles,
+                cfg.n_zeros, cfg.initial_condition, cfg.input_offset)
 
     def inputs_changed(self) -> None:
         self.view.inputs_changed(self.key())
@@ -154,7 +155,11 @@ class RecordPanel:
                                     "them below.</span>")
                 return
             _, cols, ts = out
+            self._uploads += 1              # a new file, even with the same name and length
             self.columns, self._mapping = cols, mapping
+            self.result = None
+            for d in self.downloads:
+                d.disabled = True
             self.mapping.hide()
             t, name = cols[0], cols[3]
             self.note.object = (f"<span class='eha-ok'>Your record: {html.escape(name)}, {t.size} samples every "
@@ -178,9 +183,12 @@ class RecordPanel:
         t, u, y, _ = self.columns
         (t_from, t_to), detrend = self.window(), self.detrend.value
 
+        # the estimate is drawn over the record only if it was made from exactly these inputs (the
+        # key holds the file, the range and the trend), decided here, not in the worker
+        rec = self.result if self.result is not None and self.view.computed_from == self.key() else None
+
         def compute(_token):
             prepared = prepare_record(t, u, y, detrend=detrend, t_from=t_from, t_to=t_to)
-            rec = self.result if self.result is not None and self.view.status == "current" else None
             return prepared, plots.record_data_view(t, u, y, prepared, rec)
 
         def show(out, _job):
@@ -233,8 +241,9 @@ class RecordPanel:
             else:
                 self.bode.update(bode_view)
             self._draw_data(data_view)
-            self.downloads[0].disabled = self.downloads[1].disabled = False
-            self.downloads[2].disabled = rec.bode is None
+            ok = bool(rec.estimate.success) and bool(np.all(np.isfinite(rec.estimate.den)))
+            self.downloads[0].disabled = self.downloads[1].disabled = not ok
+            self.downloads[2].disabled = not ok or rec.bode is None
             self.area.visible = True
             self.view.shown(key)
             self.inputs_changed()

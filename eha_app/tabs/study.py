@@ -111,9 +111,10 @@ class StudyPanel(pn.viewable.Viewer):
     def __init__(self, state: AppState, runner: SessionRunner, query: dict | None = None, **kwargs):
         super().__init__(**kwargs)
         self.state = state
-        self.runner = SessionRunner((runner.owner, "study"), runner.queue)
+        self.runner = runner.sub("study")
         self.result = None
         self._token = None
+        self._busy = False                  # a study is waiting or running: one at a time
         self.figure: StudyFigure | None = None
         texts = dict(STUDY_DEFAULTS)
         texts.update({k: v for k, v in (query or {}).items() if k in _FIELDS})
@@ -163,13 +164,13 @@ class StudyPanel(pn.viewable.Viewer):
         cfg, errors = self.config()
         self.form.errors = errors
         self.form.hidden = study_hidden(self.form.values)
-        self.button.disabled = cfg is None or not self.state.valid or bool(self.state.hidden)
+        self.button.disabled = self._busy or cfg is None or not self.state.valid or bool(self.state.hidden)
 
     def run(self):
         from eha_core.study import run_study
 
         cfg, _ = self.config()
-        if cfg is None or not self.state.valid or self.state.hidden:
+        if self._busy or cfg is None or not self.state.valid or self.state.hidden:
             return None
         params = self.state.params
         doc = served_document()
@@ -214,6 +215,7 @@ class StudyPanel(pn.viewable.Viewer):
                 self._running(False)
 
     def _running(self, on: bool) -> None:
+        self._busy = on
         self.button.disabled = on or self.config()[0] is None
         self.cancel_button.disabled = not on
         self.progress.visible = on
@@ -229,12 +231,17 @@ class StudyPanel(pn.viewable.Viewer):
             self.figure = StudyFigure(names)
             self.plot.objects = [pn.pane.Bokeh(self.figure.layout, sizing_mode="stretch_width")]
         self.figure.update(result)
+        from eha_core.study import coverage_band
+
         lo, hi = result.coverage_band()
         rows = []
         for n in names:
             nom = result.nominal.get(n, np.nan)
             cov = result.coverage.get(n, np.nan)
-            honest = lo <= cov <= hi
+            # the band of the seeds this parameter's coverage was counted over
+            n_used = result.values(n).size
+            p_lo, p_hi = coverage_band(max(n_used, 1))
+            honest = p_lo <= cov <= p_hi
             rows.append(f"<tr><td>{html.escape(n)}</td><td>{nom:.6g}</td><td>{result.mean[n]:.6g}</td>"
                         f"<td>{result.std[n]:.3g}</td><td>{result.mean_std_error[n]:.3g}</td>"
                         f"<td>{cov * 100:.1f} % {'✓' if honest else '✗'}</td></tr>")

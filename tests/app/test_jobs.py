@@ -142,3 +142,25 @@ def test_worker_count_from_the_environment(monkeypatch):
         worker_count()
     monkeypatch.delenv("EHA_WORKERS")
     assert worker_count() >= 1
+
+
+def test_closing_a_page_cancels_every_runner_of_its_session_and_forgets_them(queue):
+    """A session's previews, board and study run under sub-owners: closing the page cancels them all,
+    and the queue keeps no reference to the closed session."""
+    from eha_app.tasks import SessionRunner
+
+    root = SessionRunner("student", queue)
+    board, study = root.sub("board views"), root.sub("study")
+    assert board.owner == ("student", "board views") and study.sub("x").owner == (("student", "study"), "x")
+    gate = threading.Event()
+    running, _ = queue.submit(root.owner, lambda tok: gate.wait(TIMEOUT), label="experiment")
+    waiting, _ = queue.submit(board.owner, lambda tok: 1, label="board")
+    waiting2, _ = queue.submit(study.owner, lambda tok: 2, label="study")
+    wait_for(lambda: running.state == "running")
+    jobs = board.cancel_all("the page was closed")           # from any runner of the session
+    gate.set()
+    assert {j.label for j in jobs} == {"experiment", "board", "study"}
+    wait_for(lambda: running.finished)
+    assert waiting.state == waiting2.state == "cancelled"
+    owners = {root.owner, board.owner, study.owner, ("student", "study"), ("student", "study"), "x"}
+    assert not owners & set(queue._last_served) and not owners & set(queue._queued)

@@ -299,3 +299,22 @@ def test_all_figures_data_download(closed_loop):
     z = zipfile.ZipFile(io.BytesIO(panel.figures_bytes()))
     assert b"eq24" not in z.read("fig11_fit.csv") and b"eq24" not in z.read("fig12_bode_curves.csv")
     assert not any("eq24" in k for k in scipy.io.loadmat(io.BytesIO(z.read("figures.mat"))))
+
+
+def test_a_changed_record_never_shows_the_old_estimate(closed_loop):
+    panel = IdentificationTab(AppState()).frequency_panel()
+    record = _upload_record(panel, closed_loop.data_bytes("csv"), "loop.csv")
+    record.run()
+    fig = record.data_figure
+    assert fig.model_label
+    record.detrend.value = "mean"                 # prepared again: the old estimate is not drawn over it
+    assert record.view.status == "stale" and not fig.model_label and len(fig.model.data["t"]) == 0
+    record.detrend.value = "none"                 # back to what it was estimated from: drawn again
+    assert record.view.status == "current" and fig.model_label
+    # another file with the same name and length: not the estimate's data
+    from eha_core.data import write_data
+
+    d = closed_loop.result.data
+    _upload_record(panel, write_data({"t": d.t, "r": d.r, "x": 2 * d.x}, "csv"), "loop.csv")
+    assert record.result is None and record.view.status == "stale" and not fig.model_label
+    assert all(dl.disabled for dl in record.downloads)

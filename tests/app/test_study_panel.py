@@ -69,3 +69,13 @@ def test_a_transfer_function_study(model):
     panel.form.values = {**panel.form.values, "study_kind": "tf", "study_seeds": "3", "study_model": model}
     panel.run()
     assert panel.result.parameters == ("a1", "a2", "a3", "b0") and panel.result.n_completed == 3
+
+
+def test_one_study_at_a_time():
+    panel = IdentificationTab(AppState()).study_panel()
+    panel._running(True)                          # as while a study waits or runs
+    panel.form.values = {**panel.form.values, "study_seeds": "30"}
+    assert panel.button.disabled and not panel.cancel_button.disabled
+    assert panel.run() is None
+    panel._running(False)
+    assert not panel.button.disabled
