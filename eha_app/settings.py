@@ -39,7 +39,7 @@ def _tabs(page):
     return {"simulation": sim.form if sim is not None else None,
             "least_squares": ident.lse.form if ident is not None else None,
             "frequency": ident.freq.form if ident is not None and ident.freq is not None else None,
-            "board": ident.board.form if ident is not None else None,
+            "board": ident.board.form if ident is not None and ident.board is not None else None,
             "study": ident.study.form if ident is not None and ident.study is not None else None}
 
 

@@ -6,7 +6,7 @@ import panel as pn
 
 from ..state import AppState
 from ..tasks import SessionRunner, apply_locked, frozen_models
-from .board import ModelBoard
+from .board import BoardInbox, ModelBoard
 from .frequency import FREQ_DEFAULTS, FREQ_FORM, FrequencyPanel, parse_freq
 from .least_squares import LSE_DEFAULTS, LSE_FORM, LeastSquaresPanel, LseRequest, parse_lse
 from .study import StudyPanel
@@ -27,10 +27,11 @@ class IdentificationTab(pn.viewable.Viewer):
         self.state = state
         self.runner = runner if runner is not None else SessionRunner(state)
         self._query = query
-        # every estimate of the session lands on the board (built, with its figures, when first shown)
-        self.board = ModelBoard(state, self.runner, query)
+        # every estimate of the session lands on the board (made, with its figures, when first shown)
+        self.inbox = BoardInbox()
+        self.board: ModelBoard | None = None
         self.lse = LeastSquaresPanel(state, self.runner, query)
-        self.lse.board = self.board
+        self.lse.board = self.inbox
         self.freq: FrequencyPanel | None = None
         self._freq_slot = pn.Column(pn.pane.HTML("<p class='eha-note'>Preparing the frequency domain…</p>"),
                                     sizing_mode="stretch_width")
@@ -64,9 +65,13 @@ class IdentificationTab(pn.viewable.Viewer):
 
     def board_panel(self) -> ModelBoard:
         """The model board, with its figures built now if never shown."""
-        if not self.board.built:
+        if self.board is None:
             with frozen_models():
+                self.board = self.inbox.board = ModelBoard(self.state, self.runner, self._query)
                 self.board.build()
+                for model in self.inbox.pending:
+                    self.board.add(model)
+                self.inbox.pending.clear()
                 self._board_slot.objects = [self.board]
         return self.board
 
@@ -75,7 +80,7 @@ class IdentificationTab(pn.viewable.Viewer):
         if self.freq is None:
             with frozen_models():
                 self.freq = FrequencyPanel(self.state, self.runner, self._query)
-                self.freq.board = self.freq.record.board = self.board
+                self.freq.board = self.freq.record.board = self.inbox
                 self._freq_slot.objects = [self.freq]
         return self.freq
 

@@ -108,3 +108,13 @@ def test_the_frequency_experiment_lands_on_the_board(tab):
     view = tab.board.views[h1.key]
     assert view.band is not None and len(view.pz.poles) == 3
     assert tab.board.fits[h1.key].fit_percent > 90         # a fresh record: the estimate carries over
+
+
+def test_estimates_made_before_the_board_is_opened_are_on_it():
+    t = IdentificationTab(AppState())
+    t.lse.run()
+    t.lse.run()
+    assert t.board is None and len(t.inbox.pending) == 2        # no board built for a session that never looks
+    board = t.board_panel()
+    assert _names(board) == ["H(s) eq. 24", "Ĥ paper", "LS1", "LS2"] and not t.inbox.pending
+    assert all(e.key in board.views for e in board.entries)

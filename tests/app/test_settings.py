@@ -22,7 +22,7 @@ def test_saved_settings_load_into_another_session():
     ident = a.eha_lazy.build(2)
     typed(ident.lse.form, lse_scenario="5000 sin", lse_model="harmonic")
     typed(ident.frequency_panel().form, signal_type="prbs", n_samples="500")
-    typed(ident.board.form, board_seed="7", board_step="20")
+    typed(ident.board_panel().form, board_seed="7", board_step="20")
     typed(ident.study_panel().form, study_kind="tf", study_seeds="50")
     blob = settings.to_bytes(a)
     data = json.loads(blob)
@@ -37,7 +37,7 @@ def test_saved_settings_load_into_another_session():
     b_ident = b.eha_lazy.build(2)                    # built from the loaded values
     assert b_ident.lse.form.values["lse_model"] == "harmonic"
     assert b_ident.frequency_panel().form.values["signal_type"] == "prbs"
-    assert b_ident.board.form.values["board_step"] == "20"
+    assert b_ident.board_panel().form.values["board_step"] == "20"
     assert b_ident.study_panel().form.values["study_seeds"] == "50"
     assert json.loads(settings.to_bytes(b)) == {**data, "tab": json.loads(settings.to_bytes(b))["tab"]}
 
