@@ -17,7 +17,6 @@ import time
 
 import numpy as np
 import panel as pn
-from bokeh.layouts import gridplot
 from bokeh.models import ColumnDataSource, Span
 
 from eha_core.experiments import FrequencyExperiment
@@ -66,14 +65,16 @@ class StudyFigure:
     """One histogram per parameter: estimates minus the nominal value (in % of it, or in its unit
     when it is zero), the nominal value (dashed) and the mean (solid)."""
 
-    def __init__(self, names: tuple[str, ...], *, width: int = plots.FIGURE_WIDTH):
+    def __init__(self, names: tuple[str, ...], *, width: int = 300):
         self.names = names
         self.sources, self.means, self.figs = {}, {}, []
         for name in names:
             src = ColumnDataSource(data={"left": [], "right": [], "top": []})
-            fig = plots._figure(width=max(width // 3, 240), height=200, title=name,
+            # fixed-size figures in a wrapping row: three across on a wide page, one on a narrow one
+            fig = plots._figure(width=width, height=210, sizing_mode="fixed", title=name,
                                 x_axis_label="estimate − nominal [%]", y_axis_label="seeds")
-            fig.min_width = 200
+            fig.title.text_font_size = "11px"
+            fig.xaxis.ticker.desired_num_ticks = 4
             fig.quad(left="left", right="right", bottom=0, top="top", source=src, fill_color=plots.CASE_COLORS[0],
                      fill_alpha=0.5, line_color="white")
             fig.add_layout(Span(location=0.0, dimension="height", line_color="#333333", line_dash="dashed",
@@ -83,7 +84,8 @@ class StudyFigure:
             self.sources[name], self.means[name] = src, mean
             self.figs.append(fig)
         plots._lean(*self.figs)
-        self.layout = gridplot(self.figs, ncols=3, sizing_mode="stretch_width", toolbar_location=None)
+        self.layout = pn.FlexBox(*(pn.pane.Bokeh(f, width=width + 10) for f in self.figs),
+                                 sizing_mode="stretch_width", css_classes=["eha-study-histograms"])
 
     def update(self, result) -> None:
         for name, fig in zip(self.names, self.figs, strict=True):
@@ -229,7 +231,7 @@ class StudyPanel(pn.viewable.Viewer):
         names = tuple(result.parameters)
         if self.figure is None or self.figure.names != names:
             self.figure = StudyFigure(names)
-            self.plot.objects = [pn.pane.Bokeh(self.figure.layout, sizing_mode="stretch_width")]
+            self.plot.objects = [self.figure.layout]
         self.figure.update(result)
         from eha_core.study import coverage_band
 
