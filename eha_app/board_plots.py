@@ -190,12 +190,15 @@ class PoleZeroFigure:
         self.zeros = ColumnDataSource(data={k: [] for k in ("x", "y", "color", "name", "what", "flag")})
         self.flagged = ColumnDataSource(data={"x": [], "y": []})
         self.regions = ColumnDataSource(data={"xs": [], "ys": [], "color": []})
+        # a real root's region is an interval of the real axis: drawn as a thick bar, not a flat patch
+        self.intervals = ColumnDataSource(data={"x0": [], "x1": [], "y": [], "color": []})
         self.nyquist = ColumnDataSource(data={"x": [], "y": []})
         # one scale on both axes: a region's shape and the Nyquist circle are drawn true
         self.fig = _figure(width=width, height=height, x_axis_label="Re s [rad/s]", y_axis_label="Im s [rad/s]",
                            title="Poles (×) and zeros (○) with their 95 % regions", match_aspect=True)
         self.fig.patches("xs", "ys", source=self.regions, fill_color="color", fill_alpha=0.18, line_color="color",
                          line_alpha=0.6)
+        self.fig.segment("x0", "y", "x1", "y", source=self.intervals, color="color", line_width=8, line_alpha=0.35)
         self.fig.line("x", "y", source=self.nyquist, color="#999999", line_dash="dashed")
         self.fig.scatter("x", "y", source=self.flagged, marker="circle", size=18, fill_alpha=0, line_color="#b00020",
                          line_width=2)
@@ -216,6 +219,7 @@ class PoleZeroFigure:
         cols = {"poles": {k: [] for k in self.poles.data}, "zeros": {k: [] for k in self.zeros.data}}
         flagged = {"x": [], "y": []}
         regions = {"xs": [], "ys": [], "color": []}
+        intervals = {"x0": [], "x1": [], "y": [], "color": []}
         nyquist = None
         notes = []
         for e in entries:
@@ -231,23 +235,31 @@ class PoleZeroFigure:
                     c["y"].append(float(r.location.imag))
                     c["color"].append(e.color)
                     c["name"].append(e.name)
-                    loc = f"{r.location.real:.4g}" + (f" ± {abs(r.location.imag):.4g}j" if r.location.imag else "")
-                    if r.outline is not None:
+                    loc = (f"{r.location.real:.4g}" + (f" ± {abs(r.location.imag):.4g}j" if r.location.imag else "")
+                           + " rad/s")
+                    if r.interval is not None:
+                        intervals["x0"].append(float(r.interval[0]))
+                        intervals["x1"].append(float(r.interval[1]))
+                        intervals["y"].append(0.0)
+                        intervals["color"].append(e.color)
+                        loc += f" (95 %: {r.interval[0]:.4g} to {r.interval[1]:.4g})"
+                    elif r.outline is not None:
                         regions["xs"].append(np.asarray(r.outline).real.tolist())
                         regions["ys"].append(np.asarray(r.outline).imag.tolist())
                         regions["color"].append(e.color)
                         loc += f" (95 %: ±{r.half_width:.3g} rad/s)"
-                    c["what"].append(f"{r.kind} at {loc} rad/s")
+                    c["what"].append(f"{r.kind} at {loc}")
                     c["flag"].append(f"weakly determined: {r.reason}" if r.weakly_determined else "")
                     if r.weakly_determined:
                         flagged["x"].append(float(r.location.real))
                         flagged["y"].append(float(r.location.imag))
-                        notes.append(f"{html.escape(e.name)}: the {r.kind} at {html.escape(loc)} rad/s is weakly "
+                        notes.append(f"{html.escape(e.name)}: the {r.kind} at {html.escape(loc)} is weakly "
                                      f"determined ({html.escape(r.reason)}).")
         self.poles.data = cols["poles"]
         self.zeros.data = cols["zeros"]
         self.flagged.data = flagged
         self.regions.data = regions
+        self.intervals.data = intervals
         if nyquist is not None:
             a = np.linspace(np.pi / 2, 3 * np.pi / 2, 121)
             self.nyquist.data = {"x": (nyquist * np.cos(a)).tolist(), "y": (nyquist * np.sin(a)).tolist()}

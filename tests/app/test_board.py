@@ -77,7 +77,9 @@ def test_a_weakly_determined_pole_is_shown_not_hidden(tab):
     pz = tab.board.figures["pz"]
     assert len(pz.flagged.data["x"]) == 1 and "weakly determined" in pz.note.text
     assert len(pz.nyquist.data["x"]) > 0 and "π/Ts = 314 rad/s" in pz.note.text
-    assert len(pz.regions.data["xs"]) == 3
+    # three real poles: their regions are intervals of the real axis (drawn as bars), not ellipses
+    assert len(pz.regions.data["xs"]) + len(pz.intervals.data["x0"]) == 3
+    assert pz.intervals.data["x0"][0] < pz.intervals.data["x1"][0]
 
 
 def test_step_table_figures_are_the_cores(tab):
