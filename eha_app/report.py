@@ -472,6 +472,21 @@ def session_report(page) -> bytes:
         sections.append(("frequency", "Transfer function (eqs. 19-27)", _stale_note(freq.views["summary"])
                          + freq_summary_html(fi, hidden) + "{{fit}}{{bode}}{{validation}}"
                          + "<h3>Backed-out parameters (eq. 27)</h3>" + backout_html(fi, hidden)))
+    board = ident.board if ident is not None else None
+    if board is not None and board.built and board.ticked() and board.views:
+        from . import board_plots
+
+        entries, amplitude = board.ticked(), board.amplitude()
+        parts = {"board_fit": board_plots.BoardFitFigure(), "board_bode": board_plots.BoardBodeFigure(),
+                 "board_step": board_plots.BoardStepFigure(), "board_pz": board_plots.PoleZeroFigure()}
+        parts["board_fit"].update(board.record, entries, board.fits)
+        parts["board_bode"].update(entries, board.views, bands=board.bands.value)
+        parts["board_step"].update(entries, board.views, board.plant, amplitude)
+        parts["board_pz"].update(entries, board.views)
+        figures.update({k: f.layout for k, f in parts.items()})
+        sections.append(("board", "Model board (the models ticked)", _stale_note(board.record_view)
+                         + board.fit_table(entries) + "{{board_fit}}{{board_bode}}"
+                         + board.step_table(entries, amplitude) + "{{board_step}}{{board_pz}}"))
     sections.append(("settings", "Settings of this session (load them with “Load settings”)",
                      f"<pre>{html.escape(json.dumps(cfg, indent=1, ensure_ascii=False))}</pre>"))
     script, divs = components(figures) if figures else ("", {})

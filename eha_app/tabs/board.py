@@ -377,20 +377,24 @@ class ModelBoard(pn.viewable.Viewer):
         self._compute_missing()
         self.update_record()
 
+    def amplitude(self) -> float:
+        """The step of r [m] the step view draws."""
+        return (self.settings()[0].get("board_step") or 10.0) * 1e-3
+
     def refresh(self) -> None:
         """Redraw every view from the cached curves of the ticked models (no computation)."""
         if not self.built:
             return
         entries = self.ticked()
-        amplitude = (self.settings()[0].get("board_step") or 10.0) * 1e-3
+        amplitude = self.amplitude()
         self.figures["fit"].update(self.record, entries, self.fits)
         self.figures["bode"].update(entries, self.views, bands=self.bands.value)
         self.figures["step"].update(entries, self.views, self.plant, amplitude)
         self.figures["pz"].update(entries, self.views)
-        self.tables["fit"].object = self._fit_table(entries)
-        self.tables["step"].object = self._step_table(entries, amplitude)
+        self.tables["fit"].object = self.fit_table(entries)
+        self.tables["step"].object = self.step_table(entries, amplitude)
 
-    def _fit_table(self, entries) -> str:
+    def fit_table(self, entries) -> str:
         if self.record is None:
             return ""
         rows = []
@@ -417,7 +421,7 @@ class ModelBoard(pn.viewable.Viewer):
                 f"sine, seed {seed}, N = 1000, Ts = 0.01 s). Each model's initial state and input offset are "
                 "fitted to it (MATLAB's compare); fit = 100 (1 − ‖x − x̂‖ / ‖x − mean x‖).</p>")
 
-    def _step_table(self, entries, amplitude: float) -> str:
+    def step_table(self, entries, amplitude: float) -> str:
         rows = []
         items = [(e.name, e.color, self.views[e.key].step) for e in entries if e.key in self.views]
         if self.plant is not None:

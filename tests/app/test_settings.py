@@ -73,6 +73,13 @@ def test_the_session_report_holds_what_the_student_ran(tmp_path):
         assert part in text, part
     assert text.count('class="fig"') == 5                     # the grid, the fit of eqs. 15-18, Figs. 11-13
     assert "<script src=" not in text and "<link" not in text            # all inline: it opens offline
+    # with the board opened: its ticked models, their fits, steps and pole-zero map
+    board = ident.board_panel()
+    text = session_report(page).decode()
+    assert "Model board" in text and "LS1" in text and "H1" in text and "nonlinear plant" in text
+    assert text.count('class="fig"') == 9
+    board.tick(board.entries[0], False)
+    assert "H(s) eq. 24" not in session_report(page).decode().split("Model board", 1)[1].split("Settings of")[0]
 
 
 def test_the_report_button_prepares_the_download():
