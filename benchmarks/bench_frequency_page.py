@@ -31,13 +31,8 @@ import argparse
 import os
 import re
 import shutil
-import socket
 import statistics
-import subprocess
 import sys
-import tempfile
-import time
-import urllib.request
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -130,50 +125,8 @@ JS_IDLE = """async (quiet) => {
 }"""
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class Server:
-    """``eha serve`` in a subprocess on a free port."""
-
-    def __init__(self):
-        self.port = free_port()
-        fd, self.log_path = tempfile.mkstemp(prefix="eha-serve-", suffix=".log")
-        self.log = os.fdopen(fd, "w+")
-        eha = Path(sys.executable).with_name("eha")
-        cmd = ([str(eha)] if eha.exists() else [sys.executable, "-m", "eha_app.cli"])
-        cmd += ["serve", "--port", str(self.port), "--address", "127.0.0.1"]
-        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT)
-        self.url = f"http://127.0.0.1:{self.port}/eha"
-        deadline = time.monotonic() + 180
-        while True:
-            if self.proc.poll() is not None:
-                raise RuntimeError(f"eha serve exited with {self.proc.returncode}: "
-                                   f"{Path(self.log_path).read_text()[-2000:]}")
-            try:
-                with urllib.request.urlopen(self.url, timeout=10) as r:
-                    if r.status == 200:
-                        break
-            except OSError:
-                pass
-            if time.monotonic() > deadline:
-                self.stop()
-                raise RuntimeError("eha serve did not answer within 180 s")
-            time.sleep(0.3)
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        self.log.close()
-        Path(self.log_path).unlink(missing_ok=True)
+# the same server as the classroom benchmark's (run from benchmarks/, as every benchmark is)
+from bench_classroom import Server  # noqa: E402
 
 
 def _chromium(path: str | None) -> str:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import io
 import math
 from functools import partial
 
@@ -30,6 +29,7 @@ from ..tables import (
 )
 from ..tasks import SessionRunner, apply_locked, held
 from .record import RecordPanel
+from .uploads import download
 
 __all__ = ["FrequencyPanel", "FREQ_FORM", "FREQ_DEFAULTS", "parse_freq"]
 
@@ -186,23 +186,16 @@ class FrequencyPanel(pn.viewable.Viewer):
         self.unstable = pn.pane.Alert("", alert_type="warning", visible=False, sizing_mode="stretch_width",
                                       css_classes=["eha-freq-unstable"])
         self.downloads = [
-            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.data_bytes("csv")), filename="eha_closed_loop.csv",
-                                    label="Data (CSV)", disabled=True, width=128, css_classes=["eha-dl-freq-csv"]),
-            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.data_bytes("mat")), filename="eha_closed_loop.mat",
-                                    label="Data (.mat)", disabled=True, width=128, css_classes=["eha-dl-freq-mat"]),
-            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.estimate_bytes("csv")),
-                                    filename="eha_transfer_function.csv", label="Estimate (CSV)", disabled=True,
-                                    width=128, css_classes=["eha-dl-freq-est-csv"]),
-            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.estimate_bytes("json")),
-                                    filename="eha_transfer_function.json", label="Estimate (JSON)", disabled=True,
-                                    width=128, css_classes=["eha-dl-freq-json"]),
-            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.bode_bytes()),
-                                    filename="eha_bode.csv", label="Bode curves (CSV)", disabled=True,
-                                    width=128, css_classes=["eha-dl-freq-bode"]),
-            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.figures_bytes()),
-                                    filename="eha_frequency_figures.zip", label="All figures' data", disabled=True,
-                                    width=128, css_classes=["eha-dl-freq-zip"],
-                                    description="Figs. 8-13 and the residuals: one CSV per figure and a .mat"),
+            download(lambda: self.data_bytes("csv"), "eha_closed_loop.csv", "Data (CSV)", "eha-dl-freq-csv"),
+            download(lambda: self.data_bytes("mat"), "eha_closed_loop.mat", "Data (.mat)", "eha-dl-freq-mat"),
+            download(lambda: self.estimate_bytes("csv"), "eha_transfer_function.csv",
+                     "Estimate (CSV)", "eha-dl-freq-est-csv"),
+            download(lambda: self.estimate_bytes("json"), "eha_transfer_function.json",
+                     "Estimate (JSON)", "eha-dl-freq-json"),
+            download(lambda: self.bode_bytes(), "eha_bode.csv", "Bode curves (CSV)", "eha-dl-freq-bode"),
+            download(lambda: self.figures_bytes(), "eha_frequency_figures.zip",
+                     "All figures' data", "eha-dl-freq-zip",
+                     description="Figs. 8-13 and the residuals: one CSV per figure and a .mat"),
         ]
         self.area = pn.Column(self.unstable, self.summary, self.backout, sizing_mode="stretch_width")
         self.kp_note = pn.pane.HTML("", width=260, css_classes=["eha-freq-kp"], margin=(0, 10))

@@ -42,7 +42,7 @@ from ..tables import (
     table4_html,
 )
 from ..tasks import SessionRunner, apply_locked
-from .uploads import ColumnMapping, check_size
+from .uploads import ColumnMapping, check_size, download
 
 __all__ = ["LeastSquaresPanel", "LseRequest", "LSE_FORM", "LSE_DEFAULTS", "parse_lse"]
 
@@ -216,16 +216,11 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                                                   css_classes=["eha-lse-simulated"])
         self.simulated_button.on_click(lambda _e: self.use_simulated())
         self.downloads = [
-            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.data_bytes("csv")), filename="eha_lse_data.csv",
-                                    label="Data (CSV)", disabled=True, width=128, css_classes=["eha-dl-data-csv"]),
-            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.data_bytes("mat")), filename="eha_lse_data.mat",
-                                    label="Data (.mat)", disabled=True, width=128, css_classes=["eha-dl-data-mat"]),
-            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.estimates_bytes("csv")),
-                                    filename="eha_lse_estimates.csv", label="Estimates (CSV)", disabled=True,
-                                    width=128, css_classes=["eha-dl-est-csv"]),
-            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.estimates_bytes("json")),
-                                    filename="eha_lse_estimates.json", label="Estimates (JSON)", disabled=True,
-                                    width=128, css_classes=["eha-dl-est-json"]),
+            download(lambda: self.data_bytes("csv"), "eha_lse_data.csv", "Data (CSV)", "eha-dl-data-csv"),
+            download(lambda: self.data_bytes("mat"), "eha_lse_data.mat", "Data (.mat)", "eha-dl-data-mat"),
+            download(lambda: self.estimates_bytes("csv"), "eha_lse_estimates.csv", "Estimates (CSV)", "eha-dl-est-csv"),
+            download(lambda: self.estimates_bytes("json"), "eha_lse_estimates.json",
+                     "Estimates (JSON)", "eha-dl-est-json"),
         ]
         state.param.watch(self._update_enabled, "valid")
         state.param.watch(self._inputs_changed, ["params", "valid"])

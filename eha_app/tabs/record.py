@@ -9,7 +9,6 @@ is chosen), and estimates H(s) on the first two thirds, validated on the rest.
 from __future__ import annotations
 
 import html
-import io
 from collections.abc import Callable
 from functools import partial
 
@@ -26,7 +25,7 @@ from ..freshness import ResultView
 from ..glossary import term
 from ..tables import estimate_alert, estimation_sentences
 from ..tasks import SessionRunner, apply_locked
-from .uploads import ColumnMapping, check_size
+from .uploads import ColumnMapping, check_size, download
 
 __all__ = ["RecordPanel", "RECORD_COLUMNS"]
 
@@ -82,15 +81,12 @@ class RecordPanel:
         self.area = pn.Column(self.summary, sizing_mode="stretch_width", visible=False)
         self.view = ResultView("freq-record", self.area, run_hint="Press “Estimate from your record” to update it.")
         self.downloads = [
-            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.estimate_bytes("csv")),
-                                    filename="eha_record_transfer_function.csv", label="Estimate (CSV)",
-                                    disabled=True, width=128, css_classes=["eha-dl-record-csv"]),
-            pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.estimate_bytes("json")),
-                                    filename="eha_record_transfer_function.json", label="Estimate (JSON)",
-                                    disabled=True, width=128, css_classes=["eha-dl-record-json"]),
-            pn.widgets.FileDownload(callback=lambda: io.BytesIO(bode_csv(self.result.bode, theoretical=False)),
-                                    filename="eha_record_bode.csv", label="Bode curves (CSV)", disabled=True,
-                                    width=260, css_classes=["eha-dl-record-bode"]),
+            download(lambda: self.estimate_bytes("csv"), "eha_record_transfer_function.csv",
+                     "Estimate (CSV)", "eha-dl-record-csv"),
+            download(lambda: self.estimate_bytes("json"), "eha_record_transfer_function.json",
+                     "Estimate (JSON)", "eha-dl-record-json"),
+            download(lambda: bode_csv(self.result.bode, theoretical=False), "eha_record_bode.csv",
+                     "Bode curves (CSV)", "eha-dl-record-bode", width=260),
         ]
         self.window_form.param.watch(lambda _e: self.preview(), "values")
         self.detrend.param.watch(lambda _e: self.preview(), "value")

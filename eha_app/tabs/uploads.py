@@ -1,13 +1,14 @@
-"""What tab 3's two uploads share: the size limit and the column-mapping step."""
+"""What tab 3's uploads and downloads share: the size limit, the column-mapping step, the download button."""
 
 from __future__ import annotations
 
 import html
+import io
 from collections.abc import Callable
 
 import panel as pn
 
-__all__ = ["MAX_UPLOAD_BYTES", "check_size", "ColumnMapping"]
+__all__ = ["MAX_UPLOAD_BYTES", "check_size", "ColumnMapping", "download"]
 
 #: An upload larger than this is refused (a 10 minute record at 1 kHz is about 2 MB of CSV).
 MAX_UPLOAD_BYTES = 20e6
@@ -51,3 +52,12 @@ class ColumnMapping:
 
     def hide(self) -> None:
         self.panel.visible = False
+
+
+def download(make: Callable[[], bytes], filename: str, label: str, css_class: str, *, width: int = 128,
+             description: str | None = None) -> pn.widgets.FileDownload:
+    """A download button, disabled until its tab has something to offer; ``make()`` writes the
+    file's bytes when it is pressed (on the session's thread: the files are small)."""
+    extra = {"description": description} if description else {}
+    return pn.widgets.FileDownload(callback=lambda: io.BytesIO(make()), filename=filename, label=label,
+                                   disabled=True, width=width, css_classes=[css_class], **extra)
