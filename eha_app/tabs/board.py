@@ -369,10 +369,6 @@ class ModelBoard(pn.viewable.Viewer):
         if self.built:
             return
         self.built = True
-        self.figures = {"fit": board_plots.BoardFitFigure(), "bode": board_plots.BoardBodeFigure(),
-                        "step": board_plots.BoardStepFigure(), "pz": board_plots.PoleZeroFigure()}
-        for key, fig in self.figures.items():
-            self._slots[key].objects = [pn.pane.Bokeh(fig.layout, sizing_mode="stretch_width")]
         self._rebuild_list()
         self._compute_missing()
         self.update_record()
@@ -387,10 +383,24 @@ class ModelBoard(pn.viewable.Viewer):
             return
         entries = self.ticked()
         amplitude = self.amplitude()
-        self.figures["fit"].update(self.record, entries, self.fits)
-        self.figures["bode"].update(entries, self.views, bands=self.bands.value)
-        self.figures["step"].update(entries, self.views, self.plant, amplitude)
-        self.figures["pz"].update(entries, self.views)
+        drawn = [e for e in entries if e.key in self.views]
+        # a figure is made with its first data: an empty one makes Bokeh complain it cannot range it
+        ready = {"fit": self.record is not None and any(e.key in self.fits for e in drawn),
+                 "bode": bool(drawn), "step": bool(drawn), "pz": bool(drawn)}
+        for key, cls in (("fit", board_plots.BoardFitFigure), ("bode", board_plots.BoardBodeFigure),
+                         ("step", board_plots.BoardStepFigure), ("pz", board_plots.PoleZeroFigure)):
+            if key not in self.figures and ready[key]:
+                self.figures[key] = cls()
+                self._slots[key].objects = [pn.pane.Bokeh(self.figures[key].layout, sizing_mode="stretch_width")]
+            elif key not in self.figures:
+                self._slots[key].objects = [pn.pane.HTML(
+                    "<p class='eha-note'>" + ("Computing…" if entries else "Tick a model to draw it.") + "</p>")]
+        if "fit" in self.figures:
+            self.figures["fit"].update(self.record, entries, self.fits)
+        if "bode" in self.figures:
+            self.figures["bode"].update(entries, self.views, bands=self.bands.value)
+            self.figures["step"].update(entries, self.views, self.plant, amplitude)
+            self.figures["pz"].update(entries, self.views)
         self.tables["fit"].object = self.fit_table(entries)
         self.tables["step"].object = self.step_table(entries, amplitude)
 

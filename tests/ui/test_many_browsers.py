@@ -51,6 +51,16 @@ async def _student(browser, url: str, i: int, problems: list) -> None:
             await page.locator(".bk-header .bk-tab", has_text=fig).first.click()
         # the residual plots arrived with the last result's data
         await page.wait_for_function(JS_RESIDUALS_DRAWN, timeout=30_000)
+        # the board takes each student's own estimates; a short study runs beside the others'
+        await page.locator(".bk-header .bk-tab", has_text="Model board").first.click()
+        for name in ("LS1", "H1"):
+            await page.wait_for_selector(f".eha-board-fits >> text={name}", timeout=90_000)
+        await page.locator(".bk-header .bk-tab", has_text="Study over seeds").first.click()
+        seeds = page.locator(".eha-study-form input").first
+        await seeds.fill("20")
+        await seeds.press("Enter")
+        await page.get_by_role("button", name="Run the study").click()
+        await page.wait_for_selector(".eha-study-status >> text=20 of 20 seeds", timeout=90_000)
     finally:
         await context.close()
 
