@@ -84,7 +84,7 @@ from .params import ActuatorParams
 from .signals import Constant, Signal, Sine, Sum, WhiteNoise, parse_signal
 
 __all__ = ["STUDY_KINDS", "MAX_SEEDS", "MAX_WORKERS", "DEFAULT_WORKERS", "TF_PARAMETERS", "StudyConfig",
-           "SeedEstimate", "StudyResult", "run_study", "coverage_band"]
+           "SeedEstimate", "StudyResult", "run_study", "combine_studies", "coverage_band"]
 
 #: The experiments a study repeats.
 STUDY_KINDS = ("lse", "tf")
@@ -672,4 +672,30 @@ def run_study(config: StudyConfig | None = None, params: ActuatorParams | None =
         mean=mean, std=std, mean_std_error=mean_se, coverage=coverage, elapsed_s=time.perf_counter() - t0,
         workers=int(workers), cancelled=cancelled,
         message=_message(config, plan, done, cancelled, cancel.reason if cancel is not None else ""),
+    )
+
+
+def combine_studies(config: StudyConfig, parts, params: ActuatorParams | None = None, *,
+                    cancelled: bool = False) -> StudyResult:
+    """One study from its parts: results of :func:`run_study` over consecutive seed ranges of ``config``.
+
+    A web server runs a long study as short jobs, so that other students'
+    computations come between them; the combined result equals
+    :func:`run_study` over all the seeds (seed k's estimate does not depend on
+    how the seeds were split). ``cancelled``: the study was stopped before
+    its last part.
+    """
+    params = params if params is not None else ActuatorParams()
+    plan = _LsePlan(config, params) if config.kind == "lse" else _TfPlan(config, params)
+    done = sorted((s for part in parts for s in part.seeds), key=lambda s: s.seed)
+    cancelled = bool(cancelled or any(part.cancelled for part in parts)) and len(done) < config.n_seeds
+    mean, std, mean_se, coverage = _statistics(plan, done)
+    return StudyResult(
+        config=config, params=params, parameters=tuple(plan.parameters), nominal=dict(plan.nominal),
+        nominal_is_truth=plan.nominal_is_truth, reference=plan.reference, seeds=tuple(done),
+        n_requested=config.n_seeds, n_completed=len(done), n_failed=sum(not s.success for s in done),
+        mean=mean, std=std, mean_std_error=mean_se, coverage=coverage,
+        elapsed_s=float(sum(part.elapsed_s for part in parts)),
+        workers=max((part.workers for part in parts), default=1), cancelled=cancelled,
+        message=_message(config, plan, done, cancelled, "the study was cancelled" if cancelled else ""),
     )

@@ -117,6 +117,9 @@ class StudyPanel(pn.viewable.Viewer):
         self.result = None
         self._token = None
         self._busy = False                  # a study is waiting or running: one at a time
+        self._parts: list = []              # the results of its jobs so far
+        self._stopped = False
+        self._study = None                  # (config, parameters) of the study running
         self.figure: StudyFigure | None = None
         texts = dict(STUDY_DEFAULTS)
         texts.update({k: v for k, v in (query or {}).items() if k in _FIELDS})
@@ -168,44 +171,64 @@ class StudyPanel(pn.viewable.Viewer):
         self.form.hidden = study_hidden(self.form.values)
         self.button.disabled = self._busy or cfg is None or not self.state.valid or bool(self.state.hidden)
 
-    def run(self):
-        from eha_core.study import run_study
+    #: Seeds per job (about a second of one worker): between two jobs of a long study the queue
+    #: serves the other students, so a 500-seed study never holds a worker for long.
+    CHUNK_SEEDS = {"lse": 40, "tf": 6}
 
+    def run(self):
+        """Run the study in short jobs on the server's pool; the page shows the progress and the
+        result (a cancel keeps the seeds done)."""
         cfg, _ = self.config()
         if self._busy or cfg is None or not self.state.valid or self.state.hidden:
             return None
-        params = self.state.params
+        self._parts, self._stopped = [], False
+        self._study = (cfg, self.state.params)
+        self._running(True)
+        self._show_progress(0, cfg.n_seeds)
+        return self._run_part(cfg, self.state.params, cfg.first_seed)
+
+    def _run_part(self, cfg, params, first: int):
+        import dataclasses
+
+        from eha_core.study import combine_studies, run_study
+
+        total, done_before = cfg.n_seeds, first - cfg.first_seed
+        part = dataclasses.replace(cfg, first_seed=first,
+                                   n_seeds=min(self.CHUNK_SEEDS[cfg.kind], total - done_before))
         doc = served_document()
         last = [0.0]
 
-        def progress(done, total):
+        def progress(done, _part_total):
             now = time.perf_counter()
-            if done < total and now - last[0] < 1.0 / _PROGRESS_HZ:
+            if now - last[0] < 1.0 / _PROGRESS_HZ:
                 return
             last[0] = now
-            apply_locked(lambda: self._show_progress(done, total), doc)
+            apply_locked(lambda: self._show_progress(done_before + done, total), doc)
 
         def compute(token):
-            self._token = token         # the cancel button's way to the running study
-            # one worker of the server's pool: a class shares the cores fairly (run_study's own pool
-            # would take a second thread behind the queue's back)
-            return run_study(cfg, params, workers=1, progress=progress, cancel=token)
+            self._token = token         # the cancel button's way to the running part
+            return run_study(part, params, workers=1, progress=progress, cancel=token)
 
         def show(result, job):
-            self.result = result
-            self._draw(result, job)
+            self._parts.append(result)
+            done = done_before + result.n_completed
+            if done < total and not (self._stopped or result.cancelled):
+                self._show_progress(done, total)
+                self._run_part(cfg, params, first + part.n_seeds)
+                return
+            self.result = combine_studies(cfg, self._parts, params, cancelled=done < total)
+            self._draw(self.result, job)
             self._running(False)
 
         def fail(message):
             self.status.object = f"<span class='eha-warn'>The study failed: {html.escape(message)}</span>"
             self._running(False)
 
-        self._running(True)
-        self._show_progress(0, cfg.n_seeds)
         return self.runner.run("study", compute, show, fail=fail, note=self._note)
 
     def cancel(self) -> None:
         """Stop the study: a running one returns the seeds done, a waiting one never starts."""
+        self._stopped = True
         if self._token is not None:
             self._token.cancel("the study was cancelled")
         self.runner.cancel("the study was cancelled")
@@ -213,7 +236,13 @@ class StudyPanel(pn.viewable.Viewer):
     def _note(self, text: str) -> None:
         if text:
             self.status.object = f"<span class='eha-note'>{html.escape(text)}</span>"
-            if text.startswith("Stopped"):
+            if text.startswith("Stopped"):      # a part cancelled while it waited: keep what was done
+                if self._parts:
+                    from eha_core.study import combine_studies
+
+                    cfg, params = self._study
+                    self.result = combine_studies(cfg, self._parts, params, cancelled=True)
+                    self._draw(self.result, None)
                 self._running(False)
 
     def _running(self, on: bool) -> None:

@@ -11,8 +11,10 @@ def test_a_least_squares_study_shows_the_cores_figures():
     from eha_core.study import StudyConfig, run_study
 
     panel = IdentificationTab(AppState()).study_panel()
+    panel.CHUNK_SEEDS = {"lse": 5, "tf": 2}        # three jobs: 5, 5 and 2 seeds, the queue's turns between
     panel.form.values = {**panel.form.values, "study_seeds": "12"}
     panel.run()
+    assert [p.n_requested for p in panel._parts] == [5, 5, 2]
     res = panel.result
     direct = run_study(StudyConfig("lse", n_seeds=12, disturbance="white:1000"), workers=1)
     assert res.n_completed == 12 and not res.cancelled
@@ -28,6 +30,7 @@ def test_a_least_squares_study_shows_the_cores_figures():
 
 def test_a_cancelled_study_keeps_the_seeds_done():
     panel = IdentificationTab(AppState()).study_panel()
+    panel.CHUNK_SEEDS = {"lse": 10, "tf": 2}
     panel.form.values = {**panel.form.values, "study_seeds": "40"}
     calls = []
     original = panel._show_progress

@@ -220,3 +220,20 @@ def test_coverage_band_is_the_binomial_one():
     pmf = [math.comb(200, k) * 0.95**k * 0.05 ** (200 - k) for k in range(201)]
     assert sum(pmf[:k_lo]) <= 0.005 < sum(pmf[:k_lo + 1])
     assert sum(pmf[k_hi + 1:]) <= 0.005 < sum(pmf[k_hi:])
+
+
+def test_a_study_run_in_parts_is_the_study_run_at_once():
+    import dataclasses
+
+    from eha_core.study import StudyConfig, combine_studies, run_study
+
+    cfg = StudyConfig("lse", n_seeds=7, first_seed=3, disturbance="white:1000")
+    whole = run_study(cfg, workers=1)
+    parts = [run_study(dataclasses.replace(cfg, first_seed=f, n_seeds=n), workers=1) for f, n in ((3, 4), (7, 3))]
+    merged = combine_studies(cfg, parts)
+    assert [s.seed for s in merged.seeds] == list(range(3, 10)) and not merged.cancelled
+    for name in whole.parameters:
+        assert merged.values(name).tolist() == whole.values(name).tolist()
+        assert merged.coverage[name] == whole.coverage[name] and merged.std[name] == whole.std[name]
+    partial = combine_studies(cfg, parts[:1], cancelled=True)
+    assert partial.cancelled and partial.n_completed == 4 and "cancelled" in partial.message
