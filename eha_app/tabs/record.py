@@ -60,7 +60,8 @@ class RecordPanel:
         self.note = pn.pane.HTML(
             "<span class='eha-note'>Or estimate H(s) from your own record: a CSV or .mat file with t, u, y "
             "(or t, r, x), in SI or with units in the header. Its first two thirds estimate, the rest "
-            "validates.</span>", width=270, css_classes=["eha-freq-record-note"])
+            "validates; the model's poles, zeros, initial condition, offset and delay are the form's.</span>",
+            width=270, css_classes=["eha-freq-record-note"])
         self.upload = pn.widgets.FileInput(accept=".csv,.mat", width=260, css_classes=["eha-freq-upload"])
         self.upload.param.watch(self._uploaded, "value")
         self.mapping = ColumnMapping(RECORD_COLUMNS, "freq-record")
@@ -101,7 +102,7 @@ class RecordPanel:
         if self.columns is None or cfg is None or self.window_form.errors:
             return None
         return (self._uploads, self.columns[3], self.columns[0].size, self.window(), self.detrend.value, cfg.n_poles,
-                cfg.n_zeros, cfg.initial_condition, cfg.input_offset)
+                cfg.n_zeros, cfg.initial_condition, cfg.input_offset, cfg.input_delay)
 
     def inputs_changed(self) -> None:
         self.view.inputs_changed(self.key())
@@ -223,7 +224,8 @@ class RecordPanel:
         def compute(token):
             rec = identify_record(t, u, y, n_poles=cfg.n_poles, n_zeros=cfg.n_zeros,
                                   initial_condition=cfg.initial_condition, input_offset=cfg.input_offset,
-                                  detrend=detrend, t_from=t_from, t_to=t_to, cancel=token)
+                                  detrend=detrend, t_from=t_from, t_to=t_to, input_delay=cfg.input_delay,
+                                  cancel=token)
             return rec, plots.record_view(rec), plots.record_data_view(t, u, y, rec.prepared, rec)
 
         def show(out, _job):
@@ -267,6 +269,13 @@ class RecordPanel:
                 parts.append(f"<p>Validated on the last {rec.t.size - rec.n_estimation} samples: fit "
                              f"<b>{rec.validation.fit_percent:.2f} %</b>.</p>")
             parts.append(estimation_sentences(e))
+        delay = getattr(e, "input_delay", 0.0) or 0.0
+        if delay:
+            std = getattr(e, "input_delay_std", None)
+            parts.append(f"<p>With an input delay e<sup>−sτ</sup>, τ = <b>{delay * 1e3:.4g} ms</b> = "
+                         f"{delay / rec.ts:.3g} samples"
+                         + (f" (estimated, standard error {std * 1e3:.3g} ms)" if std is not None and np.isfinite(std)
+                            else "") + ".</p>")
         if rec.detrend != "none":
             parts.append(f"<p class='eha-note'>{'The mean' if rec.detrend == 'mean' else 'A linear trend'} was "
                          "removed from u and y first.</p>")

@@ -137,10 +137,12 @@ def prepare_record(t, u, y, *, detrend: str = "none", t_from=None, t_to=None,
 
 def identify_record(t, u, y, *, n_poles: int = 3, n_zeros: int = 0, initial_condition: str = "estimate",
                     input_offset: str = "estimate", detrend: str = "none", t_from=None, t_to=None,
-                    validation_fraction: float = 1 / 3, cancel=None) -> RecordIdentification:
+                    validation_fraction: float = 1 / 3, input_delay=0.0, cancel=None) -> RecordIdentification:
     """Estimate H(s) = Y(s)/U(s) from a record and validate it on the record's last part.
 
     The record is first prepared by :func:`prepare_record` (time range, trend).
+    ``input_delay``: the model's dead time in seconds, or ``"estimate"`` (see
+    :func:`~eha_core.identify.tfest.tfest`); a measured actuator often has one.
     """
     from .spectral import data_frequency_response
     from .tfest import tfest
@@ -150,14 +152,14 @@ def identify_record(t, u, y, *, n_poles: int = 3, n_zeros: int = 0, initial_cond
                               validation_fraction=validation_fraction)
     t, u, y, ts, n_est = prepared.t, prepared.u, prepared.y, prepared.ts, prepared.n_estimation
     est = tfest(u[:n_est], y[:n_est], ts, n_poles, n_zeros, initial_condition=initial_condition,
-                input_offset=input_offset, cancel=cancel)
+                input_offset=input_offset, input_delay=input_delay, cancel=cancel)
     validation = y_hat = residuals = None
     if est.success and np.all(np.isfinite(est.den)):
         y_hat = est.simulate(u[:n_est], initial_state=est.initial_state, input_offset=est.input_offset)
         residuals = residual_analysis(y[:n_est] - y_hat, u[:n_est])
         if t.size - n_est >= 2 * (n_poles + n_zeros + 2):
             validation = compare(est.num, est.den, u[n_est:], y[n_est:], ts, initial_condition="estimate",
-                                 input_offset=input_offset)
+                                 input_offset=input_offset, input_delay=est.input_delay)
     from ..experiments import bode_data
 
     response = data_frequency_response(u, y, ts)

@@ -318,3 +318,16 @@ def test_a_changed_record_never_shows_the_old_estimate(closed_loop):
     _upload_record(panel, write_data({"t": d.t, "r": d.r, "x": 2 * d.x}, "csv"), "loop.csv")
     assert record.result is None and record.view.status == "stale" and not fig.model_label
     assert all(dl.disabled for dl in record.downloads)
+
+
+def test_the_records_estimate_takes_the_forms_delay(closed_loop):
+    panel = IdentificationTab(AppState()).frequency_panel()
+    record = _upload_record(panel, closed_loop.data_bytes("csv"), "loop.csv")
+    record.run()
+    assert record.view.status == "current"
+    panel.form.values = {**panel.form.values, "input_delay": "0.02"}
+    assert record.view.status == "stale"                     # the delay is one of its inputs
+    record.run()
+    assert record.result.estimate.input_delay == 0.02 and "τ = <b>20 ms</b>" in record.summary.object
+    settings = json.loads(record.estimate_bytes("json"))
+    assert settings["estimate"]["input_delay"] == 0.02

@@ -62,3 +62,17 @@ def test_prepare_record_keeps_what_it_removes_and_checks_the_range():
         prepare_record(t, u, y, t_from="abc")
     with pytest.raises(ValueError, match=r"holds 11 samples; need at least 30"):
         prepare_record(t, u, y, t_from=2.0, t_to=2.1)
+
+
+def test_a_record_with_a_dead_time_is_estimated_with_it():
+    from eha_core.identify.validate import simulate_tf
+
+    t = np.arange(1500) * 0.01
+    rng = np.random.default_rng(3)
+    u = np.repeat(rng.choice([-1.0, 1.0], 300), 5)
+    y = simulate_tf([20.0], [1.0, 6.0, 20.0], u, 0.01, input_delay=0.043)
+    rec = identify_record(t, u, y, n_poles=2, input_delay="estimate", input_offset="zero")
+    assert abs(rec.estimate.input_delay - 0.043) < 0.01 * 0.1          # a tenth of a sample
+    assert rec.validation.input_delay == rec.estimate.input_delay and rec.validation.fit_percent > 99
+    plain = identify_record(t, u, y, n_poles=2, input_offset="zero")
+    assert plain.validation.fit_percent < rec.validation.fit_percent
