@@ -14,7 +14,7 @@ import numpy as np
 from bokeh.layouts import column
 from bokeh.models import ColumnDataSource, DataRange1d, Div, HoverTool, Span
 
-from .plots import FIGURE_WIDTH, _f32, _figure, _lean, decimate
+from .plots import FIGURE_WIDTH, _f32, _figure, _lean, _swatch, decimate
 
 __all__ = ["BOARD_COLORS", "board_legend", "BoardFitFigure", "BoardBodeFigure", "BoardStepFigure",
            "PoleZeroFigure"]
@@ -25,11 +25,8 @@ BOARD_COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b"
 
 def board_legend(entries, extra: tuple[tuple[str, str, str], ...] = ()) -> str:
     """One HTML line: a swatch and the name of each ticked model (and ``extra`` (label, colour, dash))."""
-    parts = []
-    for label, color, dash in [(e.name, e.color, "solid") for e in entries] + list(extra):
-        parts.append(f'<span style="white-space:nowrap;margin-right:14px"><span style="display:inline-block;'
-                     f'width:22px;height:0;border-top:3px {dash} {color};vertical-align:middle;margin-right:5px">'
-                     f'</span>{html.escape(label)}</span>')
+    parts = [_swatch(label, color, dash) for label, color, dash in
+             [(e.name, e.color, "solid") for e in entries] + list(extra)]
     return "".join(parts) or "<span class='eha-note'>Tick a model to draw it.</span>"
 
 

@@ -105,12 +105,14 @@ def _escape(text: str) -> str:
 
 def _figure(**kwargs):
     # a figure takes the width of its column (no horizontal scrolling on a narrow
-    # screen); ``width`` is the share it starts from, kept as its minimum's guide
+    # screen); ``width`` is its share of a full row (FIGURE_WIDTH), and its minimum the
+    # same share of the 480 px the results column has on an 800 px page (two side by side:
+    # 200 px each, three: 133)
     width = kwargs.pop("width", None)
     if "sizing_mode" not in kwargs:
         kwargs["sizing_mode"] = "stretch_width"
         if width is not None:
-            kwargs["min_width"] = min(width, 280)
+            kwargs["min_width"] = min(280, int(0.4 * width))
     kwargs.setdefault("tools", _TOOLS)
     kwargs.setdefault("active_scroll", None)
     kwargs.setdefault("output_backend", "canvas")
@@ -130,26 +132,23 @@ def _legend_above(fig, items) -> Legend:
     return legend
 
 
+def _swatch(label: str, color: str, dash: str = "solid", width: int = 3) -> str:
+    return (f'<span style="white-space:nowrap;margin-right:14px"><span style="display:inline-block;width:22px;'
+            f'height:0;border-top:{width}px {dash} {color};vertical-align:middle;margin-right:5px"></span>'
+            f'{_escape(label)}</span>')
+
+
 def legend_html(results) -> str:
     """A one-line legend: a swatch per run label, solid = nonlinear, dashed = linearised."""
     keys: dict[str, int] = {}
     for res in results:
         keys.setdefault(res.label, len(keys))
     models = list(dict.fromkeys(res.model for res in results))
-    parts = []
-    for label, i in keys.items():
-        color = CASE_COLORS[i % len(CASE_COLORS)]
-        parts.append(f'<span style="white-space:nowrap;margin-right:14px"><span style="display:inline-block;'
-                     f'width:22px;height:0;border-top:3px solid {color};vertical-align:middle;margin-right:5px">'
-                     f'</span>{_escape(label or "run")}</span>')
+    parts = [_swatch(label or "run", CASE_COLORS[i % len(CASE_COLORS)]) for label, i in keys.items()]
     names = {"nonlinear": "nonlinear", "linear": "linearised (switching)",
              "linear-positive": "linearised (u ≥ 0 branch)", "linear-negative": "linearised (u < 0 branch)"}
     css_dash = {"solid": "solid", "dashed": "dashed", "dotted": "dotted", "dotdash": "dashed"}
-    for m in models:
-        dash = css_dash[_MODEL_DASH.get(m, "solid")]
-        parts.append(f'<span style="white-space:nowrap;margin-right:14px"><span style="display:inline-block;'
-                     f'width:22px;height:0;border-top:2px {dash} #444;vertical-align:middle;margin-right:5px">'
-                     f'</span>{names.get(m, m)}</span>')
+    parts += [_swatch(names.get(m, m), "#444", css_dash[_MODEL_DASH.get(m, "solid")], width=2) for m in models]
     return "".join(parts)
 
 
@@ -472,7 +471,6 @@ class ClosedLoopFigure:
                                                 ("u", "u [V]", "Command u = Kp (r − x)", CASE_COLORS[1], True)):
             fig = _figure(width=width // 3, height=height, x_range=x_range, x_axis_label="t [s]",
                           y_axis_label=ylabel, title=title)
-            fig.min_width = 150     # three side by side in the results column of an 800 px page
             if step:
                 fig.step("t", key, source=self.source, mode="after", color=color, alpha=0.8)
             else:
@@ -616,7 +614,6 @@ class ResidualFigure:
             fig.scatter("lag", "c", source=src, color=color, size=4)
             self.sources.append(src)
             self.bands.append(band)
-            fig.min_width = 200     # two side by side in the results column of an 800 px page
             self.figs.append(fig)
         self.verdicts = Div(text="", sizing_mode="stretch_width", css_classes=["eha-residual-verdicts"],
                             styles={"font-size": "13px"})
@@ -684,8 +681,6 @@ class LseFitFigure:
         self.right.line("t", "p1", source=self.measured, color="#333333", line_width=2)
         self.resim_item = LegendItem(label="re-simulated with the estimates", renderers=[self.resim_renderers[0]])
         _legend_above(self.left, [LegendItem(label="measured", renderers=[m0]), self.resim_item])
-        for fig in (self.left, self.right):
-            fig.min_width = 200     # two side by side in the results column of an 800 px page
         _lean(self.left, self.right)
         self.layout = row(self.left, self.right, sizing_mode="stretch_width")
 
@@ -745,12 +740,6 @@ def record_data_view(t, u, y, prepared, rec=None) -> RecordDataView:
                           t_split=p.t_split, title=title, model_t=model_t, model_y=model_y, model_label=label)
 
 
-def _swatch(label: str, color: str, dash: str = "solid", width: int = 3) -> str:
-    return (f'<span style="white-space:nowrap;margin-right:14px"><span style="display:inline-block;width:22px;'
-            f'height:0;border-top:{width}px {dash} {color};vertical-align:middle;margin-right:5px"></span>'
-            f'{_escape(label)}</span>')
-
-
 class RecordDataFigure:
     """The student's record: the file's u and y (grey), the part used with its trend removed
     (colour), the removed trend (dashed), the estimation/validation split, and the estimate's output.
@@ -770,7 +759,6 @@ class RecordDataFigure:
         for key, label in (("u", "input u"), ("y", "output y")):
             fig = _figure(width=width // 2, height=height, x_range=x_range, x_axis_label="t [s]",
                           y_axis_label=label, title=f"Your record: {label}")
-            fig.min_width = 200         # two side by side in the results column of an 800 px page
             fig.line("t", key, source=self.raw, color="#b0b0b0", line_width=1)
             fig.line("t", key, source=self.used, color=CASE_COLORS[0], line_width=1.5)
             fig.line("t", key, source=self.trend, color=CASE_COLORS[1], line_dash="dashed", line_width=2)

@@ -21,7 +21,7 @@ Three details learnt the hard way:
   twelve out-of-date marks a frequency-domain result clears cost the browser
   a second. :func:`layout_once_per_message` makes it lay the page out once per
   message instead (installed on every served session's page by
-  :class:`SessionRunner`).
+  :func:`eha_app.app.create_app`).
 
 Without a server (tests, a notebook) the computation runs at once in the
 calling thread and its result is shown directly.
@@ -264,8 +264,6 @@ class SessionRunner:
         self._queue = queue
         self._root = self
         self._subs: set = set()
-        # the first runner of a session is made with its page, before the page is sent
-        layout_once_per_message(served_document())
 
     def sub(self, name: str) -> SessionRunner:
         """A runner of the same session whose requests do not replace this one's (a preview, the

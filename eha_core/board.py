@@ -92,8 +92,8 @@ def _coefficients(model: BoardModel):
 def model_views(model: BoardModel, *, w=BOARD_W, step_t=STEP_T, level: float = 0.95, n_draws: int = 300,
                 seed: int = 0) -> ModelViews:
     """Bode curve (and band), pole-zero map (with regions) and unit step response of ``model``."""
-    from .identify._ctmodels import frequency_response, simulate_tf
-    from .identify.step import StepResponse, step_info
+    from .identify._ctmodels import frequency_response
+    from .identify.step import step_response
     from .identify.uncertainty import bode_band, pole_zero_regions, reference_roots
 
     num, den = _coefficients(model)
@@ -108,15 +108,10 @@ def model_views(model: BoardModel, *, w=BOARD_W, step_t=STEP_T, level: float = 0
         pz = reference_roots(num, den, ts=None, name=model.name)
     poles = np.roots(den)
     stable = bool(np.all(poles.real < 0))
-    step = np.asarray(step_t, dtype=float)
-    y = simulate_tf(num, den, np.ones(step.size), float(step[1] - step[0]), input_delay=model.input_delay)
-    gain = float(num[-1] / den[-1]) if den[-1] != 0 else math.inf
-    info = step_info(step, y, gain if math.isfinite(gain) else None)
-    message = "ok" if stable else "the model is unstable: the figures mean little"
-    response = StepResponse(name=model.name, t=step, y=y, amplitude=1.0, info=info, source="transfer function",
-                            message=message)
+    step = step_response((num, den), np.asarray(step_t, dtype=float), name=model.name,
+                         input_delay=model.input_delay)
     return ModelViews(w=np.asarray(w), magnitude_db=fr.magnitude_db, phase_deg=fr.phase_deg, band=band, pz=pz,
-                      step=response, stable=stable)
+                      step=step, stable=stable)
 
 
 def validation_record(params: ActuatorParams | None = None, *, kp: float = 10.0, seed: int = 1,

@@ -12,6 +12,7 @@ Not offered in an exercise: every figure is drawn against the true values.
 
 from __future__ import annotations
 
+import dataclasses
 import html
 import time
 
@@ -188,8 +189,6 @@ class StudyPanel(pn.viewable.Viewer):
         return self._run_part(cfg, self.state.params, cfg.first_seed)
 
     def _run_part(self, cfg, params, first: int):
-        import dataclasses
-
         from eha_core.study import combine_studies, run_study
 
         total, done_before = cfg.n_seeds, first - cfg.first_seed

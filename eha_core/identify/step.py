@@ -311,7 +311,7 @@ def default_step_horizon(*models) -> float:
     return float(np.clip(np.log(1000.0) / min(rates), MIN_HORIZON_S, MAX_HORIZON_S))
 
 
-def step_response(model, t=None, *, amplitude=1.0, name="model", dt=None) -> StepResponse:
+def step_response(model, t=None, *, amplitude=1.0, name="model", dt=None, input_delay=None) -> StepResponse:
     """Exact step response of a continuous-time transfer function.
 
     Parameters
@@ -326,6 +326,9 @@ def step_response(model, t=None, *, amplitude=1.0, name="model", dt=None) -> Ste
     name : str
     dt : float, optional
         Step of the default grid [s] (ignored when ``t`` is given).
+    input_delay : float, optional
+        Dead time of the model's input [s]; default: the model's own (a
+        TFEstimate's ``input_delay``), else 0.
 
     Returns
     -------
@@ -346,7 +349,9 @@ def step_response(model, t=None, *, amplitude=1.0, name="model", dt=None) -> Ste
         t = np.arange(int(round(horizon / step)) + 1) * step
     t_arr, step = _uniform_grid(t)
     # a step is constant between samples: the ZOH discretisation is exact
-    y_unit = simulate_tf(num, den, np.ones(t_arr.size), step)
+    if input_delay is None:
+        input_delay = getattr(model, "input_delay", 0.0) or 0.0
+    y_unit = simulate_tf(num, den, np.ones(t_arr.size), step, input_delay=input_delay)
     gain = _dc_gain(num, den)
     unstable = den.size > 1 and bool(np.any(np.roots(den).real > 0))
     message = "ok"
