@@ -101,6 +101,7 @@ class ModelBoard(pn.viewable.Viewer):
         self.runner = runner
         self._keys = itertools.count(1)
         self.entries: list[BoardEntry] = []
+        self._failed: set[int] = set()      # models whose views could not be computed
         self.views: dict = {}           # key -> ModelViews
         self.fits: dict = {}            # key -> RecordComparison on the current record
         self.record = None
@@ -112,6 +113,7 @@ class ModelBoard(pn.viewable.Viewer):
         self.record_runner = runner.sub("board record")
         self.plant_runner = runner.sub("board plant")
         self.figures: dict = {}
+        self._panes: dict = {}
         self.built = False
         texts = dict(BOARD_DEFAULTS)
         texts.update({k: v for k, v in (query or {}).items() if k in _FIELDS})
@@ -173,20 +175,22 @@ class ModelBoard(pn.viewable.Viewer):
         return entry
 
     def _compute_missing(self) -> None:
-        """The views (and the fit on the current record) of every model that has none, in one job:
-        a newer request replaces a waiting one, and takes its models along."""
+        """What is missing, in one job: the views of every model that has none, and its fit on the
+        current record (a model that has views but no fit gets only the fit). A newer request
+        replaces a waiting one, and takes its models along."""
         if not self.built:
             return
-        todo = [(e, e.model) for e in self.entries if e.key not in self.views]
+        record = self.record
+        todo = [(e, e.model, e.key not in self.views) for e in self.entries if e.key not in self._failed
+                and (e.key not in self.views or (record is not None and e.key not in self.fits))]
         if not todo:
             return
-        record = self.record
 
         def compute(_token):
             out = []
-            for entry, model in todo:
+            for entry, model, need_views in todo:
                 try:
-                    views = model_views(model)
+                    views = model_views(model) if need_views else None
                     fit = compare_on_record(model, record) if record is not None else None
                     out.append((entry, model, views, fit, ""))
                 except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
@@ -198,10 +202,12 @@ class ModelBoard(pn.viewable.Viewer):
                 if entry not in self.entries or entry.model is not model:
                     continue                    # deleted, or rebuilt, while it computed
                 if error:
+                    self._failed.add(entry.key)
                     self._fail(entry, error)
                     entry.ticked = False
                     continue
-                self.views[entry.key] = views
+                if views is not None:
+                    self.views[entry.key] = views
                 if fit is not None and record is self.record:
                     self.fits[entry.key] = fit
             self.refresh()
@@ -330,10 +336,7 @@ class ModelBoard(pn.viewable.Viewer):
                 return                          # the inputs changed again: a newer request follows
             self.record, self.fits = out
             self.record_key = key
-            for e in self.entries:              # added while it computed: their views again, with the fit
-                if e.key in self.views and e.key not in self.fits:
-                    self.views.pop(e.key, None)
-            self._compute_missing()
+            self._compute_missing()             # the fits of models whose views came while it computed
             self.refresh()
             self._mark_record()
 
@@ -387,20 +390,28 @@ class ModelBoard(pn.viewable.Viewer):
         # a figure is made with its first data: an empty one makes Bokeh complain it cannot range it
         ready = {"fit": self.record is not None and any(e.key in self.fits for e in drawn),
                  "bode": bool(drawn), "step": bool(drawn), "pz": bool(drawn)}
+        # a view with nothing to draw shows a line instead of its figure (kept for later): Bokeh
+        # cannot range a figure without data, and says so in the browser's console
         for key, cls in (("fit", board_plots.BoardFitFigure), ("bode", board_plots.BoardBodeFigure),
                          ("step", board_plots.BoardStepFigure), ("pz", board_plots.PoleZeroFigure)):
-            if key not in self.figures and ready[key]:
-                self.figures[key] = cls()
-                self._slots[key].objects = [pn.pane.Bokeh(self.figures[key].layout, sizing_mode="stretch_width")]
-            elif key not in self.figures:
+            if not ready[key]:
                 self._slots[key].objects = [pn.pane.HTML(
                     "<p class='eha-note'>" + ("Computing…" if entries else "Tick a model to draw it.") + "</p>")]
-        if "fit" in self.figures:
-            self.figures["fit"].update(self.record, entries, self.fits)
-        if "bode" in self.figures:
-            self.figures["bode"].update(entries, self.views, bands=self.bands.value)
-            self.figures["step"].update(entries, self.views, self.plant, amplitude)
-            self.figures["pz"].update(entries, self.views)
+                continue
+            if key not in self.figures:
+                self.figures[key] = cls()
+                self._panes[key] = pn.pane.Bokeh(self.figures[key].layout, sizing_mode="stretch_width")
+            fig = self.figures[key]
+            if key == "fit":
+                fig.update(self.record, entries, self.fits)
+            elif key == "bode":
+                fig.update(entries, self.views, bands=self.bands.value)
+            elif key == "step":
+                fig.update(entries, self.views, self.plant, amplitude)
+            else:
+                fig.update(entries, self.views)
+            if self._slots[key].objects != [self._panes[key]]:
+                self._slots[key].objects = [self._panes[key]]
         self.tables["fit"].object = self.fit_table(entries)
         self.tables["step"].object = self.step_table(entries, amplitude)
 
