@@ -62,14 +62,10 @@ import urllib.request
 from pathlib import Path
 
 # run as a script, this file's folder is on the path: the client is a sibling module
-from classroom_client import (
-    STEP_NAMES,
-    STEPS,
-    ClassResult,
-    Student,
-    do_step,
-    run_class,
-)
+if __package__:
+    from .classroom_client import STEP_NAMES, STEPS, ClassResult, Student, do_step, run_class
+else:
+    from classroom_client import STEP_NAMES, STEPS, ClassResult, Student, do_step, run_class
 
 ROOT = Path(__file__).resolve().parents[1]
 _TICK = os.sysconf("SC_CLK_TCK")

@@ -125,8 +125,11 @@ JS_IDLE = """async (quiet) => {
 }"""
 
 
-# the same server as the classroom benchmark's (run from benchmarks/, as every benchmark is)
-from bench_classroom import Server  # noqa: E402
+# the same server as the classroom benchmark's (run as a script from benchmarks/, or imported)
+if __package__:
+    from .bench_classroom import Server  # noqa: E402
+else:
+    from bench_classroom import Server  # noqa: E402
 
 
 def _chromium(path: str | None) -> str:

@@ -20,12 +20,12 @@ import panel as pn
 from eha_core.params import PARAM_NAMES
 
 from .connection import ConnectionWatch
-from .state import AppState
+from .state import AppState, shown_text
 from .tables import CSS
 from .tabs.parameters import ParametersTab
 from .tasks import SessionRunner, apply_locked, frozen_models, layout_once_per_message, served_document
 
-__all__ = ["create_app", "warm_up", "CSS", "TAB_NAMES"]
+__all__ = ["create_app", "serve_session", "warm_up", "CSS", "TAB_NAMES"]
 
 TAB_NAMES = ("1. Parameters", "2. Simulation", "3. Identification")
 
@@ -100,8 +100,11 @@ def _exercise_at(path: str, mtime: float):
     from eha_core.exercise import Exercise
 
     from .handins import HandIns
+    from .redaction import keep_out_of_logs
 
-    return Exercise.load(path), HandIns(path)
+    exercise = Exercise.load(path)
+    keep_out_of_logs(exercise.secret)
+    return exercise, HandIns(path)
 
 
 def current_exercise():
@@ -142,6 +145,34 @@ class ExerciseGate:
             self.message.object = html.escape(" ".join(str(exc).split()))
             return
         self.on_start()
+
+
+def _log_to_stderr() -> None:
+    """The app's notices (a closed page's cancelled runs, failures) in the server's log, once per process."""
+    logger = logging.getLogger("eha_app")
+    if not logger.handlers:
+        handler = logging.StreamHandler()
+        handler.setFormatter(logging.Formatter("%(asctime)s %(message)s"))
+        logger.addHandler(handler)
+        logger.setLevel(logging.INFO)
+
+
+def serve_session() -> None:
+    """Make this browser session's page (the server runs :mod:`eha_app.eha` for every session)."""
+    from .redaction import redact_server_logs
+    from .serving import quiet_closed_websockets, use_local_resources
+
+    _log_to_stderr()
+    redact_server_logs()
+    warm_up()
+    quiet_closed_websockets()
+    use_local_resources(pn.state.curdoc)
+    # Neither the browser's details (language, time zone, ...) nor Panel's URL
+    # model are used: without them a page sends the server 8 fewer messages when
+    # it opens (the address is kept by eha_app.connection instead).
+    pn.config.browser_info = False
+    query = {k: v[-1].decode("utf-8", "replace") for k, v in (pn.state.session_args or {}).items() if v}
+    create_app(query=query).servable(title="EHA: modeling and identification", location=False)
 
 
 def create_app(state: AppState | None = None, *, query: dict | None = None, runner: SessionRunner | None = None):
@@ -207,11 +238,13 @@ def create_app(state: AppState | None = None, *, query: dict | None = None, runn
 def settings_row(page) -> pn.Row:
     """Save the session's settings as JSON, or load a saved file (every input of every tab)."""
     from . import settings
+    from .tabs.uploads import FileUpload
 
     save = pn.widgets.FileDownload(callback=lambda: io.BytesIO(settings.to_bytes(page)), filename="eha_settings.json",
                                    label="Save settings", width=130, css_classes=["eha-save-settings"],
                                    description="every input of every tab, as a JSON file")
-    load = pn.widgets.FileInput(accept=".json", width=230, css_classes=["eha-load-settings"])
+    load = FileUpload(accept=".json", max_bytes=settings.MAX_SETTINGS_BYTES, width=230,
+                      css_classes=["eha-load-settings"])
 
     note = pn.pane.HTML("", css_classes=["eha-settings-note"], styles={"font-size": "12px"},
                         sizing_mode="stretch_width")
@@ -244,7 +277,7 @@ def settings_row(page) -> pn.Row:
         if load.value is None:
             return
         try:
-            notes = settings.apply(page, bytes(load.value), load.filename or "settings.json")
+            notes = settings.apply(page, bytes(load.value), shown_text(load.filename or "settings.json", 60))
         except settings.SettingsError as exc:
             note.object = f"<span class='eha-warn'>{html.escape(str(exc))}</span>"
             return

@@ -26,6 +26,8 @@ from dataclasses import dataclass
 import param
 from panel.custom import JSComponent
 
+from .state import MAX_TEXT_CHARS, shown_text, too_long
+
 __all__ = ["Form", "Field", "Group", "InputError", "parse_fields"]
 
 
@@ -94,6 +96,8 @@ class Field:
     def parse(self, text: str):
         """The value of ``text``; :class:`InputError` naming the field, the text and what is allowed."""
         raw = "" if text is None else str(text)
+        if too_long(raw):
+            raise InputError(self.name, f"{self.display} = {shown_text(raw)} is not allowed: {too_long(raw)}")
         shown = raw.strip() or "(empty)"
         if self.kind == "select":
             allowed = [str(v) for v, _ in self.options]
@@ -215,6 +219,9 @@ class Form(JSComponent):
     _priority_changes = ["values"]
 
     _esm = """
+// a field holds at most this many characters (eha_app.state.MAX_TEXT_CHARS): every
+// field goes into the page's address, which must stay short enough to load
+const MAX_CHARS = __MAX_CHARS__
 export function render({ model, el }) {
   const root = document.createElement('div')
   root.className = 'eha-form'
@@ -271,6 +278,7 @@ export function render({ model, el }) {
       } else {
         input = document.createElement('input')
         input.type = 'text'
+        input.maxLength = MAX_CHARS
         input.autocomplete = 'off'
         input.spellcheck = false
         if (f.placeholder) { input.placeholder = f.placeholder }
@@ -353,7 +361,8 @@ export function render({ model, el }) {
     const query = new URLSearchParams(window.location.search)
     for (const name of Object.keys(fields)) {
       const text = model.values[name]
-      if (text === undefined || text === null || String(text) === String(defaults[name] ?? '')) {
+      if (text === undefined || text === null || String(text) === String(defaults[name] ?? '') ||
+          String(text).length > MAX_CHARS) {
         query.delete(name)
       } else {
         query.set(name, String(text))
@@ -396,7 +405,7 @@ export function render({ model, el }) {
   model.on('hidden', showHidden)
   model.on('disabled', showDisabled)
 }
-"""
+""".replace("__MAX_CHARS__", str(MAX_TEXT_CHARS))
 
     def set_values(self, **texts) -> None:
         """Write texts into fields (an explicit action: reset, preset, restored link)."""

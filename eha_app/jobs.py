@@ -37,7 +37,7 @@ from typing import Any
 
 from eha_core.cancel import Cancelled, CancelToken
 
-__all__ = ["Job", "JobQueue", "default_queue", "worker_count"]
+__all__ = ["Job", "JobQueue", "default_queue", "worker_count", "session_name"]
 
 log = logging.getLogger("eha_app")
 
@@ -60,7 +60,15 @@ def worker_count() -> int:
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
 
 
-@dataclass(eq=False)
+def session_name(owner: Hashable) -> str:
+    """How the log names a job's session: a number, the same for a session's sub-runners
+    (``(owner, "board")``), never the owner's repr (it may hold an exercise's secrets)."""
+    while isinstance(owner, tuple) and owner:
+        owner = owner[0]
+    return f"session {id(owner) % 0xFFFFFF:06x}"
+
+
+@dataclass(eq=False, repr=False)
 class Job:
     """One computation for one session.
 
@@ -81,6 +89,10 @@ class Job:
     finished_at: float | None = None
     result: Any = None
     error: BaseException | None = None
+
+    def __repr__(self) -> str:
+        # not the dataclass's: its owner, function and result are no business of a log line
+        return f"<Job {self.label!r} {self.state}>"
 
     @property
     def finished(self) -> bool:
@@ -225,7 +237,8 @@ class JobQueue:
                 job.state, job.error = "cancelled", exc
             except Exception as exc:  # noqa: BLE001 - a failure is the job's outcome, shown in its page
                 job.state, job.error = "failed", exc
-                log.warning("job %r of %r failed: %s", job.label, job.owner, exc, exc_info=True)
+                # by its session's number: the owner's repr is no business of the log
+                log.warning("job %r of %s failed: %s", job.label, session_name(job.owner), exc, exc_info=True)
             job.finished_at = time.perf_counter()
             with self._cond:
                 if self._running.get(job.owner) is job:

@@ -34,7 +34,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["ENTRY_POINT", "UNUSED_SESSION_MS", "serve_argv", "nginx_config", "nginx_standalone_config",
+from eha_core.data import MAX_DATA_BYTES
+
+__all__ = ["ENTRY_POINT", "UNUSED_SESSION_MS", "WEBSOCKET_MAX_MESSAGE_BYTES", "serve_argv", "default_origins",
+           "lan_address", "local_names", "nginx_config", "nginx_standalone_config",
            "use_local_resources", "share_port", "supervise", "quiet_closed_websockets"]
 
 ENTRY_POINT = Path(__file__).resolve().parent / "eha.py"
@@ -42,6 +45,12 @@ ENTRY_POINT = Path(__file__).resolve().parent / "eha.py"
 UNUSED_SESSION_MS = 4000
 #: How often the server looks for closed sessions.
 CHECK_SESSIONS_MS = 1000
+
+
+#: The largest message a page may send (Tornado closes the websocket beyond it, and the student's
+#: page with it; Bokeh's default is 20 MiB): an upload at the app's limit, which the page's
+#: :class:`~eha_app.tabs.uploads.FileUpload` sends as one message of raw bytes, with room to spare.
+WEBSOCKET_MAX_MESSAGE_BYTES = MAX_DATA_BYTES + 2**20
 
 
 def use_local_resources(doc) -> None:
@@ -170,16 +179,61 @@ def supervise(child_argv: list[str], n: int, *, env: dict | None = None, restart
     return 0
 
 
+def lan_address() -> str | None:
+    """This machine's address on the local network (no packet is sent)."""
+    import socket
+
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            sock.connect(("10.255.255.255", 1))
+            return sock.getsockname()[0]
+    except OSError:
+        return None
+
+
+def local_names() -> list[str]:
+    """This machine's names and addresses a student may type: the LAN address, the host name."""
+    import socket
+
+    names = []
+    for name in (lan_address(), socket.gethostname()):      # (getfqdn may wait for a DNS server)
+        if name and name not in names and name not in ("localhost", "127.0.0.1", "0.0.0.0"):
+            names.append(name.lower())
+    return names
+
+
+def default_origins(address: str, port: int) -> list[str]:
+    """The pages allowed to open a websocket when the teacher names none: those served at the
+    addresses ``eha serve`` prints (``host:port``), never ``*``.
+
+    A browser sends the page's own address as the websocket's ``Origin``; any
+    other website a student has open would send its own, and is refused. On
+    every interface (``0.0.0.0``) that is this machine's LAN address and host
+    names besides localhost.
+
+    >>> default_origins("127.0.0.1", 5006)
+    ['localhost:5006', '127.0.0.1:5006']
+    """
+    hosts = ["localhost", "127.0.0.1"]
+    if address in ("0.0.0.0", "::"):
+        hosts += local_names()
+    elif address not in hosts:
+        hosts.append(address)
+    return [f"{h}:{port}" for h in dict.fromkeys(hosts)]
+
+
 def serve_argv(*, port: int, address: str, num_procs: int = 1, allow_websocket_origin=None,
                show: bool = False, behind_proxy: bool = False) -> list[str]:
-    """The `panel serve` command line for `eha serve`."""
+    """The `panel serve` command line for `eha serve`.
+
+    ``allow_websocket_origin``: the ``host:port`` of pages allowed to connect; by
+    default :func:`default_origins` (``*``, any website, only when asked for).
+    """
     argv = ["panel", "serve", str(ENTRY_POINT), "--port", str(port), "--address", address,
             "--num-procs", str(num_procs), "--reuse-sessions",
-            "--unused-session-lifetime", str(UNUSED_SESSION_MS), "--check-unused-sessions", str(CHECK_SESSIONS_MS)]
-    origins = allow_websocket_origin
-    if origins is None and address in ("0.0.0.0", "::"):
-        origins = ["*"]
-    for origin in origins or ():
+            "--unused-session-lifetime", str(UNUSED_SESSION_MS), "--check-unused-sessions", str(CHECK_SESSIONS_MS),
+            "--websocket-max-message-size", str(WEBSOCKET_MAX_MESSAGE_BYTES)]
+    for origin in allow_websocket_origin or default_origins(address, port):
         argv += ["--allow-websocket-origin", origin]
     if behind_proxy:
         argv.append("--use-xheaders")

@@ -12,9 +12,14 @@ import json
 
 from eha_core.params import PARAM_NAMES
 
-__all__ = ["FORMAT", "collect", "apply", "SettingsError"]
+from .state import shown_text, too_long
+
+__all__ = ["FORMAT", "MAX_SETTINGS_BYTES", "collect", "apply", "SettingsError"]
 
 FORMAT = "eha-settings/1"
+#: A settings file is about 2 kB; a larger one is refused before it is read (in the page, before
+#: it is even sent), so that no file can hold the server's thread or fill its log.
+MAX_SETTINGS_BYTES = 100_000
 _SECTIONS = ("parameters", "simulation", "least_squares", "frequency", "board", "study")
 
 
@@ -63,22 +68,28 @@ def to_bytes(page) -> bytes:
 
 def apply(page, data: bytes | str, filename: str = "settings.json") -> list[str]:
     """Type a settings file's values into the session; returns notes (fields it does not know)."""
+    if len(data) > MAX_SETTINGS_BYTES:
+        raise SettingsError(f"settings = {filename!r} is not allowed: it has {len(data) / 1e3:.1f} kB; at most "
+                            f"{MAX_SETTINGS_BYTES / 1e3:g} kB (a saved settings file has about 2 kB)")
     try:
         doc = json.loads(data)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise SettingsError(f"settings = {filename!r} is not allowed: it is not JSON ({exc})") from None
+    except RecursionError:
+        raise SettingsError(f"settings = {filename!r} is not allowed: it is nested too deeply to be a settings "
+                            "file; save one with “Save settings”") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise SettingsError(f"settings = {filename!r} is not allowed: not a settings file of this app "
                             f"(format {FORMAT!r} expected); save one with “Save settings”")
     notes = []
     unknown = [k for k in doc if k not in (*_SECTIONS, "format", "tab")]
     state = page.eha_state
-    params = doc.get("parameters") or {}
+    params = _section(doc, "parameters", filename)
     for name, text in params.items():
         if name in state.hidden:
             continue
         if name in PARAM_NAMES or name == "kp":
-            state.set_text(name, str(text))
+            state.set_text(name, text)
         else:
             unknown.append(f"parameters.{name}")
     tab1 = page.eha_lazy.built.get(0)
@@ -86,13 +97,34 @@ def apply(page, data: bytes | str, filename: str = "settings.json") -> list[str]
         tab1.form.values = tab1._texts()
     forms = _tabs(page)
     for section, defaults in _defaults().items():
-        values = {k: str(v) for k, v in (doc.get(section) or {}).items() if k in defaults}
-        unknown += [f"{section}.{k}" for k in (doc.get(section) or {}) if k not in defaults]
+        given = _section(doc, section, filename)
+        values = {k: v for k, v in given.items() if k in defaults}
+        unknown += [f"{section}.{k}" for k in given if k not in defaults]
         form = forms[section]
         if form is not None:
             form.set_values(**values)
         else:                   # the tab is built later, from the page's query
             page.eha_query.update(values)
     if unknown:
-        notes.append(f"settings = {filename!r}: ignored what this app does not know: {', '.join(unknown)}")
+        shown = ", ".join(shown_text(u, 40) for u in unknown[:10]) + (f" and {len(unknown) - 10} more"
+                                                                       if len(unknown) > 10 else "")
+        notes.append(f"settings = {filename!r}: ignored what this app does not know: {shown}")
     return notes
+
+
+def _section(doc: dict, section: str, filename: str) -> dict[str, str]:
+    """A section of the file as ``{field: text}``: texts (or numbers), each a field's worth."""
+    given = doc.get(section) or {}
+    if not isinstance(given, dict):
+        raise SettingsError(f"settings = {filename!r} is not allowed: its {section!r} is not a list of fields")
+    out = {}
+    for name, value in given.items():
+        if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+            raise SettingsError(f"settings = {filename!r} is not allowed: {section}.{shown_text(name, 40)} is not "
+                                "a text or a number")
+        text = str(value)
+        if too_long(text):
+            raise SettingsError(f"settings = {filename!r} is not allowed: {section}.{shown_text(name, 40)} = "
+                                f"{shown_text(text)}: {too_long(text)}")
+        out[str(name)] = text
+    return out

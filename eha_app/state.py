@@ -42,7 +42,25 @@ from eha_core.params import (
     ParameterError,
 )
 
-__all__ = ["AppState", "FIELD_LABELS", "display_text", "parse_display", "cross_field_errors"]
+__all__ = ["AppState", "FIELD_LABELS", "MAX_TEXT_CHARS", "display_text", "parse_display", "cross_field_errors",
+           "shown_text"]
+
+#: The most characters a field may hold. Every field goes into the page's address as it is
+#: typed (a reload restores it): a 70,000-character field once made the address too long for
+#: the server to load the page again.
+MAX_TEXT_CHARS = 200
+
+
+def shown_text(text: str, limit: int = 24) -> str:
+    """A typed text as a message repeats it: whole, or its start when it is long."""
+    text = str(text).strip()
+    return text if len(text) <= limit else text[:limit] + "…"
+
+
+def too_long(text) -> str | None:
+    """What is wrong with a text of more than :data:`MAX_TEXT_CHARS` characters (None if it is not)."""
+    n = len(str(text or ""))
+    return f"at most {MAX_TEXT_CHARS} characters (it has {n})" if n > MAX_TEXT_CHARS else None
 
 #: The names tab 1's form shows, which its messages use too.
 FIELD_LABELS = {"M": "M", "B": "B", "Af": "Af", "beta_e": "βe", "Dc": "Dc", "dc": "dc", "d0": "d0", "L0": "L0",
@@ -66,6 +84,8 @@ def parse_display(name: str, text: str) -> float | None:
     Raises ParameterError naming the field when the text is not a number.
     """
     info = FIELD_INFO[name]
+    if too_long(text):
+        raise ParameterError(name, shown_text(text), too_long(text))
     text = (text or "").strip().replace(",", ".") if text is not None else ""
     if text == "":
         if name == "p2_0":
@@ -231,6 +251,8 @@ def _field_errors(texts: dict, secret: dict | None = None) -> tuple[dict, dict]:
 
 
 def _kp_error(text: str) -> tuple[float | None, str | None]:
+    if too_long(text):
+        return None, _refusal("kp", shown_text(text), too_long(text))
     raw = (text or "").strip()
     if raw == "":
         return None, _refusal("kp", "(empty)", f"enter a number in {KP_UNIT}")
@@ -282,6 +304,13 @@ class AppState(param.Parameterized):
         super().__init__(**kwargs)
         self.reset_defaults()
 
+    def __repr__(self) -> str:
+        # Param's repr lists every parameter: the parameters (hidden ones included) and the
+        # exercise with its key would go into any log line or traceback that shows the state
+        return f"<AppState {self.name}{' (exercise)' if self.secret else ''}>"
+
+    __str__ = __repr__
+
     # -- inputs ------------------------------------------------------------------
     @property
     def hidden(self) -> tuple[str, ...]:
@@ -294,10 +323,13 @@ class AppState(param.Parameterized):
 
         student = normalize_id(student_id)
         actuator = exercise.student_params(student)
+        from .redaction import keep_out_of_logs
+
         self.exercise = exercise
         self.handins = handins
         self.student = student
         self.secret = {n: getattr(actuator, n) for n in exercise.hide}
+        keep_out_of_logs(exercise.secret, *self.secret.values())
         self.reset_defaults()
 
     def reset_defaults(self) -> None:

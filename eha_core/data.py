@@ -25,12 +25,20 @@ from __future__ import annotations
 import csv
 import io
 import math
-from collections.abc import Sequence
+import struct
+import zlib
+from array import array
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["DataError", "read_columns", "read_data", "write_data", "sample_time", "UNITS", "file_columns"]
+__all__ = ["DataError", "read_columns", "read_data", "write_data", "sample_time", "UNITS", "file_columns",
+           "MAX_DATA_BYTES", "check_data_size", "csv_cell"]
+
+#: The most a data file may hold as it is read: the bytes of a CSV, the decompressed bytes of a
+#: .mat (a 10 minute record at 1 kHz is about 2 MB of CSV).
+MAX_DATA_BYTES = 20_000_000
 
 #: Units a column name may carry, as ``name[unit]``, and their factor to SI.
 UNITS = {"s": 1.0, "ms": 1e-3, "m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "m/s": 1.0, "mm/s": 1e-3,
@@ -91,24 +99,117 @@ def _split_unit(header: str, name: str, path) -> tuple[str, float]:
     return h, 1.0
 
 
+_FORMULA_START = ("=", "+", "-", "@", "\t", "\r", "\n")
+
+
+def csv_cell(value) -> str:
+    r"""A cell as every CSV of the project writes it: text that a spreadsheet would run as a
+    formula (``=HYPERLINK(...)``, ``+cmd``, ``@SUM``) gets a leading ``'``; numbers stay numbers.
+
+    >>> csv_cell('=HYPERLINK("http://x")'), csv_cell("-1.5e3"), csv_cell("ada"), csv_cell(None)
+    ('\'=HYPERLINK("http://x")', '-1.5e3', 'ada', '')
+    """
+    text = "" if value is None else str(value)
+    if text.startswith(_FORMULA_START):
+        try:
+            float(text)
+            return text
+        except ValueError:
+            return "'" + text
+    return text
+
+
+def check_data_size(size: int, path, *, name: str = "--data") -> None:
+    """Refuse a file of more than :data:`MAX_DATA_BYTES`, naming it and its size, before reading it."""
+    if size > MAX_DATA_BYTES:
+        raise DataError(name, path, f"it has {size / 1e6:.1f} MB; at most {MAX_DATA_BYTES / 1e6:g} MB")
+
+
 def _is_mat(data: bytes, filename: str) -> bool:
     return filename.lower().endswith(".mat") or data[:6] == b"MATLAB"
 
 
+#: MATLAB classes read as columns; cells, structs, strings, sparse and objects are never loaded.
+_MAT_NUMERIC = {"double": 8, "single": 4, "int8": 1, "uint8": 1, "int16": 2, "uint16": 2, "int32": 4,
+                "uint32": 4, "int64": 8, "uint64": 8, "logical": 1}
+_MI_COMPRESSED = 15
+
+
+def _too_big(what: str) -> str:
+    return f"it holds more than {MAX_DATA_BYTES / 1e6:g} MB {what}; at most {MAX_DATA_BYTES / 1e6:g} MB are read"
+
+
+def _expanded_mat(data: bytes, name: str, path) -> bytes:
+    """A MATLAB v5 file with its compressed variables expanded, never past :data:`MAX_DATA_BYTES` in all.
+
+    A v5 file is a 128-byte header, then one element per variable: an 8-byte
+    tag (type, byte count) and its bytes; type 15 is a zlib stream of a whole
+    element. Each stream is inflated only up to what is left of the limit, so
+    a small file that inflates to gigabytes (a decompression bomb) is refused
+    after reading 20 MB of it, not 1.6 GB. v4 files are never compressed.
+    """
+    if len(data) < 128 or data[126:128] not in (b"IM", b"MI"):
+        return data                       # MATLAB v4 (or not a .mat: scipy says so)
+    order = "<" if data[126:128] == b"IM" else ">"
+    if struct.unpack(order + "H", data[124:126])[0] == 0x0200:
+        raise DataError(name, path, "it is a MATLAB v7.3 (HDF5) file, which this app does not read; save it "
+                                    "with save('run.mat', 't', 'u', ..., '-v7')")
+    parts, total, pos = [data[:128]], 128, 128
+    while pos + 8 <= len(data):
+        mdtype, nbytes = struct.unpack(order + "II", data[pos:pos + 8])
+        end = pos + 8 + nbytes
+        if mdtype == _MI_COMPRESSED:
+            inflate = zlib.decompressobj()
+            budget = MAX_DATA_BYTES - total
+            try:
+                element = inflate.decompress(data[pos + 8:end], budget + 1)
+            except zlib.error:
+                raise DataError(name, path, "a compressed variable in it is damaged") from None
+            if len(element) > budget or inflate.unconsumed_tail:
+                raise DataError(name, path, _too_big("once decompressed"))
+        else:
+            element = data[pos:end]
+        parts.append(element)
+        total += len(element)
+        if total > MAX_DATA_BYTES:
+            raise DataError(name, path, _too_big("once decompressed"))
+        pos = end
+    return b"".join(parts)
+
+
 def _mat_columns(data: bytes, name: str, path) -> dict[str, np.ndarray]:
+    """The numeric vectors of a .mat file, by name: each variable's declared size is checked
+    before anything is loaded, and only numeric variables are loaded."""
     import scipy.io
 
+    def unreadable(exc) -> DataError:
+        return DataError(name, path, f"it is not a MATLAB .mat file scipy can read ({type(exc).__name__}: "
+                                     f"{' '.join(str(exc).split())[:120]})")
+
+    data = _expanded_mat(data, name, path)
     try:
-        mat = scipy.io.loadmat(io.BytesIO(data), squeeze_me=True)
+        listed = scipy.io.whosmat(io.BytesIO(data))
     except Exception as exc:  # noqa: BLE001 - scipy raises several kinds for a bad file
-        raise DataError(name, path, f"it is not a MATLAB .mat file scipy can read ({type(exc).__name__}: "
-                                    f"{' '.join(str(exc).split())[:120]})") from None
+        raise unreadable(exc) from None
+    wanted = []
+    for var, shape, cls in listed:
+        size = _MAT_NUMERIC.get(cls)
+        if size is None or var.startswith("__"):
+            continue
+        if math.prod(shape) * max(size, 8) > MAX_DATA_BYTES:      # read as float64
+            raise DataError(name, path, f"variable {var} is declared {' x '.join(map(str, shape))}: "
+                                        + _too_big("as numbers"))
+        wanted.append(var)
+    try:
+        mat = scipy.io.loadmat(io.BytesIO(data), squeeze_me=True, variable_names=wanted) if wanted else {}
+    except Exception as exc:  # noqa: BLE001 - scipy raises several kinds for a bad file
+        raise unreadable(exc) from None
     out = {}
     for key, value in mat.items():
         if key.startswith("__"):
             continue
         arr = np.asarray(value)
-        if arr.dtype.kind in "fiu" and arr.ndim == 1 and arr.size >= 1:
+        if arr.dtype.kind in "fiub" and arr.ndim == 1 and arr.size >= 1:
             out[key] = arr.astype(float)
     if not out:
         raise DataError(name, path, "it holds no numeric vector; save one vector per column, "
@@ -116,41 +217,77 @@ def _mat_columns(data: bytes, name: str, path) -> dict[str, np.ndarray]:
     return out
 
 
-def _csv_columns(text: str, name: str, path) -> tuple[list[str], list[list[str]]]:
-    rows = list(csv.reader(io.StringIO(text)))
-    while rows and not any(cell.strip() for cell in rows[-1]):
-        rows.pop()
-    if not rows:
-        raise DataError(name, path, "it is empty; need a header line and one row per sample")
-    return [h.strip() for h in rows[0]], rows[1:]
+def _short(text: str, limit: int = 40) -> str:
+    """A file's text as a message repeats it: whole, or its start when it is long."""
+    return text if len(text) <= limit else text[:limit] + "…"
+
+
+def _csv_rows(data: bytes, name: str, path) -> Iterator[list[str]]:
+    """The rows of a CSV file, decoded as they are read: no copy of the whole text (a 20 MB file
+    read through one string cost 130 MB)."""
+    text = io.TextIOWrapper(io.BytesIO(data), encoding="utf-8-sig", newline="")
+    try:
+        yield from csv.reader(text)
+    except UnicodeDecodeError:
+        raise DataError(name, path, "it is neither a text (CSV) file nor a MATLAB .mat file") from None
+    except csv.Error as exc:
+        raise DataError(name, path, f"it is not a CSV file this app can read ({exc})") from None
+
+
+def _csv_header(data: bytes, name: str, path) -> tuple[list[str], Iterator[list[str]]]:
+    """The header's names and the rows after it."""
+    rows = _csv_rows(data, name, path)
+    if data.strip(b" \t\r\n,;\xef\xbb\xbf"):
+        for row in rows:                    # the first line, as line numbers in messages count it
+            return [h.strip() for h in row], rows
+    raise DataError(name, path, "it is empty; need a header line and one row per sample")
 
 
 def file_columns(data: bytes, filename: str, *, name: str = "--data") -> list[str]:
     """The column names of a CSV or .mat file (units included), for a column-mapping step."""
+    check_data_size(len(data), filename, name=name)
     if _is_mat(data, filename):
         return list(_mat_columns(data, name, filename))
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise DataError(name, filename, "it is neither a text (CSV) file nor a MATLAB .mat file") from None
-    return _csv_columns(text, name, filename)[0]
+    return _csv_header(data, name, filename)[0]
 
 
-def _csv_column(rows, index: int, h: str, name: str, path) -> np.ndarray:
-    values = []
+def _csv_numbers(rows: Iterator[list[str]], wanted: dict[str, tuple[int, str]], name: str,
+                 path) -> tuple[dict[str, np.ndarray], int]:
+    """Read the data rows once, keeping only the wanted columns (``{name: (index, header)}``) as
+    numbers: a 20 MB file costs its numbers' memory, not a list of every cell. Returns them with
+    the count of rows (trailing blank rows not counted), or raises the first problem of the first
+    wanted column that has one."""
+    values = {c: array("d") for c in wanted}
+    problems: dict[str, str] = {}
+    blank_from = None               # the first of blank rows: a problem only if data follow them
+    count = 0
     for k, row in enumerate(rows, start=1):
-        cell = row[index].strip() if index < len(row) else ""
-        where = f"column {h}, row {k} (line {k + 1})"
-        if cell == "":
-            raise DataError(name, path, f"{where} is empty")
-        try:
-            v = float(cell)
-        except ValueError:
-            raise DataError(name, path, f"{where}: {cell!r} is not a number") from None
-        if not math.isfinite(v):
-            raise DataError(name, path, f"{where}: {cell} is not finite")
-        values.append(v)
-    return np.asarray(values, dtype=float)
+        if not any(cell.strip() for cell in row):
+            blank_from = k if blank_from is None else blank_from
+            continue
+        if blank_from is not None:
+            for c, (_, h) in wanted.items():
+                problems.setdefault(c, f"column {h}, row {blank_from} (line {blank_from + 1}) is empty")
+            blank_from = None
+        count = k
+        for c, (index, h) in wanted.items():
+            if c in problems:
+                continue
+            cell = row[index].strip() if index < len(row) else ""
+            where = f"column {h}, row {k} (line {k + 1})"
+            try:
+                v = float(cell)
+            except ValueError:
+                problems[c] = f"{where} is empty" if cell == "" else f"{where}: {_short(cell)!r} is not a number"
+                continue
+            if not math.isfinite(v):
+                problems[c] = f"{where}: {_short(cell)} is not finite"
+                continue
+            values[c].append(v)
+    for c in wanted:
+        if c in problems:
+            raise DataError(name, path, problems[c])
+    return {c: np.frombuffer(v, dtype=float) for c, v in values.items()}, count
 
 
 def read_data(source, columns: Sequence[str], *, name: str = "--data", filename: str | None = None,
@@ -169,9 +306,11 @@ def read_data(source, columns: Sequence[str], *, name: str = "--data", filename:
     """
     if isinstance(source, (bytes, bytearray)):
         data, path = bytes(source), filename or "upload"
+        check_data_size(len(data), path, name=name)
     else:
         path = str(source)
         try:
+            check_data_size(Path(source).stat().st_size, path, name=name)
             data = Path(source).read_bytes()
         except OSError as exc:
             raise DataError(name, path, f"it cannot be read ({exc.strerror or exc})") from None
@@ -179,15 +318,10 @@ def read_data(source, columns: Sequence[str], *, name: str = "--data", filename:
     if _is_mat(data, filename or path):
         table = _mat_columns(data, name, path)
         raw = {h: (arr, None) for h, arr in table.items()}
-        n = None
+        rows = n = None
     else:
-        try:
-            text = data.decode("utf-8-sig")
-        except UnicodeDecodeError:
-            raise DataError(name, path, "it is neither a text (CSV) file nor a MATLAB .mat file") from None
-        header, rows = _csv_columns(text, name, path)
+        header, rows = _csv_header(data, name, path)
         raw = {h: (None, i) for i, h in enumerate(header)}
-        n = len(rows)
     by_base = {}
     for h in raw:
         base, _ = _split_unit(h, name, path) if ("[" in h or "(" in h) else (h, 1.0)
@@ -195,20 +329,20 @@ def read_data(source, columns: Sequence[str], *, name: str = "--data", filename:
     chosen = {c: mapping.get(c) or (c if c in raw else by_base.get(c)) for c in columns}
     missing = [c for c, h in chosen.items() if h is None or h not in raw]
     if missing:
-        have = ", ".join(raw) or "nothing"
+        names = [_short(h) for h in list(raw)[:20]] + ([f"and {len(raw) - 20} more"] if len(raw) > 20 else [])
+        have = ", ".join(names) or "nothing"
         raise DataError(name, path, f"no column {', '.join(missing)}: the file has {have}; need "
                                     f"{', '.join(columns)} (rename them, or map them to the file's columns)")
-    out = {}
-    for c, h in chosen.items():
-        _, scale = _split_unit(h, name, path)
-        arr, index = raw[h]
-        if arr is None:
-            arr = _csv_column(rows, index, h, name, path)
-        else:
-            bad = np.flatnonzero(~np.isfinite(arr))
+    scales = {c: _split_unit(h, name, path)[1] for c, h in chosen.items()}
+    if rows is None:                        # a .mat file: its vectors
+        numbers = {c: raw[h][0] for c, h in chosen.items()}
+        for c, h in chosen.items():
+            bad = np.flatnonzero(~np.isfinite(numbers[c]))
             if bad.size:
-                raise DataError(name, path, f"column {h}, row {int(bad[0]) + 1}: {arr[bad[0]]} is not finite")
-        out[c] = arr * scale
+                raise DataError(name, path, f"column {h}, row {int(bad[0]) + 1}: {numbers[c][bad[0]]} is not finite")
+    else:
+        numbers, n = _csv_numbers(rows, {c: (raw[h][1], h) for c, h in chosen.items()}, name, path)
+    out = {c: numbers[c] * scales[c] for c in chosen}
     sizes = {c: a.size for c, a in out.items()}
     if len(set(sizes.values())) > 1:
         raise DataError(name, path, "the columns differ in length: " + ", ".join(f"{c} {k}" for c, k in sizes.items()))
@@ -233,7 +367,7 @@ def write_data(columns: dict[str, np.ndarray], kind: str = "csv", units: dict[st
     header = [f"{k}[{units[k]}]" if k in units else k for k in names]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(header)
+    w.writerow([csv_cell(h) for h in header])
     data = [np.asarray(columns[k], dtype=float) / scales[k] for k in names]
     for row in zip(*data, strict=True):
         w.writerow([f"{v:.10g}" for v in row])

@@ -18,6 +18,8 @@ True
 True
 >>> ex.verdicts("ada", {"M": p.M * 1.04, "B": p.B * 0.5})
 {'M': True, 'B': False}
+>>> "00" * 16 in repr(ex)                      # the secret is not in its repr
+False
 """
 
 from __future__ import annotations
@@ -50,10 +52,17 @@ def normalize_id(student_id: str) -> str:
 
     >>> normalize_id("  Ada  Lovelace ")
     'ada lovelace'
+    >>> normalize_id("ada\x1b[2J")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    ValueError: student id = ada\\x1b[2j is not allowed: use letters, digits, ... (it holds a control character)
     """
     text = " ".join(str(student_id).split()).lower()
     if not text:
         raise not_allowed("student id", student_id, "enter your name or student id")
+    if not text.isprintable():
+        raise not_allowed("student id", text.encode("unicode_escape").decode("ascii")[:40],
+                          "use letters, digits, spaces and punctuation (it holds a control character)")
     if len(text) > MAX_ID_LENGTH:
         raise not_allowed("student id", text[:20] + "…", f"at most {MAX_ID_LENGTH} characters")
     return text
@@ -67,7 +76,7 @@ class Exercise:
     vary: float
     tolerance: float
     title: str
-    secret: str
+    secret: str = dataclasses.field(repr=False)       # never in a log line or a traceback
     created: str = ""
 
     def __post_init__(self):

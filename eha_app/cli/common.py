@@ -16,7 +16,7 @@ from pathlib import Path
 from eha_core.params import PARAM_NAMES
 
 __all__ = ["EXIT_USAGE", "UsageError", "Parser", "PARAM_HELP", "parse_params", "check_output_file",
-           "check_input_file", "check_range", "json_text", "tf_text"]
+           "check_input_file", "check_range", "json_text", "tf_text", "terminal_text"]
 
 EXIT_USAGE = 2
 
@@ -41,6 +41,16 @@ def parse_params(items):
     from eha_core.params import parse_param_assignments
 
     return parse_param_assignments(items)
+
+
+def terminal_text(text) -> str:
+    r"""``text`` safe to print on the teacher's terminal: control characters (an ANSI escape, a
+    bell, a right-to-left override) are shown as escapes instead of acting.
+
+    >>> print(terminal_text("ada\x1b[2J\u202e"))
+    ada\x1b[2J\u202e
+    """
+    return "".join(ch if ch.isprintable() else ch.encode("unicode_escape").decode("ascii") for ch in str(text))
 
 
 def check_range(option: str, value, lo, hi, unit: str = "") -> None:

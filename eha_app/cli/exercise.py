@@ -7,7 +7,7 @@ import io
 import sys
 from pathlib import Path
 
-from .common import Parser, UsageError, check_input_file, check_output_file
+from .common import Parser, UsageError, check_input_file, check_output_file, terminal_text
 
 
 def add_parser(sub) -> None:
@@ -82,21 +82,34 @@ def _table(ex, handins) -> tuple[list[str], list[list[str]]]:
     return header, rows
 
 
+def _store(path: str):
+    """The exercise's hand-ins, checked: a damaged database is one line and exit code 2."""
+    from eha_app.handins import HandIns, StoreError
+
+    try:
+        return HandIns(path).check()
+    except StoreError as exc:
+        raise UsageError(f"exercise = {path!r} is not allowed: {exc}") from None
+
+
 def run_results(args) -> int:
-    from eha_app.handins import HandIns, handins_path
+    from eha_app.handins import handins_path
+    from eha_core.data import csv_cell
 
     ex = _load(args.exercise)
     if args.csv:
         check_output_file("--csv", args.csv)
-    handins = HandIns(args.exercise).latest() if handins_path(args.exercise).exists() else []
+    handins = _store(args.exercise).latest() if handins_path(args.exercise).exists() else []
     header, rows = _table(ex, handins)
-    widths = [max(len(c) for c in col) for col in zip(header, *rows, strict=False)]
-    print(f"{ex.title}: {len(rows)} student{'s' if len(rows) != 1 else ''} handed in")
-    for line in (header, *rows):
+    # what students typed reaches the teacher's terminal and spreadsheet: neither may act on it
+    shown = [[terminal_text(c) for c in row] for row in rows]
+    widths = [max(len(c) for c in col) for col in zip(header, *shown, strict=False)]
+    print(f"{terminal_text(ex.title)}: {len(rows)} student{'s' if len(rows) != 1 else ''} handed in")
+    for line in (header, *shown):
         print("  ".join(c.ljust(w) for c, w in zip(line, widths, strict=True)).rstrip())
     if args.csv:
         buf = io.StringIO()
-        csv.writer(buf).writerows([header, *rows])
+        csv.writer(buf).writerows([[csv_cell(c) for c in row] for row in (header, *rows)])
         Path(args.csv).write_text(buf.getvalue(), encoding="utf-8")
         print(f"wrote {args.csv}", file=sys.stderr)
     return 0
@@ -112,7 +125,7 @@ def run_reveal(args) -> int:
     except ValueError as exc:
         raise UsageError(str(exc).replace("student id = ", "--student = ")) from None
     p = ex.student_params(student)
-    print(f"{student}'s actuator in {ex.title!r}:")
+    print(f"{terminal_text(student)}'s actuator in {terminal_text(repr(ex.title))}:")
     for n in ex.hide:
         info = FIELD_INFO[n]
         print(f"  {n} = {getattr(p, n):.6g} {info.unit}  ({info.description})")

@@ -10,7 +10,9 @@ import threading
 import time
 import urllib.request
 
-from .common import UsageError
+from eha_app.serving import lan_address
+
+from .common import UsageError, terminal_text
 
 
 def add_parser(sub) -> None:
@@ -26,7 +28,8 @@ def add_parser(sub) -> None:
     sv.add_argument("--workers", type=int, default=None,
                     help="computation threads per process (default: the cores divided by --num-procs)")
     sv.add_argument("--allow-websocket-origin", action="append", default=None, metavar="HOST[:PORT]",
-                    help="hosts allowed to connect (default: this machine's names; '*' when listening on 0.0.0.0)")
+                    help="the address of pages allowed to connect, repeatable (default: the addresses this "
+                         "command prints; '*' lets any website a student has open use the server: not advised)")
     sv.add_argument("--behind-proxy", action="store_true",
                     help="trust X-Forwarded-* headers from a reverse proxy such as nginx")
     sv.add_argument("--nginx-config", type=int, default=None, metavar="N",
@@ -41,16 +44,6 @@ def add_parser(sub) -> None:
 
 def _cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-
-
-def lan_address() -> str | None:
-    """This machine's address on the local network (no packet is sent)."""
-    try:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-            sock.connect(("10.255.255.255", 1))
-            return sock.getsockname()[0]
-    except OSError:
-        return None
 
 
 def check_port_free(address: str, port: int) -> None:
@@ -89,22 +82,32 @@ def _announce_when_ready(url: str) -> None:
     threading.Thread(target=wait, daemon=True).start()
 
 
+def _check_exercise(args) -> None:
+    """Refuse an exercise file, or its hand-in database, that cannot be used, before anything starts."""
+    from eha_app.handins import HandIns, StoreError
+    from eha_core.exercise import Exercise
+
+    from .common import check_input_file
+
+    check_input_file("--exercise", args.exercise)
+    exercise = Exercise.load(args.exercise)          # refused now, with its message, if it is not one
+    try:
+        HandIns(args.exercise).check()
+    except StoreError as exc:
+        raise UsageError(f"--exercise = {args.exercise!r} is not allowed: {exc}") from None
+    os.environ["EHA_EXERCISE"] = os.path.abspath(args.exercise)
+    if not args.share_port:
+        print(f"Exercise {terminal_text(repr(exercise.title))}: hides {', '.join(exercise.hide)}; hand-ins go to "
+              f"{args.exercise.rsplit('.', 1)[0]}.handins.sqlite", flush=True)
+
+
 def run(args) -> int:
     _validate(args)
     if args.nginx_config is not None:
         return _print_nginx_config(args)
     if args.exercise:
-        from eha_core.exercise import Exercise
-
-        from .common import check_input_file
-
-        check_input_file("--exercise", args.exercise)
-        exercise = Exercise.load(args.exercise)          # refused now, with its message, if it is not one
-        os.environ["EHA_EXERCISE"] = os.path.abspath(args.exercise)
-        if not args.share_port:
-            print(f"Exercise {exercise.title!r}: hides {', '.join(exercise.hide)}; hand-ins go to "
-                  f"{args.exercise.rsplit('.', 1)[0]}.handins.sqlite", flush=True)
-    from eha_app.serving import ENTRY_POINT, serve_argv
+        _check_exercise(args)
+    from eha_app.serving import ENTRY_POINT, default_origins, serve_argv
 
     if not ENTRY_POINT.exists():
         raise UsageError(f"the app entry point {ENTRY_POINT} is missing: reinstall the package")
@@ -122,6 +125,9 @@ def run(args) -> int:
             lan = lan_address()
             if lan:
                 print(f"for the class (same network): http://{lan}:{args.port}/eha", flush=True)
+        origins = args.allow_websocket_origin or default_origins(args.address, args.port)
+        print(f"Pages may connect from {', '.join(origins)}"
+              + ("" if args.allow_websocket_origin else " (--allow-websocket-origin names others)"), flush=True)
         print("Preparing the simulation kernels (the first start after an install compiles them, "
               "about 30 s)...", flush=True)
         from eha_app.app import warm_up
@@ -154,6 +160,9 @@ def run(args) -> int:
         share_port()
     from panel.command import main as panel_main
 
+    from eha_app.patches import refuse_foreign_components
+
+    refuse_foreign_components()
     sys.argv = argv
     panel_main()
     return 0

@@ -42,7 +42,7 @@ from ..tables import (
     table4_html,
 )
 from ..tasks import SessionRunner, apply_locked
-from .uploads import ColumnMapping, check_size, download
+from .uploads import ColumnMapping, FileUpload, check_size, download, upload_name
 
 __all__ = ["LeastSquaresPanel", "LseRequest", "LSE_FORM", "LSE_DEFAULTS", "parse_lse"]
 
@@ -196,8 +196,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         self.last_resim = None              # the plot's re-simulation with the estimates
         self.board = None                   # the model board each run is put on (set by the tab)
         self._upload = None
-        self.upload = pn.widgets.FileInput(accept=".csv,.mat", width=260, css_classes=["eha-lse-upload"],
-                                           multiple=False)
+        self.upload = FileUpload(accept=".csv,.mat", width=260, css_classes=["eha-lse-upload"])
         self.upload.param.watch(self._uploaded, "value")
         self.upload_note = pn.pane.HTML(
             "<span class='eha-note'>Or use your own measurements: a CSV or MATLAB .mat file with columns "
@@ -290,7 +289,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
     def _uploaded(self, _event) -> None:
         if self.upload.value is None:
             return
-        self._upload = (bytes(self.upload.value), self.upload.filename or "upload")
+        self._upload = (bytes(self.upload.value), upload_name(self.upload.filename))
         self.read_upload()
 
     def read_upload(self, mapping: dict | None = None):
@@ -551,7 +550,14 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                                    f"<ul>{items}</ul></div>")
             self.verdict.visible = True
 
-        return self.runner.run("hand-in", compute, show, fail=self._fail, note=self._note)
+        def fail(message):
+            # nothing was stored (the class's database is damaged or gone): say so, not "identification failed"
+            self.verdict.object = (f"<div class='eha-verdict-box'><span class='eha-warn'>Your hand-in was not "
+                                   f"stored: {html.escape(message)}. Tell your teacher; your estimates stay "
+                                   "here and you can hand in again.</span></div>")
+            self.verdict.visible = True
+
+        return self.runner.run("hand-in", compute, show, fail=fail, note=self._note)
 
     def __panel__(self):
         controls = pn.Column(self.form, self.upload_note, self.upload, self.mapping, self.window_form,

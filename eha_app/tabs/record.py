@@ -25,7 +25,7 @@ from ..freshness import ResultView
 from ..glossary import term
 from ..tables import estimate_alert, estimation_sentences
 from ..tasks import SessionRunner, apply_locked
-from .uploads import ColumnMapping, check_size, download
+from .uploads import ColumnMapping, FileUpload, check_size, download, upload_name
 
 __all__ = ["RecordPanel", "RECORD_COLUMNS"]
 
@@ -62,7 +62,7 @@ class RecordPanel:
             "(or t, r, x), in SI or with units in the header. Its first two thirds estimate, the rest "
             "validates; the model's poles, zeros, initial condition, offset and delay are the form's.</span>",
             width=270, css_classes=["eha-freq-record-note"])
-        self.upload = pn.widgets.FileInput(accept=".csv,.mat", width=260, css_classes=["eha-freq-upload"])
+        self.upload = FileUpload(accept=".csv,.mat", width=260, css_classes=["eha-freq-upload"])
         self.upload.param.watch(self._uploaded, "value")
         self.mapping = ColumnMapping(RECORD_COLUMNS, "freq-record")
         self.window_form = Form(spec=[Group("Part of your record to use", (
@@ -112,7 +112,7 @@ class RecordPanel:
     def _uploaded(self, _event) -> None:
         if self.upload.value is None:
             return
-        self._upload = (bytes(self.upload.value), self.upload.filename or "upload")
+        self._upload = (bytes(self.upload.value), upload_name(self.upload.filename))
         self.read(None)
 
     def read(self, mapping: dict | None) -> None:

@@ -1,4 +1,5 @@
-"""What tab 3's uploads and downloads share: the size limit, the column-mapping step, the download button."""
+"""What the page's uploads and tab 3's downloads share: the upload widget and its size limit, the
+column-mapping step, the download button."""
 
 from __future__ import annotations
 
@@ -7,18 +8,83 @@ import io
 from collections.abc import Callable
 
 import panel as pn
+import param
+from panel.custom import JSComponent
 
-__all__ = ["MAX_UPLOAD_BYTES", "check_size", "ColumnMapping", "download"]
+from eha_core.data import MAX_DATA_BYTES
 
-#: An upload larger than this is refused (a 10 minute record at 1 kHz is about 2 MB of CSV).
-MAX_UPLOAD_BYTES = 20e6
+__all__ = ["MAX_UPLOAD_BYTES", "FileUpload", "check_size", "upload_name", "ColumnMapping", "download"]
+
+#: An upload larger than this is refused, in the page before it is sent and by the server
+#: (the same limit as the data reader's; the server's websocket takes a file this size).
+MAX_UPLOAD_BYTES = MAX_DATA_BYTES
 
 
-def check_size(data: bytes, filename: str) -> None:
-    """Refuse a file larger than :data:`MAX_UPLOAD_BYTES`, naming it and its size."""
-    if len(data) > MAX_UPLOAD_BYTES:
-        raise ValueError(f"your file = {filename!r} is not allowed: it has {len(data) / 1e6:.1f} MB; "
-                         f"at most {MAX_UPLOAD_BYTES / 1e6:g} MB")
+def _too_big(filename: str, size: int, limit: int) -> str:
+    return f"your file = {filename!r} is not allowed: it has {size / 1e6:.1f} MB; at most {limit / 1e6:g} MB"
+
+
+def upload_name(filename: str | None) -> str:
+    """An upload's name as the page shows and exports it: the page sends it, so it is bounded here."""
+    from ..state import shown_text
+
+    return shown_text(filename or "upload", 80)
+
+
+def check_size(data: bytes, filename: str, limit: int = MAX_UPLOAD_BYTES) -> None:
+    """Refuse a file larger than ``limit``, naming it and its size."""
+    if len(data) > limit:
+        raise ValueError(_too_big(filename, len(data), limit))
+
+
+class FileUpload(JSComponent):
+    """A file chooser that refuses a file over ``max_bytes`` in the page, before sending a byte of it.
+
+    Bokeh's own ``FileInput`` sends any file, base64-encoded in one websocket
+    message: a 19 MB file went past the server's message limit and the
+    connection closed, taking the student's session with it. Here the browser
+    checks the size first and says what is allowed beside the chooser; a file
+    within the limit goes to the server as raw bytes, with its name
+    (``filename`` and ``value`` change in one message).
+    """
+
+    accept = param.String(default="", doc="file types offered, e.g. '.csv,.mat'")
+    max_bytes = param.Integer(default=MAX_UPLOAD_BYTES, bounds=(1, None), doc="the largest file sent")
+    filename = param.String(default=None, allow_None=True, doc="the name of the last file sent")
+    value = param.Bytes(default=None, allow_None=True, doc="the last file's bytes")
+
+    _stylesheets = ["""
+:host { display: block; }
+input[type=file] { font: inherit; font-size: 13px; max-width: 100%; padding: 3px;
+                   border: 1px solid #c3c9d3; border-radius: 4px; background: #fff; box-sizing: border-box; }
+.eha-upload-refused { color: #b00020; font-size: 12px; margin-top: 2px; }
+.eha-upload-refused:empty { display: none; }
+"""]
+
+    _esm = """
+export function render({ model, el }) {
+  const input = document.createElement('input')
+  input.type = 'file'
+  input.accept = model.accept || ''
+  const refused = document.createElement('div')
+  refused.className = 'eha-upload-refused'
+  refused.setAttribute('role', 'alert')
+  input.addEventListener('change', async () => {
+    const file = input.files.length ? input.files[0] : null
+    if (file === null) { return }
+    if (file.size > model.max_bytes) {
+      refused.textContent = `your file = '${file.name}' is not allowed: it has ${(file.size / 1e6).toFixed(1)} MB; ` +
+                            `at most ${model.max_bytes / 1e6} MB`
+      input.value = ''
+      return
+    }
+    refused.textContent = ''
+    const bytes = await file.arrayBuffer()
+    model.data.setv({ filename: file.name, value: bytes })
+  })
+  el.append(input, refused)
+}
+"""
 
 
 class ColumnMapping:
