@@ -148,13 +148,16 @@ class ExerciseGate:
 
 
 def _log_to_stderr() -> None:
-    """The app's notices (a closed page's cancelled runs, failures) in the server's log, once per process."""
+    """The app's notices (a closed page's cancelled runs, failures) in the server's log: through the
+    server's own handler (``eha serve`` sets its format), or one of their own if it has none."""
+    from .serving import LOG_FORMAT
+
     logger = logging.getLogger("eha_app")
-    if not logger.handlers:
+    logger.setLevel(logging.INFO)
+    if not logger.handlers and not logging.getLogger().handlers:
         handler = logging.StreamHandler()
-        handler.setFormatter(logging.Formatter("%(asctime)s %(message)s"))
+        handler.setFormatter(logging.Formatter(LOG_FORMAT))
         logger.addHandler(handler)
-        logger.setLevel(logging.INFO)
 
 
 def serve_session() -> None:

@@ -1,4 +1,4 @@
-"""Keeping an exercise's secrets out of the server's log.
+"""Keeping an exercise's secrets, and anything long, out of the server's log.
 
 The first line of defence is that nothing secret is ever formatted into a log
 line: the exercise and a session's state leave their secrets out of ``repr``,
@@ -7,7 +7,8 @@ by the objects it belongs to. This module is the second: every record of the
 server's log passes :class:`RedactingFilter`, which replaces any registered
 secret (the exercise's key, each student's hidden values as the numbers
 they would be printed as) with ``[hidden]``, in the message and in the
-traceback alike.
+traceback alike, and cuts a message longer than :data:`MAX_MESSAGE_CHARS`
+(Panel logs a failed callback with the whole value it was given).
 
 The registry is process-wide, like the log it guards: every student's hidden
 values are added when their session starts, and only ever compared against.
@@ -27,6 +28,8 @@ import threading
 __all__ = ["keep_out_of_logs", "redact", "RedactingFilter", "redact_server_logs", "number_forms"]
 
 HIDDEN = "[hidden]"
+#: A record longer than this is cut: a failed callback's log line once held a whole uploaded file.
+MAX_MESSAGE_CHARS = 4000
 _lock = threading.Lock()
 _secrets: set[str] = set()
 _pattern: re.Pattern | None = None
@@ -74,12 +77,12 @@ class RedactingFilter(logging.Filter):
     """Redact a record's message and traceback before any handler writes it."""
 
     def filter(self, record: logging.LogRecord) -> bool:
-        if _pattern is None:
-            return True
         try:
             message = record.getMessage()
         except Exception:  # noqa: BLE001 - a broken format: let the handler report it as usual
             return True
+        if len(message) > MAX_MESSAGE_CHARS:
+            message = message[:MAX_MESSAGE_CHARS] + f"… ({len(message) - MAX_MESSAGE_CHARS} characters more)"
         record.msg, record.args = redact(message), None
         if record.exc_info and not record.exc_text:
             record.exc_text = logging.Formatter().formatException(record.exc_info)

@@ -36,8 +36,8 @@ from pathlib import Path
 
 from eha_core.data import MAX_DATA_BYTES
 
-__all__ = ["ENTRY_POINT", "UNUSED_SESSION_MS", "WEBSOCKET_MAX_MESSAGE_BYTES", "serve_argv", "default_origins",
-           "lan_address", "local_names", "nginx_config", "nginx_standalone_config",
+__all__ = ["ENTRY_POINT", "LOG_FORMAT", "UNUSED_SESSION_MS", "WEBSOCKET_MAX_MESSAGE_BYTES", "serve_argv",
+           "default_origins", "lan_address", "local_names", "nginx_config", "nginx_standalone_config",
            "use_local_resources", "share_port", "supervise", "quiet_closed_websockets"]
 
 ENTRY_POINT = Path(__file__).resolve().parent / "eha.py"
@@ -45,6 +45,8 @@ ENTRY_POINT = Path(__file__).resolve().parent / "eha.py"
 UNUSED_SESSION_MS = 4000
 #: How often the server looks for closed sessions.
 CHECK_SESSIONS_MS = 1000
+#: The server log's lines: with their level, so that a warning or an error can be found.
+LOG_FORMAT = "%(asctime)s %(levelname)s %(message)s"
 
 
 #: The largest message a page may send (Tornado closes the websocket beyond it, and the student's
@@ -232,7 +234,7 @@ def serve_argv(*, port: int, address: str, num_procs: int = 1, allow_websocket_o
     argv = ["panel", "serve", str(ENTRY_POINT), "--port", str(port), "--address", address,
             "--num-procs", str(num_procs), "--reuse-sessions",
             "--unused-session-lifetime", str(UNUSED_SESSION_MS), "--check-unused-sessions", str(CHECK_SESSIONS_MS),
-            "--websocket-max-message-size", str(WEBSOCKET_MAX_MESSAGE_BYTES)]
+            "--websocket-max-message-size", str(WEBSOCKET_MAX_MESSAGE_BYTES), "--log-format", LOG_FORMAT]
     for origin in allow_websocket_origin or default_origins(address, port):
         argv += ["--allow-websocket-origin", origin]
     if behind_proxy:

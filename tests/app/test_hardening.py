@@ -216,6 +216,26 @@ def test_the_queue_names_a_failed_jobs_session_by_a_number(exercise, caplog):
     assert not _leaks(caplog.text, ex, "ada")
 
 
+def test_the_audit_of_the_suites_logs_finds_a_planted_secret():
+    """The check run after the whole suite (conftest.py) can fail: it finds what is planted (in a
+    folder of its own: the suite's own folder is what the check searches at the end)."""
+    import tempfile
+
+    from tests.log_audit import audit
+
+    with tempfile.TemporaryDirectory() as folder:
+        tmp = Path(folder)
+        ex = Exercise.new(hide=HIDE, title="Lab 3")
+        ex.save(tmp / "class.json")
+        HandIns(tmp / "class.json").check().add("ada", {"M": 1.0}, {"M": False})
+        (tmp / "clean.log").write_text("2026-11-25 01:28:37,032 Bokeh app running at: http://127.0.0.1:5006/eha\n")
+        assert audit(tmp) == []
+        m = ex.student_params("ada").M
+        (tmp / "leaky.log").write_text(f"job of {ex!r} failed: secret={ex.secret} M = {m:.6g} kg\n")
+        found = " ".join(audit(tmp))
+    assert found.count("leaky.log") == 2 and "the secret of 'Lab 3'" in found and "ada's M" in found
+
+
 def test_the_log_filter_hides_registered_secrets_in_messages_and_tracebacks():
     keep_out_of_logs(4123.456789, "f00dfeedf00dfeedf00d")
     record = logging.LogRecord("eha_app", logging.WARNING, __file__, 1, "M = %s, key %s, M/10 = %s",
@@ -228,6 +248,11 @@ def test_the_log_filter_hides_registered_secrets_in_messages_and_tracebacks():
     text = logging.Formatter().format(record)
     assert "4123.4" not in text and "4123.5" not in text and "f00dfeed" not in text
     assert "[hidden]" in text and "412.3456789" in text          # another number is left alone
+    # a failed callback's line (Panel logs the value it was given) is cut, not logged whole
+    long = logging.LogRecord("panel.reactive", logging.ERROR, __file__, 1, "Callback failed changing %s",
+                             ("[" * 100_000,), None)
+    assert RedactingFilter().filter(long)
+    assert len(long.getMessage()) < 4100 and long.getMessage().endswith("characters more)")
 
 
 # -- 3. and 4. uploads: what is read is bounded, not what is sent -----------------------------------
