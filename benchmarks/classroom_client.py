@@ -166,7 +166,36 @@ def _encode(value):
         return {"type": "map", "entries": [[k, _encode(v)] for k, v in value.items()]}
     if isinstance(value, (list, tuple)):
         return [_encode(v) for v in value]
+    if isinstance(value, (bytes, bytearray, memoryview)):
+        return {"type": "bytes", "data": _Buffer(bytes(value))}
     return value
+
+
+class _Buffer:
+    """Bytes in a message's content: sent as BokehJS sends an ``ArrayBuffer`` (its serializer with
+    ``binary: true``, as ``Document.create_json_patch`` uses): the content holds ``{"id": "0"}``, the
+    header ``num_buffers``, and after the three text frames each buffer follows as a text frame with
+    its reference and a binary frame with its bytes (``Message.send``). Bokeh's ``Deserializer``
+    resolves the reference to the buffer (``_decode_bytes``)."""
+
+    __slots__ = ("data",)
+
+    def __init__(self, data: bytes):
+        self.data = data
+
+
+def _with_buffers(content) -> tuple[str, list]:
+    """``content`` as JSON with every :class:`_Buffer` replaced by a reference, and the buffers."""
+    buffers: list = []
+
+    def default(obj):
+        if isinstance(obj, _Buffer):
+            ref = {"id": str(len(buffers))}
+            buffers.append((ref, obj.data))
+            return ref
+        raise TypeError(f"{type(obj).__name__} is not JSON serializable")
+
+    return json.dumps(content, default=default), buffers
 
 
 # -- one browser tab ----------------------------------------------------------------------------
@@ -301,9 +330,16 @@ class StudentSession:
         if self._broken:
             raise ProtocolError(self._broken)
         msgid = msgid or uuid.uuid4().hex
-        await self._ws.write_message(json.dumps({"msgid": msgid, "msgtype": msgtype}))
+        content_json, buffers = _with_buffers(content)
+        header = {"msgid": msgid, "msgtype": msgtype}
+        if buffers:
+            header["num_buffers"] = len(buffers)
+        await self._ws.write_message(json.dumps(header))
         await self._ws.write_message("{}")
-        await self._ws.write_message(json.dumps(content))
+        await self._ws.write_message(content_json)
+        for ref, data in buffers:
+            await self._ws.write_message(json.dumps(ref))
+            await self._ws.write_message(data, binary=True)
         self.messages_out += 1
         return msgid
 
@@ -360,6 +396,21 @@ class StudentSession:
         model.attributes[attr] = value
         await self.send_patch([{"kind": "ModelChanged", "model": {"id": model.id}, "attr": attr,
                                 "new": _encode(value)}])
+
+    async def set_properties(self, model: Model, values: dict) -> None:
+        """Change several properties in one message, as BokehJS does for ``model.setv({...})`` (e.g. a
+        file chooser's name and bytes together). Bytes go as binary buffers (see :class:`_Buffer`)."""
+        model.attributes.update(values)
+        await self.send_patch([{"kind": "ModelChanged", "model": {"id": model.id}, "attr": attr,
+                                "new": _encode(value)} for attr, value in values.items()])
+
+    async def round_trip(self, timeout: float | None = None) -> float:
+        """An empty ``PATCH-DOC`` and the server's ``OK``: the connection and the session answer.
+        Returns the seconds it took (raises :class:`ProtocolError` on an ERROR reply or a closed
+        connection, ``asyncio.TimeoutError`` if nothing came back in time)."""
+        t0 = time.perf_counter()
+        await self._request("PATCH-DOC", {"events": []}, self.timeout if timeout is None else timeout)
+        return time.perf_counter() - t0
 
     async def send_event(self, name: str, values: dict | None = None) -> None:
         """A UI event (``bokeh_event``), as BokehJS's ``EventManager.send_event`` sends it."""
@@ -521,6 +572,19 @@ class Student(StudentSession):
         ref = form.attributes.get("data")
         data = self.models.get(ref["id"]) if isinstance(ref, dict) and "id" in ref else None
         return data if data is not None and "values" in data.attributes else form
+
+    def component_data(self, css: str) -> Model:
+        """The data model of the custom component (a form, a file chooser) with css class ``css``:
+        where its parameters live (Panel's ``JSComponent``: the component's ``data``)."""
+        component = self._one(f"component .{css}", self.find(css=css))
+        ref = component.attributes.get("data")
+        data = self.models.get(ref["id"]) if isinstance(ref, dict) and "id" in ref else None
+        return data if data is not None else component
+
+    async def upload(self, css: str, filename: str, data: bytes) -> None:
+        """Choose a file in the file chooser with css class ``css`` (the app's ``FileUpload``): its
+        name and bytes in one message, as the page's ``model.data.setv({filename, value})`` sends them."""
+        await self.set_properties(self.component_data(css), {"filename": filename, "value": bytes(data)})
 
     def button(self, label: str) -> Model:
         return self._one(f"button {label!r}", self.find("Button", label=label))
