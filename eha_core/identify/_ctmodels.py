@@ -36,7 +36,7 @@ used by those two modules, and the public ones are re-exported by
   constant input offset and the free response to the initial state
   (:func:`linear_columns`), and their least-squares fit
   (:func:`fit_linear_terms`), which the output-error criterion of
-  :mod:`eha_core.identify.tfest` uses to eliminate them (variable projection:
+  :mod:`eha_core.identify.tfest` (:mod:`eha_core.identify._oe_criterion`) uses to eliminate them (variable projection:
   Golub & Pereyra, SIAM J. Numer. Anal. 10, 1973);
 * MATLAB ``compare``'s fit (:func:`fit_percent`) and the frequency response
   ``G(j w) e^(-j w tau)`` (:func:`frequency_response`, :class:`FrequencyResponseData`).

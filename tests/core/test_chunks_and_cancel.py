@@ -11,7 +11,8 @@ import tracemalloc
 import numpy as np
 import pytest
 
-import eha_core.identify.tfest as tf_mod
+import eha_core.identify._oe_criterion as oe_criterion
+import eha_core.identify._srivc as srivc_mod
 import eha_core.simulate as sim
 from eha_core.cancel import Cancelled, CancelToken
 from eha_core.experiments import (
@@ -335,7 +336,7 @@ def test_the_frequency_identification_stops_soon_after_cancel():
 def test_cancel_reaches_every_stage_of_the_frequency_identification():
     token = RecordingToken()
     run_frequency_identification(config=FrequencyExperiment(n_samples=1000), cancel=token)
-    assert {"_integrate_chunked", "_srivc", "evaluate", "run_frequency_identification"} <= token.callers
+    assert {"_integrate_chunked", "srivc", "evaluate", "run_frequency_identification"} <= token.callers
 
 
 def test_cancel_reaches_the_least_squares_estimation():
@@ -359,7 +360,7 @@ def test_a_cancel_in_tfest_lands_within_one_evaluation(monkeypatch, stage):
     u, y, ts = _square_wave_data()
     token = CancelToken()
     calls = {"evaluate": 0, "filter": 0}
-    evaluate, apply = tf_mod._OutputError.evaluate, tf_mod._StateVariableFilter.apply
+    evaluate, apply = oe_criterion.OutputError.evaluate, srivc_mod.StateVariableFilter.apply
 
     def counted_evaluate(self, *args, **kwargs):
         calls["evaluate"] += 1
@@ -372,8 +373,8 @@ def test_a_cancel_in_tfest_lands_within_one_evaluation(monkeypatch, stage):
         calls["filter"] += int(token.cancelled)
         return apply(self, *args, **kwargs)
 
-    monkeypatch.setattr(tf_mod._OutputError, "evaluate", counted_evaluate)
-    monkeypatch.setattr(tf_mod._StateVariableFilter, "apply", counted_apply)
+    monkeypatch.setattr(oe_criterion.OutputError, "evaluate", counted_evaluate)
+    monkeypatch.setattr(srivc_mod.StateVariableFilter, "apply", counted_apply)
     with pytest.raises(Cancelled, match="test"):
         if stage == "srivc":
             tfest(u, y, ts, n_poles=2, cancel=token)
