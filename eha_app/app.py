@@ -23,7 +23,7 @@ from .connection import ConnectionWatch
 from .state import AppState, shown_text
 from .tables import CSS
 from .tabs.parameters import ParametersTab
-from .tasks import SessionRunner, apply_locked, frozen_models, layout_once_per_message, served_document
+from .tasks import SessionRunner, apply_locked, frozen_models, layout_once_per_message, on_click, served_document, watch
 
 __all__ = ["create_app", "serve_session", "warm_up", "CSS", "TAB_NAMES"]
 
@@ -79,7 +79,7 @@ class LazyTabs:
         # first update, once the browser has the page (see create_app)
         self.tabs = pn.Tabs(*((name, self._slots[i]) for i, (name, _) in enumerate(tabs)), active=active,
                             dynamic=False, sizing_mode="stretch_width", css_classes=["eha-main-tabs"])
-        self.tabs.param.watch(self._on_active, "active")
+        watch(self.tabs, self._on_active, "active")
 
     def _on_active(self, event) -> None:
         if event.new in self._builders:
@@ -133,7 +133,7 @@ class ExerciseGate:
         self.button = pn.widgets.Button(label="Start", color="primary", width=120, css_classes=["eha-start"])
         self.message = pn.pane.HTML("", css_classes=["eha-error", "eha-error-student"],
                                     styles={"color": "#b00020", "font-size": "12px"})
-        self.button.on_click(lambda _e: self.start())
+        on_click(self.button, lambda _e: self.start())
         self.layout = pn.Column(self.intro, self.student_id, self.button, self.message, margin=(10, 20),
                                 width=620, css_classes=["eha-gate"])
 
@@ -162,11 +162,16 @@ def _log_to_stderr() -> None:
 
 def serve_session() -> None:
     """Make this browser session's page (the server runs :mod:`eha_app.eha` for every session)."""
+    from .patches import strict_mode_on, strict_page_changes
     from .redaction import redact_server_logs
     from .serving import quiet_closed_websockets, use_local_resources
+    from .tasks import note_loop_thread
 
     _log_to_stderr()
     redact_server_logs()
+    note_loop_thread()
+    if strict_mode_on():
+        strict_page_changes()
     warm_up()
     quiet_closed_websockets()
     use_local_resources(pn.state.curdoc)
@@ -273,7 +278,7 @@ def settings_row(page) -> pn.Row:
         lab_download.visible = False
         page.eha_runner.run("session report", lambda _token: session_report(page), show, fail=fail)
 
-    lab_report.on_click(prepare)
+    on_click(lab_report, prepare)
     page.eha_report_button, page.eha_report_download = lab_report, lab_download
 
     def loaded(_event):
@@ -287,7 +292,7 @@ def settings_row(page) -> pn.Row:
         note.object = ("<span class='eha-ok'>Settings loaded.</span> "
                        + " ".join(f"<span class='eha-note'>{html.escape(n)}</span>" for n in notes))
 
-    load.param.watch(loaded, "value")
+    watch(load, loaded, "value")
     page.eha_settings_note = note
     return pn.Row(save, pn.pane.HTML("<span class='eha-note'>Load settings:</span>", margin=(12, 4, 0, 10)), load,
                   lab_report, lab_download, note, sizing_mode="stretch_width", css_classes=["eha-settings-row"])

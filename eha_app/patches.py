@@ -1,4 +1,5 @@
-"""Where the server changes a library's behaviour beyond its public API, in one place.
+"""Where the server changes a library's behaviour beyond its public API, in one place; and the
+strict mode of the test suite.
 
 Each change names the library versions it was written against and has a test
 that it takes effect (``tests/serve/test_hardening.py``): a library upgrade that
@@ -15,13 +16,24 @@ Component resources (Panel 1.9, ``panel.io.server.ComponentResourceHandler``)
     the module is already loaded, belongs to Panel or to this app, and the
     name is a Parameterized class (every Panel component is one); the
     component's own checks (listed attribute, listed file) still apply.
+
+The strict mode (Bokeh 3.9, ``DocumentCallbackManager.trigger_on_change``)
+    Every change to a served page must be made under its document's lock, on
+    the server's event loop: from a locked callback (a click, a next-tick or
+    timeout callback, :func:`eha_app.tasks.apply_locked`). A change made
+    elsewhere (a worker thread, Panel's lock-free handling of a priority
+    change) sometimes works and sometimes raises later, somewhere else: a
+    student who had shown tab 2 could no longer update tab 1. With
+    ``EHA_STRICT=1`` (the test suite sets it) :func:`strict_page_changes`
+    makes such a change raise at once, naming the line of the app that made it.
 """
 
 from __future__ import annotations
 
 import sys
 
-__all__ = ["COMPONENT_PACKAGES", "WRITTEN_FOR", "component_allowed", "refuse_foreign_components"]
+__all__ = ["COMPONENT_PACKAGES", "WRITTEN_FOR", "component_allowed", "refuse_foreign_components",
+           "strict_page_changes", "UnlockedChange", "strict_mode_on"]
 
 #: The library versions these changes were written against (checked by the tests).
 WRITTEN_FOR = {"panel": "1.9", "bokeh": "3.9"}
@@ -82,3 +94,54 @@ def refuse_foreign_components() -> None:
             self.finish(f"{status_code}: not found" if status_code == 404 else str(status_code))
 
     panel_server.ComponentResourceHandler = GuardedComponentResourceHandler
+
+
+class UnlockedChange(RuntimeError):
+    """A served page was changed outside its document's lock (strict mode)."""
+
+
+def strict_mode_on() -> bool:
+    """Is the strict mode asked for (``EHA_STRICT=1``)?"""
+    import os
+
+    return os.environ.get("EHA_STRICT", "").strip() not in ("", "0")
+
+
+def _call_site() -> str:
+    """The innermost line of the app's own code on the stack (where the change was made)."""
+    import traceback
+
+    frames = [f for f in traceback.extract_stack()[:-2]
+              if "/eha_app/" in f.filename and not f.filename.endswith(("/patches.py", "/tasks.py"))]
+    if not frames:
+        return "outside the app's code"
+    f = frames[-1]
+    return f"{f.filename.rsplit('/eha_app/', 1)[-1]}:{f.lineno} ({f.name}: {f.line})"
+
+
+def strict_page_changes() -> None:
+    """Raise :class:`UnlockedChange` on any change to a served page made without its lock.
+
+    Process-wide (a server's); calling it again does nothing.
+    """
+    from bokeh.document.callbacks import DocumentCallbackManager
+    from bokeh.document.events import DocumentPatchedEvent
+
+    from .tasks import holds_lock
+
+    trigger = DocumentCallbackManager.trigger_on_change
+    if getattr(trigger, "eha_strict", False):
+        return
+
+    def checked(self, event):
+        doc = self._document()
+        # what goes to the browser (a model's property, a root); not the callbacks' bookkeeping
+        if isinstance(event, DocumentPatchedEvent) and doc is not None and not holds_lock(doc):
+            what = getattr(event, "attr", None) or type(event).__name__
+            model = getattr(event, "model", None)
+            raise UnlockedChange(f"{type(model).__name__ if model is not None else 'the document'}.{what} changed "
+                                 f"outside the page's lock, at {_call_site()}")
+        return trigger(self, event)
+
+    checked.eha_strict = True
+    DocumentCallbackManager.trigger_on_change = checked

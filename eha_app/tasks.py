@@ -36,7 +36,7 @@ import time
 import weakref
 from collections.abc import Callable, Hashable, Sequence
 from contextlib import contextmanager
-from functools import partial
+from functools import partial, wraps
 from typing import Any
 
 import panel as pn
@@ -48,7 +48,7 @@ from eha_core.cancel import Cancelled, CancelToken
 from .jobs import Job, JobQueue, default_queue
 
 __all__ = ["SessionRunner", "PageUpdates", "apply_locked", "frozen_models", "held", "layout_once_per_message",
-           "LOADING_DELAY_S", "served_document"]
+           "LOADING_DELAY_S", "served_document", "holds_lock", "locked", "watch", "on_click", "note_loop_thread"]
 
 log = logging.getLogger("eha_app")
 
@@ -63,6 +63,50 @@ def served_document():
     if doc is not None and getattr(doc, "session_context", None) is not None:
         return doc
     return None
+
+
+_loop_thread: int | None = None
+
+
+def note_loop_thread() -> None:
+    """Remember the server's event-loop thread (called where a session is made: on that thread)."""
+    global _loop_thread
+    _loop_thread = threading.get_ident()
+
+
+def holds_lock(doc) -> bool:
+    """May ``doc`` be changed here and now? Yes outside a server, and while the page is being built
+    (no browser has it yet); else only on the server's event loop while it holds the document's
+    lock (Bokeh sets ``_pending_writes`` for exactly that time)."""
+    context = getattr(doc, "session_context", None)
+    session = getattr(context, "_session", None)
+    if session is None:
+        return True
+    return threading.get_ident() == _loop_thread and getattr(session, "_pending_writes", None) is not None
+
+
+def locked(fn: Callable) -> Callable:
+    """``fn`` run under the page's lock: at once when the caller holds it (a click, a locked
+    callback), else on the event loop's next turn, which takes the lock (Panel handles a form's
+    keystrokes without it: a change made there broke the page). Returns None when deferred."""
+    @wraps(fn)
+    def run(*args, **kwargs):
+        doc = served_document()
+        if doc is None or holds_lock(doc):
+            return fn(*args, **kwargs)
+        doc.add_next_tick_callback(partial(fn, *args, **kwargs))
+        return None
+    return run
+
+
+def watch(obj, fn: Callable, *names: str):
+    """``obj.param.watch(fn, names)``, ``fn`` run under the page's lock (:func:`locked`)."""
+    return obj.param.watch(locked(fn), list(names))
+
+
+def on_click(button, fn: Callable) -> None:
+    """``button.on_click(fn)``, ``fn`` run under the page's lock (:func:`locked`)."""
+    button.on_click(locked(fn))
 
 
 @contextmanager

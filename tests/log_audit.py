@@ -1,10 +1,13 @@
-"""After a test run: no exercise secret, and no student's hidden value, in any server log it wrote.
+"""After a test run: no exercise secret, no student's hidden value and no change made outside a
+page's lock in any server log it wrote.
 
 Every exercise file a test made (under pytest's temporary folder) names its
 secret; its hand-in database names the students who worked. Every log the run's
 servers wrote (their files under the same folder, and the browser tests' shared
 server's log) is searched for the secret and for each of those students' hidden
-values at 5 or more significant digits.
+values at 5 or more significant digits, and for the errors of a page changed
+outside its lock (``RuntimeError: _pending_writes ...``, strict mode's
+``UnlockedChange``).
 """
 
 from __future__ import annotations
@@ -69,9 +72,23 @@ def leaks_in_logs(logs: list[Path], exercises) -> list[str]:
     return found
 
 
+#: Lines no server log of the suite may hold.
+UNLOCKED = ("RuntimeError", "UnlockedChange")
+
+
+def unlocked_changes_in_logs(logs: list[Path]) -> list[str]:
+    """``file: line`` for every line of a change made outside a page's lock."""
+    found = []
+    for log in logs:
+        for line in log.read_text(encoding="utf-8", errors="replace").splitlines():
+            if any(word in line for word in UNLOCKED):
+                found.append(f"{log}: {line.strip()[:300]}")
+    return found
+
+
 def audit(basetemp: Path, extra_logs=()) -> list[str]:
     logs = [p for p in basetemp.rglob("*.log") if p.is_file()] + [Path(p) for p in extra_logs if Path(p).is_file()]
-    return leaks_in_logs(logs, exercises_under(basetemp))
+    return leaks_in_logs(logs, exercises_under(basetemp)) + unlocked_changes_in_logs(logs)
 
 
 if __name__ == "__main__":

@@ -37,7 +37,7 @@ from ..form import Field, Form, Group, parse_fields
 from ..freshness import ResultView
 from ..layout import side_by_side
 from ..state import AppState
-from ..tasks import SessionRunner
+from ..tasks import SessionRunner, on_click, watch
 
 __all__ = ["ModelBoard", "BoardInbox", "BOARD_FORM", "MAX_MODELS"]
 
@@ -119,10 +119,10 @@ class ModelBoard(pn.viewable.Viewer):
         texts.update({k: v for k, v in (query or {}).items() if k in _FIELDS})
         self.form = Form(spec=[g.to_spec() for g in BOARD_FORM], values=texts, url_defaults=BOARD_DEFAULTS,
                          width=270, css_classes=["eha-board-form"], margin=(5, 10))
-        self.form.param.watch(lambda _e: self._settings_changed(), "values")
+        watch(self.form, lambda _e: self._settings_changed(), "values")
         self.bands = pn.widgets.Checkbox(label="95 % bands on the Bode diagram", value=True, width=260,
                                          css_classes=["eha-board-bands"])
-        self.bands.param.watch(lambda _e: self.refresh(), "value")
+        watch(self.bands, lambda _e: self.refresh(), "value")
         self.list = pn.Column(width=280, css_classes=["eha-board-list"])
         self.note = pn.pane.HTML("", width=270, css_classes=["eha-board-note"])
         self.tables = {key: pn.pane.HTML("", sizing_mode="stretch_width", css_classes=[f"eha-board-{key}-table"])
@@ -247,17 +247,17 @@ class ModelBoard(pn.viewable.Viewer):
         for e in self.entries:
             box = pn.widgets.Checkbox(value=e.ticked, width=22, margin=(8, 0, 0, 5),
                                       css_classes=[f"eha-board-tick-{e.key}", "eha-board-tick"])
-            box.param.watch(lambda ev, e=e: self.tick(e, ev.new), "value")
+            watch(box, lambda ev, e=e: self.tick(e, ev.new), "value")
             swatch = pn.pane.HTML(f"<span style='display:inline-block;width:14px;height:14px;background:{e.color};"
                                   f"border-radius:3px;margin-top:9px'></span>", width=18, margin=(0, 2))
             name = pn.widgets.TextInput(value=e.name, width=150, margin=(3, 3),
                                         css_classes=[f"eha-board-name-{e.key}", "eha-board-name"])
-            name.param.watch(lambda ev, e=e: self.rename(e, ev.new), "value")
+            watch(name, lambda ev, e=e: self.rename(e, ev.new), "value")
             parts = [box, swatch, name]
             if e.kind != "reference":
                 drop = pn.widgets.Button(label="✕", width=30, margin=(3, 3), description=f"delete {e.name}",
                                          css_classes=[f"eha-board-delete-{e.key}", "eha-board-delete"])
-                drop.on_click(lambda _ev, e=e: self.delete(e))
+                on_click(drop, lambda _ev, e=e: self.delete(e))
                 parts.append(drop)
             desc = pn.pane.HTML(f"<span class='eha-note'>{html.escape(e.model.description)}</span>",
                                 width=200, margin=(0, 10, 6, 44), styles={"font-size": "11px"})

@@ -27,7 +27,7 @@ from ..tables import (
     estimate_alert,
     freq_summary_html,
 )
-from ..tasks import SessionRunner, apply_locked, held
+from ..tasks import SessionRunner, apply_locked, held, on_click, watch
 from .record import RecordPanel
 from .uploads import download
 
@@ -170,12 +170,12 @@ class FrequencyPanel(pn.viewable.Viewer):
         texts.update({k: v for k, v in (query or {}).items() if k in _FREQ_FIELDS})
         self.form = Form(spec=[g.to_spec() for g in FREQ_FORM], values=texts, url_defaults=FREQ_DEFAULTS, width=270,
                          css_classes=["eha-freq-form"], margin=(5, 10))
-        self.form.param.watch(self._on_config, "values")
+        watch(self.form, self._on_config, "values")
         self.error = pn.pane.HTML("", visible=False, width=260, css_classes=["eha-error", "eha-error-freq"],
                                   styles={"color": "#b00020", "font-size": "12px"})
         self.button = pn.widgets.Button(label="Run experiment and estimate", color="primary", width=260,
                                         css_classes=["eha-run-freq"])
-        self.button.on_click(lambda _e: self.run())
+        on_click(self.button, lambda _e: self.run())
         self.queue_note = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-queue-note"],
                                        styles={"color": "#555", "font-size": "12px"})
         self.summary = pn.pane.HTML("<p>Configure the excitation (Fig. 8) and run the closed-loop experiment.</p>",
@@ -215,10 +215,10 @@ class FrequencyPanel(pn.viewable.Viewer):
                                      for title, key, _ in _FIGURES), dynamic=False,
                                    sizing_mode="stretch_width", css_classes=["eha-freq-figures"])
         self._shown = {"excitation"}
-        self.figure_tabs.param.watch(self._on_figure_tab, "active")
+        watch(self.figure_tabs, self._on_figure_tab, "active")
         self.record = RecordPanel(runner, lambda: self.config()[0], note=self._note, fail=self._fail)
         self.board = None                   # the model board each estimate is put on (set by the tab)
-        self.form.param.watch(lambda _e: self.record.inputs_changed(), "values")
+        watch(self.form, lambda _e: self.record.inputs_changed(), "values")
         state.param.watch(self._update_enabled, "valid")
         state.param.watch(self._on_config, ["params", "kp", "valid"])
         self._on_config()

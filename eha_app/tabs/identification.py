@@ -5,7 +5,7 @@ from __future__ import annotations
 import panel as pn
 
 from ..state import AppState
-from ..tasks import SessionRunner, apply_locked, frozen_models
+from ..tasks import SessionRunner, apply_locked, frozen_models, watch
 from .board import BoardInbox, ModelBoard
 from .frequency import FREQ_DEFAULTS, FREQ_FORM, FrequencyPanel, parse_freq
 from .least_squares import LSE_DEFAULTS, LSE_FORM, LeastSquaresPanel, LseRequest, parse_lse
@@ -45,7 +45,7 @@ class IdentificationTab(pn.viewable.Viewer):
                             ("Model board", self._board_slot),
                             ("Study over seeds", self._study_slot),
                             dynamic=False, sizing_mode="stretch_width", css_classes=["eha-ident-tabs"])
-        self.tabs.param.watch(self._on_tab, "active")
+        watch(self.tabs, self._on_tab, "active")
 
     def _on_tab(self, event) -> None:
         if event.new == 1:

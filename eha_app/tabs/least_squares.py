@@ -41,7 +41,7 @@ from ..tables import (
     lse_table_html,
     table4_html,
 )
-from ..tasks import SessionRunner, apply_locked
+from ..tasks import SessionRunner, apply_locked, on_click, watch
 from .uploads import ColumnMapping, FileUpload, check_size, download, upload_name
 
 __all__ = ["LeastSquaresPanel", "LseRequest", "LSE_FORM", "LSE_DEFAULTS", "parse_lse"]
@@ -158,7 +158,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         texts.update({k: v for k, v in (query or {}).items() if k in _LSE_FIELDS})
         self.form = Form(spec=[g.to_spec() for g in LSE_FORM], values=texts, url_defaults=LSE_DEFAULTS, width=270,
                          css_classes=["eha-lse-form"], margin=(5, 10))
-        self.form.param.watch(self._update_enabled, "values")
+        watch(self.form, self._update_enabled, "values")
         self.table = pn.pane.HTML("<p>Choose a disturbance and run the least squares.</p>",
                                   sizing_mode="stretch_width", css_classes=["eha-lse-table"])
         # the figure is built with the first result: an empty figure is no use to
@@ -180,14 +180,14 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                                         css_classes=["eha-run-lse"])
         self.all_button = pn.widgets.Button(label="Run all four scenarios (Table 4)", color="success", width=260,
                                             css_classes=["eha-run-table4"])
-        self.button.on_click(lambda _e: self.run())
-        self.all_button.on_click(lambda _e: self.run_all())
+        on_click(self.button, lambda _e: self.run())
+        on_click(self.all_button, lambda _e: self.run_all())
         # an exercise: hand in the hidden parameters' estimates (Table 4 would show the truth)
         self.all_button.visible = not state.hidden
         self.handin_button = pn.widgets.Button(label="Hand in these estimates", color="warning", width=260,
                                                css_classes=["eha-handin"], visible=bool(state.hidden), disabled=True,
                                                description="run the least squares first")
-        self.handin_button.on_click(lambda _e: self.hand_in())
+        on_click(self.handin_button, lambda _e: self.hand_in())
         self.verdict = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-verdict"])
         # the student's own data (CSV or .mat), instead of the simulated sensors
         self.own_data = None                # MeasuredData of an upload, when one is in use
@@ -197,7 +197,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         self.board = None                   # the model board each run is put on (set by the tab)
         self._upload = None
         self.upload = FileUpload(accept=".csv,.mat", width=260, css_classes=["eha-lse-upload"])
-        self.upload.param.watch(self._uploaded, "value")
+        watch(self.upload, self._uploaded, "value")
         self.upload_note = pn.pane.HTML(
             "<span class='eha-note'>Or use your own measurements: a CSV or MATLAB .mat file with columns "
             "t, x, v, p1, p2, u (SI, or units in the header such as <code>p1[MPa]</code>).</span>",
@@ -210,10 +210,10 @@ class LeastSquaresPanel(pn.viewable.Viewer):
             Field("own_to", "to t", "text", unit="s", placeholder="its end", short="to t"),
         )).to_spec()], values={"own_from": "", "own_to": ""}, width=270, visible=False,
             css_classes=["eha-lse-window"], margin=(5, 10))
-        self.window_form.param.watch(lambda _e: self._update_enabled(), "values")
+        watch(self.window_form, lambda _e: self._update_enabled(), "values")
         self.simulated_button = pn.widgets.Button(label="Back to simulated data", width=260, visible=False,
                                                   css_classes=["eha-lse-simulated"])
-        self.simulated_button.on_click(lambda _e: self.use_simulated())
+        on_click(self.simulated_button, lambda _e: self.use_simulated())
         self.downloads = [
             download(lambda: self.data_bytes("csv"), "eha_lse_data.csv", "Data (CSV)", "eha-dl-data-csv"),
             download(lambda: self.data_bytes("mat"), "eha_lse_data.mat", "Data (.mat)", "eha-dl-data-mat"),

@@ -14,6 +14,7 @@ from ..form import Field, Form, Group
 from ..layout import side_by_side
 from ..state import FIELD_LABELS, AppState
 from ..tables import derived_html
+from ..tasks import on_click, watch
 
 __all__ = ["ParametersTab", "SCHEMATIC_PATH", "PARAMETER_FORM"]
 
@@ -82,9 +83,9 @@ class ParametersTab(pn.viewable.Viewer):
         self.state = state
         self.form = Form(spec=[g.to_spec() for g in form_groups(state.hidden)], values=self._texts(), width=250,
                          url_defaults=default_texts(), css_classes=["eha-param-form"], margin=(5, 10))
-        self.form.param.watch(self._typed, "values")
+        watch(self.form, self._typed, "values")
         self.reset_button = pn.widgets.Button(label="Reset to paper defaults", color="default", width=250)
-        self.reset_button.on_click(self._reset)
+        on_click(self.reset_button, self._reset)
         self.derived = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-derived"])
         self.status = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-param-status"])
         state.param.watch(self._on_state, ["errors", "revision", "kp"])

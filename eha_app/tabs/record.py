@@ -24,7 +24,7 @@ from ..formatting import tf_html
 from ..freshness import ResultView
 from ..glossary import term
 from ..tables import estimate_alert, estimation_sentences
-from ..tasks import SessionRunner, apply_locked
+from ..tasks import SessionRunner, apply_locked, on_click, watch
 from .uploads import ColumnMapping, FileUpload, check_size, download, upload_name
 
 __all__ = ["RecordPanel", "RECORD_COLUMNS"]
@@ -63,7 +63,7 @@ class RecordPanel:
             "validates; the model's poles, zeros, initial condition, offset and delay are the form's.</span>",
             width=270, css_classes=["eha-freq-record-note"])
         self.upload = FileUpload(accept=".csv,.mat", width=260, css_classes=["eha-freq-upload"])
-        self.upload.param.watch(self._uploaded, "value")
+        watch(self.upload, self._uploaded, "value")
         self.mapping = ColumnMapping(RECORD_COLUMNS, "freq-record")
         self.window_form = Form(spec=[Group("Part of your record to use", (
             Field("rec_from", "from t", "text", unit="s", placeholder="its start", short="from t"),
@@ -74,7 +74,7 @@ class RecordPanel:
                                          visible=False, css_classes=["eha-freq-record-detrend"])
         self.button = pn.widgets.Button(label="Estimate from your record", disabled=True, width=260,
                                         css_classes=["eha-freq-record-run"])
-        self.button.on_click(lambda _e: self.run())
+        on_click(self.button, lambda _e: self.run())
         self.data_figure: plots.RecordDataFigure | None = None
         self.data_area = pn.Column(sizing_mode="stretch_width", visible=False, css_classes=["eha-freq-record-data"])
         self.summary = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-freq-record-summary"])
@@ -89,8 +89,8 @@ class RecordPanel:
             download(lambda: bode_csv(self.result.bode, theoretical=False), "eha_record_bode.csv",
                      "Bode curves (CSV)", "eha-dl-record-bode", width=260),
         ]
-        self.window_form.param.watch(lambda _e: self.preview(), "values")
-        self.detrend.param.watch(lambda _e: self.preview(), "value")
+        watch(self.window_form, lambda _e: self.preview(), "values")
+        watch(self.detrend, lambda _e: self.preview(), "value")
 
     # -- inputs ------------------------------------------------------------------------------
     def window(self) -> tuple[str, str]:

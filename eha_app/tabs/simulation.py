@@ -21,7 +21,7 @@ from ..layout import side_by_side
 from ..limits import check_simulation
 from ..plots import TimeSeriesGrid
 from ..state import AppState
-from ..tasks import SessionRunner, apply_locked
+from ..tasks import SessionRunner, apply_locked, on_click, watch
 
 __all__ = ["SimulationTab", "SimulationRequest", "SIMULATION_FORM", "build_inputs", "parse_t_end", "compute_runs"]
 
@@ -264,16 +264,16 @@ class SimulationTab(pn.viewable.Viewer):
         texts.update(restored)
         self.form = Form(spec=[g.to_spec() for g in SIMULATION_FORM], values=texts, url_defaults=DEFAULT_TEXTS,
                          width=270, css_classes=["eha-sim-form"], margin=(5, 10))
-        self.form.param.watch(self._typed, "values")
+        watch(self.form, self._typed, "values")
 
         self.preset_buttons = []
         for k in (1, 2, 3, 4):
             b = pn.widgets.Button(label=f"Case {k}", width=62, margin=(2, 2), description=PAPER_CASES[k].title)
-            b.on_click(self._preset_handler(k))
+            on_click(b, self._preset_handler(k))
             self.preset_buttons.append(b)
         b = pn.widgets.Button(label="All four cases", width=130, margin=(2, 2),
                               description="the four cases of Figs. 2 and 3, overlaid")
-        b.on_click(self._preset_handler("all"))
+        on_click(b, self._preset_handler("all"))
         self.preset_buttons.append(b)
         self.run_buttons = {
             "nonlinear": pn.widgets.Button(label="Run nonlinear", color="primary", width=130,
@@ -283,7 +283,7 @@ class SimulationTab(pn.viewable.Viewer):
             "both": pn.widgets.Button(label="Compare both", color="success", width=130, css_classes=["eha-run-both"]),
         }
         for model, button in self.run_buttons.items():
-            button.on_click(self._run_handler(model))
+            on_click(button, self._run_handler(model))
         self.download = pn.widgets.FileDownload(callback=self._csv, filename="eha_simulation.csv",
                                                 color="default", label="Download CSV", disabled=True, width=134)
         self.download_mat = pn.widgets.FileDownload(callback=lambda: io.BytesIO(results_mat(self.results)),

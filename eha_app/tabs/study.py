@@ -26,7 +26,7 @@ from .. import plots
 from ..form import Field, Form, Group, parse_fields
 from ..layout import side_by_side
 from ..state import AppState
-from ..tasks import SessionRunner, apply_locked, served_document
+from ..tasks import SessionRunner, apply_locked, on_click, served_document, watch
 
 __all__ = ["StudyPanel", "STUDY_FORM", "STUDY_DEFAULTS", "MAX_APP_SEEDS"]
 
@@ -126,13 +126,13 @@ class StudyPanel(pn.viewable.Viewer):
         texts.update({k: v for k, v in (query or {}).items() if k in _FIELDS})
         self.form = Form(spec=[g.to_spec() for g in STUDY_FORM], values=texts, url_defaults=STUDY_DEFAULTS,
                          width=270, css_classes=["eha-study-form"], margin=(5, 10))
-        self.form.param.watch(lambda _e: self._update_enabled(), "values")
+        watch(self.form, lambda _e: self._update_enabled(), "values")
         self.button = pn.widgets.Button(label="Run the study", color="primary", width=260,
                                         css_classes=["eha-run-study"])
-        self.button.on_click(lambda _e: self.run())
+        on_click(self.button, lambda _e: self.run())
         self.cancel_button = pn.widgets.Button(label="Cancel", width=260, disabled=True,
                                                css_classes=["eha-cancel-study"])
-        self.cancel_button.on_click(lambda _e: self.cancel())
+        on_click(self.cancel_button, lambda _e: self.cancel())
         self.progress = pn.indicators.Progress(value=0, max=100, width=260, visible=False,
                                                css_classes=["eha-study-progress"])
         self.status = pn.pane.HTML("", width=270, css_classes=["eha-study-status"])

@@ -13,6 +13,8 @@ from panel.custom import JSComponent
 
 from eha_core.data import MAX_DATA_BYTES
 
+from ..tasks import on_click
+
 __all__ = ["MAX_UPLOAD_BYTES", "FileUpload", "check_size", "upload_name", "ColumnMapping", "download"]
 
 #: An upload larger than this is refused, in the page before it is sent and by the server
@@ -111,7 +113,7 @@ class ColumnMapping:
                                                 css_classes=[f"eha-map-{c}"])
         self.button = pn.widgets.Button(label="Use these columns", color="primary", width=250,
                                         css_classes=["eha-map-go"])
-        self.button.on_click(lambda _e: use({c: s.value for c, s in self.selects.items() if s.value != "(none)"}))
+        on_click(self.button, lambda _e: use({c: s.value for c, s in self.selects.items() if s.value != "(none)"}))
         self.panel.objects = [pn.pane.HTML(f"<span class='eha-warn'>{html.escape(message)}</span>"),
                               *self.selects.values(), self.button]
         self.panel.visible = True

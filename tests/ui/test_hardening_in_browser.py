@@ -132,7 +132,7 @@ def test_a_very_long_field_stays_out_of_the_address_and_the_page_reloads(browser
     field.click()
     field.press("Control+a")
     page.keyboard.insert_text("2" * 70_000)                       # a paste of 70,000 characters
-    wait_until(lambda: "M=222" in page.url, 15, message=f"the field in the address ({page.url[:80]}, {field.input_value()[:20]})")
+    wait_until(lambda: "M=222" in page.url, 15, message="the field in the address")
     assert field.input_value() == "2" * MAX_TEXT_CHARS            # the field holds what it may
     assert len(page.url) < 2000, len(page.url)
     page.reload()                                                 # the address still loads, with the field
