@@ -5,6 +5,12 @@ Every refusal, in the core, the command line and the app, reads
 user called it (a field, an option, an argument), VALUE is written as typed
 (text without quotes, numbers with six significant digits), WHAT says what is
 allowed, or what is wrong and what to do.
+
+A refusal is a value, :class:`FieldError` (``field``, ``value``, ``what``):
+the sentence is rendered from it (:meth:`FieldError.render` writes it with
+the label and unit a form shows), and code that needs to know more reads its
+attributes, never the text. This module is the one place that writes the
+sentence.
 """
 
 from __future__ import annotations
@@ -13,7 +19,7 @@ import math
 
 import numpy as np
 
-__all__ = ["not_allowed", "shown", "positive_number", "positive_integer"]
+__all__ = ["FieldError", "not_allowed", "shown", "positive_number", "positive_integer"]
 
 
 def shown(value) -> str:
@@ -34,9 +40,80 @@ def shown(value) -> str:
     return type(value).__name__ if len(repr(value)) > 80 else repr(value)
 
 
-def not_allowed(name: str, value, what: str) -> ValueError:
-    """The ValueError of a refused value (raise it)."""
-    return ValueError(f"{name} = {shown(value)} is not allowed: {what}")
+class FieldError(ValueError):
+    """A refused value, as data: which field, which value, and what is allowed.
+
+    ``str(error)`` is the project's one sentence, ``FIELD = VALUE is not
+    allowed: WHAT``; :meth:`render` writes the same sentence with the label and
+    unit a user interface shows. A ValueError, so ``except ValueError`` still
+    catches every refusal.
+
+    Parameters
+    ----------
+    field : str
+        What the user called it: a field, an option (``--np``), an argument.
+    value : object
+        The refused value.
+    what : str
+        What is allowed, or what is wrong and what to do.
+    value_text : str, optional
+        How the message writes the value; default :func:`shown` (as typed).
+        A file name, say, is written quoted.
+    context : str, optional
+        A condition of the refusal, written after "is not allowed"
+        (``"with --model linear"``); default none.
+
+    Examples
+    --------
+    >>> error = FieldError("beta_e", 1.1e9, "must be at most 1e+10 Pa")
+    >>> str(error)
+    'beta_e = 1.1e+09 is not allowed: must be at most 1e+10 Pa'
+    >>> error.field, error.value, error.what
+    ('beta_e', 1100000000.0, 'must be at most 1e+10 Pa')
+    >>> error.render("βe", "GPa", value_text="1.1")
+    'βe = 1.1 GPa is not allowed: must be at most 1e+10 Pa'
+    >>> str(FieldError("--branch", "nonlinear", "the branch chooses ...", context="with --model linear"))
+    '--branch = nonlinear is not allowed with --model linear: the branch chooses ...'
+    """
+
+    def __init__(self, field: str, value, what: str, *, value_text: str | None = None, context: str = ""):
+        self.field = field
+        self.value = value
+        self.what = what
+        self.value_text = shown(value) if value_text is None else value_text
+        self.context = context
+        super().__init__(self.render())
+
+    def render(self, label: str | None = None, unit: str = "", value_text: str | None = None) -> str:
+        """The sentence with ``label`` for the field and the value written ``value_text`` followed by ``unit``.
+
+        Each defaults to the error's own (``field``, no unit, ``value_text``).
+        """
+        text = self.value_text if value_text is None else value_text
+        if unit:
+            text = f"{text} {unit}"
+        condition = f" {self.context}" if self.context else ""
+        return f"{self.field if label is None else label} = {text} is not allowed{condition}: {self.what}"
+
+    def renamed(self, field: str) -> FieldError:
+        """The same refusal of a field called ``field`` (the command line's option for a core argument)."""
+        return FieldError(field, self.value, self.what, value_text=self.value_text, context=self.context)
+
+    def __reduce__(self):
+        # the subclasses' constructors differ: rebuild from the attributes, so that an
+        # error crosses a process boundary (pickle) as the same value
+        return _rebuilt, (type(self), self.args), self.__dict__
+
+
+def _rebuilt(cls, args):
+    error = cls.__new__(cls, *args)
+    error.args = args
+    return error
+
+
+def not_allowed(name: str, value, what: str, *, value_text: str | None = None, context: str = "") -> FieldError:
+    """The :class:`FieldError` of a refused value (raise it): ``NAME = VALUE is not allowed: WHAT``."""
+    return FieldError(name, value, what, value_text=value_text, context=context)
 
 
 def positive_number(name: str, value, allowed: str = "must be a finite number > 0") -> float:

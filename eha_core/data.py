@@ -33,8 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ._checks import FieldError
+
 __all__ = ["DataError", "read_columns", "read_data", "write_data", "sample_time", "UNITS", "file_columns",
-           "MAX_DATA_BYTES", "check_data_size", "csv_cell"]
+           "columns_text", "MAX_DATA_BYTES", "check_data_size", "csv_cell"]
 
 #: The most a data file may hold as it is read: the bytes of a CSV, the decompressed bytes of a
 #: .mat (a 10 minute record at 1 kHz is about 2 MB of CSV).
@@ -45,14 +47,29 @@ UNITS = {"s": 1.0, "ms": 1e-3, "m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "m
          "pa": 1.0, "kpa": 1e3, "mpa": 1e6, "bar": 1e5, "v": 1.0, "n": 1.0, "kn": 1e3}
 
 
-class DataError(ValueError):
-    """A data file that cannot be used, with what is wrong and where."""
+class DataError(FieldError):
+    """A data file that cannot be used, with what is wrong and where (a :class:`~eha_core._checks.FieldError`).
 
-    def __init__(self, name: str, path, what: str):
+    Its field is ``name`` (the option or the form's name for the file), its value
+    the file's name ``path``, written quoted.
+
+    Attributes
+    ----------
+    name, path, what : str
+        The field, the file's name, and what is wrong (column, row).
+    missing_columns : tuple of str
+        The needed columns the file does not have (empty when the problem is
+        something else): a caller offers a mapping of the file's columns then.
+    file_columns : tuple of str
+        The file's column names, when ``missing_columns`` are; see :func:`columns_text`.
+    """
+
+    def __init__(self, name: str, path, what: str, *, missing_columns=(), file_columns=()):
         self.name = name
         self.path = str(path)
-        self.what = what
-        super().__init__(f"{name} = {str(path)!r} is not allowed: {what}")
+        self.missing_columns = tuple(missing_columns)
+        self.file_columns = tuple(file_columns)
+        super().__init__(name, self.path, what, value_text=repr(self.path))
 
 
 def read_columns(path, columns: Sequence[str], *, name: str = "--data", min_rows: int = 2) -> dict[str, np.ndarray]:
@@ -243,6 +260,17 @@ def _csv_header(data: bytes, name: str, path) -> tuple[list[str], Iterator[list[
     raise DataError(name, path, "it is empty; need a header line and one row per sample")
 
 
+def columns_text(names) -> str:
+    """A file's column names as a message lists them: the first 20, each cut to 40 characters.
+
+    >>> columns_text(["t", "u", "y"]), columns_text([])
+    ('t, u, y', 'nothing')
+    """
+    names = list(names)
+    shown = [_short(h) for h in names[:20]] + ([f"and {len(names) - 20} more"] if len(names) > 20 else [])
+    return ", ".join(shown) or "nothing"
+
+
 def file_columns(data: bytes, filename: str, *, name: str = "--data") -> list[str]:
     """The column names of a CSV or .mat file (units included), for a column-mapping step."""
     check_data_size(len(data), filename, name=name)
@@ -329,10 +357,9 @@ def read_data(source, columns: Sequence[str], *, name: str = "--data", filename:
     chosen = {c: mapping.get(c) or (c if c in raw else by_base.get(c)) for c in columns}
     missing = [c for c, h in chosen.items() if h is None or h not in raw]
     if missing:
-        names = [_short(h) for h in list(raw)[:20]] + ([f"and {len(raw) - 20} more"] if len(raw) > 20 else [])
-        have = ", ".join(names) or "nothing"
-        raise DataError(name, path, f"no column {', '.join(missing)}: the file has {have}; need "
-                                    f"{', '.join(columns)} (rename them, or map them to the file's columns)")
+        raise DataError(name, path, f"no column {', '.join(missing)}: the file has {columns_text(raw)}; need "
+                                    f"{', '.join(columns)} (rename them, or map them to the file's columns)",
+                        missing_columns=missing, file_columns=raw)
     scales = {c: _split_unit(h, name, path)[1] for c, h in chosen.items()}
     if rows is None:                        # a .mat file: its vectors
         numbers = {c: raw[h][0] for c, h in chosen.items()}

@@ -321,7 +321,7 @@ def idinput(
     >>> idinput(100, "sine", [0.2, 1.5])  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    ValueError: band = [0.2, 1.5] is not allowed: need [wlow, whigh] with 0 <= wlow < whigh <= 1 (...)
+    eha_core._checks.FieldError: band = [0.2, 1.5] is not allowed: need [wlow, whigh] with 0 <= wlow < whigh <= 1 (...)
     """
     kind = _parse_type(type)
     period, n_channels, n_periods = _parse_n(n)

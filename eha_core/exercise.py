@@ -55,7 +55,7 @@ def normalize_id(student_id: str) -> str:
     >>> normalize_id("ada\x1b[2J")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    ValueError: student id = ada\\x1b[2j is not allowed: use letters, digits, ... (it holds a control character)
+    eha_core._checks.FieldError: student id = ada\\x1b[2j is not allowed: use letters, ... (it holds a control ...)
     """
     text = " ".join(str(student_id).split()).lower()
     if not text:

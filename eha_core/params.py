@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._checks import shown
+from ._checks import FieldError
 
 __all__ = [
     "ActuatorParams",
@@ -39,8 +39,8 @@ __all__ = [
 ]
 
 
-class ParameterError(ValueError):
-    """A parameter value outside what the model allows.
+class ParameterError(FieldError):
+    """A parameter value outside what the model allows (a :class:`~eha_core._checks.FieldError`).
 
     Attributes
     ----------
@@ -49,14 +49,12 @@ class ParameterError(ValueError):
     value : object
         The rejected value.
     allowed : str
-        What would have been accepted, in words.
+        What would have been accepted, in words (the same as ``what``).
     """
 
     def __init__(self, field: str, value, allowed: str):
-        self.field = field
-        self.value = value
         self.allowed = allowed
-        super().__init__(f"{field} = {shown(value)} is not allowed: {allowed}")
+        super().__init__(field, value, allowed)
 
 
 @dataclass(frozen=True)

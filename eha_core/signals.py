@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._checks import not_allowed, shown
+from ._checks import FieldError, not_allowed, shown
 
 __all__ = [
     "Signal", "Constant", "Sine", "Step", "Square", "Chirp", "WhiteNoise",
@@ -66,8 +66,9 @@ SIGNAL_GRAMMAR = """signals as text (inputs and disturbances), terms joined with
 """
 
 
-class SignalSpecError(ValueError):
-    """A signal written as text that cannot be read."""
+class SignalSpecError(FieldError):
+    """A signal written as text that cannot be read (a :class:`~eha_core._checks.FieldError`:
+    the field is the signal's name, the value the whole text)."""
 
 
 def _g(x: float) -> str:
@@ -403,7 +404,7 @@ def parse_signal(text, name: str = "signal", *, seed: int = 0, hold_s: float = 1
     if isinstance(text, Signal):
         return text
     if not isinstance(text, str) or not text.strip():
-        raise SignalSpecError(f"{name} = {shown(text)} is not allowed: expected {SIGNAL_SYNTAX}")
+        raise SignalSpecError(name, text, f"expected {SIGNAL_SYNTAX}")
     # '+' joins terms, except inside a number's exponent (1e+3)
     parts = [p.strip() for p in re.split(r"(?<![eE])\+", text.strip())]
     total: Signal = ZERO
@@ -414,7 +415,7 @@ def parse_signal(text, name: str = "signal", *, seed: int = 0, hold_s: float = 1
 
 def _parse_term(part: str, whole: str, name: str, defaults: dict) -> Signal:
     def fail(why: str) -> SignalSpecError:
-        return SignalSpecError(f"{name} = {shown(whole)} is not allowed: {why}")
+        return SignalSpecError(name, whole, why)
 
     if part.lower() in ("none", "zero", "0"):
         return ZERO

@@ -13,16 +13,53 @@ import json
 import os
 from pathlib import Path
 
+from eha_core.errors import FieldError
 from eha_core.params import PARAM_NAMES
 
 __all__ = ["EXIT_USAGE", "UsageError", "Parser", "PARAM_HELP", "parse_params", "check_output_file",
-           "check_input_file", "check_range", "json_text", "tf_text", "terminal_text"]
+           "check_input_file", "check_range", "json_text", "tf_text", "terminal_text", "refused", "refused_file",
+           "as_option"]
 
 EXIT_USAGE = 2
 
 
 class UsageError(Exception):
-    """Bad input on the command line (exit code 2, one line on stderr)."""
+    """Bad input on the command line (exit code 2, one line on stderr).
+
+    ``UsageError(FieldError(...))`` carries the refusal as data (``error``: the
+    option, the value, what is allowed), its line being the refusal's sentence;
+    ``UsageError(text)`` is argparse's own complaint, which is no refusal of a
+    value (``error`` is None). :func:`refused` builds the first kind.
+
+    >>> str(refused("--np", 9, "use 1 to 8 poles"))
+    '--np = 9 is not allowed: use 1 to 8 poles'
+    >>> refused("--np", 9, "use 1 to 8 poles").error.field
+    '--np'
+    """
+
+    def __init__(self, problem: str | FieldError):
+        self.error = problem if isinstance(problem, FieldError) else None
+        super().__init__(str(problem))
+
+
+def refused(option: str, value, what: str, *, value_text: str | None = None, context: str = "") -> UsageError:
+    """The UsageError of a refused option value: ``OPTION = VALUE is not allowed: WHAT``
+    (see :class:`eha_core.errors.FieldError` for ``value_text`` and ``context``)."""
+    return UsageError(FieldError(option, value, what, value_text=value_text, context=context))
+
+
+def refused_file(option: str, path, what: str) -> UsageError:
+    """:func:`refused` for a file name, written quoted as a shell would need it (``--out = 'a b.csv'``)."""
+    return refused(option, path, what, value_text=repr(path))
+
+
+def as_option(error: FieldError, options: dict[str, str]) -> UsageError:
+    """A core refusal as the command line's: the core's name of the field replaced by the option that set it.
+
+    ``options`` maps the core's names to options (``{"input_delay": "--delay"}``); a field not
+    among them keeps its name.
+    """
+    return UsageError(error.renamed(options.get(error.field, error.field)))
 
 
 class Parser(argparse.ArgumentParser):
@@ -57,7 +94,7 @@ def check_range(option: str, value, lo, hi, unit: str = "") -> None:
     """UsageError unless ``lo <= value <= hi`` (a size argument's limit)."""
     if not lo <= value <= hi:
         what = f"{lo:g}-{hi:g}" if isinstance(lo, float) or isinstance(hi, float) else f"{lo} to {hi}"
-        raise UsageError(f"{option} = {value} is not allowed: use {what}{' ' + unit if unit else ''}")
+        raise refused(option, value, f"use {what}{' ' + unit if unit else ''}", value_text=str(value))
 
 
 def check_output_file(option: str, path: str | None) -> None:
@@ -66,12 +103,12 @@ def check_output_file(option: str, path: str | None) -> None:
         return
     p = Path(path)
     if p.is_dir():
-        raise UsageError(f"{option} = {path!r} is not allowed: it is a folder; give a file name")
+        raise refused_file(option, path, "it is a folder; give a file name")
     folder = p.parent if str(p.parent) else Path(".")
     if not folder.is_dir():
-        raise UsageError(f"{option} = {path!r} is not allowed: the folder {str(folder)!r} does not exist")
+        raise refused_file(option, path, f"the folder {str(folder)!r} does not exist")
     if not os.access(folder, os.W_OK) or (p.exists() and not os.access(p, os.W_OK)):
-        raise UsageError(f"{option} = {path!r} is not allowed: it cannot be written (permission denied)")
+        raise refused_file(option, path, "it cannot be written (permission denied)")
 
 
 def check_input_file(option: str, path: str | None) -> None:
@@ -80,9 +117,9 @@ def check_input_file(option: str, path: str | None) -> None:
         return
     p = Path(path)
     if not p.exists():
-        raise UsageError(f"{option} = {path!r} is not allowed: no such file")
+        raise refused_file(option, path, "no such file")
     if p.is_dir() or not os.access(p, os.R_OK):
-        raise UsageError(f"{option} = {path!r} is not allowed: it is not a readable file")
+        raise refused_file(option, path, "it is not a readable file")
 
 
 def json_text(data) -> str:

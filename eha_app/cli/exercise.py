@@ -7,7 +7,17 @@ import io
 import sys
 from pathlib import Path
 
-from .common import Parser, UsageError, check_input_file, check_output_file, terminal_text
+from eha_core.errors import FieldError
+
+from .common import (
+    Parser,
+    as_option,
+    check_input_file,
+    check_output_file,
+    refused,
+    refused_file,
+    terminal_text,
+)
 
 
 def add_parser(sub) -> None:
@@ -43,7 +53,7 @@ def _fraction(option: str, text: str) -> float:
     try:
         value = float(t[:-1]) / 100 if t.endswith("%") else float(t)
     except ValueError:
-        raise UsageError(f"{option} = {text} is not allowed: give a percentage such as 25%") from None
+        raise refused(option, text, "give a percentage such as 25%", value_text=str(text)) from None
     return value
 
 
@@ -61,13 +71,12 @@ def run_new(args) -> int:
     vary, tolerance = _fraction("--vary", args.vary), _fraction("--tolerance", args.tolerance)
     check_output_file("--out", args.out)
     if Path(args.out).exists() and not args.force:
-        raise UsageError(f"--out = {args.out!r} is not allowed: it exists (its secret defines every student's "
-                         "actuator); choose another name or add --force")
+        raise refused_file("--out", args.out, "it exists (its secret defines every student's actuator); choose "
+                                              "another name or add --force")
     try:
         ex = Exercise.new(hide=hide, vary=vary, tolerance=tolerance, title=args.title)
-    except ValueError as exc:
-        raise UsageError(str(exc).replace("hide = ", "--hide = ").replace("vary = ", "--vary = ")
-                         .replace("tolerance = ", "--tolerance = ")) from None
+    except FieldError as exc:
+        raise as_option(exc, {"hide": "--hide", "vary": "--vary", "tolerance": "--tolerance"}) from None
     ex.save(args.out)
     print(f"wrote {args.out}: hides {', '.join(ex.hide)}, each student's values vary by up to ±{100 * ex.vary:g} %, "
           f"an answer within ±{100 * ex.tolerance:g} % counts. Keep this file on the server.")
@@ -89,7 +98,7 @@ def _store(path: str):
     try:
         return HandIns(path).check()
     except StoreError as exc:
-        raise UsageError(f"exercise = {path!r} is not allowed: {exc}") from None
+        raise refused_file("exercise", path, f"{exc}") from None
 
 
 def run_results(args) -> int:
@@ -122,8 +131,8 @@ def run_reveal(args) -> int:
     ex = _load(args.exercise)
     try:
         student = normalize_id(args.student)
-    except ValueError as exc:
-        raise UsageError(str(exc).replace("student id = ", "--student = ")) from None
+    except FieldError as exc:
+        raise as_option(exc, {"student id": "--student"}) from None
     p = ex.student_params(student)
     print(f"{terminal_text(student)}'s actuator in {terminal_text(repr(ex.title))}:")
     for n in ex.hide:

@@ -9,7 +9,19 @@ from __future__ import annotations
 import math
 import sys
 
-from .common import PARAM_HELP, Parser, UsageError, check_input_file, json_text, parse_params, tf_text
+from eha_core.errors import FieldError
+
+from .common import (
+    PARAM_HELP,
+    Parser,
+    UsageError,
+    as_option,
+    check_input_file,
+    json_text,
+    parse_params,
+    refused,
+    tf_text,
+)
 
 #: Poles of an estimated model at most (and zeros at most poles - 1).
 MAX_POLES = 8
@@ -76,7 +88,7 @@ def _missing_method(args) -> int:
 
 def _positive(option: str, value: float, unit: str) -> None:
     if not (math.isfinite(value) and value > 0):
-        raise UsageError(f"{option} = {value:g} is not allowed: use a number > 0 {unit}".rstrip())
+        raise refused(option, value, f"use a number > 0 {unit}".rstrip())
 
 
 def run_lse(args) -> int:
@@ -84,10 +96,10 @@ def run_lse(args) -> int:
     from eha_core.signals import parse_signal
 
     if args.seed < 0:
-        raise UsageError(f"--seed = {args.seed} is not allowed: use a whole number >= 0")
+        raise refused("--seed", args.seed, "use a whole number >= 0")
     _positive("--tau-f", args.tau_f, "s")
     if not (math.isfinite(args.t_end) and 0 < args.t_end <= MAX_LSE_T_END):
-        raise UsageError(f"--t-end = {args.t_end:g} is not allowed: use a record length in (0, {MAX_LSE_T_END:g}] s")
+        raise refused("--t-end", args.t_end, f"use a record length in (0, {MAX_LSE_T_END:g}] s")
     model, freq = parse_disturbance_model(args.disturbance_model, name="--disturbance-model")
     d = parse_signal(args.disturbance, name="--disturbance", seed=args.seed)
     u = parse_signal(args.u, name="--u") if args.u else None
@@ -128,7 +140,7 @@ def run_lse(args) -> int:
 
 def _choice(option: str, value, allowed) -> None:
     if value is not None and value not in allowed:
-        raise UsageError(f"{option} = {value} is not allowed: use {' or '.join(allowed)}")
+        raise refused(option, value, f"use {' or '.join(allowed)}", value_text=str(value))
 
 
 def _delay(text: str | None):
@@ -142,7 +154,7 @@ def _delay(text: str | None):
     except ValueError:
         value = math.nan
     if not (math.isfinite(value) and value >= 0):
-        raise UsageError(f"--delay = {text.strip() or '(empty)'} is not allowed: use a delay >= 0 s or estimate")
+        raise refused("--delay", text, "use a delay >= 0 s or estimate")
     return value
 
 
@@ -150,18 +162,16 @@ def _checked_delay(args):
     """``--delay`` (seconds or ``"estimate"``), checked with ``--max-delay`` against the other options."""
     delay = _delay(args.delay)
     if delay != 0.0 and not args.data:
-        raise UsageError(f"--delay = {args.delay.strip()} is not allowed without --data: the paper experiment's "
-                         "loop has no delay")
+        raise refused("--delay", args.delay, "the paper experiment's loop has no delay", context="without --data")
     if args.max_delay is not None:
         _positive("--max-delay", args.max_delay, "s")
         if delay != "estimate":
-            raise UsageError(f"--max-delay = {args.max_delay:g} is not allowed: it bounds an estimated delay; "
-                             "give it with --delay estimate")
+            raise refused("--max-delay", args.max_delay, "it bounds an estimated delay; give it with --delay estimate")
     return delay
 
 
 #: The core's names of the delay arguments, and the options that set them.
-_DELAY_OPTIONS = (("input_delay = ", "--delay = "), ("max_delay = ", "--max-delay = "))
+_DELAY_OPTIONS = {"input_delay": "--delay", "max_delay": "--max-delay"}
 
 
 def _tf_on_data(args, delay) -> dict:
@@ -175,26 +185,24 @@ def _tf_on_data(args, delay) -> dict:
         est = tfest(cols["u"], cols["y"], ts, args.n_poles, args.n_zeros,
                     initial_condition=args.initial_condition or "zero", input_offset=args.input_offset or "zero",
                     input_delay=delay, max_delay=args.max_delay)
-    except ValueError as exc:
+    except FieldError as exc:
         # a delay the record cannot hold (that needs the record's length): name the option
-        message = str(exc)
-        for core_name, option in _DELAY_OPTIONS:
-            if message.startswith(core_name):
-                raise UsageError(option + message[len(core_name):]) from None
+        if exc.field in _DELAY_OPTIONS:
+            raise as_option(exc, _DELAY_OPTIONS) from None
         raise
     return {**est.to_dict(), "ts": ts}
 
 
 def run_tf(args) -> int:
     if not 1 <= args.n_poles <= MAX_POLES:
-        raise UsageError(f"--np = {args.n_poles} is not allowed: use 1 to {MAX_POLES} poles")
+        raise refused("--np", args.n_poles, f"use 1 to {MAX_POLES} poles")
     if not 0 <= args.n_zeros < args.n_poles:
-        raise UsageError(f"--nz = {args.n_zeros} is not allowed: use 0 to np - 1 = {args.n_poles - 1} zeros")
+        raise refused("--nz", args.n_zeros, f"use 0 to np - 1 = {args.n_poles - 1} zeros")
     if args.ts is not None:
         _positive("--ts", args.ts, "s")
     _positive("--kp", args.kp, "V/m")
     if args.seed < 0:
-        raise UsageError(f"--seed = {args.seed} is not allowed: use a whole number >= 0")
+        raise refused("--seed", args.seed, "use a whole number >= 0")
     _choice("--model", args.model, ("nonlinear", "linear"))
     _choice("--initial-condition", args.initial_condition, ("zero", "estimate"))
     _choice("--input-offset", args.input_offset, ("zero", "estimate"))

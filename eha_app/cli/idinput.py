@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from .common import UsageError, check_output_file, check_range, json_text
+from .common import check_output_file, check_range, json_text, refused, refused_file
 
 #: Samples of one signal at most (80 MB of floats).
 MAX_SAMPLES = 10_000_000
@@ -36,10 +36,10 @@ def run(args) -> int:
     check_range("--sinedata NT", nt, 1, 500, "trials")
     check_range("--sinedata GS", gs, 1, 100)
     if args.type == "sine" and nt * args.n > MAX_SINE_TRIAL_SAMPLES:
-        raise UsageError(f"--sinedata NT = {nt} is not allowed with --n {args.n}: trials x samples must be at most "
-                         f"{MAX_SINE_TRIAL_SAMPLES} (each trial is a whole signal in memory); use fewer trials")
+        raise refused("--sinedata NT", nt, f"trials x samples must be at most {MAX_SINE_TRIAL_SAMPLES} (each trial "
+                      "is a whole signal in memory); use fewer trials", context=f"with --n {args.n}")
     if args.seed < 0:
-        raise UsageError(f"--seed = {args.seed} is not allowed: use a whole number >= 0")
+        raise refused("--seed", args.seed, "use a whole number >= 0")
     check_output_file("--out", args.out)
     from eha_core.excitation import idinput
 
@@ -52,7 +52,7 @@ def run(args) -> int:
         try:
             table.to_csv(args.out, index=False, float_format="%.10g")
         except OSError as exc:
-            raise UsageError(f"--out = {args.out!r} is not allowed: {exc.strerror or exc}") from None
+            raise refused_file("--out", args.out, f"{exc.strerror or exc}") from None
     else:
         table.to_csv(sys.stdout, index=False, float_format="%.10g")
     return 0

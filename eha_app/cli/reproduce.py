@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from .common import UsageError
+from .common import refused, refused_file
 
 
 def add_parser(sub) -> None:
@@ -20,14 +20,14 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     t0 = time.perf_counter()          # the wall time includes the imports below
     if args.seed < 0:
-        raise UsageError(f"--seed = {args.seed} is not allowed: use a whole number >= 0")
+        raise refused("--seed", args.seed, "use a whole number >= 0")
     out = Path(args.out)
     if out.exists() and not out.is_dir():
-        raise UsageError(f"--out = {args.out!r} is not allowed: it exists and is not a folder")
+        raise refused_file("--out", args.out, "it exists and is not a folder")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise UsageError(f"--out = {args.out!r} is not allowed: {exc.strerror}") from None
+        raise refused_file("--out", args.out, f"{exc.strerror}") from None
     from eha_app.report import build_report
 
     result = build_report(out, seed=args.seed, started=t0)

@@ -12,7 +12,7 @@ import urllib.request
 
 from eha_app.serving import lan_address
 
-from .common import UsageError, terminal_text
+from .common import UsageError, refused, refused_file, terminal_text
 
 
 def add_parser(sub) -> None:
@@ -54,17 +54,17 @@ def check_port_free(address: str, port: int) -> None:
         try:
             s.bind((address, port))
         except OSError as exc:
-            raise UsageError(f"--port = {port} is not allowed: {address}:{port} is in use "
-                             f"({exc.strerror}; another eha serve?); choose another port") from None
+            raise refused("--port", port, f"{address}:{port} is in use ({exc.strerror}; another eha serve?); "
+                                          "choose another port") from None
 
 
 def _validate(args) -> None:
     if not 1 <= args.port <= 65535:
-        raise UsageError(f"--port = {args.port} is not allowed: use 1-65535")
+        raise refused("--port", args.port, "use 1-65535")
     if not 1 <= args.num_procs <= 64:
-        raise UsageError(f"--num-procs = {args.num_procs} is not allowed: use 1 to 64")
+        raise refused("--num-procs", args.num_procs, "use 1 to 64")
     if args.workers is not None and not 1 <= args.workers <= 256:
-        raise UsageError(f"--workers = {args.workers} is not allowed: use 1 to 256")
+        raise refused("--workers", args.workers, "use 1 to 256")
 
 
 def _announce_when_ready(url: str) -> None:
@@ -94,7 +94,7 @@ def _check_exercise(args) -> None:
     try:
         HandIns(args.exercise).check()
     except StoreError as exc:
-        raise UsageError(f"--exercise = {args.exercise!r} is not allowed: {exc}") from None
+        raise refused_file("--exercise", args.exercise, f"{exc}") from None
     os.environ["EHA_EXERCISE"] = os.path.abspath(args.exercise)
     if not args.share_port:
         print(f"Exercise {terminal_text(repr(exercise.title))}: hides {', '.join(exercise.hide)}; hand-ins go to "
@@ -173,9 +173,9 @@ def _print_nginx_config(args) -> int:
 
     n = args.nginx_config
     if not 1 <= n <= 64:
-        raise UsageError(f"--nginx-config = {n} is not allowed: use 1-64 processes")
+        raise refused("--nginx-config", n, "use 1-64 processes")
     if not 1 <= args.port <= 65535 - n:
-        raise UsageError(f"--port = {args.port} is not allowed: use 1-{65535 - n} (the processes take the next ports)")
+        raise refused("--port", args.port, f"use 1-{65535 - n} (the processes take the next ports)")
     backends = [f"127.0.0.1:{args.port + k}" for k in range(1, n + 1)]
     print(nginx_config(backends, listen=str(args.port)))
     origin = f"{lan_address() or 'localhost'}:{args.port}"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import PARAM_HELP, UsageError, check_output_file, parse_params
+from .common import PARAM_HELP, UsageError, check_output_file, parse_params, refused, refused_file
 
 EPILOG = """\
 inputs without --case:
@@ -43,13 +43,13 @@ def run(args) -> int:
     from eha_core.simulate import MODELS, SIMULATION_BRANCHES, simulate
 
     if args.model not in MODELS:
-        raise UsageError(f"--model = {args.model} is not allowed: use one of {', '.join(MODELS)}")
+        raise refused("--model", args.model, f"use one of {', '.join(MODELS)}", value_text=args.model)
     if args.branch is not None and args.model != "linear":
-        raise UsageError(f"--branch = {args.branch} is not allowed with --model {args.model}: the branch chooses "
-                         "the valve gains of the linearised model (--model linear)")
+        raise refused("--branch", args.branch, "the branch chooses the valve gains of the linearised model "
+                      "(--model linear)", value_text=args.branch, context=f"with --model {args.model}")
     branch = args.branch or "switching"
     if branch not in SIMULATION_BRANCHES:
-        raise UsageError(f"--branch = {branch} is not allowed: use one of {', '.join(SIMULATION_BRANCHES)}")
+        raise refused("--branch", branch, f"use one of {', '.join(SIMULATION_BRANCHES)}", value_text=branch)
     check_output_file("--out", args.out)
     params = parse_params(args.param)
     u = d = ZERO
@@ -57,7 +57,7 @@ def run(args) -> int:
     label = "custom"
     if args.case is not None:
         if args.case not in PAPER_CASES:
-            raise UsageError(f"--case = {args.case} is not allowed: use one of 1, 2, 3, 4")
+            raise refused("--case", args.case, "use one of 1, 2, 3, 4")
         case = PAPER_CASES[args.case]
         u, d, t_end, label = case.u, case.d, case.t_end, case.name
     elif args.u is None and args.d is None:
@@ -76,7 +76,7 @@ def run(args) -> int:
         try:
             res.to_csv(args.out)
         except OSError as exc:
-            raise UsageError(f"--out = {args.out!r} is not allowed: {exc.strerror or exc}") from None
+            raise refused_file("--out", args.out, f"{exc.strerror or exc}") from None
     else:
         res.to_csv(sys.stdout)
     return 0 if res.success else 1

@@ -12,7 +12,9 @@ from __future__ import annotations
 import math
 import sys
 
-from .common import PARAM_HELP, Parser, UsageError, check_range, json_text, parse_params
+from eha_core.errors import FieldError
+
+from .common import PARAM_HELP, Parser, UsageError, as_option, check_range, json_text, parse_params, refused
 
 #: The sensors the least squares reads, with their SI units (for --noise).
 SENSOR_UNITS = {"x": "m", "v": "m/s", "p1": "Pa", "p2": "Pa"}
@@ -85,10 +87,10 @@ def _sensor_noise(items) -> dict[str, float]:
         except ValueError:
             sigma = math.nan
         if not sep or name not in SENSOR_UNITS:
-            raise UsageError(f"--noise = {item} is not allowed: {usage}")
+            raise refused("--noise", item, usage, value_text=item)
         if not (math.isfinite(sigma) and sigma >= 0):
-            raise UsageError(f"--noise = {item} is not allowed: the standard deviation must be a number >= 0 "
-                             f"{SENSOR_UNITS[name]}")
+            raise refused("--noise", item, f"the standard deviation must be a number >= 0 {SENSOR_UNITS[name]}",
+                          value_text=item)
         noise[name] = sigma
     return noise
 
@@ -99,8 +101,8 @@ def _position_noise(text: str) -> float:
     except ValueError:
         sigma = math.nan
     if not (math.isfinite(sigma) and sigma >= 0):
-        raise UsageError(f"--noise = {text} is not allowed: give the position noise's standard deviation, a number "
-                         ">= 0 m (e.g. 1e-4)")
+        raise refused("--noise", text, "give the position noise's standard deviation, a number >= 0 m (e.g. 1e-4)",
+                      value_text=text)
     return sigma
 
 
@@ -120,28 +122,25 @@ def _config(args):
     check_range("--first-seed", args.first_seed, 0, 2**32 - 1 - MAX_SEEDS)
     if args.kind == "lse":
         if args.model != "nonlinear":
-            raise UsageError(f"--model = {args.model} is not allowed: the least squares identifies the nonlinear "
-                             "model's parameters (eqs. 15-18); use nonlinear, or eha study tf for the linear plant")
+            raise refused("--model", args.model, "the least squares identifies the nonlinear model's parameters "
+                          "(eqs. 15-18); use nonlinear, or eha study tf for the linear plant", value_text=args.model)
         if not (math.isfinite(args.t_end) and 0 < args.t_end <= MAX_T_END):
-            raise UsageError(f"--t-end = {args.t_end:g} is not allowed: use a record length in (0, {MAX_T_END:g}] s")
+            raise refused("--t-end", args.t_end, f"use a record length in (0, {MAX_T_END:g}] s")
         model, freq = parse_disturbance_model(args.disturbance_model, name="--disturbance-model")
         parse_signal(args.disturbance, name="--disturbance")
         kwargs = {"disturbance": args.disturbance, "disturbance_model": model, "disturbance_freq_hz": freq,
                   "sensor_noise": _sensor_noise(args.noise), "t_end": args.t_end}
     else:
         if args.model not in ("nonlinear", "linear"):
-            raise UsageError(f"--model = {args.model} is not allowed: use nonlinear or linear")
+            raise refused("--model", args.model, "use nonlinear or linear", value_text=args.model)
         kwargs = {"experiment": FrequencyExperiment(model=args.model), "noise_m": _position_noise(args.noise)}
     try:
         return StudyConfig(args.kind, n_seeds=args.seeds, first_seed=args.first_seed, **kwargs)
-    except ValueError as exc:
+    except FieldError as exc:
         # the core names its field; the user typed the option
-        text = str(exc)
-        for name, option in _OPTIONS.items():
-            if text.startswith(f"{name} = "):
-                text = option + text[len(name):]
-                break
-        raise UsageError(text) from None
+        raise as_option(exc, _OPTIONS) from None
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def run_study_command(args) -> int:

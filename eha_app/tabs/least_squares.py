@@ -311,7 +311,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
                 cols = read_data(data, LSE_COLUMNS, name="your file", filename=filename, mapping=mapping,
                                  min_rows=50)
             except DataError as exc:
-                if exc.what.startswith("no column"):
+                if exc.missing_columns:
                     return "map", file_columns(data, filename, name="your file"), str(exc)
                 raise
             ts = sample_time(cols["t"], name="your file", path=filename)

@@ -117,7 +117,7 @@ class RecordPanel:
 
     def read(self, mapping: dict | None) -> None:
         """Read the upload in a worker: its t, u, y (or t, r, x, or the mapped columns), or ask for a mapping."""
-        from eha_core.data import DataError, file_columns, read_data, sample_time
+        from eha_core.data import DataError, columns_text, file_columns, read_data, sample_time
 
         if self._upload is None:
             return
@@ -132,15 +132,15 @@ class RecordPanel:
                 cols = columns(("t", "u", "y"))
                 u, y = cols["u"], cols["y"]
             except DataError as exc:
-                if not exc.what.startswith("no column") or mapping:
+                if not exc.missing_columns or mapping:
                     raise
                 try:
                     cols = columns(("t", "r", "x"))
                     u, y = cols["r"], cols["x"]
                 except DataError as second:
-                    if not second.what.startswith("no column"):
+                    if not second.missing_columns:
                         raise
-                    have = exc.what.split("the file has ", 1)[-1].split(";")[0]
+                    have = columns_text(exc.file_columns)
                     message = f"your file {filename}: it needs columns t, u, y (or t, r, x); the file has {have}"
                     return "map", file_columns(data, filename, name="your file"), message
             return "ok", (cols["t"], u, y, filename), sample_time(cols["t"], name="your file", path=filename)

@@ -13,12 +13,14 @@ typo is refused before the estimator is loaded.
 >>> parse_disturbance_model("harmonic:x", name="--disturbance-model")  # doctest: +ELLIPSIS
 Traceback (most recent call last):
 ...
-ValueError: --disturbance-model = harmonic:x is not allowed: the frequency must be a number in (0, 500) Hz; use ...
+eha_core._checks.FieldError: --disturbance-model = harmonic:x is not allowed: the frequency must be a number in ...
 """
 
 from __future__ import annotations
 
 import math
+
+from .._checks import not_allowed
 
 __all__ = ["DISTURBANCE_MODELS", "MAX_FREQ_HZ", "parse_disturbance_model"]
 
@@ -31,17 +33,18 @@ def parse_disturbance_model(text: str, name: str = "disturbance model") -> tuple
     """``(model, frequency or None)`` from ``constant`` or ``harmonic[:FREQ_HZ]``; ValueError otherwise."""
     model, sep, freq_text = str(text).strip().partition(":")
     usage = "use constant or harmonic[:FREQ_HZ]"
+    typed = str(text)                     # written as given (not stripped)
     if model not in DISTURBANCE_MODELS or (model == "constant" and sep):
-        raise ValueError(f"{name} = {text} is not allowed: {usage}")
+        raise not_allowed(name, text, usage, value_text=typed)
     if not freq_text.strip():
         if sep:
-            raise ValueError(f"{name} = {text} is not allowed: give the frequency after ':' or leave it out; {usage}")
+            raise not_allowed(name, text, f"give the frequency after ':' or leave it out; {usage}", value_text=typed)
         return model, None
     try:
         freq = float(freq_text)
     except ValueError:
         freq = float("nan")
     if not (math.isfinite(freq) and 0 < freq < MAX_FREQ_HZ):
-        raise ValueError(f"{name} = {text} is not allowed: the frequency must be a number in "
-                         f"(0, {MAX_FREQ_HZ:g}) Hz; {usage}")
+        raise not_allowed(name, text, f"the frequency must be a number in (0, {MAX_FREQ_HZ:g}) Hz; {usage}",
+                          value_text=typed)
     return model, freq
