@@ -33,6 +33,7 @@ import math
 import param
 
 from eha_core.linear import operating_point
+from eha_core.param_table import DERIVED, broken_rules
 from eha_core.params import (
     FIELD_INFO,
     NON_NEGATIVE_FIELDS,
@@ -62,13 +63,9 @@ def too_long(text) -> str | None:
     n = len(str(text or ""))
     return f"at most {MAX_TEXT_CHARS} characters (it has {n})" if n > MAX_TEXT_CHARS else None
 
-#: The names tab 1's form shows, which its messages use too.
-FIELD_LABELS = {"M": "M", "B": "B", "Af": "Af", "beta_e": "βe", "Dc": "Dc", "dc": "dc", "d0": "d0", "L0": "L0",
-                "Kq1": "Kq1", "Kq2": "Kq2", "ps": "ps", "pr": "pr", "k_f": "kf", "x0": "x(0)", "v0": "v(0)",
-                "p1_0": "p1(0)", "p2_0": "p2(0)", "kp": "Kp"}
+#: The names tab 1's form shows, which its messages use too (the core's table of parameter facts).
+FIELD_LABELS = {**{name: info.label for name, info in FIELD_INFO.items()}, "kp": "Kp"}
 KP_UNIT = "V/m"
-# the linearised model's rod-chamber pressure at its operating point (eq. 10)
-_BALANCE = "(A1 p1(0) − d0)/A2"
 
 
 def display_text(name: str, value_si: float | None) -> str:
@@ -148,66 +145,35 @@ class _Named:
         return f"[pr, ps] = [{pr}, {ps}] {FIELD_INFO['ps'].display_unit}"
 
 
-def _within_pressures(v: dict, n: _Named, pressure: float, what: str, own: dict) -> dict | None:
-    """A pressure's rule pr <= pressure <= ps: None when it holds, else the messages by field."""
-    if v["pr"] <= pressure <= v["ps"]:
-        return None
-    out = dict(own)
-    if pressure > v["ps"]:
-        out["ps"] = f"the supply pressure must be at least {what}"
-    if pressure < v["pr"]:
-        out["pr"] = f"the return pressure must be at most {what}"
-    return out
+class _Quantities:
+    """``{value[x_max]}`` of a rule's words: a derived quantity in the display unit the core's table names."""
+
+    def __init__(self, values: dict, n: _Named):
+        self.values, self.n = values, n
+
+    def __getitem__(self, name: str) -> str:
+        derived = DERIVED[name]
+        return self.n.value(derived.shown_as, derived.compute(self.values))
 
 
-def _force_balance(v: dict, n: _Named) -> dict | None:
-    """(A1 p1(0) − d0)/A2 within [pr, ps]: the initial p2 (p2(0) blank) and the linearisation's operating point."""
-    a1 = math.pi * v["Dc"] ** 2 / 4.0
-    a2 = math.pi * (v["Dc"] ** 2 - v["dc"] ** 2) / 4.0
-    p2 = (a1 * v["p1_0"] - v["d0"]) / a2
-    if v["pr"] <= p2 <= v["ps"]:
-        return None
-    side = f"above the supply pressure {n.ref('ps')}" if p2 > v["ps"] else \
-        f"below the return pressure {n.ref('pr')}"
-    value = f"{_BALANCE} = {n.value('p2_0', p2)}"
-    if v["p2_0"] is None:
-        what = f"the initial rod-chamber pressure p2(0) = {value} (force balance)"
-        change = (f"the force balance then gives the initial rod-chamber pressure p2(0) = {value}, {side}; "
-                  "change p1(0) or d0, or type p2(0)")
-    else:
-        what = f"the rod-chamber pressure of the linearised model's operating point, {value}"
-        change = (f"the linearised model's operating point (eq. 10) then has the rod-chamber pressure {value}, "
-                  f"{side}; change p1(0) or d0")
-    return _within_pressures(v, n, p2, what, {name: change for name in ("p1_0", "d0", "Dc", "dc")})
+class _Refs:
+    """``{ref[Dc]}`` of a rule's words: ``"Dc = 120 mm"``."""
+
+    def __init__(self, n: _Named):
+        self.n = n
+
+    def __getitem__(self, name: str) -> str:
+        return self.n.ref(name)
 
 
 def _rules(v: dict, n: _Named) -> list[dict]:
-    """The broken rules among those that tie fields together (ActuatorParams and the operating point).
+    """The broken rules among those that tie fields together (the core's table, eha_core.param_table.RULES).
 
-    Each is ``{field: what to say on it}`` for every field it may be put on, its own field first.
+    Each is ``{field: what to say on it}`` for every field it may be put on, its own field first, worded
+    from the table's templates with the fields as typed, in display units.
     """
-    broken = []
-    if v["dc"] >= v["Dc"]:
-        broken.append({"dc": f"the rod diameter must be smaller than the bore {n.ref('Dc')}",
-                       "Dc": f"the bore must be larger than the rod diameter {n.ref('dc')}"})
-    if v["pr"] >= v["ps"]:
-        broken.append({"pr": f"the return pressure must be below the supply pressure {n.ref('ps')}",
-                       "ps": f"the supply pressure must be above the return pressure {n.ref('pr')}"})
-    x_max = 0.8 * v["L0"]
-    if abs(v["x0"]) > x_max:
-        stops = f"±0.8 L0 = ±{n.value('x0', x_max)}"
-        broken.append({"x0": f"the initial position must lie within the end stops {stops} ({n.ref('L0')})",
-                       "L0": f"the end stops {stops} must hold the initial position {n.ref('x0')}"})
-    broken.append(_within_pressures(
-        v, n, v["p1_0"], f"the initial piston-chamber pressure {n.ref('p1_0')}",
-        {"p1_0": f"the initial piston-chamber pressure must lie within {n.pressures()}"}))
-    if v["p2_0"] is not None:
-        broken.append(_within_pressures(
-            v, n, v["p2_0"], f"the initial rod-chamber pressure {n.ref('p2_0')}",
-            {"p2_0": f"the initial rod-chamber pressure must lie within {n.pressures()}"}))
-    if v["dc"] < v["Dc"]:                  # else there is no rod-side area to balance with
-        broken.append(_force_balance(v, n))
-    return [b for b in broken if b]
+    words = {"ref": _Refs(n), "value": _Quantities(v, n), "pressures": n.pressures()}
+    return [{field: template.format(**words) for field, template in rule.sayings(v)} for rule in broken_rules(v)]
 
 
 def cross_field_errors(values: dict, texts: dict, typed=()) -> dict[str, str]:

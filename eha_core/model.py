@@ -30,26 +30,21 @@ import math
 
 import numpy as np
 
+from .param_table import PACKED
 from .params import ActuatorParams
 
 __all__ = ["pack_params", "derivatives", "project_state", "rhs", "PARAM_INDEX", "N_PACKED_PARAMS"]
 
-#: Layout of the packed parameter vector used by the compiled code.
-PARAM_INDEX = {
-    "M": 0, "B": 1, "Af": 2, "beta_e": 3, "A1": 4, "A2": 5, "L0": 6, "Kq1": 7,
-    "Kq2": 8, "ps": 9, "pr": 10, "k_f": 11, "x_max": 12, "d0": 13,
-}
+#: Layout of the packed parameter vector used by the compiled code (eha_core.param_table.PACKED;
+#: :func:`derivatives` and :func:`project_state` read it by these indices).
+PARAM_INDEX = {name: i for i, name in enumerate(PACKED)}
 #: Length of the packed parameter vector.
 N_PACKED_PARAMS = len(PARAM_INDEX)
 
 
 def pack_params(params: ActuatorParams) -> np.ndarray:
-    """Pack the parameters into the float vector :func:`derivatives` reads."""
-    return np.array([
-        params.M, params.B, params.Af, params.beta_e, params.A1, params.A2,
-        params.L0, params.Kq1, params.Kq2, params.ps, params.pr, params.k_f,
-        params.x_max, params.d0,
-    ], dtype=np.float64)
+    """Pack the parameters (fields and derived A1, A2, x_max) into the float vector :func:`derivatives` reads."""
+    return np.array([getattr(params, name) for name in PACKED], dtype=np.float64)
 
 
 def derivatives(x, v, p1, p2, u, d, prm):

@@ -26,6 +26,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._checks import FieldError
+from .param_table import (
+    FIELD_INFO,
+    NON_NEGATIVE_FIELDS,
+    PARAM_NAMES,
+    POSITIVE_FIELDS,
+    RULES,
+    FieldInfo,
+    broken_rules,
+    end_stop,
+    force_balance,
+    piston_area,
+    rod_area,
+)
 
 __all__ = [
     "ActuatorParams",
@@ -57,44 +70,8 @@ class ParameterError(FieldError):
         super().__init__(field, value, allowed)
 
 
-@dataclass(frozen=True)
-class FieldInfo:
-    """Metadata of one parameter: unit, meaning, and display scaling for the app."""
-
-    unit: str
-    description: str
-    display_unit: str
-    display_scale: float  # value_in_display_unit = value_SI / display_scale
-    group: str  # "main", "advanced" or "initial"
-
-
-FIELD_INFO: dict[str, FieldInfo] = {
-    "M": FieldInfo("kg", "load mass", "kg", 1.0, "main"),
-    "B": FieldInfo("N s/m", "viscous friction coefficient", "N s/m", 1.0, "main"),
-    "Af": FieldInfo("N", "Coulomb friction amplitude", "N", 1.0, "main"),
-    "beta_e": FieldInfo("Pa", "effective bulk modulus of the oil", "GPa", 1e9, "main"),
-    "Dc": FieldInfo("m", "cylinder bore diameter", "mm", 1e-3, "main"),
-    "dc": FieldInfo("m", "piston rod diameter", "mm", 1e-3, "main"),
-    "d0": FieldInfo("N", "slow (constant) load disturbance", "N", 1.0, "main"),
-    "L0": FieldInfo("m", "chamber length at x = 0", "mm", 1e-3, "advanced"),
-    "Kq1": FieldInfo("m^3/(s V sqrt(Pa))", "valve flow gain, piston side", "1e-8 m³/(s V √Pa)", 1e-8, "advanced"),
-    "Kq2": FieldInfo("m^3/(s V sqrt(Pa))", "valve flow gain, rod side", "1e-8 m³/(s V √Pa)", 1e-8, "advanced"),
-    "ps": FieldInfo("Pa", "supply pressure", "MPa", 1e6, "advanced"),
-    "pr": FieldInfo("Pa", "return (tank) pressure", "MPa", 1e6, "advanced"),
-    "k_f": FieldInfo("s/m", "friction slope of S(v) = (2/pi) atan(k_f v)", "s/m", 1.0, "advanced"),
-    "x0": FieldInfo("m", "initial piston position", "mm", 1e-3, "initial"),
-    "v0": FieldInfo("m/s", "initial piston velocity", "mm/s", 1e-3, "initial"),
-    "p1_0": FieldInfo("Pa", "initial piston-chamber pressure", "MPa", 1e6, "initial"),
-    "p2_0": FieldInfo("Pa", "initial rod-chamber pressure (blank: force balance)", "MPa", 1e6, "initial"),
-}
-
-#: Names accepted by ``--param NAME=VALUE`` and by :meth:`ActuatorParams.replace`.
-PARAM_NAMES: tuple[str, ...] = tuple(FIELD_INFO)
-
-#: Fields that must be > 0, and fields that must be >= 0. The other rules
-#: (:meth:`ActuatorParams.__post_init__`) each tie two fields or more together.
-POSITIVE_FIELDS: tuple[str, ...] = ("M", "beta_e", "Dc", "dc", "L0", "Kq1", "Kq2", "ps")
-NON_NEGATIVE_FIELDS: tuple[str, ...] = ("B", "Af", "k_f", "pr")
+#: The rules ActuatorParams checks (the others are the linearisation's, see eha_core.param_table.RULES).
+_CHECKED_RULES = tuple(rule for rule in RULES if rule.core is not None)
 
 
 def _unit_and_meaning(name: str) -> str:
@@ -144,53 +121,39 @@ class ActuatorParams:
             # store plain floats so that equal parameter sets hash equal
             object.__setattr__(self, f.name, float(value))
 
+        # the facts of eha_core.param_table: each field's bound, then the rules that tie fields
+        # together, in the table's order (the first broken one is reported)
         for name in POSITIVE_FIELDS:
             if getattr(self, name) <= 0:
                 raise ParameterError(name, getattr(self, name), f"must be > 0 {_unit_and_meaning(name)}")
         for name in NON_NEGATIVE_FIELDS:
             if getattr(self, name) < 0:
                 raise ParameterError(name, getattr(self, name), f"must be >= 0 {_unit_and_meaning(name)}")
-        if self.dc >= self.Dc:
-            raise ParameterError("dc", self.dc, f"the rod diameter must be smaller than the bore Dc = {self.Dc:.6g} m")
-        if self.pr >= self.ps:
-            raise ParameterError("pr", self.pr,
-                                 f"the return pressure must be below the supply pressure ps = {self.ps:.6g} Pa")
-        x_max = self.x_max
-        if abs(self.x0) > x_max:
-            raise ParameterError("x0", self.x0,
-                                 f"must lie within the end stops [-{x_max:.6g}, {x_max:.6g}] m (|x0| <= 0.8 L0)")
-        if not self.pr <= self.p1_0 <= self.ps:
-            raise ParameterError("p1_0", self.p1_0, f"must lie within [pr, ps] = [{self.pr:.6g}, {self.ps:.6g}] Pa")
-        p2 = self.p2_init
-        if not self.pr <= p2 <= self.ps:
-            bounds = f"[pr, ps] = [{self.pr:.6g}, {self.ps:.6g}] Pa"
-            if self.p2_0 is not None:
-                raise ParameterError("p2_0", p2, f"must lie within {bounds}")
-            raise ParameterError("p2_0", p2, f"the force balance (A1 p1_0 - d0)/A2 must lie within {bounds}; "
-                                             "change p1_0 or d0, or set p2_0")
+        for rule in broken_rules(vars(self), _CHECKED_RULES):
+            raise ParameterError(*rule.refusal(vars(self)))
 
     # -- derived geometry -------------------------------------------------
     @property
     def A1(self) -> float:
         """Piston-side effective area pi Dc^2 / 4 [m^2]."""
-        return math.pi * self.Dc**2 / 4.0
+        return piston_area(vars(self))
 
     @property
     def A2(self) -> float:
         """Rod-side effective area pi (Dc^2 - dc^2) / 4 [m^2]."""
-        return math.pi * (self.Dc**2 - self.dc**2) / 4.0
+        return rod_area(vars(self))
 
     @property
     def x_max(self) -> float:
         """End stop: |x| <= 0.8 L0 [m]."""
-        return 0.8 * self.L0
+        return end_stop(vars(self))
 
     @property
     def p2_init(self) -> float:
         """Initial rod pressure: ``p2_0`` or, when None, the force balance [Pa]."""
         if self.p2_0 is not None:
             return self.p2_0
-        return (self.A1 * self.p1_0 - self.d0) / self.A2
+        return force_balance(vars(self))
 
     @property
     def initial_state(self) -> np.ndarray:
