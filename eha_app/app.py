@@ -1,4 +1,4 @@
-"""create_app(): the three tabs in one page; a new instance (and state) per session.
+"""create_app(): one page per browser session, its tabs made from the registry of sections.
 
 A page is cheap to open: only the first tab is built when a student arrives;
 the simulation and identification tabs are built the first time they are
@@ -13,21 +13,20 @@ import io
 import logging
 import os
 from collections.abc import Callable
-from functools import lru_cache
+from functools import lru_cache, partial
 
 import panel as pn
 
 from eha_core.params import PARAM_NAMES
 
+from . import tabs as _sections  # noqa: F401 - registers the page's sections
 from .connection import ConnectionWatch
+from .session import MAX_SETTINGS_BYTES, Session, SettingsError
 from .state import AppState, shown_text
 from .tables import CSS
-from .tabs.parameters import ParametersTab
 from .tasks import SessionRunner, apply_locked, frozen_models, layout_once_per_message, on_click, served_document, watch
 
-__all__ = ["create_app", "serve_session", "warm_up", "CSS", "TAB_NAMES"]
-
-TAB_NAMES = ("1. Parameters", "2. Simulation", "3. Identification")
+__all__ = ["create_app", "serve_session", "warm_up", "CSS", "Page"]
 
 log = logging.getLogger("eha_app")
 
@@ -60,7 +59,7 @@ def warm_up() -> None:
 
 
 class LazyTabs:
-    """A ``pn.Tabs`` whose tabs are built when first shown.
+    """A ``pn.Tabs`` whose tabs are made when first shown.
 
     In a server, a build waits its turn with the other sessions' big page
     changes (:class:`~eha_app.tasks.PageUpdates`), and the tab says it is
@@ -70,29 +69,51 @@ class LazyTabs:
     arriving together do not hold up the ones already working.
     """
 
-    def __init__(self, tabs: list[tuple[str, Callable[[], object]]], active: int = 0):
-        self._builders = {i: make for i, (_, make) in enumerate(tabs)}
-        self._slots = {i: pn.Column(pn.pane.HTML("<p class='eha-note'>Preparing this tab…</p>"),
-                                    sizing_mode="stretch_width") for i in range(len(tabs))}
-        self.built: dict[int, object] = {}
+    def __init__(self, tabs: list[tuple[str, Callable[[], object]]], active: int = 0, css_class: str = ""):
+        self.names = [name for name, _ in tabs]
+        self._builders = dict(tabs)
+        self._slots = {name: pn.Column(pn.pane.HTML("<p class='eha-note'>Preparing this tab…</p>"),
+                                       sizing_mode="stretch_width") for name in self.names}
+        self.built: dict[str, object] = {}
         # the open tab is set before the watcher: building it is the page's
         # first update, once the browser has the page (see create_app)
-        self.tabs = pn.Tabs(*((name, self._slots[i]) for i, (name, _) in enumerate(tabs)), active=active,
-                            dynamic=False, sizing_mode="stretch_width", css_classes=["eha-main-tabs"])
+        self.tabs = pn.Tabs(*((name, self._slots[name]) for name in self.names), active=active,
+                            dynamic=False, sizing_mode="stretch_width", css_classes=[css_class] if css_class else [])
         watch(self.tabs, self._on_active, "active")
 
     def _on_active(self, event) -> None:
-        if event.new in self._builders:
-            apply_locked(lambda: self.build(event.new))
+        name = self.names[event.new]
+        if name in self._builders:
+            apply_locked(lambda: self.build(name))
 
-    def build(self, index: int):
-        """The tab's content, building it now if it was never shown."""
-        if index not in self.built and index in self._builders:
+    def build(self, name: str):
+        """The tab's content, made now if it was never shown."""
+        if name not in self.built and name in self._builders:
             with frozen_models():
-                content = self._builders.pop(index)()
-                self.built[index] = content
-                self._slots[index].objects = [content]
-        return self.built.get(index)
+                content = self._builders.pop(name)()
+                self.built[name] = content
+                self._slots[name].objects = [content]
+        return self.built.get(name)
+
+    @property
+    def active_name(self) -> str:
+        return self.names[self.tabs.active]
+
+
+class SubTabs(pn.viewable.Viewer):
+    """A main tab holding several sections, one sub-tab each (tab 3: least squares, transfer
+    function, model board, study), made when first shown."""
+
+    def __init__(self, session: Session, placements, **params):
+        super().__init__(**params)
+        self.session = session
+        self.lazy = LazyTabs([(p.subtab or p.cls.title, partial(session.build, p.key)) for p in placements],
+                             css_class="eha-ident-tabs")
+        self.keys = {p.subtab or p.cls.title: p.key for p in placements}
+        self.lazy.build(self.lazy.names[0])
+
+    def __panel__(self):
+        return self.lazy.tabs
 
 
 @lru_cache(maxsize=4)
@@ -184,134 +205,157 @@ def serve_session() -> None:
 
 
 def create_app(state: AppState | None = None, *, query: dict | None = None, runner: SessionRunner | None = None):
-    """The whole page for one session.
+    """The whole page for one session: a :class:`Page` (``page.session`` is its :class:`Session`).
 
     ``query`` holds the page address's fields (``{"M": "6000", "tab": "2"}``):
     what the student had typed before a reload, or a shared link. A value that
     is not allowed is shown with its message, as if typed.
     """
-    from .tabs.identification import IdentificationTab
-    from .tabs.simulation import SimulationTab
-
     _session_style()
     # before the page is sent (an exercise's runner is made only after the student's id)
     layout_once_per_message(served_document())
-    query = {str(k): str(v) for k, v in (query or {}).items()}
-    state = state if state is not None else AppState()
-    exercise = current_exercise()
-    if exercise is not None and not state.student:
-        return _exercise_page(state, exercise, query, runner)
-    for name in (*PARAM_NAMES, "kp"):
-        if name in query:
-            state.set_text(name, query[name])
-    runner = runner if runner is not None else SessionRunner(state)
-    tab = query.get("tab", "").strip()
-    first = int(tab) - 1 if tab in ("2", "3") else 0
-    lazy = LazyTabs([(TAB_NAMES[0], lambda: ParametersTab(state)),
-                     (TAB_NAMES[1], lambda: SimulationTab(state, runner=runner, query=query)),
-                     (TAB_NAMES[2], lambda: IdentificationTab(state, runner=runner, query=query))], active=first)
-    if served_document() is not None:
-        # The page's frame goes out now; its first tab once the browser has it
-        # (document_ready). A change made between the browser's pull of the
-        # document and that moment can be lost (Panel holds the changes of an
-        # unconnected session and relies on the pull): the page would stay at
-        # "Preparing this tab..." for good.
-        pn.state.onload(lambda: apply_locked(lambda: lazy.build(first)))
-    else:
-        lazy.build(first)
-    who = (f'<span class="eha-student" style="color:#1a56c4">{html.escape(state.exercise.title)} — '
-           f'{html.escape(state.student)}</span>' if state.student else "")
-    header = pn.pane.HTML(
-        '<div style="display:flex;align-items:baseline;gap:16px;flex-wrap:wrap">'
-        '<h2 style="margin:4px 0">Electro-hydraulic actuator: modeling and identification</h2>'
-        f'<span style="color:#666">a single-rod cylinder driven by a proportional valve</span>{who}</div>',
-        sizing_mode="stretch_width")
-    page = pn.Column(ConnectionWatch(), header, sizing_mode="stretch_width", margin=(0, 10))
-    page.eha_query = query
-    page.eha_state = state
-    page.eha_tabs = lazy.tabs
-    page.eha_lazy = lazy
-    page.eha_runner = runner
-    page.extend([settings_row(page), lazy.tabs])
+    session = Session(state, query=query, runner=runner)
+    page = Page(session)
     if served_document() is not None:
         def closed(_context):
             # nobody will see these results: free the workers for the others
-            jobs = runner.cancel_all("the page was closed")
+            jobs = session.runner.cancel_all("the page was closed")
             if jobs:
                 log.info("a page was closed: cancelled %s", ", ".join(j.label for j in jobs))
         pn.state.on_session_destroyed(closed)
     return page
 
 
-def settings_row(page) -> pn.Row:
-    """Save the session's settings as JSON, or load a saved file (every input of every tab)."""
-    from . import settings
-    from .tabs.uploads import FileUpload
+class Page(pn.viewable.Viewer):
+    """One student's page: the header, the settings row and the main tabs, each made from the
+    registry's sections when first shown; in an exercise, the student's id first."""
 
-    save = pn.widgets.FileDownload(callback=lambda: io.BytesIO(settings.to_bytes(page)), filename="eha_settings.json",
-                                   label="Save settings", width=130, css_classes=["eha-save-settings"],
-                                   description="every input of every tab, as a JSON file")
-    load = FileUpload(accept=".json", max_bytes=settings.MAX_SETTINGS_BYTES, width=230,
-                      css_classes=["eha-load-settings"])
+    def __init__(self, session: Session, **params):
+        super().__init__(**params)
+        self.session = session
+        self.tabs: LazyTabs | None = None
+        self.gate: ExerciseGate | None = None
+        self.settings_note = pn.pane.HTML("", css_classes=["eha-settings-note"], styles={"font-size": "12px"},
+                                          sizing_mode="stretch_width")
+        self.layout = pn.Column(sizing_mode="stretch_width", margin=(0, 10))
+        exercise = current_exercise()
+        if exercise is not None and not session.student:
+            self.gate = ExerciseGate(*exercise, session.state, self._start)
+            self.layout.objects = [self.gate.layout]
+        else:
+            self._start(first=True)
 
-    note = pn.pane.HTML("", css_classes=["eha-settings-note"], styles={"font-size": "12px"},
-                        sizing_mode="stretch_width")
-    # The report takes about 0.8 s to draw: a worker prepares it (the page's thread serves the
-    # other students meanwhile), then it is offered for download.
-    lab_report = pn.widgets.Button(label="Report of this session", width=190, css_classes=["eha-session-report"],
-                                   description="what you ran, as one HTML file: settings, plots, estimates")
-    lab_download = pn.widgets.FileDownload(filename="eha_session_report.html", label="Download the report",
-                                           visible=False, width=190, color="success",
-                                           css_classes=["eha-session-report-download"])
+    def _start(self, first: bool = False) -> None:
+        """The app itself (after the student's id in an exercise)."""
+        session = self.session
+        if not first:             # an exercise: the fields of the page's address, but the hidden ones
+            session.query = {k: v for k, v in session.query.items() if k not in session.hidden}
+        for name in (*PARAM_NAMES, "kp"):
+            if name in session.query:
+                session.state.set_text(name, session.query[name])
+        names = session.registry.tabs()
+        tab = session.query.get("tab", "").strip()
+        active = int(tab) - 1 if tab.isdigit() and 1 <= int(tab) <= len(names) else 0
+        self.tabs = LazyTabs([(name, partial(self._make_tab, name)) for name in names], active=active,
+                             css_class="eha-main-tabs")
+        session.active_tab = active
+        watch(self.tabs.tabs, lambda e: setattr(session, "active_tab", e.new), "active")
+        first_tab = names[active]
+        if served_document() is not None:
+            # The page's frame goes out now; its first tab once the browser has it
+            # (document_ready). A change made between the browser's pull of the
+            # document and that moment can be lost (Panel holds the changes of an
+            # unconnected session and relies on the pull): the page would stay at
+            # "Preparing this tab..." for good.
+            if first:
+                pn.state.onload(lambda: apply_locked(lambda: self.tabs.build(first_tab)))
+            else:
+                apply_locked(lambda: self.tabs.build(first_tab))
+        else:
+            self.tabs.build(first_tab)
+        who = (f'<span class="eha-student" style="color:#1a56c4">{html.escape(session.exercise.title)} — '
+               f'{html.escape(session.student)}</span>' if session.student else "")
+        header = pn.pane.HTML(
+            '<div style="display:flex;align-items:baseline;gap:16px;flex-wrap:wrap">'
+            '<h2 style="margin:4px 0">Electro-hydraulic actuator: modeling and identification</h2>'
+            f'<span style="color:#666">a single-rod cylinder driven by a proportional valve</span>{who}</div>',
+            sizing_mode="stretch_width")
+        self.layout.objects = [ConnectionWatch(), header, self._settings_row(), self.tabs.tabs]
 
-    def prepare(_event):
+    def _make_tab(self, name: str):
+        placements = self.session.registry.on_tab(name)
+        if len(placements) == 1:
+            return self.session.build(placements[0].key)
+        return SubTabs(self.session, placements)
+
+    def show(self, key: str):
+        """Show section ``key`` (its tab and sub-tab), made now if needed; returns it."""
+        placement = self.session.registry.get(key)
+        while placement.within is not None:
+            placement = self.session.registry.get(placement.within)
+        self.tabs.tabs.active = self.tabs.names.index(placement.tab)
+        content = self.tabs.build(placement.tab)
+        if isinstance(content, SubTabs):
+            name = next(n for n, k in content.keys.items() if k == placement.key)
+            content.lazy.tabs.active = content.lazy.names.index(name)
+            content.lazy.build(name)
+        return self.session.build(key)
+
+    # -- the settings row ---------------------------------------------------------------------------
+    def _settings_row(self) -> pn.Row:
+        """Save the session's settings as JSON, or load a saved file; the report of the session."""
+        from .tabs.uploads import FileUpload
+
+        session, note = self.session, self.settings_note
+        save = pn.widgets.FileDownload(callback=lambda: io.BytesIO(session.settings_bytes()),
+                                       filename="eha_settings.json", label="Save settings", width=130,
+                                       css_classes=["eha-save-settings"],
+                                       description="every input of every tab, as a JSON file")
+        self.load = FileUpload(accept=".json", max_bytes=MAX_SETTINGS_BYTES, width=230,
+                               css_classes=["eha-load-settings"])
+        # The report takes about 0.8 s to draw: a worker draws it from a snapshot of the page taken
+        # now (the page's thread serves the other students meanwhile), then it is offered.
+        self.report_button = pn.widgets.Button(label="Report of this session", width=190,
+                                               css_classes=["eha-session-report"],
+                                               description="what you ran, as one HTML file: settings, plots, "
+                                                           "estimates")
+        self.report_download = pn.widgets.FileDownload(filename="eha_session_report.html", label="Download the report",
+                                                       visible=False, width=190, color="success",
+                                                       css_classes=["eha-session-report-download"])
+        on_click(self.report_button, lambda _e: self.prepare_report())
+        watch(self.load, lambda _e: self._loaded(), "value")
+        return pn.Row(save, pn.pane.HTML("<span class='eha-note'>Load settings:</span>", margin=(12, 4, 0, 10)),
+                      self.load, self.report_button, self.report_download, note, sizing_mode="stretch_width",
+                      css_classes=["eha-settings-row"])
+
+    def prepare_report(self):
         from .report import session_report
 
+        session, download, note = self.session, self.report_download, self.settings_note
+        snapshot = session.snapshot()           # under the page's lock: a click
+
         def show(data, _job):
-            lab_download.file = io.BytesIO(data)
-            lab_download.label = f"Download the report ({len(data) / 1e6:.1f} MB)"
-            lab_download.visible = True
+            download.file = io.BytesIO(data)
+            download.label = f"Download the report ({len(data) / 1e6:.1f} MB)"
+            download.visible = True
 
         def fail(message):
             note.object = f"<span class='eha-warn'>The report could not be made: {html.escape(message)}</span>"
 
-        lab_download.visible = False
-        page.eha_runner.run("session report", lambda _token: session_report(page), show, fail=fail)
+        download.visible = False
+        return session.runner.run("session report", lambda _token: session_report(session, snapshot), show, fail=fail)
 
-    on_click(lab_report, prepare)
-    page.eha_report_button, page.eha_report_download = lab_report, lab_download
-
-    def loaded(_event):
+    def _loaded(self) -> None:
+        load, note = self.load, self.settings_note
         if load.value is None:
             return
         try:
-            notes = settings.apply(page, bytes(load.value), shown_text(load.filename or "settings.json", 60))
-        except settings.SettingsError as exc:
+            notes = self.session.load_settings(bytes(load.value), shown_text(load.filename or "settings.json", 60))
+        except SettingsError as exc:
             note.object = f"<span class='eha-warn'>{html.escape(str(exc))}</span>"
             return
         note.object = ("<span class='eha-ok'>Settings loaded.</span> "
                        + " ".join(f"<span class='eha-note'>{html.escape(n)}</span>" for n in notes))
 
-    watch(load, loaded, "value")
-    page.eha_settings_note = note
-    return pn.Row(save, pn.pane.HTML("<span class='eha-note'>Load settings:</span>", margin=(12, 4, 0, 10)), load,
-                  lab_report, lab_download, note, sizing_mode="stretch_width", css_classes=["eha-settings-row"])
-
-
-def _exercise_page(state: AppState, exercise, query: dict, runner):
-    """An exercise's page: the gate, replaced by the app once the student has given an id."""
-    ex, handins = exercise
-    page = pn.Column(sizing_mode="stretch_width")
-
-    def start() -> None:
-        app = create_app(state, query={k: v for k, v in query.items() if k not in ex.hide}, runner=runner)
-        page.objects = [app]
-        page.eha_state, page.eha_tabs = app.eha_state, app.eha_tabs
-        page.eha_lazy, page.eha_runner = app.eha_lazy, app.eha_runner
-        if served_document() is not None:
-            apply_locked(lambda: app.eha_lazy.build(app.eha_tabs.active))
-
-    gate = ExerciseGate(ex, handins, state, start)
-    page.objects = [gate.layout]
-    page.eha_state, page.eha_gate = state, gate
-    return page
+    def __panel__(self):
+        return self.layout

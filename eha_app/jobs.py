@@ -26,6 +26,7 @@ the tabs, with :mod:`eha_app.limits`.
 
 from __future__ import annotations
 
+import enum
 import itertools
 import logging
 import os
@@ -37,7 +38,7 @@ from typing import Any
 
 from eha_core.cancel import Cancelled, CancelToken
 
-__all__ = ["Job", "JobQueue", "default_queue", "worker_count", "session_name"]
+__all__ = ["Job", "JobState", "JobQueue", "default_queue", "worker_count", "session_name"]
 
 log = logging.getLogger("eha_app")
 
@@ -58,6 +59,21 @@ def worker_count() -> int:
             raise ValueError(f"EHA_WORKERS = {env} is not allowed: use a whole number >= 1")
         return n
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+
+
+class JobState(str, enum.Enum):
+    """Where a job stands. Code branches on these, never on a message's words."""
+
+    QUEUED = "queued"
+    RUNNING = "running"
+    DONE = "done"
+    FAILED = "failed"
+    CANCELLED = "cancelled"
+    REPLACED = "replaced"        # a newer request of the same session took its place before it ran
+
+    @property
+    def finished(self) -> bool:
+        return self not in (JobState.QUEUED, JobState.RUNNING)
 
 
 def session_name(owner: Hashable) -> str:
@@ -82,7 +98,7 @@ class Job:
     fn: Callable[[CancelToken], Any]
     on_done: Callable[[Job], None] | None = None
     token: CancelToken = field(default_factory=CancelToken)
-    state: str = "queued"
+    state: JobState = JobState.QUEUED
     seq: int = 0
     submitted_at: float = field(default_factory=time.perf_counter)
     started_at: float | None = None
@@ -96,7 +112,7 @@ class Job:
 
     @property
     def finished(self) -> bool:
-        return self.state in ("done", "failed", "cancelled", "replaced")
+        return self.state.finished
 
     @property
     def wait_s(self) -> float:
@@ -152,7 +168,7 @@ class JobQueue:
             job.seq = next(self._seq)
             replaced = self._queued.pop(owner, None)
             if replaced is not None:
-                replaced.state = "replaced"
+                replaced.state = JobState.REPLACED
                 replaced.finished_at = time.perf_counter()
                 replaced.token.cancel("replaced by a newer request")
             self._queued[owner] = job
@@ -168,18 +184,18 @@ class JobQueue:
             self._last_served.pop(owner, None)
             for j in jobs:
                 j.token.cancel(reason)
-                if j.state == "queued":
-                    j.state = "cancelled"
+                if j.state == JobState.QUEUED:
+                    j.state = JobState.CANCELLED
                     j.finished_at = time.perf_counter()
         for j in jobs:
-            if j.state == "cancelled":
+            if j.state == JobState.CANCELLED:
                 self._notify(j)
         return jobs
 
     def ahead_of(self, job: Job) -> int:
         """About how many jobs start before ``job`` (0 when it is running or next)."""
         with self._cond:
-            if job.state != "queued":
+            if job.state != JobState.QUEUED:
                 return 0
             mine = (self._last_served.get(job.owner, -1), job.seq)
             return sum(1 for o, j in self._queued.items()
@@ -227,16 +243,16 @@ class JobQueue:
                 del self._queued[job.owner]
                 self._running[job.owner] = job
                 self._last_served[job.owner] = next(self._seq)
-                job.state = "running"
+                job.state = JobState.RUNNING
                 job.started_at = time.perf_counter()
             try:
                 job.token.check()
                 job.result = job.fn(job.token)
-                job.state = "done"
+                job.state = JobState.DONE
             except Cancelled as exc:
-                job.state, job.error = "cancelled", exc
+                job.state, job.error = JobState.CANCELLED, exc
             except Exception as exc:  # noqa: BLE001 - a failure is the job's outcome, shown in its page
-                job.state, job.error = "failed", exc
+                job.state, job.error = JobState.FAILED, exc
                 # by its session's number: the owner's repr is no business of the log
                 log.warning("job %r of %s failed: %s", job.label, session_name(job.owner), exc, exc_info=True)
             job.finished_at = time.perf_counter()

@@ -427,82 +427,36 @@ li {{ margin-bottom: 8px; }}
 
 # -- the report of one session (the lab report a student hands in) ------------------------
 
-def session_report(page) -> bytes:
-    """What this student ran, as one self-contained HTML file: their settings, the plots, the
-    estimates with intervals, the fit and the back-out, drawn by the same code as ``eha reproduce``
-    (an exercise's hidden values are left out as on the page)."""
+def session_report(session, snapshot) -> bytes:
+    """What this student ran, as one self-contained HTML file: every section's part, in page order
+    (its settings, plots, estimates with intervals...), drawn from ``snapshot`` (taken under the
+    page's lock; this runs in a worker) by the same code as ``eha reproduce``; an exercise's hidden
+    values are left out as on the page."""
     from bokeh.embed import components
 
-    from . import settings as session_settings
-
-    state = page.eha_state
-    hidden = state.hidden
-    built = page.eha_lazy.built
-    figures, sections = {}, []
-    cfg = session_settings.collect(page)
-    rows = [[html.escape(k), html.escape(str(v))] for k, v in cfg["parameters"].items()]
-    intro = ("" if not hidden else
-             f"<p>Exercise <b>{html.escape(state.exercise.title)}</b>, student <b>{html.escape(state.student)}</b>; "
-             f"hidden: {html.escape(', '.join(hidden))}.</p>")
-    sections.append(("parameters", "Parameters (as typed, display units)", intro + table_html(["", "value"], rows)))
-    sim = built.get(1)
-    if sim is not None and sim.results:
-        figures["sim"] = plots.TimeSeriesGrid(sim.results).layout
-        runs = ", ".join(html.escape(f"{r.label} ({r.model})") for r in sim.results)
-        sections.append(("simulation", "Simulation", _stale_note(sim.view) + f"<p>Runs: {runs}.</p>{{{{sim}}}}"))
-    ident = built.get(2)
-    if ident is not None and ident.lse.result is not None:
-        lse = ident.lse
-        fig = plots.LseFitFigure()
-        fig.update(plots.lse_view(lse.last_data, None))
-        figures["lse"] = fig.layout
-        sections.append(("lse", "Least squares (eqs. 15-18)", _stale_note(lse.view)
-                         + lse_table_html(lse.result, None, hidden=hidden) + "{{lse}}"))
-    freq = ident.freq if ident is not None else None
-    if freq is not None and freq.result is not None:
-        fi = freq.result
-        view = plots.frequency_view(fi, hidden)
-        for key, cls in (("fit", plots.FitFigure), ("bode", plots.BodeFigure), ("validation", plots.ValidationFigure)):
-            fig = cls()
-            if key == "fit":
-                fig.update(view, fi.config.model)
-            else:
-                fig.update(view)
-            figures[key] = fig.layout
-        sections.append(("frequency", "Transfer function (eqs. 19-27)", _stale_note(freq.views["summary"])
-                         + freq_summary_html(fi, hidden) + "{{fit}}{{bode}}{{validation}}"
-                         + "<h3>Backed-out parameters (eq. 27)</h3>" + backout_html(fi, hidden)))
-    board = ident.board if ident is not None else None
-    if board is not None and board.built and board.ticked() and board.views:
-        from . import board_plots
-
-        entries, amplitude = board.ticked(), board.amplitude()
-        parts = {"board_fit": board_plots.BoardFitFigure(), "board_bode": board_plots.BoardBodeFigure(),
-                 "board_step": board_plots.BoardStepFigure(), "board_pz": board_plots.PoleZeroFigure()}
-        parts["board_fit"].update(board.record, entries, board.fits)
-        parts["board_bode"].update(entries, board.views, bands=board.bands.value)
-        parts["board_step"].update(entries, board.views, board.plant, amplitude)
-        parts["board_pz"].update(entries, board.views)
-        figures.update({k: f.layout for k, f in parts.items()})
-        sections.append(("board", "Model board (the models ticked)", _stale_note(board.record_view)
-                         + board.fit_table(entries) + "{{board_fit}}{{board_bode}}"
-                         + board.step_table(entries, amplitude) + "{{board_step}}{{board_pz}}"))
-    sections.append(("settings", "Settings of this session (load them with “Load settings”)",
-                     f"<pre>{html.escape(json.dumps(cfg, indent=1, ensure_ascii=False))}</pre>"))
+    figures, parts = {}, []
+    intro = ""
+    if snapshot.hidden:
+        intro = (f"<p>Exercise <b>{html.escape(snapshot.exercise_title)}</b>, student "
+                 f"<b>{html.escape(snapshot.student)}</b>; hidden: {html.escape(', '.join(snapshot.hidden))}.</p>")
+    for section, part in session.report_sections(snapshot):
+        if part is None:
+            continue
+        names = {name: f"{section.key}_{name}" for name in part.figures}
+        content = part.html
+        for name, unique in names.items():
+            content = content.replace("{{" + name + "}}", "{{" + unique + "}}")
+            figures[unique] = part.figures[name]
+        parts.append((section.key, part.title, content))
+    parts.append(("settings", "Settings of this session (load them with “Load settings”)",
+                  f"<pre>{html.escape(json.dumps(snapshot.settings, indent=1, ensure_ascii=False))}</pre>"))
     script, divs = components(figures) if figures else ("", {})
-    body = ""
-    for sid, title, content in sections:
+    body = intro
+    for sid, title, content in parts:
         for key, div in divs.items():
             content = content.replace("{{" + key + "}}", f'<div class="fig">{div}</div>')
-        body += f'<section id="{sid}"><h2>{title}</h2>{content}</section>'
+        body += f'<section id="{sid}"><h2>{html.escape(title)}</h2>{content}</section>'
     when = _dt.datetime.now().isoformat(timespec="seconds")
     header = (f"<h1>Electro-hydraulic actuator: report of a session</h1><p>Generated {when} by the EHA app "
               f"(eha {html.escape(versions().get('eha', '?'))}).</p>")
     return html_document("EHA: report of a session", header, body, script, _bokeh_js()).encode()
-
-
-def _stale_note(view) -> str:
-    if view.status in ("current", "empty"):
-        return ""
-    return ("<p class='eha-warn'>Out of date: the inputs changed after this run; it shows the run's "
-            "results.</p>")

@@ -36,6 +36,7 @@ import time
 import weakref
 from collections.abc import Callable, Hashable, Sequence
 from contextlib import contextmanager
+from dataclasses import dataclass
 from functools import partial, wraps
 from typing import Any
 
@@ -45,7 +46,7 @@ from panel.io.state import set_curdoc
 
 from eha_core.cancel import Cancelled, CancelToken
 
-from .jobs import Job, JobQueue, default_queue
+from .jobs import Job, JobQueue, JobState, default_queue
 
 __all__ = ["SessionRunner", "PageUpdates", "apply_locked", "frozen_models", "held", "layout_once_per_message",
            "LOADING_DELAY_S", "served_document", "holds_lock", "locked", "watch", "on_click", "note_loop_thread"]
@@ -332,21 +333,26 @@ class SessionRunner:
         return self._queue if self._queue is not None else default_queue()
 
     def run(self, label: str, compute: Callable[[CancelToken], Any], show: Callable[[Any, Job], None], *,
-            fail: Callable[[str], None], busy: Sequence = (), note: Callable[[str], None] | None = None) -> Job:
+            fail: Callable[[str], None], busy: Sequence = (), note: Callable[[str], None] | None = None,
+            failed: Callable[[BaseException], None] | None = None,
+            cancelled: Callable[[Job], None] | None = None) -> Job:
         """Compute ``compute(token)`` and then call ``show(result, job)`` on the page.
 
-        ``fail(message)`` instead when it raised; ``busy`` are Panel components
+        ``fail(message)`` instead when it raised (``failed(error)`` instead, when
+        given: the error itself, for code that acts on which field it names);
+        ``cancelled(job)`` when it was cancelled; ``busy`` are Panel components
         shown as loading while the user waits; ``note(text)`` tells the user
         about the queue ("waiting: 3 runs ahead", "replaced") and is called
         with "" when there is nothing to say.
         """
         note = note or (lambda _text: None)
+        outcome = _Outcome(show, fail, failed, cancelled, tuple(busy), note)
         doc = served_document()
         if doc is None:
-            return self._run_here(label, compute, show, fail, note)
+            return self._run_here(label, compute, outcome)
 
         def done(job: Job) -> None:        # a worker thread, or the submitting thread for "replaced"
-            apply_locked(partial(self._finish, job, show, fail, busy, note), doc)
+            apply_locked(partial(self._finish, job, outcome), doc)
 
         job, replaced = self.queue.submit(self.owner, compute, label=label, on_done=done)
         note(f"Your earlier request ({replaced.label}) was replaced by this one." if replaced is not None else "")
@@ -358,7 +364,7 @@ class SessionRunner:
                 for c in busy:
                     c.loading = True
                 ahead = self.queue.ahead_of(job)
-                if job.state == "queued":
+                if job.state == JobState.QUEUED:
                     note(f"Waiting for the server: {ahead} run{'s' if ahead != 1 else ''} ahead of yours."
                          if ahead else "Waiting for a free worker: yours is next.")
 
@@ -374,37 +380,54 @@ class SessionRunner:
 
     # -- internals -------------------------------------------------------------------
     @staticmethod
-    def _finish(job: Job, show, fail, busy, note) -> None:
+    def _finish(job: Job, outcome: _Outcome) -> None:
         try:
-            if job.state == "done":
-                show(job.result, job)
-                note("")
-            elif job.state == "failed":
+            if job.state == JobState.DONE:
+                outcome.show(job.result, job)
+                outcome.note("")
+            elif job.state == JobState.FAILED:
                 log.debug("job %s failed", job.label)
-                fail(_message(job.error))
-                note("")
-            elif job.state == "replaced":
+                if outcome.failed is not None:
+                    outcome.failed(job.error)
+                else:
+                    outcome.fail(_message(job.error))
+                outcome.note("")
+            elif job.state == JobState.REPLACED:
                 return          # its successor owns the indicators now
-            else:               # cancelled
-                note(f"Stopped: {job.token.reason or 'cancelled'}.")
+            elif job.state == JobState.CANCELLED:
+                outcome.note(f"Stopped: {job.token.reason or 'cancelled'}.")
+                if outcome.cancelled is not None:
+                    outcome.cancelled(job)
         finally:
-            if job.state != "replaced":
-                for c in busy:
+            if job.state != JobState.REPLACED:
+                for c in outcome.busy:
                     if c.loading:
                         c.loading = False
 
-    def _run_here(self, label, compute, show, fail, note) -> Job:
+    def _run_here(self, label, compute, outcome: _Outcome) -> Job:
         job = Job(owner=self.owner, label=label, fn=compute)
-        job.state = "running"
+        job.state = JobState.RUNNING
         job.started_at = job.submitted_at
         try:
             job.result = compute(job.token)
-            job.state = "done"
+            job.state = JobState.DONE
         except Cancelled as exc:
-            job.state, job.error = "cancelled", exc
+            job.state, job.error = JobState.CANCELLED, exc
         except Exception as exc:  # noqa: BLE001 - shown in the page, as in a server
-            job.state, job.error = "failed", exc
+            job.state, job.error = JobState.FAILED, exc
             log.warning("computation %r failed: %s", label, exc, exc_info=True)
         job.finished_at = time.perf_counter()
-        self._finish(job, show, fail, (), note)
+        self._finish(job, outcome)
         return job
+
+
+@dataclass(frozen=True)
+class _Outcome:
+    """What :meth:`SessionRunner.run` does with a job's end, by its :class:`~eha_app.jobs.JobState`."""
+
+    show: Callable[[Any, Job], None]
+    fail: Callable[[str], None]
+    failed: Callable[[BaseException], None] | None
+    cancelled: Callable[[Job], None] | None
+    busy: tuple
+    note: Callable[[str], None]

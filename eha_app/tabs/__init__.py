@@ -1,1 +1,24 @@
-"""The three tabs of the app, one Viewer class each (the paper's three steps)."""
+"""The page's sections (tabs and panels), registered in page order.
+
+A new panel is one module here and one line below: it is then in the page, in
+settings files, in the page's address and in the session report.
+"""
+
+from ..session import SECTIONS
+from .board import ModelBoard
+from .frequency import FrequencyPanel
+from .least_squares import LeastSquaresPanel
+from .parameters import ParametersTab
+from .record import RecordPanel
+from .simulation import SimulationTab
+from .study import StudyPanel
+
+__all__ = ["SECTIONS"]
+
+SECTIONS.register(ParametersTab, tab="1. Parameters")
+SECTIONS.register(SimulationTab, tab="2. Simulation")
+SECTIONS.register(LeastSquaresPanel, tab="3. Identification", subtab="Time domain: least squares")
+SECTIONS.register(FrequencyPanel, tab="3. Identification", subtab="Frequency domain: transfer function")
+SECTIONS.register(RecordPanel, within="frequency")
+SECTIONS.register(ModelBoard, tab="3. Identification", subtab="Model board")
+SECTIONS.register(StudyPanel, tab="3. Identification", subtab="Study over seeds")

@@ -16,6 +16,7 @@ The core computes each model's curves once, in a worker, when it is added
 
 from __future__ import annotations
 
+import dataclasses
 import html
 import itertools
 from dataclasses import dataclass
@@ -36,10 +37,10 @@ from .. import board_plots
 from ..form import Field, Form, Group, parse_fields
 from ..freshness import ResultView
 from ..layout import side_by_side
-from ..state import AppState
-from ..tasks import SessionRunner, on_click, watch
+from ..session import ReportPart, Section, SectionSnapshot, stale_note
+from ..tasks import on_click, watch
 
-__all__ = ["ModelBoard", "BoardInbox", "BOARD_FORM", "MAX_MODELS"]
+__all__ = ["ModelBoard", "BOARD_FORM", "BOARD_DEFAULTS", "MAX_MODELS", "fit_table", "step_table"]
 
 #: Models the board holds at most (beside the references): a student deletes one to keep more.
 MAX_MODELS = 12
@@ -71,35 +72,26 @@ class BoardEntry:
         return self.model.kind
 
 
-class BoardInbox:
-    """Where the tabs put their estimates. The board itself (forms, figures, its references'
-    linearisation: ~40 ms and 0.4 MB a session) is made when a student first opens it, and takes
-    what arrived before."""
+class ModelBoard(Section):
+    """The model board of one session (see the module docstring).
 
-    def __init__(self):
-        self.board: ModelBoard | None = None
-        self.pending: list[BoardModel] = []
-        self._counters: dict[str, itertools.count] = {}
+    It is made when a student first opens it (forms, figures, its references'
+    linearisation: about 40 ms and 0.4 MB a session), and takes the estimates the
+    other sections posted before (:meth:`receive`), naming them in the order they
+    were made: H1, H2, ... LS1, ... R1.
+    """
 
-    def next_name(self, prefix: str) -> str:
-        """H1, H2, ... LS1, ...: a short name per kind, in the order the estimates were made."""
-        return f"{prefix}{next(self._counters.setdefault(prefix, itertools.count(1)))}"
+    key = "board"
+    title = "Model board"
+    defaults = BOARD_DEFAULTS
+    #: Estimates kept for a board not opened yet (a student deletes one to keep more).
+    max_mail = MAX_MODELS
 
-    def add(self, model: BoardModel) -> None:
-        if self.board is not None:
-            self.board.add(model)
-        elif len(self.pending) < MAX_MODELS:
-            self.pending.append(model)
-
-
-class ModelBoard(pn.viewable.Viewer):
-    """The model board of one session (see the module docstring)."""
-
-    def __init__(self, state: AppState, runner: SessionRunner, query: dict | None = None, **kwargs):
-        super().__init__(**kwargs)
-        self.state = state
-        self.runner = runner
+    def __init__(self, session, **kwargs):
+        super().__init__(session, **kwargs)
+        state, runner = self.state, self.runner
         self._keys = itertools.count(1)
+        self._counters: dict[str, itertools.count] = {}
         self.entries: list[BoardEntry] = []
         self._failed: set[int] = set()      # models whose views could not be computed
         self.views: dict = {}           # key -> ModelViews
@@ -115,8 +107,7 @@ class ModelBoard(pn.viewable.Viewer):
         self.figures: dict = {}
         self._panes: dict = {}
         self.built = False
-        texts = dict(BOARD_DEFAULTS)
-        texts.update({k: v for k, v in (query or {}).items() if k in _FIELDS})
+        texts = self.initial_texts()
         self.form = Form(spec=[g.to_spec() for g in BOARD_FORM], values=texts, url_defaults=BOARD_DEFAULTS,
                          width=270, css_classes=["eha-board-form"], margin=(5, 10))
         watch(self.form, lambda _e: self._settings_changed(), "values")
@@ -137,6 +128,7 @@ class ModelBoard(pn.viewable.Viewer):
                                       run_hint="The board updates it by itself in a moment.")
         self._references()
         state.param.watch(lambda _e: self._plant_changed(), ["params", "kp"])
+        self.build()
 
     # -- models ------------------------------------------------------------------------------
     def _color(self) -> str:
@@ -157,6 +149,14 @@ class ModelBoard(pn.viewable.Viewer):
                 entry.model = ref
                 self.views.pop(entry.key, None)
                 self.fits.pop(entry.key, None)
+
+    def next_name(self, prefix: str) -> str:
+        """H1, H2, ... LS1, ...: a short name per kind, in the order the estimates were made."""
+        return f"{prefix}{next(self._counters.setdefault(prefix, itertools.count(1)))}"
+
+    def receive(self, model: BoardModel) -> None:
+        """An estimate posted by another section; its ``name`` is its kind's prefix (``"LS"``)."""
+        self.add(dataclasses.replace(model, name=self.next_name(model.name)))
 
     def add(self, model: BoardModel) -> BoardEntry | None:
         """Put ``model`` on the board, ticked if it is stable (an unstable one's curves would flatten the
@@ -269,11 +269,12 @@ class ModelBoard(pn.viewable.Viewer):
         self.list.objects = rows
 
     # -- the validation record and the nonlinear plant -------------------------------------------
-    def settings(self) -> tuple[dict, dict]:
+    def parsed(self) -> tuple[dict, dict]:
+        """The form's values and its messages."""
         return parse_fields(_FIELDS.values(), self.form.values)
 
     def _settings_changed(self) -> None:
-        values, errors = self.settings()
+        values, errors = self.parsed()
         self.form.errors = errors
         if not errors:
             self.update_record()
@@ -285,7 +286,7 @@ class ModelBoard(pn.viewable.Viewer):
 
     def record_inputs(self):
         """(record key, plant key) of the current inputs, or None when they are not valid."""
-        values, errors = self.settings()
+        values, errors = self.parsed()
         if errors or not self.state.valid:
             return None
         params, kp = self.state.params, self.state.kp
@@ -378,7 +379,7 @@ class ModelBoard(pn.viewable.Viewer):
 
     def amplitude(self) -> float:
         """The step of r [m] the step view draws."""
-        return (self.settings()[0].get("board_step") or 10.0) * 1e-3
+        return (self.parsed()[0].get("board_step") or 10.0) * 1e-3
 
     def refresh(self) -> None:
         """Redraw every view from the cached curves of the ticked models (no computation)."""
@@ -416,55 +417,106 @@ class ModelBoard(pn.viewable.Viewer):
         self.tables["step"].object = self.step_table(entries, amplitude)
 
     def fit_table(self, entries) -> str:
-        if self.record is None:
-            return ""
-        rows = []
-        for e in entries:
-            fit = self.fits.get(e.key)
-            if fit is None:
-                continue
-            verdicts = ""
-            if fit.assessment is not None:
-                verdicts = "".join(f"<div>{'✓' if v.passed else '✗'} {html.escape(v.sentence)}</div>"
-                                   for v in fit.assessment.verdicts)
-            if e.model.kp is not None and e.model.kp != self.state.kp:
-                verdicts += (f"<div class='eha-warn'>Built for Kp = {e.model.kp:g} V/m; the record's loop has "
-                             f"Kp = {self.state.kp:g} V/m (tab 1): a low fit says so, not that the model is "
-                             "wrong.</div>")
-            fit_text = f"{fit.fit_percent:.2f} %" if np.isfinite(fit.fit_percent) else "—"
-            rows.append(f"<tr><td><span style='color:{e.color}'>■</span> {html.escape(e.name)}</td>"
-                        f"<td>{fit_text}</td><td style='font-size:12px'>{verdicts}</td></tr>")
-        seed = self.record_key[2] if self.record_key else ""
-        return ("<div style='overflow-x:auto'><table class='eha-table eha-board-fits'><tr><th>model</th>"
-                "<th>fit</th><th>residual tests on the "
-                "validation record</th></tr>" + "".join(rows) + "</table></div>"
-                f"<p class='eha-note'>Validation record: a closed-loop experiment on tab 1's actuator (idinput "
-                f"sine, seed {seed}, N = 1000, Ts = 0.01 s). Each model's initial state and input offset are "
-                "fitted to it (MATLAB's compare); fit = 100 (1 − ‖x − x̂‖ / ‖x − mean x‖).</p>")
+        return fit_table(entries, self.record, self.fits, self.record_key, self.state.kp)
 
     def step_table(self, entries, amplitude: float) -> str:
-        rows = []
-        items = [(e.name, e.color, self.views[e.key].step) for e in entries if e.key in self.views]
-        if self.plant is not None:
-            items.append(("nonlinear plant", "#333333", self.plant))
+        return step_table(entries, self.views, self.plant, amplitude)
 
-        def cell(v, fmt="{:.3g}"):
-            return fmt.format(v) if v is not None and np.isfinite(v) else "—"
+    # -- the section's protocol -----------------------------------------------------------------
+    def result_views(self) -> list:
+        return [self.record_view]
 
-        for name, color, s in items:
-            i = s.info
-            rows.append(f"<tr><td><span style='color:{color}'>■</span> {html.escape(name)}</td>"
-                        f"<td>{cell(i.rise_time_s)}</td><td>{cell(i.overshoot_percent, '{:.2f}')}</td>"
-                        f"<td>{cell(i.settling_time_s)}</td><td>{cell(i.steady_state * amplitude * 1e3)}</td>"
-                        f"<td>{html.escape('' if s.message == 'ok' else s.message)}</td></tr>")
-        return ("<div style='overflow-x:auto'><table class='eha-table eha-board-steps'><tr><th>model</th>"
-                "<th>rise time 10-90 % [s]</th>"
-                "<th>overshoot [%]</th><th>settling time 2 % [s]</th><th>final x [mm]</th><th></th></tr>"
-                + "".join(rows) + "</table></div><p class='eha-note'>Rise, overshoot and settling as python-control's "
-                "step_info; a model's figures are taken against its DC gain, the plant's against its last "
-                "sample (60 s).</p>")
+    def snapshot(self) -> SectionSnapshot:
+        entries = tuple(dataclasses.replace(e) for e in self.ticked())
+        content = BoardSnapshot(entries, dict(self.views), dict(self.fits), self.record, self.record_key, self.plant,
+                                self.amplitude(), bool(self.bands.value), self.state.kp)
+        return SectionSnapshot(self.key, self.title, self.settings(), stale=self.is_stale(), content=content)
+
+    @classmethod
+    def report(cls, snapshot: SectionSnapshot, hidden=()) -> ReportPart | None:
+        b = snapshot.content
+        if b is None or not b.entries or not b.views:
+            return None
+        parts = {"board_fit": board_plots.BoardFitFigure(), "board_bode": board_plots.BoardBodeFigure(),
+                 "board_step": board_plots.BoardStepFigure(), "board_pz": board_plots.PoleZeroFigure()}
+        parts["board_fit"].update(b.record, list(b.entries), b.fits)
+        parts["board_bode"].update(list(b.entries), b.views, bands=b.bands)
+        parts["board_step"].update(list(b.entries), b.views, b.plant, b.amplitude)
+        parts["board_pz"].update(list(b.entries), b.views)
+        return ReportPart("Model board (the models ticked)", stale_note(snapshot)
+                          + fit_table(b.entries, b.record, b.fits, b.record_key, b.kp) + "{{board_fit}}{{board_bode}}"
+                          + step_table(b.entries, b.views, b.plant, b.amplitude) + "{{board_step}}{{board_pz}}",
+                          {k: f.layout for k, f in parts.items()})
 
     def __panel__(self):
         controls = pn.Column(self.form, self.bands, self.note, self.list, width=290)
         results = pn.Column(self.record_view.banner, self.area, sizing_mode="stretch_width", min_width=440)
         return side_by_side(controls, results)
+
+
+@dataclass(frozen=True)
+class BoardSnapshot:
+    """What the board shows at one moment (its ticked models, copied), for the session report."""
+
+    entries: tuple
+    views: dict
+    fits: dict
+    record: object
+    record_key: object
+    plant: object
+    amplitude: float
+    bands: bool
+    kp: float
+
+
+def fit_table(entries, record, fits, record_key, kp: float) -> str:
+    """The fits of ``entries`` on the validation record, with the residual tests' verdicts."""
+    if record is None:
+        return ""
+    rows = []
+    for e in entries:
+        fit = fits.get(e.key)
+        if fit is None:
+            continue
+        verdicts = ""
+        if fit.assessment is not None:
+            verdicts = "".join(f"<div>{'✓' if v.passed else '✗'} {html.escape(v.sentence)}</div>"
+                               for v in fit.assessment.verdicts)
+        if e.model.kp is not None and e.model.kp != kp:
+            verdicts += (f"<div class='eha-warn'>Built for Kp = {e.model.kp:g} V/m; the record's loop has "
+                         f"Kp = {kp:g} V/m (tab 1): a low fit says so, not that the model is "
+                         "wrong.</div>")
+        fit_text = f"{fit.fit_percent:.2f} %" if np.isfinite(fit.fit_percent) else "—"
+        rows.append(f"<tr><td><span style='color:{e.color}'>■</span> {html.escape(e.name)}</td>"
+                    f"<td>{fit_text}</td><td style='font-size:12px'>{verdicts}</td></tr>")
+    seed = record_key[2] if record_key else ""
+    return ("<div style='overflow-x:auto'><table class='eha-table eha-board-fits'><tr><th>model</th>"
+            "<th>fit</th><th>residual tests on the "
+            "validation record</th></tr>" + "".join(rows) + "</table></div>"
+            f"<p class='eha-note'>Validation record: a closed-loop experiment on tab 1's actuator (idinput "
+            f"sine, seed {seed}, N = 1000, Ts = 0.01 s). Each model's initial state and input offset are "
+            "fitted to it (MATLAB's compare); fit = 100 (1 − ‖x − x̂‖ / ‖x − mean x‖).</p>")
+
+
+def step_table(entries, views, plant, amplitude: float) -> str:
+    """The step responses' figures of ``entries`` (and the nonlinear plant's)."""
+    rows = []
+    items = [(e.name, e.color, views[e.key].step) for e in entries if e.key in views]
+    if plant is not None:
+        items.append(("nonlinear plant", "#333333", plant))
+
+    def cell(v, fmt="{:.3g}"):
+        return fmt.format(v) if v is not None and np.isfinite(v) else "—"
+
+    for name, color, s in items:
+        i = s.info
+        rows.append(f"<tr><td><span style='color:{color}'>■</span> {html.escape(name)}</td>"
+                    f"<td>{cell(i.rise_time_s)}</td><td>{cell(i.overshoot_percent, '{:.2f}')}</td>"
+                    f"<td>{cell(i.settling_time_s)}</td><td>{cell(i.steady_state * amplitude * 1e3)}</td>"
+                    f"<td>{html.escape('' if s.message == 'ok' else s.message)}</td></tr>")
+    return ("<div style='overflow-x:auto'><table class='eha-table eha-board-steps'><tr><th>model</th>"
+            "<th>rise time 10-90 % [s]</th>"
+            "<th>overshoot [%]</th><th>settling time 2 % [s]</th><th>final x [mm]</th><th></th></tr>"
+            + "".join(rows) + "</table></div><p class='eha-note'>Rise, overshoot and settling as python-control's "
+            "step_info; a model's figures are taken against its DC gain, the plant's against its last "
+            "sample (60 s).</p>")

@@ -21,14 +21,13 @@ from ..freshness import ResultView
 from ..glossary import GLOSSARY
 from ..layout import side_by_side
 from ..limits import check_frequency
-from ..state import AppState
+from ..session import ReportPart, Section, SectionSnapshot, stale_note
 from ..tables import (
     backout_html,
     estimate_alert,
     freq_summary_html,
 )
-from ..tasks import SessionRunner, apply_locked, held, on_click, watch
-from .record import RecordPanel
+from ..tasks import apply_locked, held, on_click, watch
 from .uploads import download
 
 __all__ = ["FrequencyPanel", "FREQ_FORM", "FREQ_DEFAULTS", "parse_freq"]
@@ -89,13 +88,13 @@ def freq_hidden(texts: dict) -> list[str]:
     return [] if texts.get("signal_type", "sine") == "sine" else ["n_sines", "n_trials", "grid_skip"]
 
 
-def _field_of_message(message: str) -> str | None:
-    """The form field a core message (``NAME = VALUE is not allowed: ...``) is about."""
-    head = message.split(" = ", 1)[0].strip()
+def _field_of(error) -> str:
+    """The form field a core error (a :class:`~eha_core._checks.FieldError`) is about ("" if none)."""
+    name = getattr(error, "field", "")
     for form_name, config_name in _CONFIG_NAME.items():
-        if head == config_name:
+        if name == config_name:
             return form_name
-    return {"band": "band_lo", "range": "range_lo", "sinedata": "n_sines"}.get(head)
+    return {"band": "band_lo", "range": "range_lo", "sinedata": "n_sines"}.get(name, "")
 
 
 def _parse_delay(text) -> tuple[float | str, str]:
@@ -138,10 +137,10 @@ def parse_freq(texts: dict, kp: float = _DEFAULT_CONFIG.kp) -> tuple[FrequencyEx
             input_offset=values["input_offset"], input_delay=delay)
     except (ValueError, TypeError) as exc:
         message = " ".join(str(exc).split())
-        if message.startswith("input_delay = "):       # the field's name and the text as typed
+        if getattr(exc, "field", "") == "input_delay":   # the field's label and the text as typed
             return None, {"input_delay": f"input delay = {str(texts.get('input_delay', '')).strip()} is not "
-                                         f"allowed: {message.split(' is not allowed: ', 1)[1]}"}
-        return None, {_field_of_message(message) or "": message}
+                                         f"allowed: {exc.what}"}
+        return None, {_field_of(exc): message}
     return cfg, {}
 
 
@@ -154,20 +153,25 @@ _FIGURES = (("Fig. 8 excitation", "excitation", plots.ExcitationFigure),
             ("Residuals", "residuals", plots.ResidualFigure))
 
 
-class FrequencyPanel(pn.viewable.Viewer):
-    """Frequency domain: the closed-loop experiment, tfest, validation, back-out (Figs. 8-13)."""
+class FrequencyPanel(Section):
+    """Frequency domain: the closed-loop experiment, tfest, validation, back-out (Figs. 8-13).
 
-    def __init__(self, state: AppState, runner: SessionRunner, query: dict | None = None, **kwargs):
-        super().__init__(**kwargs)
-        self.state = state
-        self.runner = runner
+    The student's own record is a section within it (:mod:`eha_app.tabs.record`), laid out here.
+    """
+
+    key = "frequency"
+    title = "Transfer function"
+    defaults = FREQ_DEFAULTS
+
+    def __init__(self, session, **kwargs):
+        super().__init__(session, **kwargs)
+        state, runner = self.state, self.runner
         # the excitation preview is a job of its own: typing N must not wait behind an experiment
         self.preview_runner = runner.sub("preview")
         self.result = None
         self.view: plots.FrequencyView | None = None
         self.preview = None
-        texts = dict(FREQ_DEFAULTS)
-        texts.update({k: v for k, v in (query or {}).items() if k in _FREQ_FIELDS})
+        texts = self.initial_texts()
         self.form = Form(spec=[g.to_spec() for g in FREQ_FORM], values=texts, url_defaults=FREQ_DEFAULTS, width=270,
                          css_classes=["eha-freq-form"], margin=(5, 10))
         watch(self.form, self._on_config, "values")
@@ -216,9 +220,7 @@ class FrequencyPanel(pn.viewable.Viewer):
                                    sizing_mode="stretch_width", css_classes=["eha-freq-figures"])
         self._shown = {"excitation"}
         watch(self.figure_tabs, self._on_figure_tab, "active")
-        self.record = RecordPanel(runner, lambda: self.config()[0], note=self._note, fail=self._fail)
-        self.board = None                   # the model board each estimate is put on (set by the tab)
-        watch(self.form, lambda _e: self.record.inputs_changed(), "values")
+        watch(self.form, lambda _e: self._inner_inputs_changed(), "values")
         state.param.watch(self._update_enabled, "valid")
         state.param.watch(self._on_config, ["params", "kp", "valid"])
         self._on_config()
@@ -227,7 +229,7 @@ class FrequencyPanel(pn.viewable.Viewer):
         """The experiment the form and tab 1's Kp describe (None if invalid), and the messages."""
         return parse_freq(self.form.values, self.state.kp)
 
-    def key(self, cfg=None):
+    def run_key(self, cfg=None):
         """What the experiment's results are computed from (None if the inputs are not valid)."""
         cfg = cfg if cfg is not None else self.config()[0]
         return None if cfg is None or not self.state.valid else (self.state.params, cfg)
@@ -240,7 +242,7 @@ class FrequencyPanel(pn.viewable.Viewer):
     def _mark(self, cfg, *, preview_queued: bool) -> None:
         """Mark every view of this panel against the current inputs."""
         why = "a parameter on tab 1 is not valid" if not self.state.valid else ""
-        key = self.key(cfg)
+        key = self.run_key(cfg)
         for name, view in self.views.items():
             if name == "excitation":
                 view.inputs_changed(self.excitation_key(cfg), updating=preview_queued, why=why)
@@ -315,15 +317,15 @@ class FrequencyPanel(pn.viewable.Viewer):
             self.views["excitation"].shown(exc_key)
             self._update_enabled()
 
-        def fail(message):
+        def failed(error):
             # idinput checks the band, range and sinusoid settings against N
-            self.excitation_errors = {_field_of_message(message) or "": message}
+            self.excitation_errors = {_field_of(error): " ".join(str(error).split())}
             self._update_enabled()
 
         self._update_enabled()
         self._mark(cfg, preview_queued=True)
         self.preview_runner.run("excitation preview", lambda token: plots.excitation_view(cfg.excitation(), ts),
-                                show, fail=fail)
+                                show, fail=lambda _m: None, failed=failed)
 
     def data_bytes(self, kind: str) -> bytes:
         """The closed-loop record the estimate was made from: t, r, x, u (SI), as CSV or .mat."""
@@ -399,10 +401,10 @@ class FrequencyPanel(pn.viewable.Viewer):
                 view.shown(self.excitation_key(cfg) if name == "excitation" else run_key)
             self._mark(self.config()[0], preview_queued=False)      # typed while it computed
             e = fi.estimate
-            if self.board is not None and e.success and np.all(np.isfinite(e.den)):
+            if e.success and np.all(np.isfinite(e.den)):
                 # the board's list is rebuilt in a page update of its own: the result goes out first
-                apply_locked(partial(self.board.add, BoardModel(
-                    name=self.board.next_name("H"), kind="tf", estimate=e, num=e.num, den=e.den,
+                apply_locked(partial(self.session.post, "board", BoardModel(
+                    name="H", kind="tf", estimate=e, num=e.num, den=e.den,
                     input_delay=getattr(e, "input_delay", 0.0), ts=cfg.ts, kp=cfg.kp,
                     description=f"{e.n_poles} poles, {e.n_zeros} zeros; idinput {cfg.signal_type} seed {cfg.seed}, "
                                 f"N {cfg.n_samples}, {cfg.model} plant, Kp = {cfg.kp:g} V/m; fit "
@@ -411,10 +413,57 @@ class FrequencyPanel(pn.viewable.Viewer):
         return self.runner.run("frequency experiment", compute, show, fail=self._fail, busy=[self.area],
                                note=self._note)
 
+    # -- what the sections within it use ----------------------------------------------------------
+    @property
+    def record(self):
+        """The student's own record (a section within this one)."""
+        return self.session.section("record")
+
+    def inner(self) -> list:
+        return [self.session.section(p.key) for p in self.session.registry.within(self.key)
+                if self.session.section(p.key) is not None]
+
+    def _inner_inputs_changed(self) -> None:
+        for section in self.inner():
+            section.inputs_changed()
+
+    def queue_note_text(self, text: str) -> None:
+        self._note(text)
+
+    def fail(self, message: str) -> None:
+        self._fail(message)
+
+    # -- the section's protocol ---------------------------------------------------------------------
+    def result_views(self) -> list:
+        return [v for k, v in self.views.items() if k != "excitation"]
+
+    def snapshot(self) -> SectionSnapshot:
+        return SectionSnapshot(self.key, self.title, self.settings(), stale=self.is_stale(), content=self.result)
+
+    @classmethod
+    def report(cls, snapshot: SectionSnapshot, hidden=()) -> ReportPart | None:
+        fi = snapshot.content
+        if fi is None:
+            return None
+        view = plots.frequency_view(fi, hidden)
+        figures = {}
+        for key, fig_cls in (("fit", plots.FitFigure), ("bode", plots.BodeFigure),
+                             ("validation", plots.ValidationFigure)):
+            fig = fig_cls()
+            if key == "fit":
+                fig.update(view, fi.config.model)
+            else:
+                fig.update(view)
+            figures[key] = fig.layout
+        return ReportPart("Transfer function (eqs. 19-27)", stale_note(snapshot) + freq_summary_html(fi, hidden)
+                          + "{{fit}}{{bode}}{{validation}}<h3>Backed-out parameters (eq. 27)</h3>"
+                          + backout_html(fi, hidden), figures)
+
     def __panel__(self):
+        inner = self.inner()
         config = pn.Column(self.kp_note, self.form, self.error, self.button,
-                           pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"), *self.record.controls(),
-                           self.queue_note, width=280)
+                           pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"),
+                           *[c for s in inner for c in s.controls()], self.queue_note, width=280)
         results = pn.Column(self.alert, self.figure_tabs, self.views["summary"].banner, self.area,
-                            *self.record.results(), sizing_mode="stretch_width", min_width=440)
+                            *[r for s in inner for r in s.results()], sizing_mode="stretch_width", min_width=440)
         return side_by_side(config, results)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import dataclasses
 import html
 import io
 import json
@@ -35,13 +34,13 @@ from ..freshness import ResultView
 from ..glossary import term
 from ..layout import side_by_side
 from ..limits import check_lse
-from ..state import AppState
+from ..session import ReportPart, Section, SectionSnapshot, stale_note
 from ..tables import (
     SCENARIOS,
     lse_table_html,
     table4_html,
 )
-from ..tasks import SessionRunner, apply_locked, on_click, watch
+from ..tasks import apply_locked, on_click, watch
 from .uploads import ColumnMapping, FileUpload, check_size, download, upload_name
 
 __all__ = ["LeastSquaresPanel", "LseRequest", "LSE_FORM", "LSE_DEFAULTS", "parse_lse"]
@@ -145,17 +144,19 @@ def parse_lse(texts: dict) -> tuple[LseRequest, dict]:
     return req, errors
 
 
-class LeastSquaresPanel(pn.viewable.Viewer):
+class LeastSquaresPanel(Section):
     """Time domain: least squares on eqs. 15-18, one scenario or Table 4."""
 
-    def __init__(self, state: AppState, runner: SessionRunner, query: dict | None = None, **kwargs):
-        super().__init__(**kwargs)
-        self.state = state
-        self.runner = runner
+    key = "least_squares"
+    title = "Least squares"
+    defaults = LSE_DEFAULTS
+
+    def __init__(self, session, **kwargs):
+        super().__init__(session, **kwargs)
+        state = self.state
         self.result = None
         self.all_results = None
-        texts = dict(LSE_DEFAULTS)
-        texts.update({k: v for k, v in (query or {}).items() if k in _LSE_FIELDS})
+        texts = self.initial_texts()
         self.form = Form(spec=[g.to_spec() for g in LSE_FORM], values=texts, url_defaults=LSE_DEFAULTS, width=270,
                          css_classes=["eha-lse-form"], margin=(5, 10))
         watch(self.form, self._update_enabled, "values")
@@ -194,7 +195,6 @@ class LeastSquaresPanel(pn.viewable.Viewer):
         self.own_data_key = None
         self.last_data = None               # the data behind the table and the plot (for downloads)
         self.last_resim = None              # the plot's re-simulation with the estimates
-        self.board = None                   # the model board each run is put on (set by the tab)
         self._upload = None
         self.upload = FileUpload(accept=".csv,.mat", width=260, css_classes=["eha-lse-upload"])
         watch(self.upload, self._uploaded, "value")
@@ -228,7 +228,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
     def request(self) -> tuple[LseRequest, dict]:
         return parse_lse(self.form.values)
 
-    def key(self):
+    def run_key(self):
         """What a least-squares run with the current inputs is computed from (None if they are not valid)."""
         req, errors = self.request()
         if errors or not self.state.valid or self.window_errors():
@@ -397,7 +397,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
 
     def _inputs_changed(self, *_events) -> None:
         why = "a parameter on tab 1 is not valid" if not self.state.valid else ""
-        self.view.inputs_changed(self.key(), why=why)
+        self.view.inputs_changed(self.run_key(), why=why)
         self.table4_view.inputs_changed(self.table4_key(), why=why)
 
     def _update_enabled(self, *_events) -> None:
@@ -439,7 +439,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
             self._fail(str(exc))
             return None
         params = self.state.params
-        key = self.key()
+        key = self.run_key()
         scenario = req.scenario if req.excitation == "paper" else None
 
         own = self.windowed() if self.own_data is not None else None
@@ -449,7 +449,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
 
         def board_model(res):
             """The run as the board shows it: eq. 24 with its estimates (None if they are not physical)."""
-            if self.board is None or not res.success:
+            if not res.success:
                 return None
             try:
                 return lse_model(res, params, kp, "LS", f"least squares ({what}) → eq. 24, Kp = {kp:g} V/m")
@@ -498,7 +498,7 @@ class LeastSquaresPanel(pn.viewable.Viewer):
             self._inputs_changed()          # typed while it computed
             if model is not None:
                 # the board's list is rebuilt in a page update of its own: the result goes out first
-                apply_locked(partial(self.board.add, dataclasses.replace(model, name=self.board.next_name("LS"))))
+                apply_locked(partial(self.session.post, "board", model))
 
         return self.runner.run("least squares", compute, show, fail=self._fail, busy=[self.area], note=self._note)
 
@@ -558,6 +558,31 @@ class LeastSquaresPanel(pn.viewable.Viewer):
             self.verdict.visible = True
 
         return self.runner.run("hand-in", compute, show, fail=fail, note=self._note)
+
+    # -- the section's protocol -----------------------------------------------------------
+    def result_views(self) -> list:
+        return [self.view, self.table4_view]
+
+    def snapshot(self) -> SectionSnapshot:
+        req, _ = self.request()
+        scenario = req.scenario if req.excitation == "paper" and req.scenario != "custom" else None
+        return SectionSnapshot(self.key, self.title, self.settings(), stale=self.is_stale(),
+                               content=(self.result, self.last_data, self.last_resim, scenario, self.all_results))
+
+    @classmethod
+    def report(cls, snapshot: SectionSnapshot, hidden=()) -> ReportPart | None:
+        result, data, resim, scenario, all_results = snapshot.content or (None,) * 5
+        if result is None and all_results is None:
+            return None
+        body, figures = stale_note(snapshot), {}
+        if result is not None:
+            fig = plots.LseFitFigure()
+            fig.update(plots.lse_view(data, resim))
+            figures["lse"] = fig.layout
+            body += lse_table_html(result, scenario, hidden=hidden) + "{{lse}}"
+        if all_results is not None:
+            body += "<h3>Table 4: four scenarios, both disturbance models</h3>" + table4_html(all_results)
+        return ReportPart("Least squares (eqs. 15-18)", body, figures)
 
     def __panel__(self):
         controls = pn.Column(self.form, self.upload_note, self.upload, self.mapping, self.window_form,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import html
 from functools import lru_cache
 from pathlib import Path
 
@@ -12,6 +13,7 @@ from eha_core.params import FIELD_INFO, PARAM_NAMES
 
 from ..form import Field, Form, Group
 from ..layout import side_by_side
+from ..session import ReportPart, Section, SectionSnapshot
 from ..state import FIELD_LABELS, AppState
 from ..tables import derived_html
 from ..tasks import on_click, watch
@@ -75,12 +77,21 @@ def form_groups(hidden=()) -> list[Group]:
             for g in PARAMETER_FORM]
 
 
-class ParametersTab(pn.viewable.Viewer):
-    """Step 1 of the paper: fill in the physical parameters (Fig. 15)."""
+class ParametersTab(Section):
+    """Step 1 of the paper: fill in the physical parameters (Fig. 15).
 
-    def __init__(self, state: AppState, **kwargs):
-        super().__init__(**kwargs)
-        self.state = state
+    Its fields are the session's :class:`~eha_app.state.AppState`: they exist (from the page's
+    address or a settings file) before the tab is made, and in an exercise the hidden ones are
+    neither shown, saved nor loaded.
+    """
+
+    key = "parameters"
+    title = "Parameters"
+    defaults = default_texts()
+
+    def __init__(self, session, **kwargs):
+        super().__init__(session, **kwargs)
+        state = self.state
         self.form = Form(spec=[g.to_spec() for g in form_groups(state.hidden)], values=self._texts(), width=250,
                          url_defaults=default_texts(), css_classes=["eha-param-form"], margin=(5, 10))
         watch(self.form, self._typed, "values")
@@ -91,9 +102,45 @@ class ParametersTab(pn.viewable.Viewer):
         state.param.watch(self._on_state, ["errors", "revision", "kp"])
         self._on_state()
 
+    # -- the section's protocol: its fields are the state's --------------------------------------
+    @classmethod
+    def unbuilt_settings(cls, session) -> dict[str, str]:
+        return _state_texts(session.state)
+
+    @classmethod
+    def load_unbuilt(cls, session, texts) -> None:
+        for name, text in texts.items():
+            session.state.set_text(name, text)
+
+    def settings(self) -> dict[str, str]:
+        return _state_texts(self.state)
+
+    def load(self, texts) -> None:
+        self.load_unbuilt(self.session, texts)
+        self.form.values = self._texts()
+
+    def snapshot(self) -> SectionSnapshot:
+        s = self.state
+        return SectionSnapshot(self.key, self.title, self.settings(), stale=not s.valid,
+                               content=(s.params, s.kp, dict(s.errors)))
+
+    @classmethod
+    def report(cls, snapshot: SectionSnapshot, hidden=()) -> ReportPart:
+        from ..tables import table_html
+
+        rows = [[html.escape(FIELD_LABELS.get(k, k)), html.escape(v)] for k, v in snapshot.settings.items()]
+        body = table_html(["", "value (as typed, display units)"], rows)
+        if snapshot.content is not None:
+            params, kp, errors = snapshot.content
+            if errors:
+                body += "<p class='eha-warn'>Not valid: " + html.escape("; ".join(errors.values())) + "</p>"
+            else:
+                body += _derived(params, kp, False, tuple(hidden))
+        return ReportPart("Parameters (tab 1)", body)
+
+    # -- the page ---------------------------------------------------------------------------------
     def _texts(self) -> dict:
-        return {**{k: v for k, v in self.state.texts.items() if k not in self.state.hidden},
-                "kp": self.state.kp_text}
+        return _state_texts(self.state)
 
     def _typed(self, event) -> None:
         old = event.old or {}
@@ -123,3 +170,8 @@ class ParametersTab(pn.viewable.Viewer):
         picture = pn.Column(self.status, schematic, width=540)
         derived = pn.Column(self.derived, sizing_mode="stretch_width", min_width=420)
         return side_by_side(inputs, picture, derived)
+
+
+def _state_texts(state) -> dict[str, str]:
+    """Tab 1's fields as typed (an exercise's hidden ones left out)."""
+    return {**{k: v for k, v in state.texts.items() if k not in state.hidden}, "kp": state.kp_text}

@@ -9,7 +9,6 @@ is chosen), and estimates H(s) on the first two thirds, validated on the rest.
 from __future__ import annotations
 
 import html
-from collections.abc import Callable
 from functools import partial
 
 import numpy as np
@@ -23,8 +22,9 @@ from ..form import Field, Form, Group
 from ..formatting import tf_html
 from ..freshness import ResultView
 from ..glossary import term
+from ..session import ReportPart, Section, SectionSnapshot, stale_note
 from ..tables import estimate_alert, estimation_sentences
-from ..tasks import SessionRunner, apply_locked, on_click, watch
+from ..tasks import apply_locked, on_click, watch
 from .uploads import ColumnMapping, FileUpload, check_size, download, upload_name
 
 __all__ = ["RecordPanel", "RECORD_COLUMNS"]
@@ -33,30 +33,37 @@ __all__ = ["RecordPanel", "RECORD_COLUMNS"]
 RECORD_COLUMNS = {"t": ("t", ()), "u": ("input u (or r)", ("r",)), "y": ("output y (or x)", ("x",))}
 DETRENDS = {"nothing": "none", "the mean": "mean", "a linear trend": "linear"}
 _WINDOW_FIELDS = ("rec_from", "rec_to")
+#: The section's inputs besides the file: the part of the record and what is removed from it.
+RECORD_DEFAULTS = {"rec_from": "", "rec_to": "", "rec_detrend": "none"}
 
 
-class RecordPanel:
-    """The own-record part of the frequency-domain panel.
+class RecordPanel(Section):
+    """The own-record part of the frequency-domain panel (a section within it).
 
-    ``orders()`` gives the frequency form's model settings (poles, zeros,
-    initial condition, input offset) or None while they are not valid;
-    ``note`` writes the panel's queue note; ``fail`` its alert.
+    The frequency panel gives the model settings (poles, zeros, initial
+    condition, input offset, delay: its ``config()``, None while they are not
+    valid), its queue note and its alert.
     """
 
-    def __init__(self, runner: SessionRunner, orders: Callable[[], object | None], *,
-                 note: Callable[[str], None], fail: Callable[[str], None]):
-        self.runner = runner
+    key = "record"
+    title = "Your own record"
+    defaults = RECORD_DEFAULTS
+
+    def __init__(self, session, **kwargs):
+        super().__init__(session, **kwargs)
+        runner = self.runner
+        parent = session.section(session.registry.get(self.key).within)
         # previews of the preprocessing are jobs of their own: they must not replace an estimate
         self.preview_runner = runner.sub("record preview")
-        self.orders = orders
-        self._note, self._fail = note, fail
+        self.orders = lambda: parent.config()[0]
+        self._note, self._fail = parent.queue_note_text, parent.fail
+        texts = self.initial_texts()
         self.columns: tuple[np.ndarray, np.ndarray, np.ndarray, str] | None = None    # t, u, y, file name
         self._uploads = 0
         self._upload: tuple[bytes, str] | None = None
         self._mapping: dict | None = None
         self.prepared = None
         self.result = None
-        self.board = None                   # the model board each estimate is put on (set by the tab)
         self.note = pn.pane.HTML(
             "<span class='eha-note'>Or estimate H(s) from your own record: a CSV or .mat file with t, u, y "
             "(or t, r, x), in SI or with units in the header. Its first two thirds estimate, the rest "
@@ -68,10 +75,11 @@ class RecordPanel:
         self.window_form = Form(spec=[Group("Part of your record to use", (
             Field("rec_from", "from t", "text", unit="s", placeholder="its start", short="from t"),
             Field("rec_to", "to t", "text", unit="s", placeholder="its end", short="to t"),
-        )).to_spec()], values={"rec_from": "", "rec_to": ""}, width=270, visible=False,
+        )).to_spec()], values={k: texts[k] for k in _WINDOW_FIELDS}, width=270, visible=False,
             css_classes=["eha-freq-record-window"], margin=(5, 10))
-        self.detrend = pn.widgets.Select(label="remove from u and y", value="none", width=260, options=DETRENDS,
-                                         visible=False, css_classes=["eha-freq-record-detrend"])
+        detrend = texts["rec_detrend"] if texts["rec_detrend"] in DETRENDS.values() else "none"
+        self.detrend = pn.widgets.Select(label="remove from u and y", value=detrend, width=260,
+                                         options=DETRENDS, visible=False, css_classes=["eha-freq-record-detrend"])
         self.button = pn.widgets.Button(label="Estimate from your record", disabled=True, width=260,
                                         css_classes=["eha-freq-record-run"])
         on_click(self.button, lambda _e: self.run())
@@ -96,7 +104,7 @@ class RecordPanel:
     def window(self) -> tuple[str, str]:
         return tuple(str(self.window_form.values.get(k, "")).strip() for k in _WINDOW_FIELDS)
 
-    def key(self):
+    def run_key(self):
         """What an estimate from the record is computed from (None: no record, or invalid settings)."""
         cfg = self.orders()
         if self.columns is None or cfg is None or self.window_form.errors:
@@ -105,8 +113,8 @@ class RecordPanel:
                 cfg.n_zeros, cfg.initial_condition, cfg.input_offset, cfg.input_delay)
 
     def inputs_changed(self) -> None:
-        self.view.inputs_changed(self.key())
-        self.button.disabled = self.key() is None
+        self.view.inputs_changed(self.run_key())
+        self.button.disabled = self.run_key() is None
 
     # -- reading the file ----------------------------------------------------------------------
     def _uploaded(self, _event) -> None:
@@ -182,7 +190,7 @@ class RecordPanel:
 
         # the estimate is drawn over the record only if it was made from exactly these inputs (the
         # key holds the file, the range and the trend), decided here, not in the worker
-        rec = self.result if self.result is not None and self.view.computed_from == self.key() else None
+        rec = self.result if self.result is not None and self.view.computed_from == self.run_key() else None
 
         def compute(_token):
             prepared = prepare_record(t, u, y, detrend=detrend, t_from=t_from, t_to=t_to)
@@ -194,12 +202,13 @@ class RecordPanel:
             self._draw_data(view)
             self.inputs_changed()
 
-        def fail(message):
-            field = "rec_to" if message.startswith("to t") else "rec_from"
-            self.window_form.errors = {field: message}
+        def failed(error):
+            # the core names the field it refuses ("from t" or "to t"): the message goes beside it
+            field = {"to t": "rec_to", "from t": "rec_from"}.get(getattr(error, "field", ""), "rec_from")
+            self.window_form.errors = {field: " ".join(str(error).split())}
             self.inputs_changed()
 
-        self.preview_runner.run("preparing your record", compute, show, fail=fail)
+        self.preview_runner.run("preparing your record", compute, show, fail=lambda _m: None, failed=failed)
 
     def _draw_data(self, view) -> None:
         if self.data_figure is None:
@@ -215,7 +224,7 @@ class RecordPanel:
         """H(s) from the prepared record (a worker), shown with its validation, data plot and Bode diagram."""
         from eha_core.identify.record import identify_record
 
-        cfg, key = self.orders(), self.key()
+        cfg, key = self.orders(), self.run_key()
         if key is None:
             return None
         t, u, y, name = self.columns
@@ -246,9 +255,9 @@ class RecordPanel:
             self.view.shown(key)
             self.inputs_changed()
             e = rec.estimate
-            if self.board is not None and e.success and np.all(np.isfinite(e.den)):
-                apply_locked(partial(self.board.add, BoardModel(
-                    name=self.board.next_name("R"), kind="record", estimate=e, num=e.num, den=e.den,
+            if e.success and np.all(np.isfinite(e.den)):
+                apply_locked(partial(self.session.post, "board", BoardModel(
+                    name="R", kind="record", estimate=e, num=e.num, den=e.den,
                     input_delay=getattr(e, "input_delay", 0.0), ts=rec.ts,
                     description=f"{name}: {e.n_poles} poles, {e.n_zeros} zeros, t ∈ [{rec.prepared.t_from:g}, "
                                 f"{rec.prepared.t_to:g}] s, detrend {rec.detrend}; fit {e.fit_percent:.1f} %")))
@@ -290,6 +299,39 @@ class RecordPanel:
         return tf_estimate_bytes(rec.estimate, kind, settings=settings, fits={
             "fit_percent": rec.estimate.fit_percent,
             "validation_fit_percent": None if rec.validation is None else rec.validation.fit_percent})
+
+    # -- the section's protocol ----------------------------------------------------------------------
+    def settings(self) -> dict[str, str]:
+        return {**{k: str(self.window_form.values.get(k, "")) for k in _WINDOW_FIELDS},
+                "rec_detrend": str(self.detrend.value)}
+
+    def load(self, texts) -> None:
+        window = {k: v for k, v in texts.items() if k in _WINDOW_FIELDS}
+        if window:
+            self.window_form.set_values(**window)
+        if texts.get("rec_detrend") in DETRENDS.values():
+            self.detrend.value = texts["rec_detrend"]
+
+    def result_views(self) -> list:
+        return [self.view]
+
+    def snapshot(self) -> SectionSnapshot:
+        # the file's columns are never changed in place: a new upload makes new arrays
+        return SectionSnapshot(self.key, self.title, self.settings(), stale=self.is_stale(),
+                               content=(self.result, self.columns))
+
+    @classmethod
+    def report(cls, snapshot: SectionSnapshot, hidden=()) -> ReportPart | None:
+        rec, columns = snapshot.content or (None, None)
+        if rec is None or columns is None:
+            return None
+        t, u, y, name = columns
+        bode = plots.BodeFigure()
+        bode.update(plots.record_view(rec))
+        data = plots.RecordDataFigure()
+        data.update(plots.record_data_view(t, u, y, rec.prepared, rec))
+        return ReportPart("Transfer function from your own record", stale_note(snapshot) + cls._summary(rec, name)
+                          + "{{record_data}}{{record_bode}}", {"record_data": data.layout, "record_bode": bode.layout})
 
     # -- layout ------------------------------------------------------------------------------------
     def controls(self) -> list:

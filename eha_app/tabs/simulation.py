@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import io
 import math
 from dataclasses import dataclass, replace
@@ -20,8 +21,8 @@ from ..freshness import ResultView
 from ..layout import side_by_side
 from ..limits import check_simulation
 from ..plots import TimeSeriesGrid
-from ..state import AppState
-from ..tasks import SessionRunner, apply_locked, on_click, watch
+from ..session import ReportPart, Section, SectionSnapshot, stale_note
+from ..tasks import apply_locked, on_click, watch
 
 __all__ = ["SimulationTab", "SimulationRequest", "SIMULATION_FORM", "build_inputs", "parse_t_end", "compute_runs"]
 
@@ -230,14 +231,16 @@ def results_csv(results) -> str:
     return runs_to_pandas(results).to_csv(index=False, float_format="%.10g")
 
 
-class SimulationTab(pn.viewable.Viewer):
+class SimulationTab(Section):
     """Step 2 of the paper: define u(t) and d(t), run the models, compare (Fig. 16)."""
 
-    def __init__(self, state: AppState, *, runner: SessionRunner | None = None, query: dict | None = None,
-                 **kwargs):
-        super().__init__(**kwargs)
-        self.state = state
-        self.runner = runner if runner is not None else SessionRunner(state)
+    key = "simulation"
+    title = "Simulation"
+    defaults = DEFAULT_TEXTS
+
+    def __init__(self, session, **kwargs):
+        super().__init__(session, **kwargs)
+        state = self.state
         self.preset = "all"
         self.results: list = []
         self.last_model = "nonlinear"
@@ -259,9 +262,8 @@ class SimulationTab(pn.viewable.Viewer):
                                    css_classes=["eha-sim-alert"])
         self.queue_note = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-queue-note"],
                                        styles={"color": "#555", "font-size": "12px"})
-        texts = dict(DEFAULT_TEXTS)
-        restored = {k: v for k, v in (query or {}).items() if k in _FIELDS}
-        texts.update(restored)
+        texts = self.initial_texts()
+        restored = {k: v for k, v in texts.items() if v != DEFAULT_TEXTS.get(k)}
         self.form = Form(spec=[g.to_spec() for g in SIMULATION_FORM], values=texts, url_defaults=DEFAULT_TEXTS,
                          width=270, css_classes=["eha-sim-form"], margin=(5, 10))
         watch(self.form, self._typed, "values")
@@ -326,7 +328,7 @@ class SimulationTab(pn.viewable.Viewer):
         """Type into the form (tests, presets): values as text or numbers."""
         self.form.set_values(**texts)
 
-    def key(self, model: str, preset=None):
+    def run_key(self, model: str, preset=None):
         """What a run of ``model`` with the current inputs is computed from (None if they are not valid)."""
         preset = self.preset if preset is None else preset
         req, errors = parse_request(self.form.values, preset)
@@ -348,7 +350,7 @@ class SimulationTab(pn.viewable.Viewer):
 
     def _inputs_changed(self, *_events) -> None:
         """Re-run what is on screen with the new inputs when that is quick, else mark it out of date."""
-        key = self.key(self.last_model)
+        key = self.run_key(self.last_model)
         if key is not None and key == self._pending_key:
             return                          # a run with these inputs is on its way
         if key is None or key == self.view.computed_from:
@@ -424,7 +426,7 @@ class SimulationTab(pn.viewable.Viewer):
         req, errors = self.request()
         if not self.state.valid or errors:
             return None
-        key = self.key(model)
+        key = self.run_key(model)
         self.last_model = model
         self.alert.visible = False
         labels, _, _, t_end = build_inputs(req)
@@ -440,7 +442,7 @@ class SimulationTab(pn.viewable.Viewer):
             self._pending_key = None
             self.alert.object = f"The simulation failed: {message}"
             self.alert.visible = True
-            self.view.inputs_changed(self.key(self.last_model), why="the last run failed")
+            self.view.inputs_changed(self.run_key(self.last_model), why="the last run failed")
 
         def show(results, job):
             self._pending_key = None
@@ -466,7 +468,7 @@ class SimulationTab(pn.viewable.Viewer):
 
     def _inputs_changed_since(self, key) -> None:
         # inputs typed while the run computed: mark (or re-run) again
-        if self.key(self.last_model) != key:
+        if self.run_key(self.last_model) != key:
             self._inputs_changed()
 
     def _note(self, text: str) -> None:
@@ -499,6 +501,23 @@ class SimulationTab(pn.viewable.Viewer):
 
     def _csv(self):
         return io.BytesIO(results_csv(self.results).encode())
+
+    # -- the section's protocol -----------------------------------------------------------
+    def result_views(self) -> list:
+        return [self.view]
+
+    def snapshot(self) -> SectionSnapshot:
+        return SectionSnapshot(self.key, self.title, self.settings(), stale=self.is_stale(),
+                               content=tuple(self.results))
+
+    @classmethod
+    def report(cls, snapshot: SectionSnapshot, hidden=()) -> ReportPart | None:
+        results = snapshot.content
+        if not results:
+            return None
+        runs = ", ".join(html.escape(f"{r.label} ({r.model})") for r in results)
+        return ReportPart("Simulation (tab 2)", stale_note(snapshot) + f"<p>Runs: {runs}.</p>{{{{sim}}}}",
+                          {"sim": TimeSeriesGrid(list(results)).layout})
 
     # -- layout --------------------------------------------------------------------------
     def __panel__(self):

@@ -25,8 +25,8 @@ from eha_core.experiments import FrequencyExperiment
 from .. import plots
 from ..form import Field, Form, Group, parse_fields
 from ..layout import side_by_side
-from ..state import AppState
-from ..tasks import SessionRunner, apply_locked, on_click, served_document, watch
+from ..session import ReportPart, Section, SectionSnapshot
+from ..tasks import apply_locked, on_click, served_document, watch
 
 __all__ = ["StudyPanel", "STUDY_FORM", "STUDY_DEFAULTS", "MAX_APP_SEEDS"]
 
@@ -108,13 +108,17 @@ class StudyFigure:
                               f"{cov * 100:.0f} %" if shown.size else name)
 
 
-class StudyPanel(pn.viewable.Viewer):
+class StudyPanel(Section):
     """A study of one session (see the module docstring)."""
 
-    def __init__(self, state: AppState, runner: SessionRunner, query: dict | None = None, **kwargs):
-        super().__init__(**kwargs)
-        self.state = state
-        self.runner = runner.sub("study")
+    key = "study"
+    title = "Study over seeds"
+    defaults = STUDY_DEFAULTS
+
+    def __init__(self, session, **kwargs):
+        super().__init__(session, **kwargs)
+        state = self.state
+        self.study_runner = self.runner.sub("study")
         self.result = None
         self._token = None
         self._busy = False                  # a study is waiting or running: one at a time
@@ -122,8 +126,7 @@ class StudyPanel(pn.viewable.Viewer):
         self._stopped = False
         self._study = None                  # (config, parameters) of the study running
         self.figure: StudyFigure | None = None
-        texts = dict(STUDY_DEFAULTS)
-        texts.update({k: v for k, v in (query or {}).items() if k in _FIELDS})
+        texts = self.initial_texts()
         self.form = Form(spec=[g.to_spec() for g in STUDY_FORM], values=texts, url_defaults=STUDY_DEFAULTS,
                          width=270, css_classes=["eha-study-form"], margin=(5, 10))
         watch(self.form, lambda _e: self._update_enabled(), "values")
@@ -223,26 +226,28 @@ class StudyPanel(pn.viewable.Viewer):
             self.status.object = f"<span class='eha-warn'>The study failed: {html.escape(message)}</span>"
             self._running(False)
 
-        return self.runner.run("study", compute, show, fail=fail, note=self._note)
+        return self.study_runner.run("study", compute, show, fail=fail, note=self._note, cancelled=self._cancelled)
 
     def cancel(self) -> None:
         """Stop the study: a running one returns the seeds done, a waiting one never starts."""
         self._stopped = True
         if self._token is not None:
             self._token.cancel("the study was cancelled")
-        self.runner.cancel("the study was cancelled")
+        self.study_runner.cancel("the study was cancelled")
 
     def _note(self, text: str) -> None:
         if text:
             self.status.object = f"<span class='eha-note'>{html.escape(text)}</span>"
-            if text.startswith("Stopped"):      # a part cancelled while it waited: keep what was done
-                if self._parts:
-                    from eha_core.study import combine_studies
 
-                    cfg, params = self._study
-                    self.result = combine_studies(cfg, self._parts, params, cancelled=True)
-                    self._draw(self.result, None)
-                self._running(False)
+    def _cancelled(self, job) -> None:
+        """A part cancelled before it ran: keep what was done."""
+        if self._parts:
+            from eha_core.study import combine_studies
+
+            cfg, params = self._study
+            self.result = combine_studies(cfg, self._parts, params, cancelled=True)
+            self._draw(self.result, None)
+        self._running(False)
 
     def _running(self, on: bool) -> None:
         self._busy = on
@@ -261,37 +266,63 @@ class StudyPanel(pn.viewable.Viewer):
             self.figure = StudyFigure(names)
             self.plot.objects = [self.figure.layout]
         self.figure.update(result)
-        from eha_core.study import coverage_band
 
-        lo, hi = result.coverage_band()
-        rows = []
-        for n in names:
-            nom = result.nominal.get(n, np.nan)
-            cov = result.coverage.get(n, np.nan)
-            # the band of the seeds this parameter's coverage was counted over
-            n_used = result.values(n).size
-            p_lo, p_hi = coverage_band(max(n_used, 1))
-            honest = p_lo <= cov <= p_hi
-            rows.append(f"<tr><td>{html.escape(n)}</td><td>{nom:.6g}</td><td>{result.mean[n]:.6g}</td>"
-                        f"<td>{result.std[n]:.3g}</td><td>{result.mean_std_error[n]:.3g}</td>"
-                        f"<td>{cov * 100:.1f} % {'✓' if honest else '✗'}</td></tr>")
+        self.summary.object = study_summary_html(result)
         done = (f"{result.n_completed} of {result.n_requested} seeds" + (" (cancelled)" if result.cancelled else "")
                 + f" in {result.elapsed_s:.1f} s")
         self.status.object = f"<span class='eha-ok'>{done}.</span>"
-        self.summary.object = (
-            f"<p>Nominal values: {html.escape(result.reference)}.</p>"
-            "<table class='eha-table eha-study-table'><tr><th>parameter</th><th>nominal</th><th>mean</th>"
-            "<th>spread (std)</th><th>mean reported std error</th><th>95 % interval covered the truth</th></tr>"
-            + "".join(rows) + "</table>"
-            f"<p class='eha-note'>{done}. An honest 95 % interval covers the truth in {lo * 100:.1f}-"
-            f"{hi * 100:.1f} % of {result.n_successful} seeds (binomial, 99 %): ✓ inside that range, ✗ outside. "
-            "Where the spread is larger than the reported standard error, a single run's interval is too "
-            "narrow.</p>")
-        if result.message and result.message != "ok":
-            self.summary.object += f"<p class='eha-note'>{html.escape(result.message)}</p>"
+
+    # -- the section's protocol ---------------------------------------------------------------
+    def snapshot(self) -> SectionSnapshot:
+        return SectionSnapshot(self.key, self.title, self.settings(), content=self.result)
+
+    @classmethod
+    def report(cls, snapshot: SectionSnapshot, hidden=()) -> ReportPart | None:
+        result = snapshot.content
+        if result is None:
+            return None
+        from bokeh.layouts import gridplot
+
+        figure = StudyFigure(tuple(result.parameters))
+        figure.update(result)
+        return ReportPart("Study over seeds", study_summary_html(result) + "{{study}}",
+                          {"study": gridplot(figure.figs, ncols=3)})
 
     def __panel__(self):
         controls = pn.Column(self.exercise_note, self.form, self.button, self.cancel_button, self.progress,
                              self.status, width=290)
         results = pn.Column(self.summary, self.plot, sizing_mode="stretch_width", min_width=440)
         return side_by_side(controls, results)
+
+
+def study_summary_html(result) -> str:
+    """The study's table: per parameter the nominal value, mean, spread, mean reported standard error
+    and how often the 95 % interval covered the truth, against the binomial range of an honest one."""
+    from eha_core.study import coverage_band
+
+    names = tuple(result.parameters)
+    lo, hi = result.coverage_band()
+    rows = []
+    for n in names:
+        nom = result.nominal.get(n, np.nan)
+        cov = result.coverage.get(n, np.nan)
+        # the band of the seeds this parameter's coverage was counted over
+        n_used = result.values(n).size
+        p_lo, p_hi = coverage_band(max(n_used, 1))
+        honest = p_lo <= cov <= p_hi
+        rows.append(f"<tr><td>{html.escape(n)}</td><td>{nom:.6g}</td><td>{result.mean[n]:.6g}</td>"
+                    f"<td>{result.std[n]:.3g}</td><td>{result.mean_std_error[n]:.3g}</td>"
+                    f"<td>{cov * 100:.1f} % {'✓' if honest else '✗'}</td></tr>")
+    done = (f"{result.n_completed} of {result.n_requested} seeds" + (" (cancelled)" if result.cancelled else "")
+            + f" in {result.elapsed_s:.1f} s")
+    out = (f"<p>Nominal values: {html.escape(result.reference)}.</p>"
+           "<table class='eha-table eha-study-table'><tr><th>parameter</th><th>nominal</th><th>mean</th>"
+           "<th>spread (std)</th><th>mean reported std error</th><th>95 % interval covered the truth</th></tr>"
+           + "".join(rows) + "</table>"
+           f"<p class='eha-note'>{done}. An honest 95 % interval covers the truth in {lo * 100:.1f}-"
+           f"{hi * 100:.1f} % of {result.n_successful} seeds (binomial, 99 %): ✓ inside that range, ✗ outside. "
+           "Where the spread is larger than the reported standard error, a single run's interval is too "
+           "narrow.</p>")
+    if result.message and result.message != "ok":
+        out += f"<p class='eha-note'>{html.escape(result.message)}</p>"
+    return out

@@ -3,14 +3,14 @@
 import numpy as np
 import pytest
 
+from eha_app.session import Session
 from eha_app.state import AppState
-from eha_app.tabs.identification import IdentificationTab
 
 
 @pytest.fixture
 def tab():
-    t = IdentificationTab(AppState())
-    t.board_panel()
+    t = Session(AppState())
+    t.build("board")
     return t
 
 
@@ -19,7 +19,7 @@ def _names(board):
 
 
 def test_the_references_are_there_and_compared_on_the_validation_record(tab):
-    board = tab.board
+    board = tab.section("board")
     assert _names(board) == ["H(s) eq. 24", "Ĥ paper"]
     assert [e.ticked for e in board.entries] == [True, False]
     assert board.record is not None and board.record.t.size == 1000
@@ -35,10 +35,10 @@ def test_the_references_are_there_and_compared_on_the_validation_record(tab):
 
 
 def test_estimates_land_on_the_board_and_tick_rename_delete(tab):
-    board = tab.board
-    tab.lse.run()
-    freq = tab.frequency_panel()
-    source = IdentificationTab(AppState()).frequency_panel()
+    board = tab.section("board")
+    tab.build("least_squares").run()
+    freq = tab.build("frequency")
+    source = Session(AppState()).build("frequency")
     source.run()
     record = freq.record
     record.upload.filename = "loop.csv"
@@ -70,11 +70,11 @@ def test_a_weakly_determined_pole_is_shown_not_hidden(tab):
 
     fi = run_frequency_identification(config=FrequencyExperiment(model="linear"))
     e = fi.estimate
-    entry = tab.board.add(BoardModel(name="H1", kind="tf", description="linear plant", num=e.num, den=e.den,
+    entry = tab.section("board").add(BoardModel(name="H1", kind="tf", description="linear plant", num=e.num, den=e.den,
                                      estimate=e, ts=0.01))
-    flagged = [r for r in tab.board.views[entry.key].pz.poles if r.weakly_determined]
+    flagged = [r for r in tab.section("board").views[entry.key].pz.poles if r.weakly_determined]
     assert len(flagged) == 1 and -500 < flagged[0].location.real < -300     # the pole near -385 rad/s
-    pz = tab.board.figures["pz"]
+    pz = tab.section("board").figures["pz"]
     assert len(pz.flagged.data["x"]) == 1 and "weakly determined" in pz.note.text
     assert len(pz.nyquist.data["x"]) > 0 and "π/Ts = 314 rad/s" in pz.note.text
     # three real poles: their regions are intervals of the real axis (drawn as bars), not ellipses
@@ -83,7 +83,7 @@ def test_a_weakly_determined_pole_is_shown_not_hidden(tab):
 
 
 def test_step_table_figures_are_the_cores(tab):
-    board = tab.board
+    board = tab.section("board")
     view = board.views[board.entries[0].key]
     table = board.tables["step"].object
     assert f"{view.step.info.rise_time_s:.3g}" in table and f"{board.plant.info.rise_time_s:.3g}" in table
@@ -96,27 +96,27 @@ def test_step_table_figures_are_the_cores(tab):
 def test_an_exercise_board_has_no_eq24():
     state = AppState()
     state.secret = {"M": 4000.0, "B": 1000.0}
-    t = IdentificationTab(state)
-    t.board_panel()
-    assert _names(t.board) == ["Ĥ paper"]
+    t = Session(state)
+    t.build("board")
+    assert _names(t.section("board")) == ["Ĥ paper"]
 
 
 def test_the_frequency_experiment_lands_on_the_board(tab):
-    freq = tab.frequency_panel()
+    freq = tab.build("frequency")
     freq.run()
-    h1 = next(e for e in tab.board.entries if e.name == "H1")
+    h1 = next(e for e in tab.section("board").entries if e.name == "H1")
     assert h1.kind == "tf" and "seed 0" in h1.model.description
     np.testing.assert_array_equal(h1.model.den, freq.result.estimate.den)
-    view = tab.board.views[h1.key]
+    view = tab.section("board").views[h1.key]
     assert view.band is not None and len(view.pz.poles) == 3
-    assert tab.board.fits[h1.key].fit_percent > 90         # a fresh record: the estimate carries over
+    assert tab.section("board").fits[h1.key].fit_percent > 90         # a fresh record: the estimate carries over
 
 
 def test_estimates_made_before_the_board_is_opened_are_on_it():
-    t = IdentificationTab(AppState())
-    t.lse.run()
-    t.lse.run()
-    assert t.board is None and len(t.inbox.pending) == 2        # no board built for a session that never looks
-    board = t.board_panel()
-    assert _names(board) == ["H(s) eq. 24", "Ĥ paper", "LS1", "LS2"] and not t.inbox.pending
+    t = Session(AppState())
+    t.build("least_squares").run()
+    t.build("least_squares").run()
+    assert t.section("board") is None and len(t.mail("board")) == 2     # no board for a session that never looks
+    board = t.build("board")
+    assert _names(board) == ["H(s) eq. 24", "Ĥ paper", "LS1", "LS2"] and not t.mail("board")
     assert all(e.key in board.views for e in board.entries)

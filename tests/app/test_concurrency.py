@@ -19,8 +19,9 @@ from bokeh.core.property.bases import Property
 
 from eha_app import plots
 from eha_app.jobs import JobQueue
+from eha_app.session import Session
 from eha_app.state import AppState
-from eha_app.tabs.identification import IdentificationTab, parse_freq
+from eha_app.tabs.frequency import parse_freq
 from eha_core.experiments import run_frequency_identification
 
 
@@ -33,8 +34,8 @@ def test_many_frequency_experiments_at_once_build_no_bokeh_model_and_all_succeed
         original(self, *args, **kwargs)
 
     monkeypatch.setattr(HasProps, "__init__", spy)
-    tab = IdentificationTab(AppState())
-    panel = tab.frequency_panel()
+    tab = Session(AppState())
+    panel = tab.build("frequency")
     cfg, errors = parse_freq({**panel.form.values, "freq_seed": "0"})
     assert not errors
     params = tab.state.params
@@ -63,13 +64,13 @@ def test_many_frequency_experiments_at_once_build_no_bokeh_model_and_all_succeed
 def test_one_student_clicking_four_times_gets_one_result_and_the_others_theirs():
     queue = JobQueue(workers=2)
     try:
-        tabs = [IdentificationTab(AppState()) for _ in range(3)]
+        tabs = [Session(AppState()) for _ in range(3)]
         results = {}
         done = threading.Event()
         jobs = []
         for i, tab in enumerate(tabs):
             params = tab.state.params
-            cfg, _ = parse_freq(tab.frequency_panel().form.values)
+            cfg, _ = parse_freq(tab.build("frequency").form.values)
             clicks = 4 if i == 0 else 1
             for _ in range(clicks):
                 def on_done(job, i=i):

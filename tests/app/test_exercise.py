@@ -6,9 +6,8 @@ import pytest
 
 from eha_app.app import create_app
 from eha_app.handins import HandIns
+from eha_app.session import Session
 from eha_app.state import AppState
-from eha_app.tabs.identification import IdentificationTab
-from eha_app.tabs.parameters import ParametersTab
 from eha_core.exercise import Exercise, normalize_id
 
 HIDE = ("M", "B", "Af", "beta_e")
@@ -68,7 +67,7 @@ def test_a_student_identifies_their_actuator_and_hands_in(exercise):
     ex, path = exercise
     state = AppState()
     page = create_app(state)
-    gate = page.eha_gate
+    gate = page.gate
     gate.student_id.value = "  "
     gate.start()
     assert "student id = (empty) is not allowed" in gate.message.object and not state.student
@@ -76,15 +75,15 @@ def test_a_student_identifies_their_actuator_and_hands_in(exercise):
     gate.start()
     truth = ex.student_params("ada")
     assert state.student == "ada" and state.params == truth
-    tab1 = ParametersTab(state)
+    tab1 = Session(state).build("parameters")
     shown = tab1.derived.object + str(tab1.form.values) + str(tab1.form.spec)
     for n in HIDE:
         assert n not in tab1.form.values and f"{getattr(truth, n):.4g}" not in shown
     assert "Hidden in this exercise" in tab1.derived.object and "430.1" not in tab1.derived.object
     state.set_text("M", "4000")                                     # not the student's to set
     assert state.params.M == truth.M
-    tab3 = IdentificationTab(state)
-    lse = tab3.lse
+    tab3 = Session(state)
+    lse = tab3.build("least_squares")
     assert not lse.all_button.visible and lse.handin_button.visible and lse.handin_button.disabled
     lse.run()
     assert "hidden" in lse.table.object and "nominal" not in lse.table.object
@@ -95,7 +94,7 @@ def test_a_student_identifies_their_actuator_and_hands_in(exercise):
     rows = HandIns(path).latest()
     assert [(r.student, r.score) for r in rows] == [("ada", 1.0)]
     assert rows[0].verdicts == {n: True for n in HIDE}
-    freq = tab3.frequency_panel()
+    freq = tab3.build("frequency")
     freq.run()
     assert "linearised at v = 0" not in freq.summary.object and "Hidden in this exercise" in freq.backout.object
 
@@ -103,4 +102,4 @@ def test_a_student_identifies_their_actuator_and_hands_in(exercise):
 def test_without_an_exercise_the_app_is_as_before(monkeypatch):
     monkeypatch.delenv("EHA_EXERCISE", raising=False)
     page = create_app(AppState())
-    assert not hasattr(page, "eha_gate") and page.eha_state.params.M == 4000.0
+    assert not hasattr(page, "eha_gate") and page.session.state.params.M == 4000.0

@@ -1,7 +1,8 @@
 """After any input change, every result view shows results of the current inputs or is marked out of date."""
 
+from eha_app.session import Session
 from eha_app.state import AppState
-from eha_app.tabs.simulation import AUTO_RUN_MAX_SECONDS, SimulationTab
+from eha_app.tabs.simulation import AUTO_RUN_MAX_SECONDS
 
 
 def type_into(form, **texts):
@@ -24,28 +25,28 @@ def assert_true_to_inputs(view, key):
 
 def test_simulation_reruns_as_the_student_types():
     s = AppState()
-    tab = SimulationTab(s)
-    assert tab.view.status == "current" and tab.view.computed_from == tab.key("nonlinear", "all")
+    tab = Session(s).build("simulation")
+    assert tab.view.status == "current" and tab.view.computed_from == tab.run_key("nonlinear", "all")
     runs = tab.run_count
     type_into(tab.form, u_amplitude="3")         # leaves the preset: a custom sine, re-run at once
     assert tab.run_count == runs + 1 and tab.view.status == "current"
-    assert_true_to_inputs(tab.view, tab.key(tab.last_model))
+    assert_true_to_inputs(tab.view, tab.run_key(tab.last_model))
     assert "3 sin(4πt)" in tab.info.text
     s.set_text("M", "6000")                      # tab 1: the plots follow
     assert tab.run_count == runs + 2 and tab.results[0].params.M == 6000.0
-    assert_true_to_inputs(tab.view, tab.key(tab.last_model))
+    assert_true_to_inputs(tab.view, tab.run_key(tab.last_model))
 
 
 def test_a_long_run_is_marked_out_of_date_not_rerun():
     s = AppState()
-    tab = SimulationTab(s)
+    tab = Session(s).build("simulation")
     tab.run("both")
     runs = tab.run_count
     t_long = AUTO_RUN_MAX_SECONDS / 2 + 1        # two runs (both models) beyond the automatic limit
     type_into(tab.form, t_end=f"{t_long:g}")
     assert tab.run_count == runs and tab.view.status == "stale"
     assert tab.view.banner.visible and "Out of date" in tab.view.banner.object
-    assert_true_to_inputs(tab.view, tab.key("both"))
+    assert_true_to_inputs(tab.view, tab.run_key("both"))
     tab.run("both")                              # the Run button
     assert tab.view.status == "current" and not tab.view.banner.visible
     assert tab.results[0].t[-1] == t_long
@@ -53,7 +54,7 @@ def test_a_long_run_is_marked_out_of_date_not_rerun():
 
 def test_invalid_parameters_mark_the_plots():
     s = AppState()
-    tab = SimulationTab(s)
+    tab = Session(s).build("simulation")
     s.set_text("M", "-1")
     assert tab.view.status == "stale" and "not valid" in tab.view.banner.object
     s.set_text("M", "4000")                      # back to what is drawn
@@ -62,7 +63,7 @@ def test_invalid_parameters_mark_the_plots():
 
 def test_linearised_model_beyond_its_range_is_flagged_in_the_status_line():
     s = AppState()
-    tab = SimulationTab(s)
+    tab = Session(s).build("simulation")
     type_into(tab.form, u_kind="step", u_amplitude="6", u_t0="0")
     tab.run("linear")
     assert "Beyond the physical range" in tab.info.text and "below the tank pressure" in tab.info.text
@@ -74,18 +75,18 @@ def test_linearised_model_beyond_its_range_is_flagged_in_the_status_line():
 
 
 def all_views(tab3):
-    panel = tab3.frequency_panel()
-    return [tab3.lse.view, tab3.lse.table4_view, *panel.views.values()]
+    panel = tab3.build("frequency")
+    return [tab3.build("least_squares").view, tab3.build("least_squares").table4_view, *panel.views.values()]
 
 
 def test_identification_views_are_marked_when_parameters_change():
-    from eha_app.tabs.identification import IdentificationTab
+    from eha_app.session import Session
 
     s = AppState()
-    tab = IdentificationTab(s)
-    tab.lse.run()
-    tab.lse.run_all()
-    panel = tab.frequency_panel()
+    tab = Session(s)
+    tab.build("least_squares").run()
+    tab.build("least_squares").run_all()
+    panel = tab.build("frequency")
     panel.run()
     for view in all_views(tab):
         assert view.status == "current", view.name
@@ -95,21 +96,22 @@ def test_identification_views_are_marked_when_parameters_change():
             assert view.status == "current"
         else:
             assert view.status == "stale" and "Out of date" in view.banner.object, view.name
-    assert "nominal" in tab.lse.table.object and "4000" in tab.lse.table.object   # the old table, marked
-    tab.lse.run()
-    assert tab.lse.view.status == "current" and tab.lse.result.nominal["M"] == 6000.0
-    assert tab.lse.table4_view.status == "stale"
+    lse = tab.build("least_squares")
+    assert "nominal" in lse.table.object and "4000" in lse.table.object   # the old table, marked
+    lse.run()
+    assert lse.view.status == "current" and lse.result.nominal["M"] == 6000.0
+    assert tab.build("least_squares").table4_view.status == "stale"
     s.set_text("M", "4000")                          # back to what Table 4 and the experiment were run with
-    assert tab.lse.table4_view.status == "current" and panel.views["bode"].status == "current"
-    assert tab.lse.view.status == "stale"
+    assert tab.build("least_squares").table4_view.status == "current" and panel.views["bode"].status == "current"
+    assert tab.build("least_squares").view.status == "stale"
 
 
 def test_frequency_settings_mark_the_experiment_and_update_fig8():
-    from eha_app.tabs.identification import IdentificationTab
+    from eha_app.session import Session
 
     s = AppState()
-    tab = IdentificationTab(s)
-    panel = tab.frequency_panel()
+    tab = Session(s)
+    panel = tab.build("frequency")
     panel.run()
     type_into(panel.form, signal_type="prbs", model="linear")
     exc = panel.views["excitation"]
@@ -122,12 +124,11 @@ def test_frequency_settings_mark_the_experiment_and_update_fig8():
 
 
 def test_one_kp_everywhere():
-    from eha_app.tabs.identification import IdentificationTab
-    from eha_app.tabs.parameters import ParametersTab
+    from eha_app.session import Session
 
     s = AppState()
-    tab1, tab3 = ParametersTab(s), IdentificationTab(s)
-    panel = tab3.frequency_panel()
+    tab1, tab3 = Session(s).build("parameters"), Session(s)
+    panel = tab3.build("frequency")
     panel.run()
     s.set_text("kp", "20")
     assert "K<sub>p</sub> = 20" in panel.kp_note.object
@@ -139,10 +140,10 @@ def test_one_kp_everywhere():
 
 
 def test_an_unstable_estimate_is_an_alert_and_messages_are_sentences():
-    from eha_app.tabs.identification import IdentificationTab
+    from eha_app.session import Session
 
     s = AppState()
-    panel = IdentificationTab(s).frequency_panel()
+    panel = Session(s).build("frequency")
     type_into(panel.form, n_poles="6", n_zeros="5")
     panel.run()
     assert panel.unstable.visible and "unstable" in panel.unstable.object
@@ -154,10 +155,10 @@ def test_an_unstable_estimate_is_an_alert_and_messages_are_sentences():
 
 def test_explanations_follow_the_run():
     """Linear plant and prbs: λ̂1 is near 430.1, and the text must not say it lies far below."""
-    from eha_app.tabs.identification import IdentificationTab
+    from eha_app.session import Session
 
     s = AppState()
-    panel = IdentificationTab(s).frequency_panel()
+    panel = Session(s).build("frequency")
     type_into(panel.form, model="linear", signal_type="prbs")
     panel.run()
     text = panel.backout.object
@@ -170,10 +171,10 @@ def test_explanations_follow_the_run():
 
 def test_lse_without_resimulation_draws_no_resimulated_curve():
     """Under 5000 sin with the constant model B < 0: no re-simulation, so no line or legend claims one."""
-    from eha_app.tabs.identification import IdentificationTab
+    from eha_app.session import Session
 
     s = AppState()
-    lse = IdentificationTab(s).lse
+    lse = Session(s).build("least_squares")
     type_into(lse.form, lse_scenario="5000 sin", lse_model="constant")
     lse.run()
     assert lse.result.estimates["B"] < 0                 # seed 0: B = -1574 N s/m
@@ -188,7 +189,7 @@ def test_while_a_rerun_is_on_its_way_the_status_line_says_so():
     from eha_app.freshness import ResultView
 
     s = AppState()
-    tab = SimulationTab(s)
+    tab = Session(s).build("simulation")
     key = tab.view.computed_from
     tab.view.inputs_changed(("other",), updating=True)           # what a queued automatic run does
     assert tab.view.status == "updating" and "updating to the new inputs" in tab.info.text
@@ -202,10 +203,10 @@ def test_while_a_rerun_is_on_its_way_the_status_line_says_so():
 
 
 def test_the_bode_plot_says_which_estimate_of_the_data_it_draws():
-    from eha_app.tabs.identification import IdentificationTab
+    from eha_app.session import Session
 
     s = AppState()
-    panel = IdentificationTab(s).frequency_panel()
+    panel = Session(s).build("frequency")
     panel.figure_tabs.active = 3                      # Fig. 12 shown: its figure is built
     panel.run()
     bode = panel.figures["bode"]

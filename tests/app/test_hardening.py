@@ -29,6 +29,7 @@ import pytest
 
 from eha_app.handins import HandIns, StoreError, handins_path
 from eha_app.redaction import RedactingFilter, keep_out_of_logs, number_forms
+from eha_app.session import MAX_SETTINGS_BYTES, SETTINGS_FORMAT, SettingsError
 from eha_app.state import MAX_TEXT_CHARS, AppState
 from eha_core.data import MAX_DATA_BYTES, DataError, csv_cell, read_data, write_data
 from eha_core.exercise import Exercise
@@ -124,25 +125,24 @@ def _start(ex_path, student="ada"):
 
     state = AppState()
     page = create_app(state)
-    page.eha_gate.student_id.value = student
-    page.eha_gate.start()
+    page.gate.student_id.value = student
+    page.gate.start()
     assert state.student == student
     return page, state
 
 
 def _every_job(page, nan_upload: bytes, round_: int):
     """Start every kind of computation an exercise page offers (in round 2, over round 1's results)."""
-    app = page.objects[0]
-    sim = app.eha_lazy.build(1)
-    ident = app.eha_lazy.build(2)
+    session = page.session
+    sim = session.build("simulation")
     sim.run("linear")
     sim.run("nonlinear")
-    lse = ident.lse
+    lse = session.build("least_squares")
     lse.run()
     lse.hand_in()
     lse._upload = (nan_upload, "with_nan.csv")
     lse.read_upload()
-    freq = ident.frequency_panel()
+    freq = session.build("frequency")
     freq.run()
     freq.form.set_values(n_samples=str(900 + 10 * round_))          # a new excitation: its preview
     record = freq.record
@@ -151,11 +151,11 @@ def _every_job(page, nan_upload: bytes, round_: int):
     else:
         record.upload.filename, record.upload.value = "loop2.csv", freq.data_bytes("csv") + b"\n"
     record.run()
-    board = ident.board_panel() and ident.board
-    page.objects[0].eha_state.set_text("kp", str(10 + round_))     # the board's record and step again
+    board = session.build("board")
+    session.state.set_text("kp", str(10 + round_))               # the board's record and step again
     board.fits.clear()                                            # every model's fit again: the views' job
     board._compute_missing()
-    app.eha_report_button.clicks += 1
+    page.report_button.clicks += 1
 
 
 def test_no_secret_reaches_the_log_when_every_job_fails(exercise, monkeypatch, caplog):
@@ -352,15 +352,15 @@ def test_the_server_takes_a_message_the_size_of_the_largest_upload():
     import panel as pn
 
     from eha_app.serving import WEBSOCKET_MAX_MESSAGE_BYTES, serve_argv
-    from eha_app.tabs.identification import IdentificationTab
+    from eha_app.session import Session
     from eha_app.tabs.uploads import MAX_UPLOAD_BYTES, FileUpload
 
     argv = serve_argv(port=5006, address="127.0.0.1")
     limit = int(argv[argv.index("--websocket-max-message-size") + 1])
     assert limit == WEBSOCKET_MAX_MESSAGE_BYTES >= MAX_UPLOAD_BYTES + 2**16
-    tab = IdentificationTab(AppState())
-    freq = tab.frequency_panel()
-    uploads = [tab.lse.upload, freq.record.upload]
+    tab = Session(AppState())
+    freq = tab.build("frequency")
+    uploads = [tab.build("least_squares").upload, freq.record.upload]
     assert all(isinstance(u, FileUpload) and u.max_bytes == MAX_UPLOAD_BYTES for u in uploads)
     # no upload widget that sends a file whole, whatever its size, is left in the tab
     assert not pn.Column(tab).select(pn.widgets.FileInput)
@@ -404,13 +404,13 @@ def test_a_damaged_or_deleted_database_gets_a_message_not_a_traceback(tmp_path, 
 def test_a_hand_in_the_database_refuses_is_said_in_the_page(exercise):
     ex, path = exercise
     page, state = _start(path)
-    ident = page.objects[0].eha_lazy.build(2)
-    ident.lse.run()
+    ident = page.session
+    ident.build("least_squares").run()
     handins_path(path).write_bytes(b"garbage" * 500)
-    ident.lse.hand_in()
-    text = ident.lse.verdict.object
+    ident.build("least_squares").hand_in()
+    text = ident.build("least_squares").verdict.object
     assert "Your hand-in was not stored" in text and "Tell your teacher" in text
-    assert "identification failed" not in ident.lse.alert.object
+    assert "identification failed" not in ident.build("least_squares").alert.object
 
 
 def test_the_teachers_commands_refuse_a_damaged_database_in_one_line(tmp_path, capsys):
@@ -428,28 +428,27 @@ def test_the_teachers_commands_refuse_a_damaged_database_in_one_line(tmp_path, c
 
 
 def test_settings_files_are_bounded_and_never_logged_whole(caplog):
-    from eha_app import settings
     from eha_app.app import create_app
 
     page = create_app(AppState())
     caplog.set_level(logging.DEBUG)
     deep = b'{"format": "eha-settings/1", "parameters": ' + b"[" * 20_000 + b"]" * 20_000 + b"}"
-    with pytest.raises(settings.SettingsError, match="nested too deeply"):
-        settings.apply(page, deep, "deep.json")
-    with pytest.raises(settings.SettingsError, match=r"it has 200.0 kB; at most 100 kB"):
-        settings.apply(page, b" " * 200_000, "big.json")
-    long_field = json.dumps({"format": settings.FORMAT, "parameters": {"M": "1" * 70_000}}).encode()
-    with pytest.raises(settings.SettingsError, match=r"parameters.M = 1{24}…: at most 200 characters"):
-        settings.apply(page, long_field, "long.json")
-    with pytest.raises(settings.SettingsError, match=r"parameters.M is not a text or a number"):
-        settings.apply(page, b'{"format": "eha-settings/1", "parameters": {"M": [1, 2]}}', "list.json")
-    assert page.eha_state.texts["M"] == "4000"                    # nothing was typed
+    with pytest.raises(SettingsError, match="nested too deeply"):
+        page.session.load_settings(deep, "deep.json")
+    with pytest.raises(SettingsError, match=r"it has 200.0 kB; at most 100 kB"):
+        page.session.load_settings(b" " * 200_000, "big.json")
+    long_field = json.dumps({"format": SETTINGS_FORMAT, "parameters": {"M": "1" * 70_000}}).encode()
+    with pytest.raises(SettingsError, match=r"parameters.M = 1{24}…: at most 200 characters"):
+        page.session.load_settings(long_field, "long.json")
+    with pytest.raises(SettingsError, match=r"parameters.M is not a text or a number"):
+        page.session.load_settings(b'{"format": "eha-settings/1", "parameters": {"M": [1, 2]}}', "list.json")
+    assert page.session.state.texts["M"] == "4000"                    # nothing was typed
     assert "[[[[" not in caplog.text and "1111111111" not in caplog.text
     # through the page's own loader: the message beside it
-    load = page.objects[2].objects[2]
+    load = page.load
     load.filename, load.value = "deep.json", deep
-    assert "nested too deeply" in page.eha_settings_note.object
-    assert load.max_bytes == settings.MAX_SETTINGS_BYTES
+    assert "nested too deeply" in page.settings_note.object
+    assert load.max_bytes == MAX_SETTINGS_BYTES
 
 
 def test_a_field_of_70000_characters_is_refused_and_kept_out_of_the_address():

@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
+from eha_app.session import Session
 from eha_app.state import AppState
-from eha_app.tabs.identification import IdentificationTab
 
 
 def upload(lse, blob: bytes, filename: str):
@@ -16,7 +16,7 @@ def upload(lse, blob: bytes, filename: str):
 
 @pytest.fixture(scope="module")
 def simulated():
-    lse = IdentificationTab(AppState()).lse
+    lse = Session(AppState()).build("least_squares")
     lse.run()
     return lse, dict(lse.result.estimates)
 
@@ -25,7 +25,7 @@ def simulated():
 def test_exported_data_uploaded_again_gives_the_same_estimates(simulated, kind):
     exported, estimates = simulated
     blob = exported.data_bytes(kind)
-    lse = IdentificationTab(AppState()).lse
+    lse = Session(AppState()).build("least_squares")
     upload(lse, blob, f"eha_lse_data.{kind}")
     assert lse.own_data is not None and "Using your data" in lse.upload_note.object
     lse.run()
@@ -54,7 +54,7 @@ def test_estimates_download_as_csv_and_json(simulated):
 def test_a_file_with_other_column_names_is_mapped(simulated):
     exported, estimates = simulated
     text = exported.data_bytes("csv").decode().replace("t,x,v,p1,p2,u", "time,pos,vel,pa,pb,cmd", 1)
-    lse = IdentificationTab(AppState()).lse
+    lse = Session(AppState()).build("least_squares")
     upload(lse, text.encode(), "lab.csv")
     assert lse.own_data is None and lse.mapping.visible
     assert "no column t, x, v, p1, p2, u: the file has time, pos, vel, pa, pb, cmd" in lse.mapping.objects[0].object
@@ -74,7 +74,7 @@ def test_a_file_with_other_column_names_is_mapped(simulated):
      "column t, row 32 (line 33): the sampling is not uniform"),
 ])
 def test_malformed_uploads_get_their_message(content, message):
-    lse = IdentificationTab(AppState()).lse
+    lse = Session(AppState()).build("least_squares")
     upload(lse, content, "bad.csv")
     assert lse.own_data is None
     assert "your file = &#x27;bad.csv&#x27; is not allowed" in lse.upload_note.object
@@ -84,7 +84,7 @@ def test_malformed_uploads_get_their_message(content, message):
 def test_frequency_downloads():
     from eha_core.data import read_data
 
-    panel = IdentificationTab(AppState()).frequency_panel()
+    panel = Session(AppState()).build("frequency")
     panel.run()
     for kind in ("csv", "mat"):
         back = read_data(panel.downloads[0 if kind == "csv" else 1].callback().read(), ("t", "r", "x", "u"),
@@ -99,7 +99,7 @@ def test_frequency_downloads():
 
 
 def test_sensor_noise_changes_the_estimates_reproducibly():
-    lse = IdentificationTab(AppState()).lse
+    lse = Session(AppState()).build("least_squares")
     lse.run()
     clean = dict(lse.result.estimates)
     lse.form.values = {**lse.form.values, "lse_noise_p": "0.05", "lse_noise_v": "0.2"}
@@ -116,7 +116,7 @@ def test_sensor_noise_changes_the_estimates_reproducibly():
 
 def test_a_time_range_of_the_own_record(simulated):
     exported, estimates = simulated
-    lse = IdentificationTab(AppState()).lse
+    lse = Session(AppState()).build("least_squares")
     upload(lse, exported.data_bytes("csv"), "run.csv")
     assert lse.window_form.visible
     lse.window_form.values = {"own_from": "1", "own_to": "4"}
@@ -134,7 +134,7 @@ def test_a_time_range_of_the_own_record(simulated):
 @pytest.fixture(scope="module")
 def closed_loop():
     """The frequency panel's own experiment: its record (t, r, x, u) as CSV and .mat, and its estimate."""
-    source = IdentificationTab(AppState()).frequency_panel()
+    source = Session(AppState()).build("frequency")
     source.run()
     return source
 
@@ -146,7 +146,7 @@ def _upload_record(panel, blob: bytes, filename: str):
 
 
 def test_a_transfer_function_from_the_students_own_record(closed_loop):
-    panel = IdentificationTab(AppState()).frequency_panel()
+    panel = Session(AppState()).build("frequency")
     record = _upload_record(panel, closed_loop.data_bytes("csv"), "loop.csv")   # t, r, x, u: r/x understood
     assert "Your record: loop.csv, 1000 samples every 10 ms, t from 0 to 9.99 s" in record.note.object
     # the record is drawn as soon as it is read: as in the file, and as it will be estimated
@@ -168,7 +168,7 @@ def test_a_transfer_function_from_the_students_own_record(closed_loop):
 
 
 def test_preprocessing_is_drawn_on_the_record_and_checked(closed_loop):
-    panel = IdentificationTab(AppState()).frequency_panel()
+    panel = Session(AppState()).build("frequency")
     record = _upload_record(panel, closed_loop.data_bytes("csv"), "loop.csv")
     x = closed_loop.result.data.x
     record.detrend.value = "linear"
@@ -198,7 +198,7 @@ def test_a_record_with_other_column_names_is_mapped(closed_loop):
 
     d = closed_loop.result.data
     blob = write_data({"time": d.t, "cmd": d.r, "pos": d.x}, "csv", units={"pos": "mm"})
-    panel = IdentificationTab(AppState()).frequency_panel()
+    panel = Session(AppState()).build("frequency")
     record = _upload_record(panel, blob, "lab.csv")
     assert record.columns is None and record.mapping.panel.visible
     assert "it needs columns t, u, y (or t, r, x); the file has time, cmd, pos[mm]" in \
@@ -210,7 +210,7 @@ def test_a_record_with_other_column_names_is_mapped(closed_loop):
     assert record.columns is not None and not record.mapping.panel.visible
     np.testing.assert_allclose(record.columns[2], d.x, rtol=1e-9)       # mm read back as m
     record.run()
-    direct = _upload_record(IdentificationTab(AppState()).frequency_panel(), closed_loop.data_bytes("mat"),
+    direct = _upload_record(Session(AppState()).build("frequency"), closed_loop.data_bytes("mat"),
                             "loop.mat")
     direct.run()                                                        # the .mat export, read by name
     np.testing.assert_allclose(record.result.estimate.den, direct.result.estimate.den, rtol=1e-6)
@@ -219,7 +219,7 @@ def test_a_record_with_other_column_names_is_mapped(closed_loop):
 
 
 def test_a_record_without_the_columns_gets_its_message():
-    panel = IdentificationTab(AppState()).frequency_panel()
+    panel = Session(AppState()).build("frequency")
     record = _upload_record(panel, b"t,u\n0,1\n", "bad.csv")
     assert "it needs columns t, u, y (or t, r, x); the file has t, u" in record.mapping.panel.objects[0].object
     record.mapping.selects["t"].value = "t"
@@ -254,14 +254,14 @@ def test_an_exercise_leaves_eq24_out_of_the_bode_curves(closed_loop):
 
     state = AppState()
     state.secret = {"M": 4000.0, "B": 1000.0}
-    panel = IdentificationTab(state).frequency_panel()
+    panel = Session(state).build("frequency")
     panel.result = dataclasses.replace(closed_loop.result)
     curves = {line.split(",")[0] for line in panel.bode_bytes().decode().splitlines()[1:]}
     assert "linearised_eq24" not in curves and "estimate" in curves
 
 
 def test_the_record_bode_has_no_eq24_entry(closed_loop):
-    panel = IdentificationTab(AppState()).frequency_panel()
+    panel = Session(AppState()).build("frequency")
     record = _upload_record(panel, closed_loop.data_bytes("csv"), "loop.csv")
     record.run()
     assert not record.bode.theory_item.visible                  # nothing is known of a record's plant
@@ -294,7 +294,7 @@ def test_all_figures_data_download(closed_loop):
     # an exercise: nothing computed from the hidden values
     state = AppState()
     state.secret = {"M": 4000.0}
-    panel = IdentificationTab(state).frequency_panel()
+    panel = Session(state).build("frequency")
     panel.result = dataclasses.replace(fi)
     z = zipfile.ZipFile(io.BytesIO(panel.figures_bytes()))
     assert b"eq24" not in z.read("fig11_fit.csv") and b"eq24" not in z.read("fig12_bode_curves.csv")
@@ -302,7 +302,7 @@ def test_all_figures_data_download(closed_loop):
 
 
 def test_a_changed_record_never_shows_the_old_estimate(closed_loop):
-    panel = IdentificationTab(AppState()).frequency_panel()
+    panel = Session(AppState()).build("frequency")
     record = _upload_record(panel, closed_loop.data_bytes("csv"), "loop.csv")
     record.run()
     fig = record.data_figure
@@ -321,7 +321,7 @@ def test_a_changed_record_never_shows_the_old_estimate(closed_loop):
 
 
 def test_the_records_estimate_takes_the_forms_delay(closed_loop):
-    panel = IdentificationTab(AppState()).frequency_panel()
+    panel = Session(AppState()).build("frequency")
     record = _upload_record(panel, closed_loop.data_bytes("csv"), "loop.csv")
     record.run()
     assert record.view.status == "current"

@@ -3,6 +3,7 @@ import re
 
 import pytest
 
+from eha_app.session import Session
 from eha_app.state import FIELD_LABELS, AppState, cross_field_errors, display_text, parse_display
 from eha_core.linear import operating_point
 from eha_core.params import FIELD_INFO, PARAM_NAMES, ActuatorParams, ParameterError
@@ -196,10 +197,9 @@ def test_the_app_and_the_core_agree_on_what_is_allowed():
 
 def test_the_first_tab_never_draws_a_set_the_linearisation_refuses():
     # p2(0) typed keeps the initial state valid, but the operating point's force balance is out of [pr, ps]
-    from eha_app.tabs.parameters import ParametersTab
 
     s = AppState()
-    tab = ParametersTab(s)
+    tab = Session(s).build("parameters")
     s.set_text("p2_0", "15")
     s.set_text("p1_0", "30")                         # raised in the tab's watcher before
     assert not s.valid and list(s.errors) == ["p1_0"]

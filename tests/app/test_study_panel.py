@@ -3,14 +3,14 @@
 import numpy as np
 import pytest
 
+from eha_app.session import Session
 from eha_app.state import AppState
-from eha_app.tabs.identification import IdentificationTab
 
 
 def test_a_least_squares_study_shows_the_cores_figures():
     from eha_core.study import StudyConfig, run_study
 
-    panel = IdentificationTab(AppState()).study_panel()
+    panel = Session(AppState()).build("study")
     panel.CHUNK_SEEDS = {"lse": 5, "tf": 2}        # three jobs: 5, 5 and 2 seeds, the queue's turns between
     panel.form.values = {**panel.form.values, "study_seeds": "12"}
     panel.run()
@@ -29,7 +29,7 @@ def test_a_least_squares_study_shows_the_cores_figures():
 
 
 def test_a_cancelled_study_keeps_the_seeds_done():
-    panel = IdentificationTab(AppState()).study_panel()
+    panel = Session(AppState()).build("study")
     panel.CHUNK_SEEDS = {"lse": 10, "tf": 2}
     panel.form.values = {**panel.form.values, "study_seeds": "40"}
     calls = []
@@ -49,7 +49,7 @@ def test_a_cancelled_study_keeps_the_seeds_done():
 
 
 def test_the_form_checks_and_switches_fields():
-    panel = IdentificationTab(AppState()).study_panel()
+    panel = Session(AppState()).build("study")
     assert "study_noise" in panel.form.hidden and "study_white" not in panel.form.hidden
     panel.form.values = {**panel.form.values, "study_kind": "tf"}
     assert "study_white" in panel.form.hidden and "study_noise" not in panel.form.hidden
@@ -61,21 +61,21 @@ def test_the_form_checks_and_switches_fields():
 def test_no_study_in_an_exercise():
     state = AppState()
     state.secret = {"M": 4000.0}
-    panel = IdentificationTab(state).study_panel()
+    panel = Session(state).build("study")
     assert panel.button.disabled and panel.exercise_note.visible
     assert panel.run() is None
 
 
 @pytest.mark.parametrize("model", ["linear"])
 def test_a_transfer_function_study(model):
-    panel = IdentificationTab(AppState()).study_panel()
+    panel = Session(AppState()).build("study")
     panel.form.values = {**panel.form.values, "study_kind": "tf", "study_seeds": "3", "study_model": model}
     panel.run()
     assert panel.result.parameters == ("a1", "a2", "a3", "b0") and panel.result.n_completed == 3
 
 
 def test_one_study_at_a_time():
-    panel = IdentificationTab(AppState()).study_panel()
+    panel = Session(AppState()).build("study")
     panel._running(True)                          # as while a study waits or runs
     panel.form.values = {**panel.form.values, "study_seeds": "30"}
     assert panel.button.disabled and not panel.cancel_button.disabled

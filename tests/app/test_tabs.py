@@ -6,10 +6,9 @@ import pytest
 
 from eha_app.app import create_app
 from eha_app.form import InputError
+from eha_app.session import Session
 from eha_app.state import AppState
-from eha_app.tabs.identification import IdentificationTab
-from eha_app.tabs.parameters import ParametersTab
-from eha_app.tabs.simulation import SimulationTab, parse_t_end
+from eha_app.tabs.simulation import parse_t_end
 
 
 def type_into(form, **texts):
@@ -19,7 +18,7 @@ def type_into(form, **texts):
 
 def test_parameters_tab_shows_eq23_and_follows_typing():
     s = AppState()
-    tab = ParametersTab(s)
+    tab = Session(s).build("parameters")
     html = tab.derived.object
     assert "243.7" in html and "430.1" in html and "1.721·10<sup>4</sup>" in html and "2437" in html
     type_into(tab.form, M="8000")
@@ -34,7 +33,7 @@ def test_parameters_tab_shows_eq23_and_follows_typing():
 
 def test_simulation_runs_four_case_comparison():
     s = AppState()
-    tab = SimulationTab(s)
+    tab = Session(s).build("simulation")
     assert len(tab.results) == 4                      # opens on Fig. 2
     tab._apply_preset("all")
     job = tab.run("both")
@@ -56,7 +55,7 @@ def test_simulation_runs_four_case_comparison():
 
 def test_simulation_custom_input_and_preset():
     s = AppState()
-    tab = SimulationTab(s)
+    tab = Session(s).build("simulation")
     tab._apply_preset(3)
     tab.run("nonlinear")
     assert [r.label for r in tab.results] == ["Case 3"]
@@ -69,12 +68,12 @@ def test_simulation_custom_input_and_preset():
 
 def test_invalid_inputs_disable_runs():
     s = AppState()
-    tab = SimulationTab(s)
-    ident = IdentificationTab(s)
-    freq = ident.frequency_panel()
+    tab = Session(s).build("simulation")
+    ident = Session(s)
+    freq = ident.build("frequency")
     s.set_text("dc", "200")
     assert all(b.disabled for b in tab.run_buttons.values())
-    assert ident.lse.button.disabled and freq.button.disabled
+    assert ident.build("least_squares").button.disabled and freq.button.disabled
     s.set_text("dc", "70")
     assert not any(b.disabled for b in tab.run_buttons.values())
     type_into(tab.form, t_end="-2")
@@ -89,7 +88,7 @@ def test_invalid_inputs_disable_runs():
 
 def test_a_failing_computation_is_shown_and_the_session_keeps_working(monkeypatch):
     s = AppState()
-    tab = SimulationTab(s)
+    tab = Session(s).build("simulation")
     import eha_app.tabs.simulation as sim
 
     def boom(*a, **k):
@@ -104,35 +103,33 @@ def test_a_failing_computation_is_shown_and_the_session_keeps_working(monkeypatc
 
 
 def test_identification_least_squares_and_table4():
-    s = AppState()
-    tab = IdentificationTab(s)
-    type_into(tab.lse.form, lse_scenario="5000 sin", lse_model="harmonic")
-    tab.lse.run()
-    res = tab.lse.result
+    lse = Session(AppState()).build("least_squares")
+    type_into(lse.form, lse_scenario="5000 sin", lse_model="harmonic")
+    lse.run()
+    res = lse.result
     assert abs(res.rel_error["B"]) < 0.02
-    assert "paper (Table 3/4)" in tab.lse.table.object and "1326.3" in tab.lse.table.object
-    assert len(tab.lse.plot.objects) == 1 and len(tab.lse.figure.resim.data["t"]) > 1000
-    tab.lse.run_all()
-    assert set(tab.lse.all_results) == {"constant", "harmonic"}
-    assert "white noise" in tab.lse.table4.object and "4003.4" in tab.lse.table4.object
+    assert "paper (Table 3/4)" in lse.table.object and "1326.3" in lse.table.object
+    assert len(lse.plot.objects) == 1 and len(lse.figure.resim.data["t"]) > 1000
+    lse.run_all()
+    assert set(lse.all_results) == {"constant", "harmonic"}
+    assert "white noise" in lse.table4.object and "4003.4" in lse.table4.object
 
 
 def test_identification_custom_disturbance_validation():
-    s = AppState()
-    tab = IdentificationTab(s)
-    type_into(tab.lse.form, lse_scenario="custom", lse_custom="sine:x")
-    assert "lse_custom" in tab.lse.form.errors and tab.lse.button.disabled
-    type_into(tab.lse.form, lse_custom="sine:800:3+noise:50:2")
-    assert "lse_custom" not in tab.lse.form.errors and not tab.lse.button.disabled
-    type_into(tab.lse.form, lse_model="harmonic", lse_freq="abc")
-    assert "lse_freq" in tab.lse.form.errors and tab.lse.button.disabled
+    lse = Session(AppState()).build("least_squares")
+    type_into(lse.form, lse_scenario="custom", lse_custom="sine:x")
+    assert "lse_custom" in lse.form.errors and lse.button.disabled
+    type_into(lse.form, lse_custom="sine:800:3+noise:50:2")
+    assert "lse_custom" not in lse.form.errors and not lse.button.disabled
+    type_into(lse.form, lse_model="harmonic", lse_freq="abc")
+    assert "lse_freq" in lse.form.errors and lse.button.disabled
 
 
 def test_identification_frequency_domain():
     s = AppState()
-    tab = IdentificationTab(s)
-    assert tab.freq is None                       # built when first shown
-    freq = tab.frequency_panel()
+    tab = Session(s)
+    assert tab.section("frequency") is None                       # built when first shown
+    freq = tab.build("frequency")
     assert len(freq.figures["excitation"].source.data["t"]) == 1000
     freq.run()
     fi = freq.result
@@ -150,21 +147,24 @@ def test_identification_frequency_domain():
 
 def test_each_app_has_its_own_state_and_builds_tabs_when_shown():
     a, b = create_app(), create_app()
-    assert a.eha_state is not b.eha_state
-    a.eha_state.set_text("M", "5000")
-    assert b.eha_state.params.M == 4000.0
-    assert list(a.eha_tabs._names) == ["1. Parameters", "2. Simulation", "3. Identification"]
-    assert set(a.eha_lazy.built) == {0}
-    a.eha_tabs.active = 2
-    assert isinstance(a.eha_lazy.built[2], IdentificationTab) and 1 not in a.eha_lazy.built
+    assert a.session.state is not b.session.state
+    a.session.state.set_text("M", "5000")
+    assert b.session.state.params.M == 4000.0
+    assert a.tabs.names == ["1. Parameters", "2. Simulation", "3. Identification"]
+    assert set(a.tabs.built) == {"1. Parameters"}
+    a.tabs.tabs.active = 2
+    # tab 3's first sub-tab is made with it; the others, and tab 2, when shown
+    assert set(a.tabs.built) == {"1. Parameters", "3. Identification"}
+    assert a.session.section("least_squares") is not None and a.session.section("frequency") is None
 
 
 def test_the_address_restores_what_was_typed():
     page = create_app(query={"M": "6000", "dc": "130", "tab": "2", "u_kind": "step", "t_end": "-1"})
-    state = page.eha_state
+    state = page.session.state
     assert state.params.M == 6000.0
     assert "dc" in state.errors                   # a bad value gets its message, the page still opens
-    sim = page.eha_lazy.built[1]
+    sim = page.session.section("simulation")               # the tab of the address, opened
+    assert page.tabs.active_name == "2. Simulation"
     assert sim.form.values["u_kind"] == "step" and "t_end" in sim.form.errors
 
 
@@ -179,7 +179,7 @@ def test_the_server_warm_up_runs():
 def test_simulation_downloads_as_mat():
     import scipy.io
 
-    tab = SimulationTab(AppState())
+    tab = Session(AppState()).build("simulation")
     tab.run("both")
     mat = scipy.io.loadmat(io.BytesIO(tab.download_mat.callback().read()))
     assert mat["t"].shape == (5001, 1) and mat["x"].shape == (5001, 8)
@@ -189,7 +189,7 @@ def test_simulation_downloads_as_mat():
 
 def test_sensor_noise_on_the_simulation_is_seeded_and_said():
     s = AppState()
-    tab = SimulationTab(s)
+    tab = Session(s).build("simulation")
     clean = tab.results[0]
     tab.form.values = {**tab.form.values, "sensor_p": "0.2", "sensor_seed": "3"}
     noisy = tab.results[0]                                      # re-run at once: the four cases, with noise
@@ -215,7 +215,7 @@ def test_the_frequency_experiment_with_an_input_delay_and_residual_verdicts():
                             "input_delay": "99"})
     assert errors["input_delay"] == ("input delay = 99 is not allowed: must be a time in [0, 5] s (half the "
                                      "record), or estimate")
-    panel = IdentificationTab(AppState()).frequency_panel()
+    panel = Session(AppState()).build("frequency")
     panel.form.values = {**panel.form.values, "input_delay": "estimate", "model": "linear"}
     panel.run()
     e = panel.result.estimate

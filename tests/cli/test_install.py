@@ -29,7 +29,7 @@ def test_a_wheel_install_carries_the_schematic(tmp_path):
     code = (
         "import eha_app, eha_core; "
         "from eha_app.app import create_app; "
-        "page = create_app(); tab = page.eha_lazy.built[0]; "
+        "page = create_app(); tab = page.session.section(\"parameters\"); "
         "panel = tab.__panel__(); "
         "html = ' '.join(str(getattr(o, 'object', '')) for o in panel.select()); "
         "print(eha_app.__file__); print(eha_core.__file__); print('<svg' in html)")

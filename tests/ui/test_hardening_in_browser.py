@@ -123,6 +123,10 @@ def test_a_decompression_bomb_gets_a_message_and_the_server_stays_within_its_mem
     assert not problems, problems
 
 
+def _address(page) -> str:
+    return page.evaluate("() => location.href")
+
+
 def test_a_very_long_field_stays_out_of_the_address_and_the_page_reloads(browser, server):
     context = browser.new_context(viewport={"width": 1366, "height": 900})
     page = context.new_page()
@@ -132,9 +136,10 @@ def test_a_very_long_field_stays_out_of_the_address_and_the_page_reloads(browser
     field.click()
     field.press("Control+a")
     page.keyboard.insert_text("2" * 70_000)                       # a paste of 70,000 characters
-    wait_until(lambda: "M=222" in page.url, 15, message="the field in the address")
+    # the address as the page has it (Playwright's page.url can miss a replaceState)
+    wait_until(lambda: "M=222" in _address(page), 15, message="the field in the address")
     assert field.input_value() == "2" * MAX_TEXT_CHARS            # the field holds what it may
-    assert len(page.url) < 2000, len(page.url)
+    assert len(_address(page)) < 2000, len(_address(page))
     page.reload()                                                 # the address still loads, with the field
     page.wait_for_selector("text=Reset to paper defaults", timeout=60_000)
     wait_until(lambda: page.locator(".eha-field-M input").first.input_value() == "2" * MAX_TEXT_CHARS, 15,

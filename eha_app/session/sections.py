@@ -1,0 +1,229 @@
+"""The parts of a page (tabs and panels), what each offers the session, and the ordered registry.
+
+A :class:`Section` is one tab or one panel of a tab: the least squares, the
+model board, the study... It declares its inputs (:attr:`Section.defaults`: its
+fields and their texts as they open, which are its part of the page's address
+and of a settings file) and its results (the ``result`` parameter), and offers
+the session a small protocol:
+
+- :meth:`Section.settings` and :meth:`Section.load`: its fields' texts, saved
+  and loaded again (a settings file, the page's address);
+- :meth:`Section.snapshot`: what it shows, taken under the page's lock, as an
+  immutable :class:`SectionSnapshot` that a worker may read;
+- :meth:`Section.report`: its part of the session report, drawn from a
+  snapshot (in a worker, off the page).
+
+The registry (:data:`SECTIONS`) holds every section in page order with where it
+goes: a main tab, a sub-tab of one, or inside another section. Settings, the
+address and the report iterate it: a new panel is one module and one
+``SECTIONS.register(...)`` line (see ``eha_app/sections/__init__.py``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import panel as pn
+import param
+
+__all__ = ["Section", "SectionSnapshot", "ReportPart", "Placement", "SectionRegistry", "SECTIONS", "stale_note"]
+
+
+@dataclass(frozen=True)
+class SectionSnapshot:
+    """What a section shows at one moment: its settings, whether its results are out of date, and
+    whatever its report needs (``content``: immutable results of the core, copies of lists)."""
+
+    key: str
+    title: str
+    settings: Mapping[str, str]
+    built: bool = True
+    stale: bool = False
+    content: Any = None
+
+
+@dataclass(frozen=True)
+class ReportPart:
+    """A section's part of the session report: HTML with ``{{name}}`` where each of ``figures``
+    (Bokeh layouts, made for the report alone) goes."""
+
+    title: str
+    html: str
+    figures: Mapping[str, Any] = field(default_factory=dict)
+
+
+def stale_note(snapshot: SectionSnapshot) -> str:
+    """The report's line above results the inputs no longer describe (as the page marks them)."""
+    if not snapshot.stale:
+        return ""
+    return ("<p class='eha-warn'>Out of date: the inputs changed after this run; it shows the run's "
+            "results.</p>")
+
+
+class Section(pn.viewable.Viewer):
+    """One tab or panel of the page, made by the session when first shown (see the module docstring).
+
+    Subclasses set :attr:`key` (its name in settings files and the report),
+    :attr:`title` and :attr:`defaults`, build their widgets in ``__init__(session)``
+    from :meth:`initial_texts`, and override :meth:`snapshot` and
+    :meth:`report` to show their results in the session report.
+    """
+
+    key: ClassVar[str] = ""
+    title: ClassVar[str] = ""
+    #: The section's fields and the texts they open with (display units, as typed).
+    defaults: ClassVar[Mapping[str, str]] = {}
+    #: At most this many posts wait for the section before it is made (None: no limit).
+    max_mail: ClassVar[int | None] = None
+
+    result = param.Parameter(default=None, doc="the section's last result (an immutable result of the core)")
+
+    def __init__(self, session, **params):
+        super().__init__(**params)
+        self.session = session
+
+    @property
+    def state(self):
+        return self.session.state
+
+    @property
+    def runner(self):
+        return self.session.runner
+
+    def initial_texts(self) -> dict[str, str]:
+        """The texts the section's fields open with: defaults, the page's address, loaded settings."""
+        return self.session.texts_for(self.key)
+
+    # -- the protocol --------------------------------------------------------------------------
+    def settings(self) -> dict[str, str]:
+        """The section's fields as typed (by default its form's ``values``)."""
+        form = getattr(self, "form", None)
+        values = form.values if form is not None else {}
+        return {k: str(values.get(k, v)) for k, v in self.defaults.items()}
+
+    def load(self, texts: Mapping[str, str]) -> None:
+        """Type ``texts`` into the section's fields (a settings file, a restored address)."""
+        form = getattr(self, "form", None)
+        if form is not None and texts:
+            form.set_values(**texts)
+
+    def is_stale(self) -> bool:
+        """Are the section's results out of date with its inputs? (Its views say so on the page.)"""
+        return any(getattr(v, "status", "") == "stale" for v in self.result_views())
+
+    def result_views(self) -> list:
+        """The section's :class:`~eha_app.freshness.ResultView`s (none by default)."""
+        return []
+
+    def snapshot(self) -> SectionSnapshot:
+        """What the section shows now; call under the page's lock. Subclasses add ``content``."""
+        return SectionSnapshot(self.key, self.title, self.settings(), stale=self.is_stale())
+
+    @classmethod
+    def report(cls, snapshot: SectionSnapshot, hidden: tuple[str, ...] = ()) -> ReportPart | None:
+        """The section's part of the session report, from ``snapshot`` (None: nothing to report)."""
+        return None
+
+    def receive(self, item) -> None:
+        """Take what another section posted to this one (:meth:`Session.post`)."""
+        raise TypeError(f"section {self.key!r} takes nothing from other sections (got {type(item).__name__})")
+
+    # -- before it is made ---------------------------------------------------------------------
+    @classmethod
+    def unbuilt_settings(cls, session) -> dict[str, str]:
+        """The section's settings while it was never shown: its opening texts."""
+        return session.texts_for(cls.key)
+
+    @classmethod
+    def load_unbuilt(cls, session, texts: Mapping[str, str]) -> None:
+        """Settings loaded before the section was made: it opens with them."""
+        session.keep_for(cls.key, texts)
+
+    @classmethod
+    def unbuilt_snapshot(cls, session) -> SectionSnapshot:
+        """A section never shown: only its settings."""
+        return SectionSnapshot(cls.key, cls.title, cls.unbuilt_settings(session), built=False)
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where a section goes: on a main ``tab`` (as one of its sub-tabs when the tab holds several,
+    titled ``subtab``), or ``within`` another section, which lays it out."""
+
+    cls: type
+    tab: str | None = None
+    subtab: str | None = None
+    within: str | None = None
+
+    @property
+    def key(self) -> str:
+        return self.cls.key
+
+
+class SectionRegistry:
+    """The page's sections in order, each with its :class:`Placement`."""
+
+    def __init__(self):
+        self._placements: list[Placement] = []
+
+    def register(self, cls: type, *, tab: str | None = None, subtab: str | None = None,
+                 within: str | None = None) -> type:
+        """Add ``cls`` (a :class:`Section`) to the page; returns it (usable as a decorator's result)."""
+        if not cls.key:
+            raise ValueError(f"section = {cls.__name__} is not allowed: it has no key")
+        if (tab is None) == (within is None):
+            raise ValueError(f"section = {cls.key} is not allowed: give a tab or the section it is within")
+        if any(p.key == cls.key for p in self._placements):
+            raise ValueError(f"section = {cls.key} is not allowed: a section of that key is registered")
+        clash = set(cls.defaults) & {f for p in self._placements for f in p.cls.defaults}
+        if clash:
+            # every field is one argument of the page's address: names must not collide
+            raise ValueError(f"section = {cls.key} is not allowed: fields {', '.join(sorted(clash))} are "
+                             "another section's")
+        self._placements.append(Placement(cls, tab, subtab, within))
+        return cls
+
+    def unregister(self, key: str) -> None:
+        self._placements = [p for p in self._placements if p.key != key]
+
+    @contextmanager
+    def added(self, cls: type, **where) -> Iterator[type]:
+        """``cls`` registered for the duration of a block (tests)."""
+        self.register(cls, **where)
+        try:
+            yield cls
+        finally:
+            self.unregister(cls.key)
+
+    def __iter__(self) -> Iterator[Placement]:
+        return iter(list(self._placements))
+
+    def __contains__(self, key: str) -> bool:
+        return any(p.key == key for p in self._placements)
+
+    def get(self, key: str) -> Placement:
+        for p in self._placements:
+            if p.key == key:
+                return p
+        raise KeyError(key)
+
+    def tabs(self) -> list[str]:
+        """The main tabs, in order."""
+        return list(dict.fromkeys(p.tab for p in self._placements if p.tab is not None))
+
+    def on_tab(self, tab: str) -> list[Placement]:
+        return [p for p in self._placements if p.tab == tab]
+
+    def within(self, key: str) -> list[Placement]:
+        return [p for p in self._placements if p.within == key]
+
+    def owner_of(self, field_name: str) -> str | None:
+        """The key of the section a field of the page's address belongs to."""
+        return next((p.key for p in self._placements if field_name in p.cls.defaults), None)
+
+
+#: The page's sections (filled by ``eha_app.sections``).
+SECTIONS = SectionRegistry()
