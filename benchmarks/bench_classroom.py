@@ -135,7 +135,7 @@ class Server:
     """``eha serve`` in a subprocess on a free port.
 
     ``eha serve`` already passes ``--unused-session-lifetime 4000
-    --check-unused-sessions 1000`` to Panel (eha_app/serving.py): a closed page's
+    --check-unused-sessions 1000`` to Panel (eha_app/runtime/serving.py): a closed page's
     session is discarded about 5 s later, which the churn mode relies on.
     """
 

@@ -19,12 +19,20 @@ import panel as pn
 
 from eha_core.params import PARAM_NAMES
 
-from . import tabs as _sections  # noqa: F401 - registers the page's sections
-from .connection import ConnectionWatch
+from . import sections as _sections  # noqa: F401 - registers the page's sections
+from .render.tables import CSS
+from .runtime.connection import ConnectionWatch
+from .runtime.tasks import (
+    SessionRunner,
+    apply_locked,
+    frozen_models,
+    layout_once_per_message,
+    on_click,
+    served_document,
+    watch,
+)
 from .session import MAX_SETTINGS_BYTES, Session, SettingsError
-from .state import AppState, shown_text
-from .tables import CSS
-from .tasks import SessionRunner, apply_locked, frozen_models, layout_once_per_message, on_click, served_document, watch
+from .session.state import AppState, shown_text
 
 __all__ = ["create_app", "serve_session", "warm_up", "CSS", "Page"]
 
@@ -62,7 +70,7 @@ class LazyTabs:
     """A ``pn.Tabs`` whose tabs are made when first shown.
 
     In a server, a build waits its turn with the other sessions' big page
-    changes (:class:`~eha_app.tasks.PageUpdates`), and the tab says it is
+    changes (:class:`~eha_app.runtime.tasks.PageUpdates`), and the tab says it is
     being prepared meanwhile. Even the first tab is built that way, right
     after the page has loaded: opening a page then costs the server's event
     loop only its frame (about 10 ms instead of 60), so thirty students
@@ -120,8 +128,8 @@ class SubTabs(pn.viewable.Viewer):
 def _exercise_at(path: str, mtime: float):
     from eha_core.exercise import Exercise
 
-    from .handins import HandIns
-    from .redaction import keep_out_of_logs
+    from .runtime.handins import HandIns
+    from .runtime.redaction import keep_out_of_logs
 
     exercise = Exercise.load(path)
     keep_out_of_logs(exercise.secret)
@@ -171,7 +179,7 @@ class ExerciseGate:
 def _log_to_stderr() -> None:
     """The app's notices (a closed page's cancelled runs, failures) in the server's log: through the
     server's own handler (``eha serve`` sets its format), or one of their own if it has none."""
-    from .serving import LOG_FORMAT
+    from .runtime.serving import LOG_FORMAT
 
     logger = logging.getLogger("eha_app")
     logger.setLevel(logging.INFO)
@@ -183,10 +191,10 @@ def _log_to_stderr() -> None:
 
 def serve_session() -> None:
     """Make this browser session's page (the server runs :mod:`eha_app.eha` for every session)."""
-    from .patches import strict_mode_on, strict_page_changes
-    from .redaction import redact_server_logs
-    from .serving import quiet_closed_websockets, use_local_resources
-    from .tasks import note_loop_thread
+    from .runtime.patches import strict_mode_on, strict_page_changes
+    from .runtime.redaction import redact_server_logs
+    from .runtime.serving import quiet_closed_websockets, use_local_resources
+    from .runtime.tasks import note_loop_thread
 
     _log_to_stderr()
     redact_server_logs()
@@ -198,7 +206,7 @@ def serve_session() -> None:
     use_local_resources(pn.state.curdoc)
     # Neither the browser's details (language, time zone, ...) nor Panel's URL
     # model are used: without them a page sends the server 8 fewer messages when
-    # it opens (the address is kept by eha_app.connection instead).
+    # it opens (the address is kept by eha_app.runtime.connection instead).
     pn.config.browser_info = False
     query = {k: v[-1].decode("utf-8", "replace") for k, v in (pn.state.session_args or {}).items() if v}
     create_app(query=query).servable(title="EHA: modeling and identification", location=False)
@@ -304,7 +312,7 @@ class Page(pn.viewable.Viewer):
     # -- the settings row ---------------------------------------------------------------------------
     def _settings_row(self) -> pn.Row:
         """Save the session's settings as JSON, or load a saved file; the report of the session."""
-        from .tabs.uploads import FileUpload
+        from .sections.uploads import FileUpload
 
         session, note = self.session, self.settings_note
         save = pn.widgets.FileDownload(callback=lambda: io.BytesIO(session.settings_bytes()),
@@ -329,7 +337,7 @@ class Page(pn.viewable.Viewer):
                       css_classes=["eha-settings-row"])
 
     def prepare_report(self):
-        from .report import session_report
+        from .render.report import session_report
 
         session, download, note = self.session, self.report_download, self.settings_note
         snapshot = session.snapshot()           # under the page's lock: a click

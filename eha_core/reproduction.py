@@ -3,7 +3,7 @@
 :func:`reproduce` runs everything the paper shows (Tables 1-4, Figs. 2-13 and
 eqs. 23-27) for a parameter set and returns a :class:`Reproduction`: every
 run, estimate and number of the report, with the parameters they were
-computed for. The app renders it (:mod:`eha_app.report`); nothing there
+computed for. The app renders it (:mod:`eha_app.render.report`); nothing there
 computes physics. :meth:`Reproduction.numbers` is the report's
 ``results.json``.
 

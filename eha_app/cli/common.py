@@ -124,7 +124,7 @@ def check_input_file(option: str, path: str | None) -> None:
 
 def json_text(data) -> str:
     """JSON of results holding numpy values."""
-    from eha_app.formatting import json_default
+    from eha_app.render.formatting import json_default
 
     return json.dumps(data, indent=2, default=json_default)
 

@@ -93,7 +93,7 @@ def _table(ex, handins) -> tuple[list[str], list[list[str]]]:
 
 def _store(path: str):
     """The exercise's hand-ins, checked: a damaged database is one line and exit code 2."""
-    from eha_app.handins import HandIns, StoreError
+    from eha_app.runtime.handins import HandIns, StoreError
 
     try:
         return HandIns(path).check()
@@ -102,7 +102,7 @@ def _store(path: str):
 
 
 def run_results(args) -> int:
-    from eha_app.handins import handins_path
+    from eha_app.runtime.handins import handins_path
     from eha_core.data import csv_cell
 
     ex = _load(args.exercise)

@@ -28,7 +28,7 @@ def run(args) -> int:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise refused_file("--out", args.out, f"{exc.strerror}") from None
-    from eha_app.report import build_report
+    from eha_app.render.report import build_report
 
     result = build_report(out, seed=args.seed, started=t0)
     print(result.path)

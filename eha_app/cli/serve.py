@@ -10,7 +10,7 @@ import threading
 import time
 import urllib.request
 
-from eha_app.serving import lan_address
+from eha_app.runtime.serving import lan_address
 
 from .common import UsageError, refused, refused_file, terminal_text
 
@@ -84,7 +84,7 @@ def _announce_when_ready(url: str) -> None:
 
 def _check_exercise(args) -> None:
     """Refuse an exercise file, or its hand-in database, that cannot be used, before anything starts."""
-    from eha_app.handins import HandIns, StoreError
+    from eha_app.runtime.handins import HandIns, StoreError
     from eha_core.exercise import Exercise
 
     from .common import check_input_file
@@ -107,7 +107,7 @@ def run(args) -> int:
         return _print_nginx_config(args)
     if args.exercise:
         _check_exercise(args)
-    from eha_app.serving import ENTRY_POINT, default_origins, serve_argv
+    from eha_app.runtime.serving import ENTRY_POINT, default_origins, serve_argv
 
     if not ENTRY_POINT.exists():
         raise UsageError(f"the app entry point {ENTRY_POINT} is missing: reinstall the package")
@@ -137,7 +137,7 @@ def run(args) -> int:
         _announce_when_ready(f"http://127.0.0.1:{args.port}/eha" if args.address in ("0.0.0.0", "::")
                              else f"http://{args.address}:{args.port}/eha")
     if args.num_procs > 1:
-        from eha_app.serving import supervise
+        from eha_app.runtime.serving import supervise
 
         # N independent processes on one port (SO_REUSEPORT): the kernel spreads
         # the students evenly, where Bokeh's own forked processes did not
@@ -155,12 +155,12 @@ def run(args) -> int:
             threading.Timer(8.0, webbrowser.open, args=(url,)).start()
         return supervise(child, args.num_procs)
     if args.share_port:
-        from eha_app.serving import share_port
+        from eha_app.runtime.serving import share_port
 
         share_port()
     from panel.command import main as panel_main
 
-    from eha_app.patches import refuse_foreign_components
+    from eha_app.runtime.patches import refuse_foreign_components
 
     refuse_foreign_components()
     sys.argv = argv
@@ -169,7 +169,7 @@ def run(args) -> int:
 
 
 def _print_nginx_config(args) -> int:
-    from eha_app.serving import nginx_config
+    from eha_app.runtime.serving import nginx_config
 
     n = args.nginx_config
     if not 1 <= n <= 64:

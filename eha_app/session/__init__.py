@@ -2,11 +2,11 @@
 
 :class:`~eha_app.session.session.Session` (one per page) owns the state, the
 runner, the page's address, the exercise identity and the sections;
-:class:`~eha_app.session.sections.Section` is one tab or panel, registered in
-page order in :data:`~eha_app.session.sections.SECTIONS`.
+:class:`~eha_app.session.section.Section` is one tab or panel, registered in
+page order in :data:`~eha_app.session.section.SECTIONS`.
 """
 
-from .sections import SECTIONS, Placement, ReportPart, Section, SectionRegistry, SectionSnapshot, stale_note
+from .section import SECTIONS, Placement, ReportPart, Section, SectionRegistry, SectionSnapshot, stale_note
 from .session import MAX_SETTINGS_BYTES, SETTINGS_FORMAT, Session, SessionSnapshot, SettingsError
 
 __all__ = ["Session", "SessionSnapshot", "Section", "SectionSnapshot", "ReportPart", "Placement",

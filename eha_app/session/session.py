@@ -2,15 +2,15 @@
 
 A :class:`Session` is made per page (``create_app``). It owns
 
-- the student's :class:`~eha_app.state.AppState` (tab 1's parameters; in an
+- the student's :class:`~eha_app.session.state.AppState` (tab 1's parameters; in an
   exercise, the student and their hidden values),
-- the :class:`~eha_app.tasks.SessionRunner` every computation of the page goes
+- the :class:`~eha_app.runtime.tasks.SessionRunner` every computation of the page goes
   through (closed with the page),
 - the page's address as it was opened (``query``: what a reload or a shared
   link restores) and the texts of sections not shown yet (from the address or
   a loaded settings file),
 - its sections, made when first shown, in the order of the registry
-  (:data:`~eha_app.session.sections.SECTIONS`), and what sections post to one
+  (:data:`~eha_app.session.section.SECTIONS`), and what sections post to one
   another (an estimate going to the model board before it was opened).
 
 Settings files, the address and the session report iterate the registry:
@@ -27,9 +27,9 @@ from typing import Any
 
 import param
 
-from ..state import AppState, shown_text, too_long
-from ..tasks import SessionRunner, apply_locked, frozen_models, served_document
-from .sections import SECTIONS, Section, SectionRegistry, SectionSnapshot
+from ..runtime.tasks import SessionRunner, apply_locked, frozen_models, served_document
+from .section import SECTIONS, Section, SectionRegistry, SectionSnapshot
+from .state import AppState, shown_text, too_long
 
 __all__ = ["Session", "SessionSnapshot", "SettingsError", "SETTINGS_FORMAT", "MAX_SETTINGS_BYTES"]
 
@@ -76,7 +76,8 @@ class Session(param.Parameterized):
         self._pending: dict[str, dict[str, str]] = {}
         self._mail: dict[str, list] = {}
         self._on_built: list[Callable[[Section], None]] = []
-        from .. import tabs  # noqa: F401 - the page's sections register themselves there
+        if not list(self.registry):
+            raise RuntimeError("no section is registered: import eha_app.sections (the page's sections) first")
 
     def __repr__(self) -> str:
         return f"<Session {self.name}>"

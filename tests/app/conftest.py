@@ -2,6 +2,8 @@ import asyncio
 
 import pytest
 
+import eha_app.sections  # noqa: F401 - the page's sections register themselves (sessions of these tests use them)
+
 
 @pytest.fixture
 def run_async():

@@ -17,11 +17,11 @@ import numpy as np
 from bokeh.core.has_props import HasProps
 from bokeh.core.property.bases import Property
 
-from eha_app import plots
-from eha_app.jobs import JobQueue
+from eha_app.render import plots
+from eha_app.runtime.jobs import JobQueue
+from eha_app.sections.frequency import parse_freq
 from eha_app.session import Session
-from eha_app.state import AppState
-from eha_app.tabs.frequency import parse_freq
+from eha_app.session.state import AppState
 from eha_core.experiments import run_frequency_identification
 
 

@@ -5,9 +5,9 @@ import threading
 import pytest
 
 from eha_app.app import create_app
-from eha_app.handins import HandIns
+from eha_app.runtime.handins import HandIns
 from eha_app.session import Session
-from eha_app.state import AppState
+from eha_app.session.state import AppState
 from eha_core.exercise import Exercise, normalize_id
 
 HIDE = ("M", "B", "Af", "beta_e")

@@ -1,8 +1,8 @@
 """After any input change, every result view shows results of the current inputs or is marked out of date."""
 
+from eha_app.sections.simulation import AUTO_RUN_MAX_SECONDS
 from eha_app.session import Session
-from eha_app.state import AppState
-from eha_app.tabs.simulation import AUTO_RUN_MAX_SECONDS
+from eha_app.session.state import AppState
 
 
 def type_into(form, **texts):
@@ -186,7 +186,7 @@ def test_lse_without_resimulation_draws_no_resimulated_curve():
 
 
 def test_while_a_rerun_is_on_its_way_the_status_line_says_so():
-    from eha_app.freshness import ResultView
+    from eha_app.session.freshness import ResultView
 
     s = AppState()
     tab = Session(s).build("simulation")

@@ -27,10 +27,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from eha_app.handins import HandIns, StoreError, handins_path
-from eha_app.redaction import RedactingFilter, keep_out_of_logs, number_forms
+from eha_app.runtime.handins import HandIns, StoreError, handins_path
+from eha_app.runtime.redaction import RedactingFilter, keep_out_of_logs, number_forms
 from eha_app.session import MAX_SETTINGS_BYTES, SETTINGS_FORMAT, SettingsError
-from eha_app.state import MAX_TEXT_CHARS, AppState
+from eha_app.session.state import MAX_TEXT_CHARS, AppState
 from eha_core.data import MAX_DATA_BYTES, DataError, csv_cell, read_data, write_data
 from eha_core.exercise import Exercise
 
@@ -67,7 +67,7 @@ def test_the_components_route_is_guarded_once_the_server_is_prepared(monkeypatch
     import panel.io.server as panel_server
     from panel.io.server import get_static_routes
 
-    from eha_app.patches import WRITTEN_FOR, component_allowed, refuse_foreign_components
+    from eha_app.runtime.patches import WRITTEN_FOR, component_allowed, refuse_foreign_components
 
     # the guard is process-wide (a server's); put Panel's own handler back after the test
     monkeypatch.setattr(panel_server, "ComponentResourceHandler", panel_server.ComponentResourceHandler)
@@ -76,14 +76,14 @@ def test_the_components_route_is_guarded_once_the_server_is_prepared(monkeypatch
     (route, handler, _), = get_static_routes({})
     assert route == "/components/(.*)" and getattr(handler, "eha_guarded", False)
     assert handler.__mro__[1].__name__ == "ComponentResourceHandler"   # not wrapped twice
-    import eha_app.form  # noqa: F401 - a component module the page loads
+    import eha_app.session.form  # noqa: F401 - a component module the page loads
 
     assert not component_allowed("this/x/_css/a")
     assert not component_allowed("eha_app.cli.__main__/x/_css/a")
     assert not component_allowed("eha_app.eha/x/_css/a")           # the entry script: never a module
     assert not component_allowed("os/system/_css/a")
     assert not component_allowed("eha_app.app/create_app/_css/a")  # a function, not a component
-    assert component_allowed("eha_app.form/Form/_stylesheets/x.css")
+    assert component_allowed("eha_app.session.form/Form/_stylesheets/x.css")
     # the versions the patch was written for: an upgrade fails here, to be checked by hand
     import bokeh
     import panel
@@ -161,7 +161,7 @@ def _every_job(page, nan_upload: bytes, round_: int):
 def test_no_secret_reaches_the_log_when_every_job_fails(exercise, monkeypatch, caplog):
     """A failed job was logged with its owner's repr: the exercise with its key and the student's
     hidden values. Every kind of job fails here (each after doing its work); the log has neither."""
-    from eha_app import tasks
+    from eha_app.runtime import tasks
 
     ex, path = exercise
     real_run = tasks.SessionRunner.run
@@ -197,7 +197,7 @@ def test_no_secret_reaches_the_log_when_every_job_fails(exercise, monkeypatch, c
 
 
 def test_the_queue_names_a_failed_jobs_session_by_a_number(exercise, caplog):
-    from eha_app.jobs import JobQueue
+    from eha_app.runtime.jobs import JobQueue
 
     ex, _ = exercise
     state = AppState()
@@ -351,9 +351,9 @@ def test_the_server_takes_a_message_the_size_of_the_largest_upload():
     page's uploads now refuse a file over the limit before sending it, and send raw bytes."""
     import panel as pn
 
-    from eha_app.serving import WEBSOCKET_MAX_MESSAGE_BYTES, serve_argv
+    from eha_app.runtime.serving import WEBSOCKET_MAX_MESSAGE_BYTES, serve_argv
+    from eha_app.sections.uploads import MAX_UPLOAD_BYTES, FileUpload
     from eha_app.session import Session
-    from eha_app.tabs.uploads import MAX_UPLOAD_BYTES, FileUpload
 
     argv = serve_argv(port=5006, address="127.0.0.1")
     limit = int(argv[argv.index("--websocket-max-message-size") + 1])
@@ -452,14 +452,14 @@ def test_settings_files_are_bounded_and_never_logged_whole(caplog):
 
 
 def test_a_field_of_70000_characters_is_refused_and_kept_out_of_the_address():
-    from eha_app.form import Field, InputError
+    from eha_app.session.form import Field, InputError
 
     state = AppState()
     state.set_text("M", "1" * 70_000)
     assert state.errors["M"] == f"M = {'1' * 24}… is not allowed: at most {MAX_TEXT_CHARS} characters (it has 70000)"
     with pytest.raises(InputError, match=rf"at most {MAX_TEXT_CHARS} characters"):
         Field("ts", "Ts").parse("1" * 70_000)
-    from eha_app.form import Form
+    from eha_app.session.form import Form
 
     assert f"const MAX_CHARS = {MAX_TEXT_CHARS}" in Form._esm and "input.maxLength = MAX_CHARS" in Form._esm
 

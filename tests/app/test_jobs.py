@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from eha_app.jobs import JobQueue, worker_count
+from eha_app.runtime.jobs import JobQueue, worker_count
 
 TIMEOUT = 10.0
 
@@ -147,7 +147,7 @@ def test_worker_count_from_the_environment(monkeypatch):
 def test_closing_a_page_cancels_every_runner_of_its_session_and_forgets_them(queue):
     """A session's previews, board and study run under sub-owners: closing the page cancels them all,
     and the queue keeps no reference to the closed session."""
-    from eha_app.tasks import SessionRunner
+    from eha_app.runtime.tasks import SessionRunner
 
     root = SessionRunner("student", queue)
     board, study = root.sub("board views"), root.sub("study")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from eha_app.session import Session
-from eha_app.state import AppState
+from eha_app.session.state import AppState
 
 
 def upload(lse, blob: bytes, filename: str):

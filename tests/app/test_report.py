@@ -8,8 +8,8 @@ import pandas as pd
 import pytest
 
 from eha_app.cli import main
-from eha_app.formatting import num_html
-from eha_app.report import SECTIONS, build_report
+from eha_app.render.formatting import num_html
+from eha_app.render.report import SECTIONS, build_report
 from eha_core.experiments import FrequencyExperiment, run_frequency_identification, run_lse_table, run_paper_cases
 from eha_core.params import ActuatorParams
 from eha_core.reproduction import ReproductionSettings

@@ -9,9 +9,9 @@ import json
 import pytest
 
 from eha_app.app import create_app
-from eha_app.form import Field, Form, Group
 from eha_app.session import SECTIONS, SETTINGS_FORMAT, ReportPart, Section, SectionSnapshot, SettingsError
-from eha_app.state import AppState
+from eha_app.session.form import Field, Form, Group
+from eha_app.session.state import AppState
 
 
 def typed(form, **texts):
@@ -66,7 +66,7 @@ def test_a_file_that_is_not_settings_is_refused(content, message):
 
 
 def test_the_session_report_holds_what_the_student_ran(tmp_path):
-    from eha_app.report import session_report
+    from eha_app.render.report import session_report
 
     page = create_app(AppState())
     page.session.state.set_text("M", "6000")
@@ -100,7 +100,7 @@ def test_the_report_button_prepares_the_download():
 
 
 def test_the_report_holds_the_study_and_the_own_record_from_a_snapshot():
-    from eha_app.report import session_report
+    from eha_app.render.report import session_report
 
     page = create_app(AppState())
     session = page.session
@@ -146,7 +146,7 @@ class DummySection(Section):
 
 
 def test_a_section_registered_with_one_line_is_in_the_page_settings_address_and_report():
-    from eha_app.report import session_report
+    from eha_app.render.report import session_report
 
     with SECTIONS.added(DummySection, tab="3. Identification", subtab="Dummy"):
         page = create_app(query={"dummy_x": "5"})                    # the page's address

@@ -4,7 +4,7 @@ import re
 import pytest
 
 from eha_app.session import Session
-from eha_app.state import FIELD_LABELS, AppState, cross_field_errors, display_text, parse_display
+from eha_app.session.state import FIELD_LABELS, AppState, cross_field_errors, display_text, parse_display
 from eha_core.linear import operating_point
 from eha_core.params import FIELD_INFO, PARAM_NAMES, ActuatorParams, ParameterError
 
@@ -223,7 +223,7 @@ def test_display_round_trip():
 
 
 def test_the_form_and_its_messages_use_the_same_names():
-    from eha_app.tabs.parameters import PARAMETER_FORM
+    from eha_app.sections.parameters import PARAMETER_FORM
 
     labels = {f.name: f.label for g in PARAMETER_FORM for f in g.fields}
     assert labels == FIELD_LABELS

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from eha_app.session import Session
-from eha_app.state import AppState
+from eha_app.session.state import AppState
 
 
 def test_a_least_squares_study_shows_the_cores_figures():

@@ -5,10 +5,10 @@ import pandas as pd
 import pytest
 
 from eha_app.app import create_app
-from eha_app.form import InputError
+from eha_app.sections.simulation import parse_t_end
 from eha_app.session import Session
-from eha_app.state import AppState
-from eha_app.tabs.simulation import parse_t_end
+from eha_app.session.form import InputError
+from eha_app.session.state import AppState
 
 
 def type_into(form, **texts):
@@ -89,7 +89,7 @@ def test_invalid_inputs_disable_runs():
 def test_a_failing_computation_is_shown_and_the_session_keeps_working(monkeypatch):
     s = AppState()
     tab = Session(s).build("simulation")
-    import eha_app.tabs.simulation as sim
+    import eha_app.sections.simulation as sim
 
     def boom(*a, **k):
         raise RuntimeError("integrator exploded")
@@ -203,7 +203,7 @@ def test_sensor_noise_on_the_simulation_is_seeded_and_said():
 
 
 def test_the_frequency_experiment_with_an_input_delay_and_residual_verdicts():
-    from eha_app.tabs.frequency import FREQ_DEFAULTS, parse_freq
+    from eha_app.sections.frequency import FREQ_DEFAULTS, parse_freq
 
     cfg, errors = parse_freq({**FREQ_DEFAULTS,
                               "input_delay": "estimate", "model": "linear"})

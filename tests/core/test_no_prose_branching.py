@@ -32,18 +32,18 @@ FORMATTER = "eha_core/_checks.py"
 #: owners convert them to FieldError later. A count may only go down; every other module of
 #: eha_core and eha_app (the command line included) has none.
 NOT_YET_CONVERTED = {
-    "eha_app/form.py": 6,
-    "eha_app/jobs.py": 3,
-    "eha_app/limits.py": 4,
-    "eha_app/serving.py": 1,
-    "eha_app/session/sections.py": 4,
+    "eha_app/session/form.py": 6,
+    "eha_app/runtime/jobs.py": 3,
+    "eha_app/runtime/limits.py": 4,
+    "eha_app/runtime/serving.py": 1,
+    "eha_app/session/section.py": 4,
     "eha_app/session/session.py": 7,
     "eha_app/settings.py": 7,
-    "eha_app/state.py": 1,
-    "eha_app/tabs/frequency.py": 3,
-    "eha_app/tabs/least_squares.py": 4,
-    "eha_app/tabs/simulation.py": 1,
-    "eha_app/tabs/uploads.py": 2,
+    "eha_app/session/state.py": 1,
+    "eha_app/sections/frequency.py": 3,
+    "eha_app/sections/least_squares.py": 4,
+    "eha_app/sections/simulation.py": 1,
+    "eha_app/sections/uploads.py": 2,
 }
 
 #: App modules that still read a message back, with how many places: tab 2 finds the form field
@@ -51,8 +51,8 @@ NOT_YET_CONVERTED = {
 #: ``fail(message)`` picks the time field by the text's start (the job runner hands it the text,
 #: not the error). A count may only go down.
 STILL_READING = {
-    "eha_app/tabs/frequency.py": 3,
-    "eha_app/tabs/record.py": 1,
+    "eha_app/sections/frequency.py": 3,
+    "eha_app/sections/record.py": 1,
 }
 
 #: Attributes of an exception that hold (part of) its message.

@@ -4,7 +4,7 @@ On 58ceb4b, once a student had shown tab 2, typing on tab 1 changed none of
 its derived values for good: Panel handles a form's keystrokes without the
 page's lock, and tab 2's watcher then changed a Bokeh model there
 (``RuntimeError: _pending_writes should be non-None``). Every watcher of a
-widget now runs under the lock (``eha_app.tasks.locked``), and the servers of
+widget now runs under the lock (``eha_app.runtime.tasks.locked``), and the servers of
 the suite run in strict mode, where any change made outside it raises.
 """
 
@@ -43,8 +43,8 @@ def test_typing_on_tab_1_after_every_tab_was_shown_updates_its_derived_values(se
     seconds, derived = asyncio.run(scenario())
     assert all(t < 20 for t in seconds)
     # exactly what tab 1 shows for these fields (the app's own rendering of its own state)
-    from eha_app.state import AppState
-    from eha_app.tables import derived_html
+    from eha_app.render.tables import derived_html
+    from eha_app.session.state import AppState
 
     state = AppState()
     for name, text in (("M", "7000"), ("Dc", "125"), ("kp", "12"), ("M", "4000")):

@@ -34,8 +34,8 @@ SCAN = [
     "benchmarks.bench_classroom/Server/_css/a",
     "tools.screenshots/main/_css/a",
     "panel.command/main/_css/a",
-    "eha_app.form/Form/_stylesheets/..%2F..%2F..%2Fetc%2Fpasswd",
-    "eha_app.form/Form/__javascript__/../../pyproject.toml",
+    "eha_app.session.form/Form/_stylesheets/..%2F..%2F..%2Fetc%2Fpasswd",
+    "eha_app.session.form/Form/__javascript__/../../pyproject.toml",
     "..%2F..%2Fetc/passwd/_css/a",
     "a/b",
 ]

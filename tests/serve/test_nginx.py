@@ -13,7 +13,7 @@ import subprocess
 import pytest
 
 from benchmarks.classroom_client import run_students
-from eha_app.serving import nginx_standalone_config
+from eha_app.runtime.serving import nginx_standalone_config
 from tests.serve.conftest import free_port, wait_http
 
 NGINX = shutil.which("nginx") or ("/usr/sbin/nginx" if shutil.os.path.exists("/usr/sbin/nginx") else None)

@@ -47,7 +47,7 @@ def surroundings(number: str, text: str) -> str:
 
 def rounded(value: float, scale: float) -> set[str]:
     """Four to six significant digits, as tables and messages write numbers (SI and display units)."""
-    from eha_app.tables import _num
+    from eha_app.render.tables import _num
 
     out = set()
     for v in (value, value / scale):
@@ -58,7 +58,7 @@ def rounded(value: float, scale: float) -> set[str]:
 def the_students_own_numbers(truth) -> set[str]:
     """What the page legitimately shows: the student's own least-squares estimates and intervals
     (noise-free, they agree with the truth to about five digits), as the app writes them."""
-    from eha_app.tables import _num
+    from eha_app.render.tables import _num
     from eha_core.experiments import lse_data
     from eha_core.identify.lse import identify_lse
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from eha_app.state import FIELD_LABELS, KP_UNIT
+from eha_app.session.state import FIELD_LABELS, KP_UNIT
 from eha_core.params import FIELD_INFO, PARAM_NAMES
 from tests.ui.browser_helpers import Session, text_of, wait_until
 

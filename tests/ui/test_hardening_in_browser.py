@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from eha_app.state import MAX_TEXT_CHARS
+from eha_app.session.state import MAX_TEXT_CHARS
 from tests.app.test_hardening import _csv_of_size, mat_bomb
 from tests.ui.browser_helpers import ROOT, _free_port, text_of, wait_until
 
@@ -104,7 +104,7 @@ def _memory_mb(pid: int) -> dict:
 
 
 def test_a_decompression_bomb_gets_a_message_and_the_server_stays_within_its_memory(browser, own_server, tmp_path):
-    from eha_app.limits import max_bytes
+    from eha_app.runtime.limits import max_bytes
 
     url, pid = own_server
     context, page, problems, _ = _student(browser, url)

@@ -2,7 +2,7 @@
 
 import pytest
 
-from eha_app.report import build_report
+from eha_app.render.report import build_report
 from tests.ui.browser_helpers import IGNORED_CONSOLE
 
 

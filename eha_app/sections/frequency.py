@@ -14,20 +14,20 @@ from eha_core.experiments import (
     run_frequency_identification,
 )
 
-from .. import plots
-from ..exports import bode_csv, frequency_figures_zip, tf_estimate_bytes
-from ..form import Field, Form, Group, parse_fields
-from ..freshness import ResultView
-from ..glossary import GLOSSARY
-from ..layout import side_by_side
-from ..limits import check_frequency
-from ..session import ReportPart, Section, SectionSnapshot, stale_note
-from ..tables import (
+from ..render import plots
+from ..render.exports import bode_csv, frequency_figures_zip, tf_estimate_bytes
+from ..render.glossary import GLOSSARY
+from ..render.layout import side_by_side
+from ..render.tables import (
     backout_html,
     estimate_alert,
     freq_summary_html,
 )
-from ..tasks import apply_locked, held, on_click, watch
+from ..runtime.limits import check_frequency
+from ..runtime.tasks import apply_locked, held, on_click, watch
+from ..session import ReportPart, Section, SectionSnapshot, stale_note
+from ..session.form import Field, Form, Group, parse_fields
+from ..session.freshness import ResultView
 from .uploads import download
 
 __all__ = ["FrequencyPanel", "FREQ_FORM", "FREQ_DEFAULTS", "parse_freq"]
@@ -156,7 +156,7 @@ _FIGURES = (("Fig. 8 excitation", "excitation", plots.ExcitationFigure),
 class FrequencyPanel(Section):
     """Frequency domain: the closed-loop experiment, tfest, validation, back-out (Figs. 8-13).
 
-    The student's own record is a section within it (:mod:`eha_app.tabs.record`), laid out here.
+    The student's own record is a section within it (:mod:`eha_app.sections.record`), laid out here.
     """
 
     key = "frequency"

@@ -22,11 +22,11 @@ from bokeh.models import ColumnDataSource, Span
 
 from eha_core.experiments import FrequencyExperiment
 
-from .. import plots
-from ..form import Field, Form, Group, parse_fields
-from ..layout import side_by_side
+from ..render import plots
+from ..render.layout import side_by_side
+from ..runtime.tasks import apply_locked, on_click, served_document, watch
 from ..session import ReportPart, Section, SectionSnapshot
-from ..tasks import apply_locked, on_click, served_document, watch
+from ..session.form import Field, Form, Group, parse_fields
 
 __all__ = ["StudyPanel", "STUDY_FORM", "STUDY_DEFAULTS", "MAX_APP_SEEDS"]
 

@@ -33,12 +33,12 @@ from eha_core.board import (
     validation_record,
 )
 
-from .. import board_plots
-from ..form import Field, Form, Group, parse_fields
-from ..freshness import ResultView
-from ..layout import side_by_side
+from ..render import board_plots
+from ..render.layout import side_by_side
+from ..runtime.tasks import on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot, stale_note
-from ..tasks import on_click, watch
+from ..session.form import Field, Form, Group, parse_fields
+from ..session.freshness import ResultView
 
 __all__ = ["ModelBoard", "BOARD_FORM", "BOARD_DEFAULTS", "MAX_MODELS", "fit_table", "step_table"]
 

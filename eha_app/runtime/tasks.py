@@ -1,7 +1,7 @@
 """Running one session's computations on the shared queue and showing their results.
 
 :class:`SessionRunner` hands a computation to the process's
-:class:`~eha_app.jobs.JobQueue` (a worker thread computes; nothing in it
+:class:`~eha_app.runtime.jobs.JobQueue` (a worker thread computes; nothing in it
 touches Bokeh, HoloViews or Panel objects) and, when it ends, applies the
 result to the session's own document in one callback on the event loop, under
 the document's lock, with the document's events held and combined: the
@@ -423,7 +423,7 @@ class SessionRunner:
 
 @dataclass(frozen=True)
 class _Outcome:
-    """What :meth:`SessionRunner.run` does with a job's end, by its :class:`~eha_app.jobs.JobState`."""
+    """What :meth:`SessionRunner.run` does with a job's end, by its :class:`~eha_app.runtime.jobs.JobState`."""
 
     show: Callable[[Any, Job], None]
     fail: Callable[[str], None]

@@ -115,7 +115,7 @@ class Section(pn.viewable.Viewer):
         return any(getattr(v, "status", "") == "stale" for v in self.result_views())
 
     def result_views(self) -> list:
-        """The section's :class:`~eha_app.freshness.ResultView`s (none by default)."""
+        """The section's :class:`~eha_app.session.freshness.ResultView`s (none by default)."""
         return []
 
     def snapshot(self) -> SectionSnapshot:

@@ -11,12 +11,12 @@ import panel as pn
 
 from eha_core.params import FIELD_INFO, PARAM_NAMES
 
-from ..form import Field, Form, Group
-from ..layout import side_by_side
+from ..render.layout import side_by_side
+from ..render.tables import derived_html
+from ..runtime.tasks import on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot
-from ..state import FIELD_LABELS, AppState
-from ..tables import derived_html
-from ..tasks import on_click, watch
+from ..session.form import Field, Form, Group
+from ..session.state import FIELD_LABELS, AppState
 
 __all__ = ["ParametersTab", "SCHEMATIC_PATH", "PARAMETER_FORM"]
 
@@ -80,7 +80,7 @@ def form_groups(hidden=()) -> list[Group]:
 class ParametersTab(Section):
     """Step 1 of the paper: fill in the physical parameters (Fig. 15).
 
-    Its fields are the session's :class:`~eha_app.state.AppState`: they exist (from the page's
+    Its fields are the session's :class:`~eha_app.session.state.AppState`: they exist (from the page's
     address or a settings file) before the tab is made, and in an exercise the hidden ones are
     neither shown, saved nor loaded.
     """
@@ -126,7 +126,7 @@ class ParametersTab(Section):
 
     @classmethod
     def report(cls, snapshot: SectionSnapshot, hidden=()) -> ReportPart:
-        from ..tables import table_html
+        from ..render.tables import table_html
 
         rows = [[html.escape(FIELD_LABELS.get(k, k)), html.escape(v)] for k, v in snapshot.settings.items()]
         body = table_html(["", "value (as typed, display units)"], rows)

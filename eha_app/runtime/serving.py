@@ -40,7 +40,7 @@ __all__ = ["ENTRY_POINT", "LOG_FORMAT", "UNUSED_SESSION_MS", "WEBSOCKET_MAX_MESS
            "default_origins", "lan_address", "local_names", "nginx_config", "nginx_standalone_config",
            "use_local_resources", "share_port", "supervise", "quiet_closed_websockets"]
 
-ENTRY_POINT = Path(__file__).resolve().parent / "eha.py"
+ENTRY_POINT = Path(__file__).resolve().parents[1] / "eha.py"
 #: A closed page's session (and its computations) ends this long after its websocket closed.
 UNUSED_SESSION_MS = 4000
 #: How often the server looks for closed sessions.
@@ -51,7 +51,7 @@ LOG_FORMAT = "%(asctime)s %(levelname)s %(message)s"
 
 #: The largest message a page may send (Tornado closes the websocket beyond it, and the student's
 #: page with it; Bokeh's default is 20 MiB): an upload at the app's limit, which the page's
-#: :class:`~eha_app.tabs.uploads.FileUpload` sends as one message of raw bytes, with room to spare.
+#: :class:`~eha_app.sections.uploads.FileUpload` sends as one message of raw bytes, with room to spare.
 WEBSOCKET_MAX_MESSAGE_BYTES = MAX_DATA_BYTES + 2**20
 
 

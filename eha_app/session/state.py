@@ -13,7 +13,7 @@ those it ties, and names the others with their values.
 
 Examples
 --------
->>> from eha_app.state import AppState
+>>> from eha_app.session.state import AppState
 >>> s = AppState()
 >>> s.set_text("M", "-5")
 >>> s.valid, s.errors["M"]
@@ -262,7 +262,7 @@ class AppState(param.Parameterized):
     student = param.String(default="", doc="the student's normalised id in an exercise")
     secret = param.Dict(default={}, doc="hidden parameters' SI values: used, never shown")
     exercise = param.Parameter(default=None, doc="the eha_core.exercise.Exercise being run, if any")
-    handins = param.Parameter(default=None, doc="where the exercise's hand-ins go (eha_app.handins.HandIns)")
+    handins = param.Parameter(default=None, doc="where the exercise's hand-ins go (eha_app.runtime.handins.HandIns)")
 
     def __init__(self, **kwargs):
         # the fields in the order they were last typed (the last typed last)
@@ -289,7 +289,7 @@ class AppState(param.Parameterized):
 
         student = normalize_id(student_id)
         actuator = exercise.student_params(student)
-        from .redaction import keep_out_of_logs
+        from ..runtime.redaction import keep_out_of_logs
 
         self.exercise = exercise
         self.handins = handins

@@ -16,13 +16,13 @@ from eha_core.experiments import PAPER_CASES, run_paper_cases
 from eha_core.signals import ZERO, Chirp, Sine, Square, Step, WhiteNoise
 from eha_core.simulate import runs_to_pandas, simulate_many
 
-from ..form import Field, Form, Group, InputError, parse_fields
-from ..freshness import ResultView
-from ..layout import side_by_side
-from ..limits import check_simulation
-from ..plots import TimeSeriesGrid
+from ..render.layout import side_by_side
+from ..render.plots import TimeSeriesGrid
+from ..runtime.limits import check_simulation
+from ..runtime.tasks import apply_locked, on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot, stale_note
-from ..tasks import apply_locked, on_click, watch
+from ..session.form import Field, Form, Group, InputError, parse_fields
+from ..session.freshness import ResultView
 
 __all__ = ["SimulationTab", "SimulationRequest", "SIMULATION_FORM", "build_inputs", "parse_t_end", "compute_runs"]
 

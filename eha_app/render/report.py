@@ -5,8 +5,8 @@
 self-contained file: Bokeh's JavaScript is inlined, so it opens offline and
 its plots stay interactive), the data behind it as CSV in ``data/``, and
 ``data/results.json`` with every number (:meth:`Reproduction.numbers`).
-Figures and tables come from the app's own builders (:mod:`eha_app.plots`,
-:mod:`eha_app.tables`); nothing here computes physics, and every sentence is
+Figures and tables come from the app's own builders (:mod:`eha_app.render.plots`,
+:mod:`eha_app.render.tables`); nothing here computes physics, and every sentence is
 filled in from the computed numbers and the parameters they were computed for.
 """
 

@@ -16,15 +16,15 @@ import panel as pn
 
 from eha_core.board import BoardModel
 
-from .. import plots
-from ..exports import bode_csv, tf_estimate_bytes
-from ..form import Field, Form, Group
-from ..formatting import tf_html
-from ..freshness import ResultView
-from ..glossary import term
+from ..render import plots
+from ..render.exports import bode_csv, tf_estimate_bytes
+from ..render.formatting import tf_html
+from ..render.glossary import term
+from ..render.tables import estimate_alert, estimation_sentences
+from ..runtime.tasks import apply_locked, on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot, stale_note
-from ..tables import estimate_alert, estimation_sentences
-from ..tasks import apply_locked, on_click, watch
+from ..session.form import Field, Form, Group
+from ..session.freshness import ResultView
 from .uploads import ColumnMapping, FileUpload, check_size, download, upload_name
 
 __all__ = ["RecordPanel", "RECORD_COLUMNS"]

@@ -219,7 +219,7 @@ class Form(JSComponent):
     _priority_changes = ["values"]
 
     _esm = """
-// a field holds at most this many characters (eha_app.state.MAX_TEXT_CHARS): every
+// a field holds at most this many characters (eha_app.session.state.MAX_TEXT_CHARS): every
 // field goes into the page's address, which must stay short enough to load
 const MAX_CHARS = __MAX_CHARS__
 export function render({ model, el }) {

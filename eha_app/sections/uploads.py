@@ -13,7 +13,7 @@ from panel.custom import JSComponent
 
 from eha_core.data import MAX_DATA_BYTES
 
-from ..tasks import on_click
+from ..runtime.tasks import on_click
 
 __all__ = ["MAX_UPLOAD_BYTES", "FileUpload", "check_size", "upload_name", "ColumnMapping", "download"]
 
@@ -28,7 +28,7 @@ def _too_big(filename: str, size: int, limit: int) -> str:
 
 def upload_name(filename: str | None) -> str:
     """An upload's name as the page shows and exports it: the page sends it, so it is bounded here."""
-    from ..state import shown_text
+    from ..session.state import shown_text
 
     return shown_text(filename or "upload", 80)
 

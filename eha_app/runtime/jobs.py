@@ -21,7 +21,7 @@ another student's 0.08 s simulation waited 78 s. The rules here:
   before anyone's computation.
 
 Per-request limits (steps and memory) are checked before a job is queued, in
-the tabs, with :mod:`eha_app.limits`.
+the tabs, with :mod:`eha_app.runtime.limits`.
 """
 
 from __future__ import annotations

@@ -28,19 +28,19 @@ from eha_core.identify.lse import identify_lse
 from eha_core.params import ParameterError
 from eha_core.signals import SignalSpecError, parse_signal
 
-from .. import plots
-from ..form import Field, Form, Group, parse_fields
-from ..freshness import ResultView
-from ..glossary import term
-from ..layout import side_by_side
-from ..limits import check_lse
-from ..session import ReportPart, Section, SectionSnapshot, stale_note
-from ..tables import (
+from ..render import plots
+from ..render.glossary import term
+from ..render.layout import side_by_side
+from ..render.tables import (
     SCENARIOS,
     lse_table_html,
     table4_html,
 )
-from ..tasks import apply_locked, on_click, watch
+from ..runtime.limits import check_lse
+from ..runtime.tasks import apply_locked, on_click, watch
+from ..session import ReportPart, Section, SectionSnapshot, stale_note
+from ..session.form import Field, Form, Group, parse_fields
+from ..session.freshness import ResultView
 from .uploads import ColumnMapping, FileUpload, check_size, download, upload_name
 
 __all__ = ["LeastSquaresPanel", "LseRequest", "LSE_FORM", "LSE_DEFAULTS", "parse_lse"]

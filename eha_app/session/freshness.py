@@ -10,7 +10,7 @@ student has to run it again, the run being too long to start on every
 keystroke). :meth:`ResultView.shown` records the key of freshly drawn content.
 
 The mark is a class on the view's container (``eha-current``, ``eha-updating``,
-``eha-out-of-date``; styled in :data:`eha_app.tables.CSS`: an updating view is
+``eha-out-of-date``; styled in :data:`eha_app.render.tables.CSS`: an updating view is
 outlined, a stale one dimmed) and, for a stale one, a line of text above it
 (:attr:`ResultView.banner`) that says why and what to do. Both are Panel objects of the
 session's own document, changed from the session's callbacks.

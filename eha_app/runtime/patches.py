@@ -20,7 +20,7 @@ Component resources (Panel 1.9, ``panel.io.server.ComponentResourceHandler``)
 The strict mode (Bokeh 3.9, ``DocumentCallbackManager.trigger_on_change``)
     Every change to a served page must be made under its document's lock, on
     the server's event loop: from a locked callback (a click, a next-tick or
-    timeout callback, :func:`eha_app.tasks.apply_locked`). A change made
+    timeout callback, :func:`eha_app.runtime.tasks.apply_locked`). A change made
     elsewhere (a worker thread, Panel's lock-free handling of a priority
     change) sometimes works and sometimes raises later, somewhere else: a
     student who had shown tab 2 could no longer update tab 1. With
