@@ -4,7 +4,7 @@ from pathlib import Path
 import pytest
 
 # Every server the suite starts runs in strict mode: a change to a page made outside its
-# document's lock raises at once, naming the line that made it (eha_app/patches.py).
+# document's lock raises at once, naming the line that made it (eha_app/runtime/patches.py).
 os.environ.setdefault("EHA_STRICT", "1")
 
 @pytest.fixture(scope="session", autouse=True)

@@ -22,7 +22,7 @@ __all__ = ["exercises_under", "leaks_in_logs"]
 
 def exercises_under(folder: Path) -> list[tuple[object, list[str]]]:
     """The exercises made under ``folder`` with the students of their hand-in databases."""
-    from eha_app.handins import handins_path
+    from eha_app.runtime.handins import handins_path
     from eha_core.exercise import Exercise
 
     found = []
@@ -47,7 +47,7 @@ def exercises_under(folder: Path) -> list[tuple[object, list[str]]]:
 
 def leaks_in_logs(logs: list[Path], exercises) -> list[str]:
     """``file: what`` for every secret or hidden value found in one of ``logs``."""
-    from eha_app.redaction import number_forms
+    from eha_app.runtime.redaction import number_forms
 
     needles: dict[str, str] = {}
     for ex, students in exercises:
