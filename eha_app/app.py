@@ -26,7 +26,6 @@ from .runtime.tasks import (
     SessionRunner,
     apply_locked,
     frozen_models,
-    layout_once_per_message,
     on_click,
     served_document,
     watch,
@@ -212,6 +211,18 @@ def serve_session() -> None:
     create_app(query=query).servable(title="EHA: modeling and identification", location=False)
 
 
+_patch_warned: set[str] = set()
+
+
+def _patches_reported(event) -> None:
+    """A page said which library patches took effect: say once per process if one did not."""
+    for name, applied in (event.new or {}).items():
+        if not applied and name not in _patch_warned:
+            _patch_warned.add(name)
+            log.warning("the page's %s patch found none of the internals it needs (a newer Bokeh?): pages "
+                        "still work, more slowly; see eha_app/runtime/patches.py", name)
+
+
 def create_app(state: AppState | None = None, *, query: dict | None = None, runner: SessionRunner | None = None):
     """The whole page for one session: a :class:`Page` (``page.session`` is its :class:`Session`).
 
@@ -220,8 +231,6 @@ def create_app(state: AppState | None = None, *, query: dict | None = None, runn
     is not allowed is shown with its message, as if typed.
     """
     _session_style()
-    # before the page is sent (an exercise's runner is made only after the student's id)
-    layout_once_per_message(served_document())
     session = Session(state, query=query, runner=runner)
     page = Page(session)
     if served_document() is not None:
@@ -246,10 +255,14 @@ class Page(pn.viewable.Viewer):
         self.settings_note = pn.pane.HTML("", css_classes=["eha-settings-note"], styles={"font-size": "12px"},
                                           sizing_mode="stretch_width")
         self.layout = pn.Column(sizing_mode="stretch_width", margin=(0, 10))
+        # on every page, the gate of an exercise included: the lost connection's notice and the
+        # page's one layout per message, which it reports
+        self.connection = ConnectionWatch()
+        watch(self.connection, _patches_reported, "patches")
         exercise = current_exercise()
         if exercise is not None and not session.student:
             self.gate = ExerciseGate(*exercise, session.state, self._start)
-            self.layout.objects = [self.gate.layout]
+            self.layout.objects = [self.connection, self.gate.layout]
         else:
             self._start(first=True)
 
@@ -288,7 +301,7 @@ class Page(pn.viewable.Viewer):
             '<h2 style="margin:4px 0">Electro-hydraulic actuator: modeling and identification</h2>'
             f'<span style="color:#666">a single-rod cylinder driven by a proportional valve</span>{who}</div>',
             sizing_mode="stretch_width")
-        self.layout.objects = [ConnectionWatch(), header, self._settings_row(), self.tabs.tabs]
+        self.layout.objects = [self.connection, header, self._settings_row(), self.tabs.tabs]
 
     def _make_tab(self, name: str):
         placements = self.session.registry.on_tab(name)

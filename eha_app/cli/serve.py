@@ -155,9 +155,9 @@ def run(args) -> int:
             threading.Timer(8.0, webbrowser.open, args=(url,)).start()
         return supervise(child, args.num_procs)
     if args.share_port:
-        from eha_app.runtime.serving import share_port
+        from eha_app.runtime.patches import bind_port_shared
 
-        share_port()
+        bind_port_shared()
     from panel.command import main as panel_main
 
     from eha_app.runtime.patches import refuse_foreign_components

@@ -9,13 +9,18 @@ A restarted server has no memory of the old session, but nothing typed is
 lost: every form writes its fields into the page's address as they are typed,
 and the app reads them back when it starts (:func:`eha_app.app.create_app`).
 
-It also keeps the address in step with the open tab (``tab=2``).
+It also keeps the address in step with the open tab (``tab=2``), and installs
+the page's one layout per message
+(:data:`~eha_app.runtime.patches.LAYOUT_ONCE_JS`), reporting in ``patches``
+whether it took effect.
 """
 
 from __future__ import annotations
 
 import param
 from panel.custom import JSComponent
+
+from .patches import LAYOUT_ONCE_JS
 
 __all__ = ["ConnectionWatch"]
 
@@ -25,11 +30,17 @@ class ConnectionWatch(JSComponent):
 
     retry_ms = param.Integer(default=2000, bounds=(100, None))
     tabs_class = param.String(default="eha-main-tabs", doc="css class of the Tabs whose index goes into the URL")
+    patches = param.Dict(default={}, doc="what the page reports of the library patches it installed, e.g. "
+                                         "{'layout_once': True}")
 
-    _esm = """
+    _esm = LAYOUT_ONCE_JS + """
 export function render({ view, model, el }) {
   el.style.display = 'none'
   const doc = view.model.document
+  // one layout per message from the server: the page says whether BokehJS had what it needs
+  const applied = { layout_once: ehaLayoutOncePerMessage(doc) }
+  window.__eha_patches = applied
+  model.patches = applied
   let overlay = null
   let lost = false
   function show(text) {

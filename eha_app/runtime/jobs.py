@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from eha_core.cancel import Cancelled, CancelToken
+from eha_core.errors import not_allowed
 
 __all__ = ["Job", "JobState", "JobQueue", "default_queue", "worker_count", "session_name"]
 
@@ -54,9 +55,9 @@ def worker_count() -> int:
         try:
             n = int(env)
         except ValueError:
-            raise ValueError(f"EHA_WORKERS = {env} is not allowed: use a whole number >= 1") from None
+            raise not_allowed("EHA_WORKERS", env, "use a whole number >= 1") from None
         if n < 1:
-            raise ValueError(f"EHA_WORKERS = {env} is not allowed: use a whole number >= 1")
+            raise not_allowed("EHA_WORKERS", env, "use a whole number >= 1")
         return n
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
 
@@ -139,7 +140,7 @@ class JobQueue:
     def __init__(self, workers: int | None = None, *, nice: int = WORKER_NICE, name: str = "eha-worker"):
         self.workers = worker_count() if workers is None else int(workers)
         if self.workers < 1:
-            raise ValueError(f"workers = {workers} is not allowed: use 1 or more")
+            raise not_allowed("workers", workers, "use 1 or more")
         self._nice = nice
         self._cond = threading.Condition()
         self._queued: dict[Hashable, Job] = {}

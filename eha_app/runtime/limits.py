@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 
+from eha_core.errors import FieldError, not_allowed
 from eha_core.simulate import DEFAULT_H_MAX, simulation_cost
 
 __all__ = ["max_steps", "max_bytes", "check_cost", "check_simulation", "check_frequency", "check_lse"]
@@ -30,9 +31,9 @@ def _env_int(name: str, default: int) -> int:
     try:
         value = int(float(text))
     except ValueError:
-        raise ValueError(f"{name} = {text} is not allowed: use a whole number > 0") from None
+        raise not_allowed(name, text, "use a whole number > 0") from None
     if value <= 0:
-        raise ValueError(f"{name} = {text} is not allowed: use a whole number > 0")
+        raise not_allowed(name, text, "use a whole number > 0")
     return value
 
 
@@ -48,37 +49,36 @@ def _millions(n: float) -> str:
     return f"{n / 1e6:.3g} M"
 
 
-def check_cost(what: str, steps: int, peak_bytes: int, simulated_s: float, hint: str) -> None:
-    """ValueError with a message when ``steps`` or ``peak_bytes`` exceed the limits.
+def check_cost(name: str, value_text: str, steps: int, peak_bytes: int, simulated_s: float, hint: str) -> None:
+    """A :class:`~eha_core.errors.FieldError` when ``steps`` or ``peak_bytes`` exceed the limits.
 
-    ``simulated_s`` is the simulated time the steps stand for, ``hint`` what
-    the user can change.
+    ``name = value_text`` is what was asked (``N × Ts = 20000 × 0.5 s``),
+    ``simulated_s`` the simulated time the steps stand for, ``hint`` what the
+    user can change.
     """
     limit_steps, limit_bytes = max_steps(), max_bytes()
     if steps > limit_steps:
         per_second = steps / simulated_s if simulated_s > 0 else 1.0 / DEFAULT_H_MAX
-        raise ValueError(
-            f"{what} is not allowed here: it simulates {simulated_s:.6g} s, {_millions(steps)} integration steps, "
-            f"and this server allows {_millions(limit_steps)} per run (about {limit_steps / per_second:.4g} s "
-            f"simulated): {hint}.")
+        raise FieldError(name, value_text, f"it simulates {simulated_s:.6g} s, {_millions(steps)} integration "
+                         f"steps, and this server allows {_millions(limit_steps)} per run (about "
+                         f"{limit_steps / per_second:.4g} s simulated): {hint}.", context="here")
     if peak_bytes > limit_bytes:
-        raise ValueError(
-            f"{what} is not allowed here: it needs about {peak_bytes / 2**20:.0f} MB of memory and this server "
-            f"allows {limit_bytes / 2**20:.0f} MB per run: {hint}.")
+        raise FieldError(name, value_text, f"it needs about {peak_bytes / 2**20:.0f} MB of memory and this server "
+                         f"allows {limit_bytes / 2**20:.0f} MB per run: {hint}.", context="here")
 
 
 def check_simulation(t_end: float, dt: float, *, n_runs: int = 1) -> None:
     """The simulation tab's runs (open loop, ``n_runs`` runs of ``t_end`` s)."""
     cost = simulation_cost(t_end, dt, n_runs=n_runs)
-    check_cost(f"{n_runs} run{'s' if n_runs != 1 else ''} of {t_end:g} s", cost.steps, cost.peak_bytes,
-               n_runs * t_end, "shorten the horizon")
+    check_cost("runs × horizon", f"{n_runs} × {t_end:g} s", cost.steps, cost.peak_bytes, n_runs * t_end,
+               "shorten the horizon")
 
 
 def check_frequency(config) -> None:
     """The closed-loop experiment (estimation and validation runs, tfest)."""
     cost = config.cost()
     duration = config.n_samples * config.ts
-    check_cost(f"N × Ts = {config.n_samples} × {config.ts:g} s", cost.steps, cost.peak_bytes, 2 * duration,
+    check_cost("N × Ts", f"{config.n_samples} × {config.ts:g} s", cost.steps, cost.peak_bytes, 2 * duration,
                "lower N or Ts")
 
 
@@ -87,5 +87,5 @@ def check_lse(t_end: float) -> None:
     from eha_core.experiments import lse_cost
 
     cost = lse_cost(t_end, resimulation=True)
-    check_cost(f"the least-squares experiment over {t_end:g} s", cost.steps, cost.peak_bytes, t_end,
+    check_cost("least-squares excitation", f"{t_end:g} s", cost.steps, cost.peak_bytes, t_end,
                "use a shorter excitation")

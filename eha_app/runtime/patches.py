@@ -17,6 +17,35 @@ Component resources (Panel 1.9, ``panel.io.server.ComponentResourceHandler``)
     name is a Parameterized class (every Panel component is one); the
     component's own checks (listed attribute, listed file) still apply.
 
+One layout per message (BokehJS 3.9, ``Document._apply_json_patch`` and ``LayoutDOMView.invalidate_layout``)
+    BokehJS lays the whole page out again, synchronously, for every changed
+    property that can move something (a class, a visibility, a size): 60-150 ms
+    each on tab 3, and a frequency-domain result clears twelve out-of-date
+    marks. :data:`LAYOUT_ONCE_JS` (run by every page's
+    :class:`~eha_app.runtime.connection.ConnectionWatch` when it renders) notes
+    the layouts invalidated while one message from the server is applied and
+    does each root's once, when the message is applied. The page reports
+    whether it found those internals (``ConnectionWatch.patches``, and
+    ``window.__eha_patches`` for the browser tests); the server logs a warning
+    when a page reports it did not (the page still works, only slower).
+    No public API lays out once per message.
+
+Is the event loop busy? (CPython 3.10-3.13 ``asyncio.BaseEventLoop._ready``)
+    The page updates wait until nothing else is ready to run
+    (:class:`~eha_app.runtime.tasks.PageUpdates`): a student typing goes
+    first. asyncio has no public way to ask; :func:`loop_has_work` reads the
+    queue of CPython's own loops, chosen by the loop's type, and calls any
+    other loop (uvloop) idle, which only makes the page updates less polite.
+
+One port, several processes (Bokeh 3.9, ``bokeh.server.server.bind_sockets``)
+    ``eha serve --num-procs N`` runs N processes on one port with
+    ``SO_REUSEPORT``, so that Linux spreads the students evenly (Bokeh's own
+    forked processes put 28 of 30 students in one of two). Bokeh's ``Server``
+    binds its sockets itself, through a function of its module and without
+    that option; :func:`bind_port_shared` replaces that function. The
+    public route, ``BaseServer`` with sockets of our own, would mean building
+    Panel's server by hand instead of running ``panel serve``.
+
 The strict mode (Bokeh 3.9, ``DocumentCallbackManager.trigger_on_change``)
     Every change to a served page must be made under its document's lock, on
     the server's event loop: from a locked callback (a click, a next-tick or
@@ -33,10 +62,14 @@ from __future__ import annotations
 import sys
 
 __all__ = ["COMPONENT_PACKAGES", "WRITTEN_FOR", "component_allowed", "refuse_foreign_components",
-           "strict_page_changes", "UnlockedChange", "strict_mode_on"]
+           "strict_page_changes", "UnlockedChange", "strict_mode_on", "LAYOUT_ONCE_JS", "loop_has_work",
+           "bind_port_shared"]
 
-#: The library versions these changes were written against (checked by the tests).
+#: The library versions these changes were written against (checked by the tests; pyproject.toml
+#: keeps both below their next minor version).
 WRITTEN_FOR = {"panel": "1.9", "bokeh": "3.9"}
+#: The Pythons whose asyncio loop :func:`loop_has_work` reads (``BaseEventLoop._ready``).
+PYTHONS = ((3, 10), (3, 11), (3, 12), (3, 13))
 
 #: Top-level packages whose components' resources the server may serve.
 COMPONENT_PACKAGES = ("panel", "eha_app")
@@ -94,6 +127,78 @@ def refuse_foreign_components() -> None:
             self.finish(f"{status_code}: not found" if status_code == 404 else str(status_code))
 
     panel_server.ComponentResourceHandler = GuardedComponentResourceHandler
+
+
+#: BokehJS: ``ehaLayoutOncePerMessage(doc)`` installs one layout per message on ``doc`` and returns
+#: whether it found the internals it needs (see the module docstring). Pasted into the ESM of
+#: :class:`~eha_app.runtime.connection.ConnectionWatch`.
+LAYOUT_ONCE_JS = """
+function ehaLayoutOncePerMessage(doc) {
+  if (doc == null || typeof doc._apply_json_patch !== "function") { return false; }
+  if (doc.__eha_layout_once) { return true; }
+  let proto = null;
+  try {
+    const column = Bokeh.Models.get("Column");
+    proto = column != null ? column.prototype.default_view.prototype : null;
+    while (proto != null && proto.constructor.__name__ !== "LayoutDOMView") { proto = Object.getPrototypeOf(proto); }
+  } catch (e) { proto = null; }
+  if (proto == null || typeof proto.invalidate_layout !== "function") { return false; }
+  doc.__eha_layout_once = true;
+  const LayoutDOMView = proto.constructor;
+  const invalidate = proto.invalidate_layout;
+  if (!invalidate.__eha_deferring) {
+    const deferring = function () {
+      const pending = window.__eha_layout_pending;
+      if (pending != null && !(this.parent instanceof LayoutDOMView)) { pending.add(this); return; }
+      return invalidate.call(this);
+    };
+    deferring.__eha_deferring = true;
+    proto.invalidate_layout = deferring;
+  }
+  const apply = doc._apply_json_patch;
+  doc._apply_json_patch = function (...args) {
+    if (window.__eha_layout_pending != null) { return apply.apply(this, args); }
+    const pending = window.__eha_layout_pending = new Set();
+    try {
+      return apply.apply(this, args);
+    } finally {
+      window.__eha_layout_pending = null;
+      for (const view of pending) {
+        try { view.invalidate_layout(); } catch (e) { console.error(e); }
+      }
+    }
+  };
+  return true;
+}
+"""
+
+
+def loop_has_work(loop) -> bool:
+    """Does ``loop`` have callbacks ready to run now? (see the module docstring; False for a loop
+    that is not one of CPython's, which cannot tell)."""
+    import asyncio
+
+    return isinstance(loop, asyncio.BaseEventLoop) and bool(getattr(loop, "_ready", ()))
+
+
+def bind_port_shared() -> None:
+    """Make this process's Bokeh server bind its port with ``SO_REUSEPORT`` (see the module docstring).
+
+    Then several processes can listen on one port and Linux hands each new
+    connection to one of them by a hash of its addresses: an even spread.
+    """
+    import bokeh.server.server as bokeh_server
+    from tornado import netutil
+
+    if getattr(bokeh_server.bind_sockets, "eha_shared", False):
+        return
+
+    def bind_sockets(address, port):
+        sockets = netutil.bind_sockets(port=port or 0, address=address, reuse_port=True)
+        return sockets, sockets[0].getsockname()[1]
+
+    bind_sockets.eha_shared = True
+    bokeh_server.bind_sockets = bind_sockets
 
 
 class UnlockedChange(RuntimeError):

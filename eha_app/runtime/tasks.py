@@ -19,9 +19,9 @@ Three details learnt the hard way:
   whole page again, synchronously, for every changed property that can move
   something (a class, a visibility, a size), 60-150 ms each on tab 3. The
   twelve out-of-date marks a frequency-domain result clears cost the browser
-  a second. :func:`layout_once_per_message` makes it lay the page out once per
-  message instead (installed on every served session's page by
-  :func:`eha_app.app.create_app`).
+  a second. The page lays itself out once per message instead
+  (:data:`eha_app.runtime.patches.LAYOUT_ONCE_JS`, installed by every page's
+  :class:`~eha_app.runtime.connection.ConnectionWatch`).
 
 Without a server (tests, a notebook) the computation runs at once in the
 calling thread and its result is shown directly.
@@ -33,7 +33,6 @@ import collections
 import logging
 import threading
 import time
-import weakref
 from collections.abc import Callable, Hashable, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -48,7 +47,7 @@ from eha_core.cancel import Cancelled, CancelToken
 
 from .jobs import Job, JobQueue, JobState, default_queue
 
-__all__ = ["SessionRunner", "PageUpdates", "apply_locked", "frozen_models", "held", "layout_once_per_message",
+__all__ = ["SessionRunner", "PageUpdates", "apply_locked", "frozen_models", "held",
            "LOADING_DELAY_S", "served_document", "holds_lock", "locked", "watch", "on_click", "note_loop_thread"]
 
 log = logging.getLogger("eha_app")
@@ -134,63 +133,6 @@ def held():
         yield
 
 
-#: BokehJS, when the page is ready: while the document applies one message from the
-#: server, a layout invalidated anywhere is only noted, by its root; each noted root is
-#: laid out once when the whole message is applied, before the browser paints. Without
-#: it every changed class or visibility lays out the whole page at once (BokehJS 3.9:
-#: ``LayoutDOMView.invalidate_layout``). If BokehJS's internals are not found it does nothing.
-_LAYOUT_ONCE_JS = """
-const doc = cb_obj;
-if (doc == null || doc.__eha_layout_once || typeof doc._apply_json_patch !== "function") { return; }
-let proto = null;
-try {
-  const column = Bokeh.Models.get("Column");
-  proto = column != null ? column.prototype.default_view.prototype : null;
-  while (proto != null && proto.constructor.__name__ !== "LayoutDOMView") { proto = Object.getPrototypeOf(proto); }
-} catch (e) { proto = null; }
-if (proto == null || typeof proto.invalidate_layout !== "function") { return; }
-doc.__eha_layout_once = true;
-const LayoutDOMView = proto.constructor;
-const invalidate = proto.invalidate_layout;
-if (!invalidate.__eha_deferring) {
-  const deferring = function () {
-    const pending = window.__eha_layout_pending;
-    if (pending != null && !(this.parent instanceof LayoutDOMView)) { pending.add(this); return; }
-    return invalidate.call(this);
-  };
-  deferring.__eha_deferring = true;
-  proto.invalidate_layout = deferring;
-}
-const apply = doc._apply_json_patch;
-doc._apply_json_patch = function (...args) {
-  if (window.__eha_layout_pending != null) { return apply.apply(this, args); }
-  const pending = window.__eha_layout_pending = new Set();
-  try {
-    return apply.apply(this, args);
-  } finally {
-    window.__eha_layout_pending = null;
-    for (const view of pending) {
-      try { view.invalidate_layout(); } catch (e) { console.error(e); }
-    }
-  }
-};
-"""
-
-_layout_once_docs: weakref.WeakSet = weakref.WeakSet()
-
-
-def layout_once_per_message(doc) -> None:
-    """Have the browser lay out ``doc``'s page once per message from the server (see
-    :data:`_LAYOUT_ONCE_JS`). Call it before the page is sent (it runs when the page is
-    ready); once per document is enough, more calls do nothing."""
-    if doc is None or doc in _layout_once_docs:
-        return
-    from bokeh.models import CustomJS
-
-    _layout_once_docs.add(doc)
-    doc.js_on_event("document_ready", CustomJS(code=_LAYOUT_ONCE_JS))
-
-
 class PageUpdates:
     """The server's big page changes, one at a time, when the event loop is idle.
 
@@ -252,9 +194,9 @@ class PageUpdates:
             self._task = self._loop.create_task(self._work())
 
     def _loop_busy(self) -> bool:
-        # asyncio keeps the callbacks ready to run in ``_ready`` (CPython's
-        # base event loop); if a loop does not, every moment counts as idle
-        return bool(getattr(self._loop, "_ready", None))
+        from .patches import loop_has_work
+
+        return loop_has_work(self._loop)
 
     async def _work(self) -> None:
         import asyncio

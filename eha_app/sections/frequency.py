@@ -9,6 +9,7 @@ import numpy as np
 import panel as pn
 
 from eha_core.board import BoardModel
+from eha_core.errors import FieldError
 from eha_core.experiments import (
     FrequencyExperiment,
     run_frequency_identification,
@@ -109,7 +110,7 @@ def _parse_delay(text) -> tuple[float | str, str]:
         if not (math.isfinite(value) and value >= 0):
             raise ValueError
     except ValueError:
-        return 0.0, f"input delay = {raw} is not allowed: enter a time >= 0 s, or estimate"
+        return 0.0, str(FieldError("input delay", raw, "enter a time >= 0 s, or estimate", value_text=raw))
     return value, ""
 
 
@@ -138,8 +139,8 @@ def parse_freq(texts: dict, kp: float = _DEFAULT_CONFIG.kp) -> tuple[FrequencyEx
     except (ValueError, TypeError) as exc:
         message = " ".join(str(exc).split())
         if getattr(exc, "field", "") == "input_delay":   # the field's label and the text as typed
-            return None, {"input_delay": f"input delay = {str(texts.get('input_delay', '')).strip()} is not "
-                                         f"allowed: {exc.what}"}
+            typed = str(texts.get("input_delay", "")).strip()
+            return None, {"input_delay": exc.render("input delay", value_text=typed)}
         return None, {_field_of(exc): message}
     return cfg, {}
 

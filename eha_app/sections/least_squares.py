@@ -14,6 +14,7 @@ import numpy as np
 import panel as pn
 
 from eha_core.board import lse_model
+from eha_core.errors import FieldError
 from eha_core.experiments import (
     LSE_INPUT,
     LSE_INPUT_RICH,
@@ -129,8 +130,8 @@ def parse_lse(texts: dict) -> tuple[LseRequest, dict]:
             if not (math.isfinite(freq) and 0 < freq < MAX_FREQ_HZ):
                 raise ValueError
         except ValueError:
-            errors["lse_freq"] = (f"harmonic frequency = {text} is not allowed: a number in (0, {MAX_FREQ_HZ:g}) "
-                                  f"Hz, or blank to estimate it")
+            errors["lse_freq"] = str(FieldError("harmonic frequency", text, f"a number in (0, {MAX_FREQ_HZ:g}) Hz, "
+                                                "or blank to estimate it", value_text=text))
             freq = None
     req = LseRequest(scenario=values.get("lse_scenario", "none"), custom=texts.get("lse_custom", ""),
                      model=values.get("lse_model", "constant"), frequency_hz=freq,
@@ -258,19 +259,21 @@ class LeastSquaresPanel(Section):
                 if not math.isfinite(v):
                     raise ValueError
             except ValueError:
-                errors[name] = f"{label} = {text} is not allowed: enter a time in s, or leave it blank"
+                errors[name] = str(FieldError(label, text, "enter a time in s, or leave it blank", value_text=text))
                 continue
             if not t[0] <= v <= t[-1]:
-                errors[name] = f"{label} = {text} s is not allowed: your record runs from {t[0]:g} to {t[-1]:g} s"
+                errors[name] = str(FieldError(label, text, f"your record runs from {t[0]:g} to {t[-1]:g} s",
+                                              value_text=f"{text} s"))
             values[name] = v
         if not errors:
             lo, hi = values.get("own_from", t[0]), values.get("own_to", t[-1])
             n = int(np.count_nonzero((t >= lo) & (t <= hi)))
             if n < 50:
                 target = "own_to" if "own_to" in values else "own_from"
-                errors[target] = (f"{'to t' if target == 'own_to' else 'from t'} = "
-                                  f"{self.window_form.values[target]} s is not allowed: the range [{lo:g}, {hi:g}] s "
-                                  f"holds {n} samples; need at least 50")
+                typed = str(self.window_form.values[target])
+                errors[target] = str(FieldError("to t" if target == "own_to" else "from t", typed,
+                                                f"the range [{lo:g}, {hi:g}] s holds {n} samples; need at least 50",
+                                                value_text=f"{typed} s"))
         return errors
 
     def windowed(self):

@@ -104,7 +104,7 @@ def parse_t_end(text: str, dt: float = DT) -> float:
     value = _FIELDS["t_end"].parse(text)
     n = round(value / dt)
     if abs(n * dt - value) > 1e-9:
-        raise InputError("t_end", f"horizon = {str(text).strip()} is not allowed: use a whole number of milliseconds")
+        raise InputError("t_end", "horizon", str(text).strip(), "use a whole number of milliseconds")
     return n * dt
 
 
@@ -414,7 +414,7 @@ class SimulationTab(Section):
         """The runs for the current request (also used without a browser)."""
         req, errors = self.request()
         if errors:
-            raise InputError(next(iter(errors)), next(iter(errors.values())))
+            raise ValueError(next(iter(errors.values())))         # the form's message, as rendered
         return compute_runs(self.state.params, req, model, cancel)
 
     def run(self, model: str, *, auto: bool = False):

@@ -12,6 +12,7 @@ import param
 from panel.custom import JSComponent
 
 from eha_core.data import MAX_DATA_BYTES
+from eha_core.errors import FieldError
 
 from ..runtime.tasks import on_click
 
@@ -23,7 +24,13 @@ MAX_UPLOAD_BYTES = MAX_DATA_BYTES
 
 
 def _too_big(filename: str, size: int, limit: int) -> str:
-    return f"your file = {filename!r} is not allowed: it has {size / 1e6:.1f} MB; at most {limit / 1e6:g} MB"
+    return str(FieldError("your file", filename, f"it has {size / 1e6:.1f} MB; at most {limit / 1e6:g} MB",
+                          value_text=repr(filename)))
+
+
+#: The same sentence, written by the browser before it sends a file (a JavaScript template).
+_TOO_BIG_JS = str(FieldError("your file", None, "it has ${(file.size / 1e6).toFixed(1)} MB; at most "
+                             "${model.max_bytes / 1e6} MB", value_text="'${file.name}'"))
 
 
 def upload_name(filename: str | None) -> str:
@@ -75,8 +82,7 @@ export function render({ model, el }) {
     const file = input.files.length ? input.files[0] : null
     if (file === null) { return }
     if (file.size > model.max_bytes) {
-      refused.textContent = `your file = '${file.name}' is not allowed: it has ${(file.size / 1e6).toFixed(1)} MB; ` +
-                            `at most ${model.max_bytes / 1e6} MB`
+      refused.textContent = `__TOO_BIG__`
       input.value = ''
       return
     }
@@ -86,7 +92,7 @@ export function render({ model, el }) {
   })
   el.append(input, refused)
 }
-"""
+""".replace("__TOO_BIG__", _TOO_BIG_JS)
 
 
 class ColumnMapping:

@@ -26,17 +26,20 @@ from dataclasses import dataclass
 import param
 from panel.custom import JSComponent
 
+from eha_core.errors import FieldError
+
 from .state import MAX_TEXT_CHARS, shown_text, too_long
 
 __all__ = ["Form", "Field", "Group", "InputError", "parse_fields"]
 
 
-class InputError(ValueError):
-    """A typed value that is not allowed, with the field it belongs to."""
+class InputError(FieldError):
+    """A typed value that is not allowed: the form's field it belongs to (``name``), the label the
+    message shows, the text as typed and what is allowed (a :class:`~eha_core.errors.FieldError`)."""
 
-    def __init__(self, name: str, message: str):
-        self.field = name
-        super().__init__(message)
+    def __init__(self, name: str, label: str, text: str, what: str):
+        self.name = name
+        super().__init__(label, text, what, value_text=text)
 
 
 def _plain(x: float | None) -> str:
@@ -97,12 +100,12 @@ class Field:
         """The value of ``text``; :class:`InputError` naming the field, the text and what is allowed."""
         raw = "" if text is None else str(text)
         if too_long(raw):
-            raise InputError(self.name, f"{self.display} = {shown_text(raw)} is not allowed: {too_long(raw)}")
+            raise InputError(self.name, self.display, shown_text(raw), too_long(raw))
         shown = raw.strip() or "(empty)"
         if self.kind == "select":
             allowed = [str(v) for v, _ in self.options]
             if raw not in allowed:
-                raise InputError(self.name, f"{self.display} = {shown} is not allowed: use one of {', '.join(allowed)}")
+                raise InputError(self.name, self.display, shown, f"use one of {', '.join(allowed)}")
             return next(v for v, _ in self.options if str(v) == raw)
         if self.kind == "text":
             return raw.strip()
@@ -115,18 +118,17 @@ class Field:
         try:
             value = float(s)
         except ValueError:
-            raise InputError(self.name, f"{self.display} = {shown} is not allowed: enter {what}") from None
+            raise InputError(self.name, self.display, shown, f"enter {what}") from None
         if not math.isfinite(value):
-            raise InputError(self.name, f"{self.display} = {shown} is not allowed: enter {what}")
+            raise InputError(self.name, self.display, shown, f"enter {what}")
         if self.kind == "integer":
             if value != int(value):
-                raise InputError(self.name, f"{self.display} = {shown} is not allowed: enter a whole number; "
-                                            f"{self._range_text()}")
+                raise InputError(self.name, self.display, shown, f"enter a whole number; {self._range_text()}")
             value = int(value)
         low_bad = self.lo is not None and (value <= self.lo if self.lo_open else value < self.lo)
         high_bad = self.hi is not None and value > self.hi
         if low_bad or high_bad:
-            raise InputError(self.name, f"{self.display} = {shown} is not allowed: {self._range_text()}")
+            raise InputError(self.name, self.display, shown, self._range_text())
         return value
 
     def text(self, value) -> str:

@@ -29,6 +29,8 @@ from typing import Any, ClassVar
 import panel as pn
 import param
 
+from eha_core.errors import not_allowed
+
 __all__ = ["Section", "SectionSnapshot", "ReportPart", "Placement", "SectionRegistry", "SECTIONS", "stale_note"]
 
 
@@ -173,16 +175,15 @@ class SectionRegistry:
                  within: str | None = None) -> type:
         """Add ``cls`` (a :class:`Section`) to the page; returns it (usable as a decorator's result)."""
         if not cls.key:
-            raise ValueError(f"section = {cls.__name__} is not allowed: it has no key")
+            raise not_allowed("section", cls.__name__, "it has no key")
         if (tab is None) == (within is None):
-            raise ValueError(f"section = {cls.key} is not allowed: give a tab or the section it is within")
+            raise not_allowed("section", cls.key, "give a tab or the section it is within")
         if any(p.key == cls.key for p in self._placements):
-            raise ValueError(f"section = {cls.key} is not allowed: a section of that key is registered")
+            raise not_allowed("section", cls.key, "a section of that key is registered")
         clash = set(cls.defaults) & {f for p in self._placements for f in p.cls.defaults}
         if clash:
             # every field is one argument of the page's address: names must not collide
-            raise ValueError(f"section = {cls.key} is not allowed: fields {', '.join(sorted(clash))} are "
-                             "another section's")
+            raise not_allowed("section", cls.key, f"fields {', '.join(sorted(clash))} are another section's")
         self._placements.append(Placement(cls, tab, subtab, within))
         return cls
 

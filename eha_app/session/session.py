@@ -27,6 +27,8 @@ from typing import Any
 
 import param
 
+from eha_core.errors import FieldError
+
 from ..runtime.tasks import SessionRunner, apply_locked, frozen_models, served_document
 from .section import SECTIONS, Section, SectionRegistry, SectionSnapshot
 from .state import AppState, shown_text, too_long
@@ -39,8 +41,11 @@ SETTINGS_FORMAT = "eha-settings/1"
 MAX_SETTINGS_BYTES = 100_000
 
 
-class SettingsError(ValueError):
-    """A settings file that cannot be loaded, with what is wrong."""
+class SettingsError(FieldError):
+    """A settings file that cannot be loaded: its name and what is wrong (a FieldError of ``settings``)."""
+
+    def __init__(self, filename: str, what: str):
+        super().__init__("settings", filename, what, value_text=repr(filename))
 
 
 @dataclass(frozen=True)
@@ -225,18 +230,18 @@ class Session(param.Parameterized):
 
 def _read_settings(data: bytes | str, filename: str) -> dict:
     if len(data) > MAX_SETTINGS_BYTES:
-        raise SettingsError(f"settings = {filename!r} is not allowed: it has {len(data) / 1e3:.1f} kB; at most "
-                            f"{MAX_SETTINGS_BYTES / 1e3:g} kB (a saved settings file has about 2 kB)")
+        raise SettingsError(filename, f"it has {len(data) / 1e3:.1f} kB; at most {MAX_SETTINGS_BYTES / 1e3:g} kB "
+                                      "(a saved settings file has about 2 kB)")
     try:
         doc = json.loads(data)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise SettingsError(f"settings = {filename!r} is not allowed: it is not JSON ({exc})") from None
+        raise SettingsError(filename, f"it is not JSON ({exc})") from None
     except RecursionError:
-        raise SettingsError(f"settings = {filename!r} is not allowed: it is nested too deeply to be a settings "
-                            "file; save one with “Save settings”") from None
+        raise SettingsError(filename, "it is nested too deeply to be a settings file; save one with “Save "
+                                      "settings”") from None
     if not isinstance(doc, dict) or doc.get("format") != SETTINGS_FORMAT:
-        raise SettingsError(f"settings = {filename!r} is not allowed: not a settings file of this app "
-                            f"(format {SETTINGS_FORMAT!r} expected); save one with “Save settings”")
+        raise SettingsError(filename, f"not a settings file of this app (format {SETTINGS_FORMAT!r} expected); "
+                                      "save one with “Save settings”")
     return doc
 
 
@@ -244,15 +249,13 @@ def _section_texts(doc: dict, section: str, filename: str) -> dict[str, str]:
     """A section of the file as ``{field: text}``: texts (or numbers), each a field's worth."""
     given = doc.get(section) or {}
     if not isinstance(given, dict):
-        raise SettingsError(f"settings = {filename!r} is not allowed: its {section!r} is not a list of fields")
+        raise SettingsError(filename, f"its {section!r} is not a list of fields")
     out = {}
     for name, value in given.items():
         if isinstance(value, bool) or not isinstance(value, (str, int, float)):
-            raise SettingsError(f"settings = {filename!r} is not allowed: {section}.{shown_text(name, 40)} is not "
-                                "a text or a number")
+            raise SettingsError(filename, f"{section}.{shown_text(name, 40)} is not a text or a number")
         text = str(value)
         if too_long(text):
-            raise SettingsError(f"settings = {filename!r} is not allowed: {section}.{shown_text(name, 40)} = "
-                                f"{shown_text(text)}: {too_long(text)}")
+            raise SettingsError(filename, f"{section}.{shown_text(name, 40)} = {shown_text(text)}: {too_long(text)}")
         out[str(name)] = text
     return out

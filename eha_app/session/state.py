@@ -32,6 +32,7 @@ import math
 
 import param
 
+from eha_core.errors import FieldError
 from eha_core.linear import operating_point
 from eha_core.param_table import DERIVED, broken_rules
 from eha_core.params import (
@@ -110,8 +111,8 @@ def _quantity(number: str, name: str) -> str:
 
 
 def _refusal(name: str, value: str, what: str) -> str:
-    """The project's one form of a message, with the label the form shows."""
-    return f"{FIELD_LABELS.get(name, name)} = {value} is not allowed: {what}"
+    """The project's one form of a message, with the label the form shows (``value`` as typed)."""
+    return str(FieldError(FIELD_LABELS.get(name, name), value, what, value_text=value))
 
 
 def _bound(name: str, relation: str, description: str) -> str:

@@ -28,33 +28,6 @@ PACKAGES = ("eha_core", "eha_app")
 #: The one module that writes "NAME = VALUE is not allowed: WHAT".
 FORMATTER = "eha_core/_checks.py"
 
-#: App modules that still hand-format their refusals, with how many literals each has: their
-#: owners convert them to FieldError later. A count may only go down; every other module of
-#: eha_core and eha_app (the command line included) has none.
-NOT_YET_CONVERTED = {
-    "eha_app/session/form.py": 6,
-    "eha_app/runtime/jobs.py": 3,
-    "eha_app/runtime/limits.py": 4,
-    "eha_app/runtime/serving.py": 1,
-    "eha_app/session/section.py": 4,
-    "eha_app/session/session.py": 7,
-    "eha_app/settings.py": 7,
-    "eha_app/session/state.py": 1,
-    "eha_app/sections/frequency.py": 3,
-    "eha_app/sections/least_squares.py": 4,
-    "eha_app/sections/simulation.py": 1,
-    "eha_app/sections/uploads.py": 2,
-}
-
-#: App modules that still read a message back, with how many places: tab 2 finds the form field
-#: of a core refusal in its text (``_field_of_message``, and the input delay's), and the record's
-#: ``fail(message)`` picks the time field by the text's start (the job runner hands it the text,
-#: not the error). A count may only go down.
-STILL_READING = {
-    "eha_app/sections/frequency.py": 3,
-    "eha_app/sections/record.py": 1,
-}
-
 #: Attributes of an exception that hold (part of) its message.
 MESSAGE_ATTRIBUTES = frozenset({"args", "what", "message", "text", "msg", "allowed"})
 #: String methods that look inside a text (``split``/``rsplit`` only with a separator).
@@ -261,16 +234,15 @@ X = "y = 2 is not allowed with z: " + "no"
 # -- the checks on the code ----------------------------------------------------------------
 
 def test_no_code_reads_an_exception_message_back():
-    found = {path: [f"{path}:{line}: {what}" for line, what in prose_readings(source)] for path, source in _sources()}
-    unexpected = [hit for path, hits in found.items() if len(hits) > STILL_READING.get(path, 0) for hit in hits]
-    assert not unexpected, ("read the error's attributes (field, value, what, missing_columns...) instead:\n"
-                            + "\n".join(unexpected))
+    found = [f"{path}:{line}: {what}" for path, source in _sources() for line, what in prose_readings(source)]
+    assert not found, ("read the error's attributes (field, value, what, missing_columns...) instead:\n"
+                       + "\n".join(found))
 
 
 def test_refusals_are_formatted_in_one_place():
     counts = {path: len(hand_formatted_refusals(source)) for path, source in _sources()}
     counts.pop(FORMATTER)
-    unexpected = {p: n for p, n in counts.items() if n > NOT_YET_CONVERTED.get(p, 0)}
+    unexpected = {p: n for p, n in counts.items() if n}
     assert not unexpected, (f"these modules write 'is not allowed' themselves: {unexpected}; raise "
                             "eha_core.errors.FieldError (or not_allowed) instead")
 

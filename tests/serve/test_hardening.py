@@ -65,6 +65,9 @@ def test_the_server_survives_a_scan_of_the_components_route(serve, procs):
     log = server.log_text()
     assert "Beautiful is better than ugly" not in log and "eha: error" not in log, log[-3000:]
     assert "exited with code" not in log and "Traceback" not in log, log[-3000:]
+    # every process bound the one port (eha_app.runtime.patches.bind_port_shared took effect)
+    pids = set(re.findall(r"Starting Bokeh server with process id: (\d+)", log))
+    assert len(pids) == int(procs), log[-3000:]
 
 
 async def _websocket_status(url: str, origin: str) -> int:
