@@ -17,8 +17,6 @@ from functools import lru_cache, partial
 
 import panel as pn
 
-from eha_core.params import PARAM_NAMES
-
 from . import sections as _sections  # noqa: F401 - registers the page's sections
 from .render.tables import CSS
 from .runtime.connection import ConnectionWatch
@@ -31,7 +29,7 @@ from .runtime.tasks import (
     watch,
 )
 from .session import MAX_SETTINGS_BYTES, Session, SettingsError
-from .session.state import AppState, shown_text
+from .session.state import FORM_FIELDS, AppState, shown_text
 
 __all__ = ["create_app", "serve_session", "warm_up", "CSS", "Page"]
 
@@ -271,7 +269,7 @@ class Page(pn.viewable.Viewer):
         session = self.session
         if not first:             # an exercise: the fields of the page's address, but the hidden ones
             session.query = {k: v for k, v in session.query.items() if k not in session.hidden}
-        for name in (*PARAM_NAMES, "kp"):
+        for name in FORM_FIELDS:
             if name in session.query:
                 session.state.set_text(name, session.query[name])
         names = session.registry.tabs()

@@ -9,14 +9,12 @@ from pathlib import Path
 
 import panel as pn
 
-from eha_core.params import FIELD_INFO, PARAM_NAMES
-
 from ..render.layout import side_by_side
 from ..render.tables import derived_html
 from ..runtime.tasks import on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot
 from ..session.form import Field, Form, Group
-from ..session.state import FIELD_LABELS, AppState
+from ..session.state import FIELD_LABELS, FORM_FIELDS, AppState
 
 __all__ = ["ParametersTab", "SCHEMATIC_PATH", "PARAMETER_FORM"]
 
@@ -29,30 +27,27 @@ _PLAIN = FIELD_LABELS
 
 
 def _field(name: str) -> Field:
-    if name == "kp":
-        return Field("kp", "Kp", kind="text", unit="V/m", tip="proportional gain of the controller in H(s) (eq. 22)")
-    info = FIELD_INFO[name]
-    return Field(name, _PLAIN.get(name, name), kind="text", unit=info.display_unit, tip=info.description,
+    info = FORM_FIELDS[name]
+    return Field(name, FIELD_LABELS.get(name, name), kind="text", unit=info.display_unit, tip=info.description,
                  placeholder="force balance" if name == "p2_0" else "")
 
 
 def _group(group: str) -> tuple[Field, ...]:
-    return tuple(_field(n) for n in PARAM_NAMES if FIELD_INFO[n].group == group)
+    return tuple(_field(n) for n, info in FORM_FIELDS.items() if info.group == group)
 
 
-#: Tab 1's form: the model's parameters in display units (parsed by AppState).
+#: Tab 1's form: the model's parameters and the controller gain, in display units (parsed by AppState).
 PARAMETER_FORM = (
     Group("Load, friction, cylinder", _group("main")),
     Group("Advanced: valve, supply, chamber", _group("advanced"), collapsible=True, collapsed=True),
-    Group("Initial conditions and controller", _group("initial") + (_field("kp"),), collapsible=True, collapsed=True),
+    Group("Initial conditions and controller", _group("initial"), collapsible=True, collapsed=True),
 )
 
 
 @lru_cache(maxsize=1)
 def default_texts() -> dict:
     """Tab 1's fields as they open: the paper's values in display units."""
-    s = AppState()
-    return {**s.texts, "kp": s.kp_text}
+    return dict(AppState().texts)
 
 
 @lru_cache(maxsize=1)
@@ -174,4 +169,4 @@ class ParametersTab(Section):
 
 def _state_texts(state) -> dict[str, str]:
     """Tab 1's fields as typed (an exercise's hidden ones left out)."""
-    return {**{k: v for k, v in state.texts.items() if k not in state.hidden}, "kp": state.kp_text}
+    return {k: v for k, v in state.texts.items() if k not in state.hidden}

@@ -34,18 +34,16 @@ import param
 
 from eha_core.errors import FieldError
 from eha_core.linear import operating_point
-from eha_core.param_table import DERIVED, broken_rules
+from eha_core.param_table import DERIVED, FieldInfo, broken_rules
 from eha_core.params import (
     FIELD_INFO,
-    NON_NEGATIVE_FIELDS,
     PARAM_NAMES,
-    POSITIVE_FIELDS,
     ActuatorParams,
     ParameterError,
 )
 
-__all__ = ["AppState", "FIELD_LABELS", "MAX_TEXT_CHARS", "display_text", "parse_display", "cross_field_errors",
-           "shown_text"]
+__all__ = ["AppState", "FIELD_LABELS", "FORM_FIELDS", "KP_INFO", "DEFAULT_KP", "MAX_TEXT_CHARS", "display_text",
+           "parse_display", "cross_field_errors", "shown_text"]
 
 #: The most characters a field may hold. Every field goes into the page's address as it is
 #: typed (a reload restores it): a 70,000-character field once made the address too long for
@@ -64,16 +62,22 @@ def too_long(text) -> str | None:
     n = len(str(text or ""))
     return f"at most {MAX_TEXT_CHARS} characters (it has {n})" if n > MAX_TEXT_CHARS else None
 
-#: The names tab 1's form shows, which its messages use too (the core's table of parameter facts).
-FIELD_LABELS = {**{name: info.label for name, info in FIELD_INFO.items()}, "kp": "Kp"}
-KP_UNIT = "V/m"
+#: The controller's gain Kp of tab 1 (eq. 22): a field like the actuator's parameters, in the same
+#: table's terms, but of the loop that H(s) closes rather than of the actuator.
+KP_INFO = FieldInfo("V/m", "proportional gain", "V/m", 1.0, "initial", "Kp", ">")
+#: Tab 1's fields: the actuator's parameters (the core's table of parameter facts) and Kp.
+FORM_FIELDS: dict[str, FieldInfo] = {**FIELD_INFO, "kp": KP_INFO}
+#: The names tab 1's form shows, which its messages use too.
+FIELD_LABELS = {name: info.label for name, info in FORM_FIELDS.items()}
+#: The controller gain as the page opens [V/m].
+DEFAULT_KP = 10.0
 
 
 def display_text(name: str, value_si: float | None) -> str:
-    """A parameter's SI value written in its display unit."""
+    """A field's SI value written in its display unit."""
     if value_si is None:
         return ""
-    return f"{value_si / FIELD_INFO[name].display_scale:.6g}"
+    return f"{value_si / FORM_FIELDS[name].display_scale:.6g}"
 
 
 def parse_display(name: str, text: str) -> float | None:
@@ -81,7 +85,7 @@ def parse_display(name: str, text: str) -> float | None:
 
     Raises ParameterError naming the field when the text is not a number.
     """
-    info = FIELD_INFO[name]
+    info = FORM_FIELDS[name]
     if too_long(text):
         raise ParameterError(name, shown_text(text), too_long(text))
     text = (text or "").strip().replace(",", ".") if text is not None else ""
@@ -101,7 +105,7 @@ def parse_display(name: str, text: str) -> float | None:
 # -- messages in display units ------------------------------------------------------------------
 
 def _unit(name: str) -> str:
-    return KP_UNIT if name == "kp" else FIELD_INFO[name].display_unit
+    return FORM_FIELDS[name].display_unit
 
 
 def _quantity(number: str, name: str) -> str:
@@ -200,7 +204,7 @@ def _field_errors(texts: dict, secret: dict | None = None) -> tuple[dict, dict]:
     """Each field on its own: (SI values of those that are valid, messages of the others).
     ``secret``: the hidden parameters' values (an exercise), taken as they are."""
     values, errors = dict(secret or {}), {}
-    for name in PARAM_NAMES:
+    for name, info in FORM_FIELDS.items():
         if name in values:
             continue
         try:
@@ -208,30 +212,13 @@ def _field_errors(texts: dict, secret: dict | None = None) -> tuple[dict, dict]:
         except ParameterError as exc:
             errors[name] = _refusal(name, str(exc.value).strip() or "(empty)", exc.allowed)
             continue
-        relation = ">" if name in POSITIVE_FIELDS else ">=" if name in NON_NEGATIVE_FIELDS else None
+        relation = info.bound
         if relation is not None and not (value > 0 if relation == ">" else value >= 0):
             typed = _quantity(str(texts[name]).strip(), name)
-            errors[name] = _refusal(name, typed, _bound(name, relation, FIELD_INFO[name].description))
+            errors[name] = _refusal(name, typed, _bound(name, relation, info.description))
             continue
         values[name] = value
     return values, errors
-
-
-def _kp_error(text: str) -> tuple[float | None, str | None]:
-    if too_long(text):
-        return None, _refusal("kp", shown_text(text), too_long(text))
-    raw = (text or "").strip()
-    if raw == "":
-        return None, _refusal("kp", "(empty)", f"enter a number in {KP_UNIT}")
-    try:
-        kp = float(raw.replace(",", "."))
-    except ValueError:
-        return None, _refusal("kp", raw, f"must be a number in {KP_UNIT}, > 0")
-    if not math.isfinite(kp):
-        return None, _refusal("kp", raw, f"must be a finite number in {KP_UNIT}")
-    if kp <= 0:
-        return None, _refusal("kp", _quantity(raw, "kp"), f"must be > 0 {KP_UNIT} (proportional gain)")
-    return kp, None
 
 
 # where a core message the app's rules missed is shown: the operating point's names are the initial state's
@@ -255,8 +242,7 @@ class AppState(param.Parameterized):
     params = param.ClassSelector(class_=ActuatorParams, doc="the last valid parameter set (SI)")
     errors = param.Dict(default={}, doc="messages by field name; empty when the inputs are valid")
     valid = param.Boolean(default=True, doc="all inputs valid: run buttons are enabled")
-    kp = param.Number(default=10.0, doc="proportional gain for H(s) [V/m]")
-    kp_text = param.String(default="10")
+    kp = param.Number(default=DEFAULT_KP, doc="the controller's proportional gain for H(s) [V/m] (the last valid)")
     revision = param.Integer(default=0, doc="bumped whenever the valid parameters change")
     # An exercise (eha serve --exercise): the student's id, and the values of the hidden
     # parameters, which the server uses and never sends (their texts read "hidden").
@@ -299,34 +285,32 @@ class AppState(param.Parameterized):
         keep_out_of_logs(exercise.secret, *self.secret.values())
         self.reset_defaults()
 
+    @property
+    def kp_text(self) -> str:
+        """Kp as typed."""
+        return self.texts.get("kp", "")
+
     def reset_defaults(self) -> None:
-        """Back to the paper's parameters (docs/model.md §2); an exercise's hidden ones stay."""
-        defaults = ActuatorParams()
+        """Back to the paper's parameters (docs/model.md §2) and Kp = 10 V/m; an exercise's hidden ones stay."""
+        defaults = {**ActuatorParams().to_dict(), "kp": DEFAULT_KP}
         self._typed = []
-        self.kp_text = "10"
-        self.kp = 10.0
-        self.texts = {n: "hidden" if n in self.secret else display_text(n, getattr(defaults, n))
-                      for n in PARAM_NAMES}
+        self.kp = DEFAULT_KP
+        self.texts = {n: "hidden" if n in self.secret else display_text(n, defaults[n]) for n in FORM_FIELDS}
         self._revalidate()
 
     def set_text(self, name: str, text: str) -> None:
         """Record what was typed into a field and revalidate everything."""
         if name in self.secret:
             return                          # a hidden parameter is not the student's to set
-        if name == "kp":
-            self.kp_text = text
-        elif name in FIELD_INFO:
-            self.texts = {**self.texts, name: text}
-        else:
+        if name not in FORM_FIELDS:
             raise KeyError(name)
+        self.texts = {**self.texts, name: text}
         self._typed = [n for n in self._typed if n != name] + [name]
         self._revalidate()
 
     def _revalidate(self) -> None:
         values, errors = _field_errors(self.texts, self.secret)
-        kp, kp_error = _kp_error(self.kp_text)
-        if kp_error:
-            errors["kp"] = kp_error
+        kp = values.pop("kp", None)
         new_params = None
         if len(values) == len(PARAM_NAMES):
             rules = cross_field_errors(values, self.texts, self._typed)

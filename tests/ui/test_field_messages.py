@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import pytest
 
-from eha_app.session.state import FIELD_LABELS, KP_UNIT
-from eha_core.params import FIELD_INFO, PARAM_NAMES
+from eha_app.session.state import FIELD_LABELS, FORM_FIELDS
+from eha_core.params import PARAM_NAMES
 from tests.ui.browser_helpers import Session, text_of, wait_until
 
 RED = "rgb(176, 0, 32)"                  # #b00020, the Form's invalid border
@@ -46,7 +46,7 @@ JS_FORM = """w => {
 
 
 def _unit(name: str) -> str:
-    return KP_UNIT if name == "kp" else FIELD_INFO[name].display_unit
+    return FORM_FIELDS[name].display_unit
 
 
 def _bad_values(name: str) -> list[tuple[tuple, str, list[str]]]:
