@@ -227,7 +227,6 @@ def build_report(out_dir: str | Path, *, seed: int = 0,
     ``started`` (a ``time.perf_counter()`` value) is when the command began:
     the wall time it reports then includes the imports.
     """
-    from bokeh.embed import components
 
     out = Path(out_dir)
     data_dir = out / "data"
@@ -268,7 +267,7 @@ def build_report(out_dir: str | Path, *, seed: int = 0,
     numbers["differences_from_paper"] = diff_items
 
     step("writing report.html")
-    script, divs = components(figures)
+    script, divs = components_alone(figures)
     page = _page(r, numbers, params_html, lse_html, freq_html, _differences_html(r.case_differences), diff_items,
                  divs, script, _bokeh_js())
     path = out / "report.html"
@@ -427,13 +426,30 @@ li {{ margin-bottom: 8px; }}
 
 # -- the report of one session (the lab report a student hands in) ------------------------
 
+def components_alone(figures: dict):
+    """Bokeh's ``components`` of ``figures`` without touching any other document.
+
+    Given models of no document, Bokeh makes one and copies the JavaScript
+    callbacks of ``curdoc()`` into it, and takes ``curdoc()``'s theme: in a
+    server's worker thread that is whatever page the event loop happens to be
+    serving (or one already closed: "'DocumentCallbackManager' object has no
+    attribute '_js_event_callbacks'"). The figures are put in a document of
+    their own first, and no theme is asked of ``curdoc()``.
+    """
+    from bokeh.document import Document
+    from bokeh.embed import components
+
+    doc = Document()
+    for fig in figures.values():
+        doc.add_root(fig)
+    return components(figures, theme=None)
+
+
 def session_report(session, snapshot) -> bytes:
     """What this student ran, as one self-contained HTML file: every section's part, in page order
     (its settings, plots, estimates with intervals...), drawn from ``snapshot`` (taken under the
     page's lock; this runs in a worker) by the same code as ``eha reproduce``; an exercise's hidden
     values are left out as on the page."""
-    from bokeh.embed import components
-
     figures, parts = {}, []
     intro = ""
     if snapshot.hidden:
@@ -450,7 +466,7 @@ def session_report(session, snapshot) -> bytes:
         parts.append((section.key, part.title, content))
     parts.append(("settings", "Settings of this session (load them with “Load settings”)",
                   f"<pre>{html.escape(json.dumps(snapshot.settings, indent=1, ensure_ascii=False))}</pre>"))
-    script, divs = components(figures) if figures else ("", {})
+    script, divs = components_alone(figures) if figures else ("", {})
     body = intro
     for sid, title, content in parts:
         for key, div in divs.items():

@@ -127,7 +127,9 @@ class ModelBoard(Section):
         self.record_view = ResultView("board-record", self.area,
                                       run_hint="The board updates it by itself in a moment.")
         self._references()
-        state.param.watch(lambda _e: self._plant_changed(), ["params", "kp"])
+        # "valid" too: an invalid tab 1 keeps its last valid parameters, and the record must say it
+        # no longer describes what tab 1 says
+        state.param.watch(lambda _e: self._plant_changed(), ["params", "kp", "valid"])
         self.build()
 
     # -- models ------------------------------------------------------------------------------

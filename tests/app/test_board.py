@@ -120,3 +120,15 @@ def test_estimates_made_before_the_board_is_opened_are_on_it():
     board = t.build("board")
     assert _names(board) == ["H(s) eq. 24", "Ĥ paper", "LS1", "LS2"] and not t.mail("board")
     assert all(e.key in board.views for e in board.entries)
+
+
+def test_the_validation_record_is_marked_while_tab_1_is_not_valid(tab):
+    """Found by the random walk: with an invalid field on tab 1 the board's views stayed 'current'
+    (tab 1 keeps its last valid parameters, so the board saw no change)."""
+    board, state = tab.section("board"), tab.state
+    assert board.record_view.status == "current"
+    state.set_text("Kq1", "1e309")
+    assert not state.valid and board.record_view.status == "stale"
+    assert "not valid" in board.record_view.banner.object
+    state.set_text("Kq1", "3.043")
+    assert state.valid and board.record_view.status == "current"
