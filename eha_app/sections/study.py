@@ -85,8 +85,17 @@ class StudyFigure:
             self.sources[name], self.means[name] = src, mean
             self.figs.append(fig)
         plots._lean(*self.figs)
-        self.layout = pn.FlexBox(*(pn.pane.Bokeh(f, width=width + 10) for f in self.figs),
-                                 sizing_mode="stretch_width", css_classes=["eha-study-histograms"])
+        self.width = width
+        self._layout = None
+
+    @property
+    def layout(self):
+        """The page's wrapping row of the histograms (made on first use: the session report, drawn
+        in a worker, uses the Bokeh figures alone and makes no Panel object)."""
+        if self._layout is None:
+            self._layout = pn.FlexBox(*(pn.pane.Bokeh(f, width=self.width + 10) for f in self.figs),
+                                      sizing_mode="stretch_width", css_classes=["eha-study-histograms"])
+        return self._layout
 
     def update(self, result) -> None:
         for name, fig in zip(self.names, self.figs, strict=True):
