@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-__all__ = ["FieldError", "not_allowed", "shown", "positive_number", "positive_integer"]
+__all__ = ["FieldError", "ComputationError", "not_allowed", "shown", "positive_number", "positive_integer"]
 
 
 def shown(value) -> str:
@@ -103,6 +103,15 @@ class FieldError(ValueError):
         # the subclasses' constructors differ: rebuild from the attributes, so that an
         # error crosses a process boundary (pickle) as the same value
         return _rebuilt, (type(self), self.args), self.__dict__
+
+
+class ComputationError(RuntimeError):
+    """A computation these inputs do not allow, found only by doing it: a simulation whose state
+    stops being finite, say. An outcome to show the user, like a refusal, not a fault of the code.
+
+    >>> str(ComputationError("the simulation failed: the state stopped being finite at t = 0 s"))
+    'the simulation failed: the state stopped being finite at t = 0 s'
+    """
 
 
 def _rebuilt(cls, args):

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._checks import not_allowed
+from ._checks import ComputationError, not_allowed
 from .cancel import CancelToken, check
 from .params import ActuatorParams
 
@@ -128,7 +128,7 @@ def validation_record(params: ActuatorParams | None = None, *, kp: float = 10.0,
     cfg = FrequencyExperiment(n_samples=n_samples, ts=ts, seed=int(seed), kp=kp, model=model)
     data = cfg.closed_loop(params if params is not None else ActuatorParams(), cfg.excitation(), cancel)
     if not data.success:
-        raise RuntimeError(f"the validation experiment failed: {data.message}")
+        raise ComputationError(f"the validation experiment failed: {data.message}")
     return data
 
 

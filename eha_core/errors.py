@@ -8,6 +8,9 @@ allowed: WHAT``. The core's own kinds are subclasses:
 needed columns it lacks) and :class:`eha_core.signals.SignalSpecError` (a
 signal written as text). A user interface writes the sentence with its own
 label and unit (:meth:`FieldError.render`), and never reads the text back.
+A computation the inputs do not allow, found only by doing it (a simulation
+that diverges), raises :class:`ComputationError`: an outcome to show, not a
+fault of the code.
 
 >>> from eha_core.errors import FieldError
 >>> from eha_core.params import ActuatorParams
@@ -22,6 +25,6 @@ beta_e -1.0
 
 from __future__ import annotations
 
-from ._checks import FieldError, not_allowed
+from ._checks import ComputationError, FieldError, not_allowed
 
-__all__ = ["FieldError", "not_allowed"]
+__all__ = ["FieldError", "ComputationError", "not_allowed"]

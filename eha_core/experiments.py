@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ._checks import not_allowed
+from ._checks import ComputationError, not_allowed
 from .cancel import CancelToken, check
 from .params import ActuatorParams
 from .signals import ZERO, Signal, Sine, parse_signal
@@ -145,7 +145,7 @@ def lse_data(params: ActuatorParams | None = None, disturbance: str | Signal = "
 
     res = lse_simulation(params, disturbance, u=u, t_end=t_end, dt=dt, seed=seed, cancel=cancel)
     if not res.success:
-        raise RuntimeError(f"the simulation failed: {res.message}")
+        raise ComputationError(f"the simulation failed: {res.message}")
     data = MeasuredData.from_simulation(res, source=res.label)
     if measurement_noise:
         data = data.with_noise(measurement_noise, seed=seed + 1)
@@ -588,7 +588,7 @@ def run_frequency_identification(params: ActuatorParams | None = None,
     data = config.closed_loop(params, excitation, cancel)
     timings["experiment"] = time.perf_counter() - t0
     if not data.success:
-        raise RuntimeError(f"the closed-loop simulation failed: {data.message}")
+        raise ComputationError(f"the closed-loop simulation failed: {data.message}")
 
     lin = linearize(params)
     theoretical = lin.closed_loop_coeffs(config.kp)

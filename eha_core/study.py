@@ -76,7 +76,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._checks import not_allowed, shown
+from ._checks import ComputationError, not_allowed, shown
 from .cancel import Cancelled, CancelToken, check
 from .experiments import LSE_INPUT, FrequencyExperiment
 from .identify._stats import Z95
@@ -545,7 +545,7 @@ class _TfPlan:
             data = simulate_closed_loop(self.params, excitation.u, kp=exp.kp, ts=exp.ts, controller=exp.controller,
                                         model=exp.model, branch=branch, label=f"study seed {seed}", cancel=cancel)
             if not data.success:
-                raise RuntimeError(f"the closed-loop simulation failed: {data.message}")
+                raise ComputationError(f"the closed-loop simulation failed: {data.message}")
             rng = np.random.default_rng(_stream(seed, _POSITION_STREAM))
             y = data.x + cfg.noise_m * rng.standard_normal(data.x.size)
             est = tfest(data.r, y, exp.ts, 3, 0, initial_condition=exp.initial_condition,

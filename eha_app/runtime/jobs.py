@@ -37,9 +37,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from eha_core.cancel import Cancelled, CancelToken
-from eha_core.errors import not_allowed
+from eha_core.errors import ComputationError, not_allowed
 
-__all__ = ["Job", "JobState", "JobQueue", "default_queue", "worker_count", "session_name"]
+__all__ = ["Job", "JobState", "JobQueue", "default_queue", "worker_count", "session_name", "log_failure",
+           "EXPECTED_FAILURES"]
 
 log = logging.getLogger("eha_app")
 
@@ -75,6 +76,21 @@ class JobState(str, enum.Enum):
     @property
     def finished(self) -> bool:
         return self not in (JobState.QUEUED, JobState.RUNNING)
+
+
+#: Failures that are outcomes of what the student asked (a refused value or file, parameters that
+#: make a simulation diverge): the page says them; the log notes them, without a traceback, below
+#: warnings, which are kept for faults of the server's own code.
+EXPECTED_FAILURES = (ValueError, ArithmeticError, ComputationError)
+
+
+def log_failure(label: str, who: str, exc: BaseException) -> None:
+    """Log a computation that raised: a note for an expected outcome, a warning with its traceback
+    for anything else."""
+    if isinstance(exc, EXPECTED_FAILURES):
+        log.info("job %r of %s ended without a result: %s", label, who, " ".join(str(exc).split()))
+    else:
+        log.warning("job %r of %s failed: %s", label, who, exc, exc_info=exc)
 
 
 def session_name(owner: Hashable) -> str:
@@ -255,7 +271,7 @@ class JobQueue:
             except Exception as exc:  # noqa: BLE001 - a failure is the job's outcome, shown in its page
                 job.state, job.error = JobState.FAILED, exc
                 # by its session's number: the owner's repr is no business of the log
-                log.warning("job %r of %s failed: %s", job.label, session_name(job.owner), exc, exc_info=True)
+                log_failure(job.label, session_name(job.owner), exc)
             job.finished_at = time.perf_counter()
             with self._cond:
                 if self._running.get(job.owner) is job:

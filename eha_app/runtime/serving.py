@@ -32,6 +32,7 @@ Several processes or machines
 
 from __future__ import annotations
 
+import logging
 import weakref
 from pathlib import Path
 
@@ -75,6 +76,17 @@ def use_local_resources(doc) -> None:
         doc.template_variables["dist_url"] = f"{rel}/{LOCAL_DIST}" if rel else LOCAL_DIST
 
 
+class _ClosedPageNote(logging.Filter):
+    """Bokeh's and Panel's warning of a message to a closed page, written as a note (INFO)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno == logging.WARNING and record.getMessage().startswith("Failed sending message as connection"):
+            record.levelno, record.levelname = logging.INFO, "INFO"
+        return True
+
+
+_closed_page_note = _ClosedPageNote()
+
 #: The event loops already told to be quiet (a set, not an attribute on the loop: uvloop's take none).
 _quiet_loops: weakref.WeakSet = weakref.WeakSet()
 
@@ -111,6 +123,12 @@ def quiet_closed_websockets() -> None:
 
     loop.set_exception_handler(handler)
     _quiet_loops.add(loop)
+    # Bokeh and Panel warn when a message finds its page closed (a reload, a laptop shut): a
+    # normal event of a class, not a fault; it goes to the log as a note
+    for name in ("bokeh.server.views.ws", "panel.io.document"):
+        logger = logging.getLogger(name)
+        if _closed_page_note not in logger.filters:
+            logger.addFilter(_closed_page_note)
     # BokehJS sends a button's whole definition with its click when the button
     # arrived in a patch (our tabs are built when first shown); Bokeh then warns
     # "reference already known" and uses the model it has. Nothing is wrong.

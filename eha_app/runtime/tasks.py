@@ -45,7 +45,7 @@ from panel.io.state import set_curdoc
 
 from eha_core.cancel import Cancelled, CancelToken
 
-from .jobs import Job, JobQueue, JobState, default_queue
+from .jobs import Job, JobQueue, JobState, default_queue, log_failure, session_name
 
 __all__ = ["SessionRunner", "PageUpdates", "apply_locked", "frozen_models", "held",
            "LOADING_DELAY_S", "served_document", "holds_lock", "locked", "watch", "on_click", "note_loop_thread"]
@@ -357,7 +357,7 @@ class SessionRunner:
             job.state, job.error = JobState.CANCELLED, exc
         except Exception as exc:  # noqa: BLE001 - shown in the page, as in a server
             job.state, job.error = JobState.FAILED, exc
-            log.warning("computation %r failed: %s", label, exc, exc_info=True)
+            log_failure(label, session_name(self.owner), exc)
         job.finished_at = time.perf_counter()
         self._finish(job, outcome)
         return job

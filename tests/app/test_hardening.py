@@ -203,16 +203,28 @@ def test_the_queue_names_a_failed_jobs_session_by_a_number(exercise, caplog):
     state = AppState()
     state.start_exercise(ex, "ada")
     queue = JobQueue(workers=1)
-    done = threading.Event()
+    done = threading.Semaphore(0)
     try:
-        def fail(_token):
+        def refused(_token):
             raise ValueError("a NaN in the upload")
-        caplog.set_level(logging.WARNING, logger="eha_app")
-        queue.submit((state, "board"), fail, label="reading your data", on_done=lambda _j: done.set())
-        assert done.wait(30)
+
+        def broken(_token):
+            raise KeyError("a fault of the server's code")
+        caplog.set_level(logging.INFO, logger="eha_app")
+        queue.submit((state, "board"), refused, label="reading your data", on_done=lambda _j: done.release())
+        assert done.acquire(timeout=30)
+        queue.submit(state, broken, label="least squares", on_done=lambda _j: done.release())
+        assert done.acquire(timeout=30)
     finally:
         queue.shutdown()
-    assert "job 'reading your data' of session " in caplog.text and "AppState" not in caplog.text
+    assert "AppState" not in caplog.text
+    # the student's bad file: a note without a traceback; a fault of the code: a warning with one
+    notes = [r for r in caplog.records if "reading your data" in r.getMessage()]
+    assert [r.levelname for r in notes] == ["INFO"] and "ended without a result" in notes[0].getMessage()
+    assert notes[0].exc_info is None
+    faults = [r for r in caplog.records if "least squares" in r.getMessage()]
+    assert [r.levelname for r in faults] == ["WARNING"] and faults[0].exc_info is not None
+    assert "job 'least squares' of session " in faults[0].getMessage()
     assert not _leaks(caplog.text, ex, "ada")
 
 
