@@ -129,7 +129,7 @@ class ModelBoard(Section):
         self._references()
         # "valid" too: an invalid tab 1 keeps its last valid parameters, and the record must say it
         # no longer describes what tab 1 says
-        state.param.watch(lambda _e: self._plant_changed(), ["params", "kp", "valid"])
+        state.param.watch(lambda *_events: self._plant_changed(), ["params", "kp", "valid"])
         self.build()
 
     # -- models ------------------------------------------------------------------------------

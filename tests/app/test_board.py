@@ -132,3 +132,10 @@ def test_the_validation_record_is_marked_while_tab_1_is_not_valid(tab):
     assert "not valid" in board.record_view.banner.object
     state.set_text("Kq1", "3.043")
     assert state.valid and board.record_view.status == "current"
+    # a change of validity and parameters at once (one batch of two events): every tab follows
+    sim = tab.build("simulation")
+    state.set_text("k_f", "-1")
+    assert all(b.disabled for b in sim.run_buttons.values())
+    state.set_text("k_f", "800")                   # valid again, and new parameters: two events at once
+    assert state.valid and not any(b.disabled for b in sim.run_buttons.values())
+    assert board.record_view.status == "current" and board.record_key[0].k_f == 800
