@@ -276,10 +276,9 @@ class ModelBoard(Section):
         return parse_fields(_FIELDS.values(), self.form.values)
 
     def _settings_changed(self) -> None:
-        values, errors = self.parsed()
+        _, errors = self.parsed()
         self.form.errors = errors
-        if not errors:
-            self.update_record()
+        self.update_record()            # with an invalid field: the record is marked, not recomputed
 
     def _plant_changed(self) -> None:
         self._references()
@@ -301,8 +300,8 @@ class ModelBoard(Section):
             return
         keys = self.record_inputs()
         if keys is None:
-            self.record_view.inputs_changed(None, why="" if self.state.valid else "a parameter on tab 1 is not "
-                                                                                  "valid")
+            self.record_view.inputs_changed(None, why="a field of the comparison is not valid" if self.state.valid
+                                            else "a parameter on tab 1 is not valid")
             return
         record_key, plant_key = keys
         if (record_key, plant_key) == (self.record_key, self.plant_key):

@@ -314,8 +314,9 @@ class SimulationTab(Section):
         req, _ = self.request()
         # the paper's Fig. 2 as computed: the four cases, nonlinear, no sensor noise
         self.view.shown((self.state.params, "all", "nonlinear", (0.0, 0.0, 0.0), req.sensor_seed))
-        if self.preset == "custom" or any(req.sensor_noise):
-            # opened from a link (or a reload) with inputs of its own: run those, as typed
+        if self.preset == "custom" or any(req.sensor_noise) or not self.state.valid:
+            # opened from a link (or a reload) with inputs of its own: run those, as typed; or
+            # opened while tab 1 is not valid: Fig. 2 of its last valid parameters, marked so
             self._inputs_changed()
         self.plot_area.objects = [pn.pane.Bokeh(self.info, sizing_mode="stretch_width"),
                                   pn.pane.Bokeh(self.grid.layout, sizing_mode="stretch_width", min_height=540)]

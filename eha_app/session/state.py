@@ -30,10 +30,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import param
 
 from eha_core.errors import FieldError
-from eha_core.linear import operating_point
+from eha_core.linear import linearize, operating_point
 from eha_core.param_table import DERIVED, FieldInfo, broken_rules
 from eha_core.params import (
     FIELD_INFO,
@@ -235,6 +236,26 @@ def _build(values: dict) -> tuple[ActuatorParams | None, dict]:
     return params, {}
 
 
+def _not_computable(params: ActuatorParams, kp: float) -> str | None:
+    """Why tab 1 could not show this set's derived values (λ, a1..a10, P(s), H(s) and their poles),
+    or None: numbers each allowed on its own can overflow together (βe = 1e308 GPa makes λ4
+    infinite), and a student must be told so beside the field rather than see a page that
+    stops following."""
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):     # an overflow is the answer
+        lin = linearize(params)
+        num, den = lin.tf_coeffs()
+        cnum, cden = lin.closed_loop_coeffs(kp)
+        numbers = [*lin.lambdas, *lin.lambdas_negative, *params.a.values(), *num, *den, *cnum, *cden]
+    if all(math.isfinite(float(v)) for v in numbers):
+        try:
+            np.roots(den), np.roots(cden)
+            return None
+        except np.linalg.LinAlgError:
+            pass
+    return ("with the other values, the linearised model's coefficients (λ, a1..a10, P(s), H(s)) are not "
+            "finite numbers; use the values of a physical actuator")
+
+
 class AppState(param.Parameterized):
     """State of one session. The tabs read and write it; the core computes."""
 
@@ -318,6 +339,13 @@ class AppState(param.Parameterized):
             if not rules:
                 new_params, core = _build(values)
                 errors.update(core)
+        # what tab 1 would draw: the new parameters (or the last valid ones) with the new Kp (or the last)
+        candidate = new_params if new_params is not None else self.params
+        if candidate is not None and (why := _not_computable(candidate, kp if kp is not None else self.kp)):
+            # on the field typed last (the one that tipped it), in the words of that field
+            target = self._typed[-1] if self._typed else "M"
+            errors[target] = _refusal(target, _quantity(str(self.texts[target]).strip(), target), why)
+            new_params = kp = None
         with param.parameterized.batch_call_watchers(self):
             self.errors = errors
             self.valid = not errors

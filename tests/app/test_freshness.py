@@ -219,3 +219,37 @@ def test_the_bode_plot_says_which_estimate_of_the_data_it_draws():
     import numpy as np
     assert np.all(bode.band.data["lo"] <= bode.points.data["db"] + 1e-3)
     assert np.all(bode.band.data["hi"] >= bode.points.data["db"] - 1e-3)
+
+
+def test_tab_2_opened_while_tab_1_is_not_valid_marks_its_figure():
+    """Found by the random walk: tab 2 made while tab 1 held an invalid field drew Fig. 2 of the last
+    valid parameters as 'current'."""
+    s = AppState()
+    s.set_text("M", "-5")
+    tab = Session(s).build("simulation")
+    assert tab.view.status == "stale" and "not valid" in tab.view.banner.object
+    s.set_text("M", "4000")
+    assert tab.view.status == "current"
+
+
+def test_a_board_field_that_is_not_valid_marks_the_validation_record():
+    session = Session(AppState())
+    board = session.build("board")
+    assert board.record_view.status == "current"
+    board.form.values = {**board.form.values, "board_seed": "nan"}
+    assert board.record_view.status == "stale" and "comparison is not valid" in board.record_view.banner.object
+    board.form.values = {**board.form.values, "board_seed": "1000"}
+    assert board.record_view.status == "current"
+
+
+def test_values_that_overflow_the_linearised_model_are_refused_beside_the_field():
+    """Found by the random walk: a settings file with βe = 1e299 GPa was 'valid' (each value allowed on its
+    own), and drawing tab 1's derived values raised, which stopped the other tabs from following."""
+    s = AppState()
+    tab1 = Session(s).build("parameters")
+    s.set_text("beta_e", "1e299")
+    assert not s.valid and "not finite numbers" in s.errors["beta_e"] and s.errors["beta_e"].startswith("βe = 1e299 GPa")
+    assert "not finite numbers" in tab1.form.errors["beta_e"]
+    s.set_text("beta_e", "1.1")
+    s.set_text("kp", "1e308")
+    assert not s.valid and list(s.errors) == ["kp"]
