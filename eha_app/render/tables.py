@@ -150,8 +150,9 @@ def _lse_exercise_html(res, hidden) -> str:
     for k, v in res.estimates.items():
         lo, hi = res.ci95[k]
         nom = None if k in hidden else res.nominal.get(k)
-        rows.append([f"{_NAMES.get(k, k)} [{_UNITS.get(k, '')}]", "hidden" if k in hidden else _num(nom),
-                     _num(v), f"[{_num(lo)}, {_num(hi)}]"])
+        # the harmonic disturbance's amplitudes have no known value: an empty cell, as in the full table
+        known = "hidden" if k in hidden else ("" if nom is None else _num(nom))
+        rows.append([f"{_NAMES.get(k, k)} [{_UNITS.get(k, '')}]", known, _num(v), f"[{_num(lo)}, {_num(hi)}]"])
     note = (f"<p class='eha-note'>Disturbance model: {res.disturbance_model}. Intervals: {term('Newey-West')} over "
             f"{res.hac_lags} lags. Hand in the estimates of the hidden parameters below.</p>")
     return table_html(["parameter", "known value", "estimate", "95 % interval"], rows) + note

@@ -325,7 +325,14 @@ class SessionRunner:
     def _finish(job: Job, outcome: _Outcome) -> None:
         try:
             if job.state == JobState.DONE:
-                outcome.show(job.result, job)
+                try:
+                    outcome.show(job.result, job)
+                except Exception as exc:  # noqa: BLE001 - a fault of the page's code: said there, logged
+                    # caught here, inside the page's update, so that what it changed so far still
+                    # reaches the browser whole (an error escaping it left pages that later failed)
+                    log.warning("showing the result of %r failed: %s", job.label, exc, exc_info=exc)
+                    outcome.fail(f"the result could not be shown ({type(exc).__name__}); the server's log says "
+                                 "more")
                 outcome.note("")
             elif job.state == JobState.FAILED:
                 log.debug("job %s failed", job.label)

@@ -103,3 +103,17 @@ def test_without_an_exercise_the_app_is_as_before(monkeypatch):
     monkeypatch.delenv("EHA_EXERCISE", raising=False)
     page = create_app(AppState())
     assert not hasattr(page, "eha_gate") and page.session.state.params.M == 4000.0
+
+
+def test_the_harmonic_disturbance_model_in_an_exercise(exercise):
+    """Found by the random walk (seed 404): the exercise's table of a harmonic model wrote the nominal value
+    of the sinusoid's amplitudes, which has none, raised, and left the page broken."""
+    ex, _ = exercise
+    page = create_app(AppState())
+    page.gate.student_id.value = "ada"
+    page.gate.start()
+    lse = page.session.build("least_squares")
+    lse.form.values = {**lse.form.values, "lse_model": "harmonic"}
+    lse.run()
+    assert not lse.alert.visible and "hidden" in lse.table.object and "<table" in lse.table.object
+    assert len([k for k in lse.result.estimates if k not in HIDE]) > len(("d0",))   # the amplitudes too
