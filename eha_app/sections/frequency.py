@@ -321,6 +321,7 @@ class FrequencyPanel(Section):
         def failed(error):
             # idinput checks the band, range and sinusoid settings against N
             self.excitation_errors = {_field_of(error): " ".join(str(error).split())}
+            self.views["excitation"].inputs_changed(None, why="the excitation's settings are not valid")
             self._update_enabled()
 
         self._update_enabled()

@@ -253,3 +253,13 @@ def test_values_that_overflow_the_linearised_model_are_refused_beside_the_field(
     s.set_text("beta_e", "1.1")
     s.set_text("kp", "1e308")
     assert not s.valid and list(s.errors) == ["kp"]
+
+
+def test_an_excitation_idinput_refuses_marks_its_preview():
+    """Found by the random walk (seed 202): settings idinput refuses (a band beyond what N allows) left
+    Fig. 8's previous excitation 'current'."""
+    freq = Session(AppState()).build("frequency")
+    assert freq.views["excitation"].status == "current"
+    freq.form.values = {**freq.form.values, "signal_type": "sine", "n_sines": "5000"}
+    assert freq.excitation_errors, "idinput accepted the settings: pick others that it refuses"
+    assert freq.views["excitation"].status == "stale" and freq.button.disabled
