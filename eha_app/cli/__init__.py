@@ -40,27 +40,38 @@ def _one_line(exc: BaseException) -> str:
 
 def main(argv=None) -> int:
     parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except UsageError as exc:
+        return _error(exc)
+    if args.command is None:
+        parser.print_help()
+        return EXIT_USAGE
+    if args.command == "serve":
+        # a server runs for hours: its warnings are not kept to be printed when it stops
+        return _handle(args)
     with warnings.catch_warnings(record=True) as notes:
         warnings.simplefilter("always")
         try:
-            args = parser.parse_args(argv)
-            if args.command is None:
-                parser.print_help()
-                return EXIT_USAGE
-            code = args.handler(args)
-        except (UsageError, ParameterError, DataError) as exc:
-            code = _error(exc)
-        except ValueError as exc:
-            # a ValueError of the core names the argument, its value and what is allowed
-            code = _error(exc)
-        except MemoryError:
-            code = _error("the computation needs more memory than this machine has: ask for a smaller one")
-        except BrokenPipeError:  # e.g. `eha simulate ... | head`
-            code = 0
+            return _handle(args)
         finally:
             for note in notes:
                 print(f"eha: note: {_one_line(note.message)}", file=sys.stderr)
-    return code
+
+
+def _handle(args) -> int:
+    """Run the subcommand; a refusal is one line on stderr and exit code 2."""
+    try:
+        return args.handler(args)
+    except (UsageError, ParameterError, DataError) as exc:
+        return _error(exc)
+    except ValueError as exc:
+        # a ValueError of the core names the argument, its value and what is allowed
+        return _error(exc)
+    except MemoryError:
+        return _error("the computation needs more memory than this machine has: ask for a smaller one")
+    except BrokenPipeError:  # e.g. `eha simulate ... | head`
+        return 0
 
 
 def _error(exc) -> int:

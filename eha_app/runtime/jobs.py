@@ -300,6 +300,12 @@ class JobQueue:
             numba.set_num_threads(1)  # per calling thread: one core per job, jobs in parallel
         except Exception:  # noqa: BLE001 - numba missing or no threading layer: nothing to limit
             pass
+        # A student's extreme values overflow (inf, nan): the core checks what it computes and says so
+        # in the page; numpy's warnings of it (per worker thread: numpy's error state is the thread's)
+        # would only fill the server's log
+        import numpy as np
+
+        np.seterr(all="ignore")
 
 
 _default: JobQueue | None = None
