@@ -77,10 +77,12 @@ def use_local_resources(doc) -> None:
 
 
 class _ClosedPageNote(logging.Filter):
-    """Bokeh's and Panel's warning of a message to a closed page, written as a note (INFO)."""
+    """Bokeh's and Panel's warning of a message to a closed page, and Python's warnings, written as
+    notes (INFO): events of a class at work, not faults of the server."""
 
     def filter(self, record: logging.LogRecord) -> bool:
-        if record.levelno == logging.WARNING and record.getMessage().startswith("Failed sending message as connection"):
+        closed = record.getMessage().startswith("Failed sending message as connection")
+        if record.levelno == logging.WARNING and (closed or record.name == "py.warnings"):
             record.levelno, record.levelname = logging.INFO, "INFO"
         return True
 
@@ -129,6 +131,12 @@ def quiet_closed_websockets() -> None:
         logger = logging.getLogger(name)
         if _closed_page_note not in logger.filters:
             logger.addFilter(_closed_page_note)
+    # Python's warnings (numpy's "All-NaN slice" on a student's diverged run, a library's notice)
+    # go to the log as notes, with their place, instead of bare lines on stderr
+    logging.captureWarnings(True)
+    warnings_logger = logging.getLogger("py.warnings")
+    if _closed_page_note not in warnings_logger.filters:
+        warnings_logger.addFilter(_closed_page_note)
     # BokehJS sends a button's whole definition with its click when the button
     # arrived in a patch (our tabs are built when first shown); Bokeh then warns
     # "reference already known" and uses the model it has. Nothing is wrong.

@@ -420,7 +420,8 @@ def nonlinear_step_response(params=None, *, amplitude_m=0.01, t_end_s=20.0, dt_s
     messages = []
     if not run.success:
         messages.append(run.message)
-    if np.nanmax(np.abs(run.x)) >= run.params.x_max * (1.0 - 1e-9):
+    reached = np.abs(run.x[np.isfinite(run.x)])      # a failed run may hold nothing finite
+    if reached.size and reached.max() >= run.params.x_max * (1.0 - 1e-9):
         messages.append("the piston reached an end stop: the step is too large for the stroke")
     info = step_info(run.t, y / amplitude) if run.success else _nan_info()
     if run.success and not np.isnan(info.settling_time_s) and abs(info.steady_state - 1.0) > SETTLING_THRESHOLD:
