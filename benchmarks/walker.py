@@ -1414,8 +1414,26 @@ class Walker:
             if label == RESET:
                 self.shadow.reset_defaults()
                 await self._wait_derived()
+            elif label == REPORT:
+                # the report takes a second or two of a worker, with no indicator: its download button
+                # (or a message) is its effect; waiting for it keeps the walk the same from run to run
+                await self._wait_report()
         return Action(kind, desc, press, settle=settle, runs=runs,
                       spec={"do": "press", "label": label, "nth": nth, "kind": kind, "settle": settle})
+
+    async def _wait_report(self) -> None:
+        s = self.s
+
+        def ready():
+            button = s.one(css="eha-session-report-download")
+            note = s.one(css="eha-settings-note")
+            return ((button is not None and button.attributes.get("visible"))
+                    or (note is not None and "could not be made" in note.text()))
+        await s.round_trip(10)
+        try:
+            await s.wait_for(ready, 15, "the session report")
+        except StepTimeout:
+            pass
 
     def _make_sim_button(self):
         return self._press(self.rng.choice(SIM_BUTTONS), "sim-button")
