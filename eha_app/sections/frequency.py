@@ -307,6 +307,7 @@ class FrequencyPanel(Section):
         ts = cfg.ts
         exc_key = self.excitation_key(cfg)
         if exc_key == self.views["excitation"].computed_from:
+            self.excitation_errors = {}         # these settings made the preview on screen: idinput took them
             self._mark(cfg, preview_queued=False)
             self._update_enabled()
             return

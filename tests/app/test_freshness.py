@@ -248,7 +248,8 @@ def test_values_that_overflow_the_linearised_model_are_refused_beside_the_field(
     s = AppState()
     tab1 = Session(s).build("parameters")
     s.set_text("beta_e", "1e299")
-    assert not s.valid and "not finite numbers" in s.errors["beta_e"] and s.errors["beta_e"].startswith("βe = 1e299 GPa")
+    assert not s.valid and "not finite numbers" in s.errors["beta_e"]
+    assert s.errors["beta_e"].startswith("βe = 1e299 GPa")
     assert "not finite numbers" in tab1.form.errors["beta_e"]
     s.set_text("beta_e", "1.1")
     s.set_text("kp", "1e308")
@@ -263,3 +264,15 @@ def test_an_excitation_idinput_refuses_marks_its_preview():
     freq.form.values = {**freq.form.values, "signal_type": "sine", "n_sines": "5000"}
     assert freq.excitation_errors, "idinput accepted the settings: pick others that it refuses"
     assert freq.views["excitation"].status == "stale" and freq.button.disabled
+
+
+def test_excitation_settings_set_back_after_a_refusal_clear_its_message():
+    """Found by the random walk (seed 202): after idinput refused, typing back the settings of the preview
+    on screen made it current again but left the refusal beside the field and the button disabled."""
+    freq = Session(AppState()).build("frequency")
+    before = dict(freq.form.values)
+    freq.form.values = {**before, "signal_type": "sine", "n_sines": "5000"}
+    assert freq.excitation_errors and freq.views["excitation"].status == "stale"
+    freq.form.values = before
+    assert freq.views["excitation"].status == "current"
+    assert not freq.excitation_errors and not freq.form.errors and not freq.button.disabled
