@@ -55,6 +55,8 @@ def main(argv=None) -> int:
                     "range (studies of 500 seeds, 20000 samples)")
     ap.add_argument("--only", default="", help="comma-separated action kinds to walk (development)")
     ap.add_argument("--json", help="write the failures and the counts to this file")
+    ap.add_argument("--save", metavar="FILE", help="write each walk's actions (as data) to this JSON file: "
+                    "python -m benchmarks.walker --replay FILE [--shrink 300] does the first again")
     args = ap.parse_args(argv)
     if args.sessions < 1 or args.actions < 1:
         print("bench_random_walk: error: --sessions and --actions must be at least 1", file=sys.stderr)
@@ -106,6 +108,8 @@ def main(argv=None) -> int:
     print(format_failures(failures))
     by_kind = Counter(f.kind for f in failures)
     print("\nfailures by kind: " + (", ".join(f"{k} {n}" for k, n in by_kind.most_common()) or "none"))
+    if args.save:
+        Path(args.save).write_text(json.dumps([{"seed": w.seed, "actions": w.specs} for w in walkers]))
     if args.json:
         counts = Counter()
         for w in walkers:

@@ -118,6 +118,8 @@ VIEW_BUTTON = {"lse": LSE_RUN, "table4": TABLE4_RUN, "freq-record": RECORD_RUN,
 
 _LOG_LINE = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) (DEBUG|INFO|WARNING|ERROR|CRITICAL) (.*)$")
 _BARE_LEVEL = re.compile(r"^(WARNING|ERROR|CRITICAL)\b[: ]")
+#: a Python warning as a log line holds it ("file.py:12: UserWarning: ..."), its source line below
+_WARNING_NOTE = re.compile(r"\.py:\d+: \w*Warning: ")
 #: what ``eha serve`` itself prints when it starts and stops (anything else unformatted is a problem:
 #: a library writing to stderr, warnings printed as notes)
 _BENIGN = re.compile(r"^(EHA app:|Pages may connect|Preparing the simulation|Starting the server|Ready: |for the class|"
@@ -302,6 +304,9 @@ class LogMonitor:
             elif self._open is not None and self._open_is_problem:
                 if len(self._open.lines) < 1000:
                     self._open.lines.append(ln)      # a problem's traceback, its further lines
+            elif (self._open is not None and len(self._open.lines) == 1 and ln.startswith("  ")
+                  and _WARNING_NOTE.search(self._open.lines[0])):
+                self._open.lines.append(ln)          # a Python warning's source line, under its note
             else:
                 self._close()                        # a line of its own: printed, not logged
                 self._open, self._open_is_problem = LogProblem(now, [ln]), True
@@ -783,9 +788,19 @@ class Walker:
         self.shadow = state
 
     def _shadow_type(self, name: str, text: str) -> None:
+        """Type into the shadow of tab 1 (the app's own AppState). If that raises, the app's does too: a
+        finding (once per sort), and the shadow goes on as the app's state would."""
         if name in self.shadow.secret:
             return
-        self.shadow.set_text(name, text)
+        try:
+            self.shadow.set_text(name, text)
+        except Exception as exc:  # noqa: BLE001 - the app's own state class fails on this input
+            what = f"{type(exc).__name__}: {exc}"
+            if what not in self.reported.setdefault("state-raises", set()):
+                self.reported["state-raises"].add(what)
+                self.fail("derived", "tab 1 takes any text in any field (eha_app's AppState.set_text)",
+                          f"AppState.set_text({name!r}, {_short(text)}) raises {what[:200]}",
+                          "a value, or a message beside the field")
 
     def _tab1_texts(self) -> dict:
         s = self.shadow
@@ -995,15 +1010,22 @@ class Walker:
         if self.monitor is not None:
             self.monitor.dispatch(settle_s=0.3)
 
-    async def _reopen(self) -> None:
-        try:
-            await self.s.close()
-        except Exception:  # noqa: BLE001, S110 - it is broken anyway
-            pass
-        try:
-            await self.open(self.query)
-        except Exception as exc:  # noqa: BLE001
-            self.fail("connection", "a new page opens after a lost one", f"{type(exc).__name__}: {exc}", "the page")
+    async def _reopen(self, query: dict | None = None, *, why: str = "a new page opens after a lost one") -> None:
+        """A new page (with ``query``, else the last address); if it does not open, one without an address
+        (the student clears it), so that one page that cannot open does not end the walk."""
+        for attempt in (self.query if query is None else query, {}):
+            try:
+                await self.s.close()
+            except Exception:  # noqa: BLE001, S110 - it is broken anyway
+                pass
+            try:
+                await self.open(attempt)
+                return
+            except Exception as exc:  # noqa: BLE001 - reported; then without the address
+                shown = "?" + urlencode(attempt) if attempt else "(no address)"
+                self.fail("connection", why, f"{type(exc).__name__}: {exc}"[:300], f"the page {shown[:300]}")
+                if not attempt:
+                    return
 
     # -- choosing --------------------------------------------------------------------------------------
     #: relative weights of the action kinds
@@ -1825,8 +1847,7 @@ class Walker:
 
     def _reload(self, query: dict) -> Action:
         async def reload():
-            await self.s.close()
-            await self.open(query)
+            await self._reopen(query, why="the page opens again from its address")
         shown = "&".join(f"{k}={_short(v, 20)}" for k, v in query.items())
         return Action("reload", f"reload the page ?{shown}", reload, spec={"do": "reload", "query": dict(query)})
 
@@ -1938,8 +1959,11 @@ class Walker:
             record = self._record_token()
             window = self._form_errors(RECORD_WINDOW) or {}
             # the record's estimate uses no parameter of tab 1: only the record and the form's model settings
-            out[RECORD_RUN] = (bool(record) and not freq and not window,
-                               "a record is loaded" if record else "no record loaded")
+            # (a message of the form as a whole shows in the panel's error line; with tab 1 invalid that
+            # line speaks of tab 1 instead, and whether the form is whole cannot be told: not checked)
+            if valid or not (pane is not None and pane.attributes.get("visible")):
+                out[RECORD_RUN] = (bool(record) and not freq and not window and not config_error,
+                                   "a record is loaded" if record else "no record loaded")
         study = self._form_errors(STUDY_FORM)
         if study is not None:
             progress = s.one(css="eha-study-progress")
@@ -2355,6 +2379,9 @@ def main(argv=None) -> int:
     ap.add_argument("--heavy", action="store_true", help="valid values of costly fields over their whole range")
     ap.add_argument("--json", help="write the failures here")
     ap.add_argument("--trace", action="store_true", help="print every action as it is done")
+    ap.add_argument("--save", metavar="FILE", help="write each walk's actions (as data) to this JSON file")
+    ap.add_argument("--replay", metavar="FILE", help="instead of walking: do the actions of this JSON file (a "
+                    "list of actions, or --save's file: its first walk) in one session")
     ap.add_argument("--no-wait-busy", action="store_true", help="after typing, do not wait for the re-runs it "
                     "started (faster, less repeatable)")
     ap.add_argument("--shrink", type=float, default=0, metavar="SECONDS", help="after the walk, look for the "
@@ -2382,9 +2409,19 @@ def main(argv=None) -> int:
             print(f"server: {url}, log {log}", flush=True)
         t0 = time.perf_counter()
         monitor = LogMonitor(log) if log else None
-        failures, walkers = asyncio.run(run_walks(url, [args.seed + k for k in range(args.sessions)], args.actions,
-                                                  monitor=monitor, options=options))
+        if args.replay:
+            specs = json.loads(Path(args.replay).read_text())
+            specs = specs[0]["actions"] if specs and isinstance(specs[0], dict) and "actions" in specs[0] else specs
+            walker = Walker(url, args.seed, name="replay", options=options)
+            failures = asyncio.run(replay_failures(url, monitor, specs, seed=args.seed, options=options))
+            walkers = [walker]
+            walker.actions_done, walker.specs = len(specs), specs
+        else:
+            failures, walkers = asyncio.run(run_walks(url, [args.seed + k for k in range(args.sessions)],
+                                                      args.actions, monitor=monitor, options=options))
         seconds = time.perf_counter() - t0
+        if args.save:
+            Path(args.save).write_text(json.dumps([{"seed": w.seed, "actions": w.specs} for w in walkers]))
         if args.shrink > 0:
             _shrink_all(url, monitor, failures, walkers, options, args.shrink)
     finally:
