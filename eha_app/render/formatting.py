@@ -13,11 +13,12 @@ def num_html(x: float, digits: int = 4) -> str:
     """4 significant digits, powers of ten as 1.721·10⁴."""
     if x == 0 or not math.isfinite(x):
         return f"{x:g}"
-    exp = int(math.floor(math.log10(abs(x))))
+    # the exponent from Python's own rounding: x / 10**exp underflows for subnormal x (10**-324 == 0)
+    mant, exp = f"{x:.{digits - 1}e}".split("e")
+    exp = int(exp)
     if -3 <= exp < digits:
         return f"{x:.{digits}g}"
-    mant = x / 10**exp
-    return f"{mant:.{digits - 1}f}".rstrip("0").rstrip(".") + f"·10<sup>{exp}</sup>"
+    return mant.rstrip("0").rstrip(".") + f"·10<sup>{exp}</sup>"
 
 
 def pct_text(fraction: float, digits: int = 2) -> str:

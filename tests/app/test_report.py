@@ -108,3 +108,13 @@ def test_sentences_follow_the_parameters_not_the_papers(tmp_path):
     assert f"{100 * numbers['b_se_default'] / 1200.0:.0f} %" in joined
     page = result.path.read_text(encoding="utf-8")
     assert "1.2·10<sup>3</sup>" in page or "1200" in page
+
+
+def test_numbers_of_any_size_are_written():
+    """Found by the long random walk: a subnormal value typed on tab 1 (5e-324) broke Table 4, the least
+    squares' table and the report (10**-324 is 0.0 in floating point)."""
+    assert num_html(5e-324) == "4.941·10<sup>-324</sup>"
+    assert num_html(-2.5e-310, 5) == "-2.5·10<sup>-310</sup>"
+    assert num_html(1.7e308) == "1.7·10<sup>308</sup>"
+    assert num_html(9999.7) == "1·10<sup>4</sup>" and num_html(17210.0) == "1.721·10<sup>4</sup>"
+    assert num_html(0.0012345) == "0.001234" and num_html(0.00012345) == "1.234·10<sup>-4</sup>"
