@@ -397,8 +397,8 @@ def frequency_view(fi, hidden=()) -> FrequencyView:
     et, er, etitle = excitation_view(fi.excitation, fi.config.ts)
     d = fi.data
     base = dict(excitation_t=et, excitation_r=er, excitation_title=etitle, t=d.t, r=d.r, x_mm=d.x * 1e3, u=d.u)
-    if fi.validation is None or fi.bode is None:
-        view = FrequencyView(fit_ok=False, **base)
+    if fi.validation is None or fi.bode is None:        # tfest failed: the data, no estimate's curves
+        return FrequencyView(fit_ok=False, **base)
     e, theo, bode = fi.estimate, fi.theoretical_comparison, fi.bode
     vd, v = fi.validation_data, fi.validation
     ra = fi.residuals

@@ -225,3 +225,23 @@ def test_the_frequency_experiment_with_an_input_delay_and_residual_verdicts():
     panel._draw("residuals")
     verdicts = panel.figures["residuals"].verdicts.text
     assert verdicts.count("<p>") == 2 and "lags outside the 99 % band" in verdicts
+
+
+def test_a_failed_estimate_shows_its_data_in_every_figure():
+    """Found by the long random walk: when tfest failed (no validation, no Bode), Figs. 8-13 raised
+    instead of showing the experiment's data and no estimate."""
+    from types import SimpleNamespace
+
+    from eha_app.render import plots
+
+    t = np.arange(50) * 0.01
+    fi = SimpleNamespace(excitation=SimpleNamespace(u=np.sign(np.sin(t * 9)), type="rbs", seed=3),
+                         config=SimpleNamespace(ts=0.01), validation=None, bode=None, estimate_output=None,
+                         data=SimpleNamespace(t=t, r=np.sin(t), x=0.01 * np.sin(t), u=np.cos(t)))
+    view = plots.frequency_view(fi, hidden=("M",))
+    assert not view.fit_ok and view.y_hat_mm is None and np.allclose(view.x_mm, 10 * np.sin(t))
+    plots.ExcitationFigure().update(view.excitation_t, view.excitation_r, view.excitation_title)
+    for figure in (plots.ClosedLoopFigure, plots.FitFigure, plots.BodeFigure, plots.ValidationFigure,
+                   plots.ResidualFigure):
+        fig = figure()
+        fig.update(view, "nonlinear") if figure is plots.FitFigure else fig.update(view)
