@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize, signal
 
-from .._checks import not_allowed, shown
+from .._checks import ComputationError, not_allowed, shown
 from ..cancel import CancelToken, check
 from ..params import ActuatorParams
 from ._stats import Z95
@@ -248,7 +248,12 @@ def _solve(Phi: np.ndarray, y: np.ndarray, lags: int, cancel: CancelToken | None
 
     ``cancel`` is checked at every Newey-West lag (each a pass over the data).
     """
-    scale = np.sqrt(np.sum(Phi * Phi, axis=0))
+    with np.errstate(over="ignore", invalid="ignore"):
+        scale = np.sqrt(np.sum(Phi * Phi, axis=0))
+    if not (np.all(np.isfinite(Phi)) and np.all(np.isfinite(y)) and np.all(np.isfinite(scale))):
+        # LAPACK would print to the server's stderr and fail with "SVD did not converge"
+        raise ComputationError("the least squares failed: its regressors (eq. 15) are not finite, or too large to "
+                               "square, with this record and these parameters")
     scale[scale == 0] = 1.0
     Z = Phi / scale
     theta_z, _, rank, sv = np.linalg.lstsq(Z, y, rcond=None)

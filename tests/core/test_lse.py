@@ -192,3 +192,16 @@ def test_richer_excitation_narrows_B_under_white_noise():
     assert se_default / 1500 > 0.25                          # B is poorly determined by the default input
     assert se_rich < se_default / 2.5
     assert sum(r.covers("B") for r in rich) >= 3
+
+
+def test_regressors_that_overflow_are_a_computation_error_not_a_lapack_failure(capfd):
+    """Found by the long random walk: values typed at the edge of their ranges made the regressors
+    overflow; LAPACK printed '** On entry to DLASCL ...' on the server's stderr and numpy raised 'SVD did
+    not converge'. Now the least squares says what happened, before calling LAPACK."""
+    from eha_core.errors import ComputationError
+
+    data = lse_data(disturbance="none")
+    big = MeasuredData(t=data.t, x=data.x, v=data.v, p1=data.p1 * 1e300, p2=data.p2, u=data.u)
+    with pytest.raises(ComputationError, match=r"regressors \(eq. 15\) are not finite, or too large to square"):
+        identify_lse(big)
+    assert "DLASCL" not in capfd.readouterr().err
