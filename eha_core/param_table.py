@@ -117,12 +117,12 @@ NON_NEGATIVE_FIELDS: tuple[str, ...] = tuple(sorted((n for n, f in FIELD_INFO.it
 
 def piston_area(v: Values) -> float:
     """Piston-side effective area ``A1 = pi Dc^2 / 4`` [m^2]."""
-    return math.pi * v["Dc"] ** 2 / 4.0
+    return math.pi * (v["Dc"] * v["Dc"]) / 4.0    # not **: a float overflows there with an exception
 
 
 def rod_area(v: Values) -> float:
     """Rod-side effective area ``A2 = pi (Dc^2 - dc^2) / 4`` [m^2]."""
-    return math.pi * (v["Dc"] ** 2 - v["dc"] ** 2) / 4.0
+    return math.pi * (v["Dc"] * v["Dc"] - v["dc"] * v["dc"]) / 4.0
 
 
 def end_stop(v: Values) -> float:
@@ -278,6 +278,10 @@ _CHANGE = ("p1_0", "d0", "Dc", "dc")
 #: The rules that tie fields together, in the order they are checked (ActuatorParams raises the first
 #: broken one; the app shows each broken one on one field).
 RULES: tuple[Rule, ...] = (
+    # a bore typed at 1e200 m is a positive number, but its area A1 = pi Dc^2 / 4 is not one
+    Rule("bore area finite", ("Dc",), lambda v: math.isfinite(piston_area(v)),
+         core="the bore is too large: its area pi Dc^2 / 4 is not a finite number",
+         says=(Saying("Dc", "the bore is too large: its area π Dc²/4 is not a finite number"),)),
     Rule("rod inside the bore", ("dc", "Dc"), lambda v: v["dc"] < v["Dc"],
          core="the rod diameter must be smaller than the bore Dc = {Dc:.6g} m",
          says=(Saying("dc", "the rod diameter must be smaller than the bore {ref[Dc]}"),

@@ -234,3 +234,17 @@ def test_sessions_do_not_share_state():
     a.set_text("M", "5000")
     a.set_text("B", "-1")
     assert b.params.M == 4000.0 and b.valid and b.errors == {}
+
+
+def test_a_bore_whose_area_overflows_is_refused_beside_it():
+    """Found by the long random walk: Dc = 1e200 raised OverflowError in the page's callback (Dc ** 2), so
+    tab 1 stopped following what was typed. Now the field says why, and the core refuses it too."""
+    s = AppState()
+    s.set_text("Dc", "1e200")
+    assert not s.valid and list(s.errors) == ["Dc"]
+    assert s.errors["Dc"] == ("Dc = 1e200 mm is not allowed: the bore is too large: its area π Dc²/4 is not a "
+                              "finite number")
+    s.set_text("Dc", "100")
+    assert s.valid
+    with pytest.raises(ParameterError, match="its area pi Dc"):
+        ActuatorParams(Dc=1e200)
