@@ -287,6 +287,7 @@ class FrequencyPanel(Section):
             self.error.object = errors.get("", "") or (f"Fix the input to run: {next(iter(errors.values()))}"
                                                        if errors else "")
         self.error.visible = bool(self.error.object)
+        self._inner_inputs_changed()        # the record's button and marks follow the form's messages too
 
     def _on_config(self, *_events) -> None:
         # the marks of seven views, the form and the note: one message, not twenty (each one

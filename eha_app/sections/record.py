@@ -55,7 +55,9 @@ class RecordPanel(Section):
         parent = session.section(session.registry.get(self.key).within)
         # previews of the preprocessing are jobs of their own: they must not replace an estimate
         self.preview_runner = runner.sub("record preview")
-        self.orders = lambda: parent.config()[0]
+        # the form's model settings; None while any field of the form is refused (a parse error, or an
+        # excitation idinput refused: the form shows it, and every run of the panel waits for it)
+        self.orders = lambda: None if parent.excitation_errors else parent.config()[0]
         self._note, self._fail = parent.queue_note_text, parent.fail
         texts = self.initial_texts()
         self.columns: tuple[np.ndarray, np.ndarray, np.ndarray, str] | None = None    # t, u, y, file name

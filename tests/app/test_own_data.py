@@ -331,3 +331,19 @@ def test_the_records_estimate_takes_the_forms_delay(closed_loop):
     assert record.result.estimate.input_delay == 0.02 and "τ = <b>20 ms</b>" in record.summary.object
     settings = json.loads(record.estimate_bytes("json"))
     assert settings["estimate"]["input_delay"] == 0.02
+
+
+def test_an_excitation_idinput_refuses_holds_the_records_estimate_too(closed_loop):
+    """Found by the long random walk (41 times): with an excitation setting idinput refuses shown beside
+    its field, "Estimate from your record" stayed enabled and its result current, while a setting the form
+    cannot parse disabled both: one rule now, every run of the panel waits for the form's messages."""
+    panel = Session(AppState()).build("frequency")
+    record = _upload_record(panel, closed_loop.data_bytes("csv"), "loop.csv")
+    record.run()
+    assert record.view.status == "current" and not record.button.disabled
+    before = dict(panel.form.values)
+    panel.form.values = {**before, "signal_type": "sine", "n_sines": "5000"}
+    assert panel.excitation_errors and panel.form.errors
+    assert record.button.disabled and record.view.status == "stale"
+    panel.form.values = before
+    assert not panel.form.errors and not record.button.disabled and record.view.status == "current"
