@@ -260,7 +260,7 @@ class StudyPanel(Section):
 
     def _running(self, on: bool) -> None:
         self._busy = on
-        self.button.disabled = on or self.config()[0] is None
+        self._update_enabled()          # the study's own rule: also tab 1 valid, no hidden values
         self.cancel_button.disabled = not on
         self.progress.visible = on
 

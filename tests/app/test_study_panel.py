@@ -82,3 +82,17 @@ def test_one_study_at_a_time():
     assert panel.run() is None
     panel._running(False)
     assert not panel.button.disabled
+
+
+def test_a_study_ending_while_tab_1_is_invalid_leaves_its_button_disabled():
+    """Found by the long random walk: a study that ended (or was cancelled) while a tab-1 field was
+    invalid enabled "Run the study" again."""
+    state = AppState()
+    panel = Session(state).build("study")
+    panel._running(True)
+    state.set_text("pr", "1000")                   # above the supply pressure
+    assert not state.valid
+    panel._running(False)
+    assert panel.button.disabled and panel.cancel_button.disabled
+    state.set_text("pr", "0")
+    assert state.valid and not panel.button.disabled
