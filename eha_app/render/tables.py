@@ -133,13 +133,15 @@ def lse_table_html(res, scenario: str | None, hidden=()) -> str:
     header = ["parameter", "nominal", "estimate", "rel. error", "95 % interval (covers nominal?)",
               "paper (Table 3/4)" if paper else "paper"]
     noiseless = scenario in ("none", "200 sin", "5000 sin")
-    narrower = max(res.std_errors[k] / res.std_errors_textbook[k]
-                   for k in res.std_errors if res.std_errors_textbook[k] > 0)
+    # (an exact fit has no textbook interval to compare with: every one is zero)
+    narrower = max((res.std_errors[k] / res.std_errors_textbook[k]
+                    for k in res.std_errors if res.std_errors_textbook[k] > 0), default=None)
+    compared = "" if narrower is None else f"; textbook intervals are up to {narrower:.1f}× narrower"
     note = (f"<p class='eha-note'>Disturbance model: {res.disturbance_model}"
             + (f", frequency {res.disturbance_freq_hz:.6g} Hz ({'estimated' if res.freq_estimated else 'given'})"
                if res.disturbance_freq_hz else "")
-            + f". Intervals: {term('Newey-West')} over {res.hac_lags} lags (the prefilter colours the residual; "
-              f"textbook intervals are up to {narrower:.1f}× narrower)."
+            + f". Intervals: {term('Newey-West')} over {res.hac_lags} lags (the prefilter colours the residual"
+              f"{compared})."
             + (" Without noise the intervals shrink to the regressors' numerical error (~0.003 %), so ✗ may mark "
                "a miss by that much." if noiseless else "") + "</p>")
     return table_html(header, rows) + note

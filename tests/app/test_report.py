@@ -118,3 +118,19 @@ def test_numbers_of_any_size_are_written():
     assert num_html(1.7e308) == "1.7·10<sup>308</sup>"
     assert num_html(9999.7) == "1·10<sup>4</sup>" and num_html(17210.0) == "1.721·10<sup>4</sup>"
     assert num_html(0.0012345) == "0.001234" and num_html(0.00012345) == "1.234·10<sup>-4</sup>"
+
+
+def test_a_least_squares_table_with_no_textbook_interval_is_written():
+    """Found by the long random walk: when every textbook standard error was zero (an exact fit), the
+    table's note failed ('max() arg is an empty sequence') and the least squares showed nothing."""
+    import dataclasses
+
+    from eha_app.render.tables import lse_table_html
+    from eha_core.experiments import run_lse
+
+    res = run_lse(disturbance="none")
+    html = lse_table_html(res, "none")
+    assert "textbook intervals are up to" in html
+    exact = dataclasses.replace(res, std_errors_textbook={k: 0.0 for k in res.std_errors_textbook})
+    html = lse_table_html(exact, "none")
+    assert "narrower" not in html and "lags (the prefilter colours the residual)." in html
