@@ -11,7 +11,9 @@ __all__ = ["num_html", "pct_text", "poly_html", "tf_html", "poles_html", "table_
 
 def num_html(x: float, digits: int = 4) -> str:
     """4 significant digits, powers of ten as 1.721·10⁴."""
-    if x == 0 or not math.isfinite(x):
+    if x == 0:
+        return "0"                      # -0.0 too: a sign on nothing only puzzles
+    if not math.isfinite(x):
         return f"{x:g}"
     # the exponent from Python's own rounding: x / 10**exp underflows for subnormal x (10**-324 == 0)
     mant, exp = f"{x:.{digits - 1}e}".split("e")

@@ -71,8 +71,9 @@ def derived_html(params: ActuatorParams, kp: float = 10.0, *, stale: bool = Fals
         ["A<sub>2</sub> = π (D<sub>c</sub><sup>2</sup> − d<sub>c</sub><sup>2</sup>)/4",
          f"{p.A2 * 1e4:.4g} cm<sup>2</sup>"],
         ["end stops ±0.8 L<sub>0</sub>", f"±{p.x_max * 1e3:.4g} mm"],
-        ["operating point (eq. 10)", f"x = {op.x * 1e3:.3g} mm, v = 0, p<sub>1</sub> = {op.p1 / 1e6:.4g} MPa, "
-                                      f"p<sub>2</sub> = {op.p2 / 1e6:.5g} MPa, u = 0"],
+        # "+ 0.0": -0.0 is written 0 (a cache keyed on the parameters treats -0.0 and 0.0 as one)
+        ["operating point (eq. 10)", f"x = {op.x * 1e3 + 0.0:.3g} mm, v = 0, p<sub>1</sub> = {op.p1 / 1e6 + 0.0:.4g} "
+                                      f"MPa, p<sub>2</sub> = {op.p2 / 1e6 + 0.0:.5g} MPa, u = 0"],
     ])
     if hidden:
         return f'{stale}<h4>Geometry and operating point</h4>{geometry}{hidden_note(hidden)}'

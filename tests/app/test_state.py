@@ -248,3 +248,17 @@ def test_a_bore_whose_area_overflows_is_refused_beside_it():
     assert s.valid
     with pytest.raises(ParameterError, match="its area pi Dc"):
         ActuatorParams(Dc=1e200)
+
+
+def test_derived_values_are_the_same_for_zero_and_minus_zero():
+    """Found by the long random walk: tab 1's derived values are cached per parameter set, and -0.0 == 0.0,
+    so a student who typed 0 could see another's '-0' (a2, p1 of the operating point). Now both are
+    written 0, and the cache's sharing is invisible."""
+    from eha_app.render.tables import derived_html
+
+    zeroable = [n for n, f in FIELD_INFO.items() if f.bound != ">"]
+    assert {"B", "Af", "d0", "x0", "v0", "p1_0"} <= set(zeroable)
+    for name in zeroable:
+        plus, minus = derived_html(ActuatorParams(**{name: 0.0})), derived_html(ActuatorParams(**{name: -0.0}))
+        assert plus == minus, name
+        assert ">-0<" not in minus and " -0 " not in minus and "= -0 " not in minus, name
