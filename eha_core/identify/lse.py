@@ -327,8 +327,11 @@ def _estimate_frequency(t, e, Phi, y, ts, tau_f, keep, cancel: CancelToken | Non
         check(cancel)
         s_f, c_f = _harmonic_regressors(t, f, ts, tau_f)
         P = np.column_stack([Phi, s_f[keep], c_f[keep]])
-        th, *_ = np.linalg.lstsq(P / np.linalg.norm(P, axis=0), y, rcond=None)
-        r = y - (P / np.linalg.norm(P, axis=0)) @ th
+        norms = np.linalg.norm(P, axis=0)
+        norms[norms == 0] = 1.0             # a regressor that is zero throughout (no motion): 0/0 would be NaN
+        P = P / norms
+        th, *_ = np.linalg.lstsq(P, y, rcond=None)
+        r = y - P @ th
         return float(r @ r)
 
     res = optimize.minimize_scalar(rss, bounds=(max(lo, f0 - df), f0 + df), method="bounded",

@@ -205,3 +205,11 @@ def test_regressors_that_overflow_are_a_computation_error_not_a_lapack_failure(c
     with pytest.raises(ComputationError, match=r"regressors \(eq. 15\) are not finite, or too large to square"):
         identify_lse(big)
     assert "DLASCL" not in capfd.readouterr().err
+
+
+def test_no_motion_with_the_harmonic_model_is_reported_not_raised(capfd):
+    """Found by the long random walk (Table 4 with no motion): the harmonic model's frequency search divided
+    a zero regressor by its zero norm; LAPACK printed '** On entry to DLASCL' and numpy raised."""
+    res = run_lse(disturbance="none", u=Sine(0.0, 2.0), disturbance_model="harmonic")
+    assert not res.success and "linearly dependent" in res.message
+    assert "DLASCL" not in capfd.readouterr().err
