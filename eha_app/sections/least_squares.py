@@ -394,9 +394,8 @@ class LeastSquaresPanel(Section):
         return buf.getvalue().encode()
 
     def table4_key(self):
-        _, errors = self.request()
-        return None if "lse_seed" in errors or not self.state.valid else (self.state.params,
-                                                                          self.form.values.get("lse_seed"))
+        req, errors = self.request()
+        return None if "lse_seed" in errors or not self.state.valid else (self.state.params, int(req.seed))
 
     def _inputs_changed(self, *_events) -> None:
         why = "a parameter on tab 1 is not valid" if not self.state.valid else ""
@@ -506,12 +505,12 @@ class LeastSquaresPanel(Section):
         return self.runner.run("least squares", compute, show, fail=self._fail, busy=[self.area], note=self._note)
 
     def run_all(self):
-        _, errors = self.request()
+        req, errors = self.request()
         if not self.state.valid or "lse_seed" in errors:
             return None
         self.alert.visible = False
         params = self.state.params
-        seed = int(self.form.values.get("lse_seed", "0"))
+        seed = int(req.seed)                # as the form parsed it ("1e3", "1_000": 1000), not the raw text
         key = self.table4_key()
 
         def compute(token):

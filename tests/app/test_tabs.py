@@ -245,3 +245,21 @@ def test_a_failed_estimate_shows_its_data_in_every_figure():
                    plots.ResidualFigure):
         fig = figure()
         fig.update(view, "nonlinear") if figure is plots.FitFigure else fig.update(view)
+
+
+def test_table_4_takes_the_seed_as_the_form_reads_it(monkeypatch):
+    """Found by the long random walk: the noise seed typed as '1e3' was valid in the form (1000) but
+    "All four cases" read the raw text with int() and failed in the page's callback."""
+    from eha_app.sections import least_squares
+
+    seeds = []
+    monkeypatch.setattr(least_squares, "run_lse_table",
+                        lambda params, disturbance_model, seed, cancel: seeds.append(seed) or {})
+    lse = Session(AppState()).build("least_squares")
+    type_into(lse.form, lse_seed="1e3")
+    assert "lse_seed" not in lse.form.errors and not lse.all_button.disabled
+    key = lse.table4_key()
+    type_into(lse.form, lse_seed="1000")
+    assert lse.table4_key() == key
+    lse.run_all()
+    assert seeds == [1000, 1000]
