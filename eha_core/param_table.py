@@ -30,9 +30,9 @@ Examples
 >>> FIELD_INFO["beta_e"].label, FIELD_INFO["beta_e"].display_unit, FIELD_INFO["beta_e"].bound
 ('βe', 'GPa', '>')
 >>> values = {"Dc": 0.12, "dc": 0.13, "pr": 0.0, "ps": 32e6}
->>> [rule.name for rule in broken_rules(values, RULES[:2])]
+>>> [rule.name for rule in broken_rules(values, RULES[:3])]
 ['rod inside the bore']
->>> RULES[0].refusal(values)
+>>> RULES[1].refusal(values)
 ('dc', 0.13, 'the rod diameter must be smaller than the bore Dc = 0.12 m')
 """
 

@@ -321,6 +321,10 @@ class FrequencyPanel(Section):
             self._update_enabled()
 
         def failed(error):
+            if not isinstance(error, FieldError):
+                # a fault of the preview itself (logged), not of the settings: nothing beside a field
+                self.views["excitation"].inputs_changed(None, why="the excitation preview failed")
+                return
             # idinput checks the band, range and sinusoid settings against N
             self.excitation_errors = {_field_of(error): " ".join(str(error).split())}
             self.views["excitation"].inputs_changed(None, why="the excitation's settings are not valid")
