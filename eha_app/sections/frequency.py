@@ -318,6 +318,11 @@ class FrequencyPanel(Section):
             self.preview = out
             self._draw("excitation")
             self.views["excitation"].shown(exc_key)
+            # settings typed while it computed that start no preview of their own (a form that no
+            # longer parses): the preview just drawn is marked against them, not left current
+            cfg_now = self.config()[0]
+            if self.excitation_key(cfg_now) != exc_key:
+                self._mark(cfg_now, preview_queued=cfg_now is not None)
             self._update_enabled()
 
         def failed(error):

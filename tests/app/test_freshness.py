@@ -276,3 +276,19 @@ def test_excitation_settings_set_back_after_a_refusal_clear_its_message():
     freq.form.values = before
     assert freq.views["excitation"].status == "current"
     assert not freq.excitation_errors and not freq.form.errors and not freq.button.disabled
+
+
+def test_a_preview_that_arrives_after_the_form_stopped_parsing_is_marked():
+    """Found by the long random walk (12 times, seed 2): a preview asked for, then a setting the form
+    cannot parse (band_lo = 2: no new preview), then the first preview arrives: it was drawn as current
+    while the form showed its message. (In-process jobs run at once: the arrival is held back here.)"""
+    freq = Session(AppState()).build("frequency")
+    held_back = []
+    freq.preview_runner.run = lambda label, compute, show, **kwargs: held_back.append((compute, show))
+    freq.form.values = {**freq.form.values, "n_samples": "1500"}
+    freq.form.values = {**freq.form.values, "band_lo": "2"}
+    assert len(held_back) == 1 and "band_lo" in freq.form.errors
+    compute, show = held_back[0]
+    show(compute(None), None)
+    assert freq.views["excitation"].status == "stale" and "band_lo" in freq.form.errors
+    assert freq.button.disabled
