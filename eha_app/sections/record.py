@@ -173,6 +173,7 @@ class RecordPanel(Section):
                                 f"{ts * 1e3:.4g} ms, t from {t[0]:g} to {t[-1]:g} s.</span>")
             self.window_form.values = {"rec_from": "", "rec_to": ""}
             self.window_form.visible = self.detrend.visible = True
+            self.inputs_changed()           # a record is loaded: its button now, not when the drawing comes
             self.preview()
 
         def fail(message):

@@ -347,3 +347,16 @@ def test_an_excitation_idinput_refuses_holds_the_records_estimate_too(closed_loo
     assert record.button.disabled and record.view.status == "stale"
     panel.form.values = before
     assert not panel.form.errors and not record.button.disabled and record.view.status == "current"
+
+
+def test_the_records_button_follows_the_file_read_not_its_drawing(closed_loop):
+    """Found by the long random walk (seed 2): the note named the new record while its button waited for
+    the record's drawing (a job of its own) to be enabled. (In-process jobs run at once: the drawing is
+    held back here.)"""
+    panel = Session(AppState()).build("frequency")
+    record = panel.record
+    held_back = []
+    record.preview_runner.run = lambda label, compute, show, **kwargs: held_back.append(show)
+    _upload_record(panel, closed_loop.data_bytes("csv"), "loop.csv")
+    assert held_back and "Your record: loop.csv" in record.note.object
+    assert not record.button.disabled
