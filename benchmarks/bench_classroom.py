@@ -58,14 +58,13 @@ import subprocess
 import sys
 import tempfile
 import time
-import urllib.request
 from pathlib import Path
 
 # run as a script, this file's folder is on the path: the client is a sibling module
 if __package__:
-    from .classroom_client import STEP_NAMES, STEPS, ClassResult, Student, do_step, run_class
+    from .classroom_client import STEP_NAMES, STEPS, ClassResult, Student, do_step, run_class, wait_served
 else:
-    from classroom_client import STEP_NAMES, STEPS, ClassResult, Student, do_step, run_class
+    from classroom_client import STEP_NAMES, STEPS, ClassResult, Student, do_step, run_class, wait_served
 
 ROOT = Path(__file__).resolve().parents[1]
 _TICK = os.sysconf("SC_CLK_TCK")
@@ -149,20 +148,7 @@ class Server:
         self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT)
         self.tree = ProcTree(self.proc.pid)
         self.url = f"http://127.0.0.1:{self.port}/eha"
-        deadline = time.monotonic() + 180
-        while True:
-            if self.proc.poll() is not None:
-                raise RuntimeError(f"eha serve exited with {self.proc.returncode}: {self.log_text()[-2000:]}")
-            try:
-                with urllib.request.urlopen(self.url, timeout=10) as r:
-                    if r.status == 200:
-                        break
-            except OSError:
-                pass
-            if time.monotonic() > deadline:
-                self.stop()
-                raise RuntimeError("eha serve did not answer within 180 s")
-            time.sleep(0.3)
+        wait_served(self.proc, self.url, 180, self.log_text, self.stop, poll_s=0.3)
 
     def log_text(self) -> str:
         if not self.log.closed:

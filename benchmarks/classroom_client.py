@@ -51,9 +51,13 @@ from __future__ import annotations
 import asyncio
 import html
 import json
+import os
 import random
 import re
+import signal
+import subprocess
 import time
+import urllib.request
 import uuid
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -81,6 +85,37 @@ __all__ = [
 ]
 
 _TOKEN = re.compile(r'"token"\s*:\s*"([^"]+)"')
+
+
+def wait_served(proc: subprocess.Popen, url: str, timeout: float, log_tail: Callable[[], str],
+                stop: Callable[[], None], poll_s: float = 0.2) -> None:
+    """Wait until ``eha serve`` (``proc``) answers ``url`` with 200; RuntimeError if it exits or does not
+    answer within ``timeout`` seconds (``stop()`` first)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        if proc.poll() is not None:
+            raise RuntimeError(f"eha serve exited with {proc.returncode}: {log_tail()[-2000:]}")
+        try:
+            with urllib.request.urlopen(url, timeout=10) as r:
+                if r.status == 200:
+                    return
+        except OSError:
+            pass
+        if time.monotonic() > deadline:
+            stop()
+            raise RuntimeError(f"eha serve did not answer within {timeout:g} s")
+        time.sleep(poll_s)
+
+
+def stop_server(proc: subprocess.Popen) -> None:
+    """Stop a server started with ``start_new_session=True`` and its children: SIGTERM, SIGKILL after 20 s."""
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
 
 
 class ProtocolError(RuntimeError):

@@ -62,13 +62,11 @@ import math
 import os
 import random
 import re
-import signal
 import socket
 import subprocess
 import sys
 import tempfile
 import time
-import urllib.request
 from collections import Counter
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -76,9 +74,9 @@ from pathlib import Path
 from urllib.parse import urlencode
 
 if __package__:
-    from .classroom_client import Model, ProtocolError, StepTimeout, Student, _plain, _refs
+    from .classroom_client import Model, ProtocolError, StepTimeout, Student, _plain, _refs, stop_server, wait_served
 else:  # run as a script: this file's folder is on the path
-    from classroom_client import Model, ProtocolError, StepTimeout, Student, _plain, _refs
+    from classroom_client import Model, ProtocolError, StepTimeout, Student, _plain, _refs, stop_server, wait_served
 
 __all__ = ["Failure", "LogMonitor", "WalkServer", "WalkStudent", "Walker", "WalkOptions", "run_walks",
            "format_failures", "main"]
@@ -204,20 +202,7 @@ class WalkServer:
         self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT,
                                      env={**os.environ, "EHA_STRICT": "1", **(env or {})}, start_new_session=True)
         self.url = f"http://127.0.0.1:{self.port}/eha"
-        deadline = time.monotonic() + timeout
-        while True:
-            if self.proc.poll() is not None:
-                raise RuntimeError(f"eha serve exited with {self.proc.returncode}: {self.log_text()[-2000:]}")
-            try:
-                with urllib.request.urlopen(self.url, timeout=10) as r:
-                    if r.status == 200:
-                        break
-            except OSError:
-                pass
-            if time.monotonic() > deadline:
-                self.stop()
-                raise RuntimeError(f"eha serve did not answer within {timeout:g} s")
-            time.sleep(0.2)
+        wait_served(self.proc, self.url, timeout, self.log_text, self.stop)
 
     def log_text(self) -> str:
         if not self.log.closed:
@@ -225,13 +210,7 @@ class WalkServer:
         return Path(self.log_path).read_text(errors="replace")
 
     def stop(self) -> None:
-        if self.proc.poll() is None:
-            os.killpg(self.proc.pid, signal.SIGTERM)
-            try:
-                self.proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait()
+        stop_server(self.proc)
         self.log.close()
 
 

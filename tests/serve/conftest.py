@@ -7,8 +7,6 @@ sends them, without a browser (tests/ui drives a real one).
 
 from __future__ import annotations
 
-import os
-import signal
 import socket
 import subprocess
 import sys
@@ -17,6 +15,8 @@ import urllib.request
 from pathlib import Path
 
 import pytest
+
+from benchmarks.classroom_client import stop_server
 
 ROOT = Path(__file__).resolve().parents[2]
 EHA = Path(sys.executable).with_name("eha")
@@ -61,13 +61,7 @@ class EhaServer:
         return self.log_path.read_text(errors="replace")
 
     def stop(self) -> None:
-        if self.proc.poll() is None:
-            os.killpg(self.proc.pid, signal.SIGTERM)
-            try:
-                self.proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait()
+        stop_server(self.proc)
         self.log.close()
 
 
