@@ -221,7 +221,6 @@ class FrequencyPanel(Section):
                                    sizing_mode="stretch_width", css_classes=["eha-freq-figures"])
         self._shown = {"excitation"}
         watch(self.figure_tabs, self._on_figure_tab, "active")
-        watch(self.form, lambda _e: self._inner_inputs_changed(), "values")
         state.param.watch(self._update_enabled, "valid")
         state.param.watch(self._on_config, ["params", "kp", "valid"])
         self._on_config()
