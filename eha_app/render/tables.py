@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import html
 import math
 
 import numpy as np
 
 from eha_core.experiments import PAPER_EQ25, PAPER_EQ26, PAPER_FIT_PERCENT, PAPER_TABLE3_BETA_E, PAPER_TABLE4
+from eha_core.identify.lse_reading import read_all, read_estimate
 from eha_core.linear import linearize
 from eha_core.params import ActuatorParams
 
@@ -14,7 +16,7 @@ from .formatting import num_html, pct_text, poles_html, table_html, tf_html
 from .glossary import term
 
 __all__ = ["CSS", "SCENARIOS", "derived_html", "lse_table_html", "table4_html", "freq_summary_html", "backout_html",
-           "estimate_alert", "estimation_sentences"]
+           "estimate_alert", "estimation_sentences", "reading_mark", "readings_html", "paper_gaps"]
 
 #: Styles of the formulas and tables (the app's page and the report).
 CSS = """
@@ -29,6 +31,9 @@ CSS = """
 .eha-two { display: flex; flex-wrap: wrap; }
 .eha-ok { color: #1b5e20; }
 .eha-warn { color: #b00020; font-weight: 600; }
+.eha-undetermined { color: #8a5a00; font-weight: 600; }
+.eha-readings { font-size: 13px; margin: 4px 0 8px 0; padding-left: 18px; }
+.eha-cite { color: #666; }
 .eha-stale { color: #b00020; font-style: italic; }
 .eha-invalid input { border-color: #b00020 !important; background: #fff4f4 !important; }
 h4 { margin: 12px 0 4px 0; }
@@ -107,70 +112,201 @@ def _num(v: float) -> str:
     return num_html(v, 5) if v != 0 else "0"
 
 
-def lse_table_html(res, scenario: str | None, hidden=()) -> str:
-    """Estimates against nominal values, with 95 % intervals and the paper's number.
+_MARKS = {"exact": ("exact ✓", "eha-ok"), "covers": ("covers ✓", "eha-ok"),
+          "undetermined": ("undetermined", "eha-undetermined"), "estimated": ("", ""),
+          "misses": ("misses ✗", "eha-warn"), "impossible": ("impossible ✗", "eha-warn")}
+
+
+def reading_mark(reading, nominal: str = "nominal") -> str:
+    """The reading of an estimate in one word and a mark, coloured (✓ only for exact and covers)."""
+    text, cls = _MARKS[reading.kind]
+    if not text:
+        return ""
+    return (f"<span class='eha-reading eha-reading-{reading.kind} {cls}' title='{_plain(reading.describe(nominal=nominal))}'>"
+            f"{text}</span>")
+
+
+def _plain(text: str) -> str:
+    return html.escape(text, quote=True)
+
+
+def _describe(reading, nominal: str = "nominal") -> str:
+    return reading.describe(fmt=_num, symbol=_NAMES.get(reading.name, reading.name),
+                            unit=_UNITS.get(reading.name, ""), nominal=nominal)
+
+
+def readings_html(readings, prefix: str = "", nominal: str = "nominal") -> str:
+    """What the readings that are not a plain "covers" mean, one line each; the exact ones in one line."""
+    exact = [r for r in readings if r.kind == "exact"]
+    lines = []
+    if exact:
+        names = ", ".join(_NAMES.get(r.name, r.name) for r in exact)
+        worst = max((abs(r.value / r.nominal - 1) for r in exact if r.nominal), default=0.0)
+        lines.append(f"{prefix}<b class='eha-ok'>Exact</b> ({names}): without noise each estimate equals its {nominal} "
+                     f"value to within the regressors' numerical error (at most {100 * worst:.2g} %), and its "
+                     "interval collapses to that error: the ✓ says the estimate is right, not that the interval "
+                     "covers.")
+    for r in readings:
+        if r.kind in ("impossible", "undetermined", "misses"):
+            text, cls = _MARKS[r.kind]
+            lines.append(f"{prefix}<b class='{cls}'>{text.rstrip(' ✗')}</b>: {_describe(r, nominal)}")
+    return "".join(f"<li>{line}</li>" for line in lines)
+
+
+def _paper_cell(scenario: str, name: str, nominal: float | None) -> tuple[float | None, str]:
+    """The paper's value of ``name`` for one case, and its source: Table 4's column of that case
+    (Table 3 prints the case d = 0 once more, with another β_e: named in the note)."""
+    p = PAPER_TABLE4.get(scenario, {}).get(name)
+    if p is None:
+        return None, ""
+    txt = _num(p) + (f" ({pct_text(p / nominal - 1)})" if nominal else "")
+    return p, f"{txt}<br><small class='eha-cite'>Table 4, {SCENARIOS[scenario]}</small>"
+
+
+def _printed_half_ulp(p: float) -> float:
+    """Half a unit in the last printed digit of a number of the paper (4000.1 → 0.05, 1.101e9 → 5e5)."""
+    if p == 0:
+        return 0.0
+    digits = repr(float(p)).lower().split("e")[0].replace("-", "").replace(".", "").strip("0") or "0"
+    exp = math.floor(math.log10(abs(p)))
+    return 0.5 * 10.0 ** (exp - len(digits) + 1)
+
+
+def paper_gaps(res, scenario: str | None) -> list[str]:
+    """The parameters whose paper value lies outside our interval by more than the paper's rounding."""
+    if scenario not in PAPER_TABLE4:
+        return []
+    gaps = []
+    for k, (lo, hi) in res.ci95.items():
+        p = PAPER_TABLE4[scenario].get(k)
+        if p is None:
+            continue
+        h = _printed_half_ulp(p)
+        if p + h < lo or p - h > hi:
+            gaps.append(k)
+    return gaps
+
+
+def _setup_note(scenario: str, model: str, gaps, seed: int | None) -> str:
+    """Where our number and the paper's differ by more than our interval, and what differs in the setup."""
+    if not gaps:
+        return ""
+    names = ", ".join(_NAMES.get(k, k) for k in gaps)
+    setup = ["our regressors are formed on a cubic-spline grid 16 times finer than the 1 kHz samples and filtered "
+             "there (the paper does not state its discretisation; the classical one biases B by about 1.5 %)",
+             "the paper gives no intervals"]
+    if model != "constant":
+        setup.insert(0, "the paper estimated with the constant d<sub>0</sub>; this is the model with d<sub>0</sub> + "
+                        "a sinusoid")
+    if scenario == "white noise":
+        setup.insert(0, "the noise is another draw (the paper gives neither its seed nor how it is held between "
+                        f"samples; ours: seed {seed if seed is not None else 0}, held for 1 ms)")
+    if scenario in ("200 sin", "5000 sin") and model == "constant":
+        setup.insert(0, "under this force the constant model cannot separate the sinusoid from the regressors "
+                        "(see above), so any small difference in the setup moves its estimates far")
+    return (f"<li><b>Not the paper's number</b> ({names}): the paper's value lies outside our 95 % interval. "
+            f"What differs: {'; '.join(setup)}.</li>")
+
+
+def lse_table_html(res, scenario: str | None, hidden=(), *, alternative=None, leak=None, seed: int | None = None,
+                   own_record: bool = False) -> str:
+    """Estimates against nominal values, with 95 % intervals, their readings and the paper's number.
 
     ``hidden``: an exercise's hidden parameters: their nominal value, error and
-    coverage are not shown (nor is the paper's column).
+    reading against the truth are not shown (nor is the paper's column).
+    ``alternative``: the same data with the harmonic disturbance model, shown
+    beside when ``leak`` (a :class:`~eha_core.identify.lse_reading.DisturbanceLeak`)
+    says the constant model left a sinusoid out. ``own_record``: a student's
+    own measurements: no nominal or paper column (nothing is known to compare with).
     """
     if hidden:
         return _lse_exercise_html(res, hidden)
-    paper = PAPER_TABLE4.get(scenario, {}) if scenario else {}
-    if scenario == "none":
-        paper = {**paper, "beta_e": PAPER_TABLE3_BETA_E}
+    known = not own_record
+    paper_on = scenario in PAPER_TABLE4 and known
+    readings = read_all(res, hidden=() if known else tuple(res.estimates))
+    alt = leak is not None and alternative is not None
     rows = []
     for k, v in res.estimates.items():
-        nom = res.nominal.get(k)
-        rel = res.rel_error.get(k)
+        nom = res.nominal.get(k) if known else None
+        rel = res.rel_error.get(k) if known else None
         lo, hi = res.ci95[k]
-        covers = "" if nom is None else ("✓" if lo <= nom <= hi else "✗")
-        p = paper.get(k)
-        p_txt = "" if p is None else _num(p)
-        if p is not None and nom:
-            p_txt += f" ({pct_text(p / nom - 1)})"
-        rows.append([f"{_NAMES.get(k, k)} [{_UNITS.get(k, '')}]", "" if nom is None else _num(nom), _num(v),
-                     "" if rel is None else pct_text(rel, 3),
-                     f"[{_num(lo)}, {_num(hi)}] {covers}", p_txt])
-    header = ["parameter", "nominal", "estimate", "rel. error", "95 % interval (covers nominal?)",
-              "paper (Table 3/4)" if paper else "paper"]
-    noiseless = scenario in ("none", "200 sin", "5000 sin")
+        row = [f"{_NAMES.get(k, k)} [{_UNITS.get(k, '')}]"]
+        if known:
+            row.append("" if nom is None else _num(nom))
+        row += [_num(v)]
+        if known:
+            row.append("" if rel is None else pct_text(rel, 3))
+        row += [f"[{_num(lo)}, {_num(hi)}]", reading_mark(readings[k])]
+        if alt:
+            a = alternative.estimates.get(k)
+            row.append("" if a is None else _num(a) + (f" ({pct_text(a / nom - 1, 3)})" if nom else ""))
+        if paper_on:
+            row.append(_paper_cell(scenario, k, nom)[1])
+        rows.append(row)
+    if alt:     # the sinusoid's own amplitudes, which only the harmonic model has
+        for k in ("d_sin", "d_cos"):
+            row = [f"{_NAMES[k]} [{_UNITS[k]}]"] + [""] * (4 if known else 2) + [""]
+            row.append(_num(alternative.estimates[k]))
+            if paper_on:
+                row.append("")
+            rows.append(row)
+    header = ["parameter"] + (["nominal"] if known else []) + ["estimate"] + (["rel. error"] if known else []) \
+        + ["95 % interval", "reading"] + (["with d<sub>0</sub> + a sinusoid"] if alt else []) \
+        + (["paper"] if paper_on else [])
     # (an exact fit has no textbook interval to compare with: every one is zero)
     narrower = max((res.std_errors[k] / res.std_errors_textbook[k]
                     for k in res.std_errors if res.std_errors_textbook[k] > 0), default=None)
     compared = "" if narrower is None else f"; textbook intervals are up to {narrower:.1f}× narrower"
+    items = readings_html(readings.values())
+    if leak is not None:
+        items += f"<li class='eha-leak'><b>Why the constant model fails here.</b> {html.escape(leak.sentence)}</li>"
+    if paper_on:
+        items += _setup_note(scenario, res.disturbance_model, paper_gaps(res, scenario), seed)
+        if scenario == "none" and "beta_e" in res.estimates:
+            items += (f"<li>The paper prints this case twice: Table 4 gives β<sub>e</sub> = "
+                      f"{_num(PAPER_TABLE4['none']['beta_e'])} Pa, Table 3 {_num(PAPER_TABLE3_BETA_E)} Pa "
+                      f"({pct_text(PAPER_TABLE3_BETA_E / res.nominal['beta_e'] - 1)}).</li>")
+    if own_record:
+        items += ("<li>Your own record: no nominal values are known, so the readings say only whether an "
+                  "estimate is physically possible and whether the data determine it.</li>")
     note = (f"<p class='eha-note'>Disturbance model: {res.disturbance_model}"
             + (f", frequency {res.disturbance_freq_hz:.6g} Hz ({'estimated' if res.freq_estimated else 'given'})"
                if res.disturbance_freq_hz else "")
             + f". Intervals: {term('Newey-West')} over {res.hac_lags} lags (the prefilter colours the residual"
-              f"{compared})."
-            + (" Without noise the intervals shrink to the regressors' numerical error (~0.003 %), so ✗ may mark "
-               "a miss by that much." if noiseless else "") + "</p>")
-    return table_html(header, rows) + note
+              f"{compared}).</p>")
+    return (table_html(header, rows, cls="eha-table eha-lse-readings") + note
+            + (f"<ul class='eha-readings'>{items}</ul>" if items else ""))
 
 
 def _lse_exercise_html(res, hidden) -> str:
+    readings = read_all(res, hidden=tuple(hidden))
     rows = []
     for k, v in res.estimates.items():
         lo, hi = res.ci95[k]
         nom = None if k in hidden else res.nominal.get(k)
         # the harmonic disturbance's amplitudes have no known value: an empty cell, as in the full table
         known = "hidden" if k in hidden else ("" if nom is None else _num(nom))
-        rows.append([f"{_NAMES.get(k, k)} [{_UNITS.get(k, '')}]", known, _num(v), f"[{_num(lo)}, {_num(hi)}]"])
+        rows.append([f"{_NAMES.get(k, k)} [{_UNITS.get(k, '')}]", known, _num(v), f"[{_num(lo)}, {_num(hi)}]",
+                     reading_mark(readings[k], nominal="known")])
+    items = readings_html(readings.values(), nominal="known")
     note = (f"<p class='eha-note'>Disturbance model: {res.disturbance_model}. Intervals: {term('Newey-West')} over "
             f"{res.hac_lags} lags. Hand in the estimates of the hidden parameters below.</p>")
-    return table_html(["parameter", "known value", "estimate", "95 % interval"], rows) + note
+    return (table_html(["parameter", "known value", "estimate", "95 % interval", "reading"], rows) + note
+            + (f"<ul class='eha-readings'>{items}</ul>" if items else ""))
 
 
-def table4_html(by_model: dict) -> str:
+def table4_html(by_model: dict, leaks: dict | None = None, seed: int | None = None) -> str:
     """Table 4: for every scenario, our estimates with both disturbance models and the paper's.
 
-    ``by_model`` maps 'constant' / 'harmonic' to {scenario: LSEResult}.
+    ``by_model`` maps 'constant' / 'harmonic' to {scenario: LSEResult};
+    ``leaks`` maps a scenario to its :class:`~eha_core.identify.lse_reading.DisturbanceLeak`.
     """
     names = ["M", "B", "Af", "d0", "beta_e"]
     models = list(by_model)
     scenarios = list(next(iter(by_model.values())))
     first = by_model[models[0]][scenarios[0]]
     header = ["parameter", "nominal"] + [SCENARIOS[s] for s in scenarios]
+    short = {"constant": "const.", "harmonic": "harm."}
     rows = []
     for k in names:
         nom = first.nominal[k]
@@ -182,21 +318,36 @@ def table4_html(by_model: dict) -> str:
                 v = res.estimates[k]
                 rel = res.rel_error.get(k)
                 lo, hi = res.ci95[k]
-                mark = "✓" if lo <= nom <= hi else "✗"
-                short = {"constant": "const.", "harmonic": "harm."}[m]
-                lines.append(f"<span class='eha-t4-{m}'>{short}: <b>{_num(v)}</b>"
+                mark = reading_mark(read_estimate(res, k))
+                lines.append(f"<span class='eha-t4-{m}'>{short[m]}: <b>{_num(v)}</b>"
                              + (f" ({pct_text(rel)})" if rel is not None else "")
-                             + f"<br><small>[{_num(lo)}, {_num(hi)}] {mark}</small></span>")
+                             + f"<br><small>[{_num(lo)}, {_num(hi)}]</small> {mark}</span>")
             p = PAPER_TABLE4[scen][k]
             prel = f" ({pct_text(p / nom - 1)})" if nom else ""
             lines.append(f"<span class='eha-t4-paper'>paper: {_num(p)}{prel}</span>")
             row.append("<br>".join(lines))
         rows.append(row)
+    items = ""
+    for scen in scenarios:
+        for m in models:
+            res = by_model[m][scen]
+            prefix = f"{SCENARIOS[scen]}, {short[m]} — "
+            items += readings_html([r for r in read_all(res).values() if r.kind != "exact"], prefix=prefix)
+            items += _setup_note(scen, m, [g for g in paper_gaps(res, scen) if g in names], seed).replace(
+                "<li><b>", f"<li>{prefix}<b>", 1)
+        leak = (leaks or {}).get(scen)
+        if leak is not None:
+            items += (f"<li class='eha-leak'>{SCENARIOS[scen]} — <b>why the constant model fails.</b> "
+                      f"{html.escape(leak.sentence)}</li>")
     note = ("<p class='eha-note'>const. = the paper's constant d<sub>0</sub>; harm. = d<sub>0</sub> plus a sinusoid "
-            "whose frequency is estimated from the data. [95 % interval] ✓ when it covers the nominal value. "
-            "Without noise (d = 0, sinusoids) the intervals shrink to the regressors' numerical error (~0.003 %) and "
-            "may miss the nominal value by that much.</p>")
-    return table_html(header, rows, cls="eha-table eha-table4") + note
+            "whose frequency is estimated from the data. Every paper value is Table 4's, in the column of its case "
+            f"(Table 3 prints d = 0 again with β<sub>e</sub> = {_num(PAPER_TABLE3_BETA_E)} Pa). Readings: "
+            "<b>exact</b> ✓ without noise, the estimate equals the nominal value to within the regressors' "
+            "numerical error (~0.003 %) and its interval collapses to that error; <b>covers</b> ✓ / <b>misses</b> ✗ "
+            "the nominal value; <b>undetermined</b>: the interval is wider than the estimate; <b>impossible</b> ✗: "
+            "no actuator has that value.</p>")
+    return (table_html(header, rows, cls="eha-table eha-table4") + note
+            + (f"<ul class='eha-readings'>{items}</ul>" if items else ""))
 
 
 def estimate_alert(e) -> str:

@@ -14,7 +14,7 @@ import numpy as np
 import panel as pn
 
 from eha_core.board import lse_model
-from eha_core.errors import FieldError
+from eha_core.errors import ComputationError, FieldError
 from eha_core.experiments import (
     LSE_INPUT,
     LSE_INPUT_RICH,
@@ -26,6 +26,7 @@ from eha_core.experiments import (
 )
 from eha_core.identify.disturbance import MAX_FREQ_HZ
 from eha_core.identify.lse import identify_lse
+from eha_core.identify.lse_reading import disturbance_leak
 from eha_core.params import ParameterError
 from eha_core.signals import SignalSpecError, parse_signal
 
@@ -145,6 +146,19 @@ def parse_lse(texts: dict) -> tuple[LseRequest, dict]:
     return req, errors
 
 
+def _beside(model: str, res, data, params, token):
+    """The harmonic model on the same data and why the constant one failed: (alternative, leak),
+    (None, None) when the constant model left no sinusoid out (see disturbance_leak)."""
+    if model != "constant" or not res.success:
+        return None, None
+    try:
+        alt = identify_lse(data, params, disturbance_model="harmonic", cancel=token)
+    except ComputationError:
+        return None, None
+    leak = disturbance_leak(res, alt, data, params)
+    return (alt, leak) if leak is not None else (None, None)
+
+
 class LeastSquaresPanel(Section):
     """Time domain: least squares on eqs. 15-18, one scenario or Table 4."""
 
@@ -156,7 +170,9 @@ class LeastSquaresPanel(Section):
         super().__init__(session, **kwargs)
         state = self.state
         self.result = None
+        self.result_context = {}            # what the table shows beside the result (lse_table_html's keywords)
         self.all_results = None
+        self.all_context = {}
         texts = self.initial_texts()
         self.form = Form(spec=[g.to_spec() for g in LSE_FORM], values=texts, url_defaults=LSE_DEFAULTS, width=270,
                          css_classes=["eha-lse-form"], margin=(5, 10))
@@ -462,9 +478,10 @@ class LeastSquaresPanel(Section):
             if own is not None:     # the student's measurements: nothing to simulate
                 res = identify_lse(own, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
                                    cancel=token)
-                return res, plots.lse_view(own, None), (f"Your data ({html.escape(own.source)}, {own.t.size} "
-                                                        "samples): the model is not re-simulated (the input is "
-                                                        "known only at its samples)."), own, None, board_model(res)
+                return (res, plots.lse_view(own, None), (f"Your data ({html.escape(own.source)}, {own.t.size} "
+                                                         "samples): the model is not re-simulated (the input is "
+                                                         "known only at its samples)."), own, None, board_model(res),
+                        _beside(req.model, res, own, params, token))
             d = req.disturbance()
             data = lse_data(params, d, u=u, t_end=t_end, seed=req.seed, measurement_noise=req.measurement_noise(),
                             cancel=token)
@@ -475,11 +492,13 @@ class LeastSquaresPanel(Section):
                 resim_error = ""
             except ParameterError as exc:
                 resim, resim_error = None, f"No re-simulation: the estimate is not physical ({exc})."
-            return res, plots.lse_view(data, resim), resim_error, data, resim, board_model(res)
+            return (res, plots.lse_view(data, resim), resim_error, data, resim, board_model(res),
+                    _beside(req.model, res, data, params, token))
 
         def show(out, job):
-            res, view, resim_error, data, resim, model = out
+            res, view, resim_error, data, resim, model, (alt, leak) = out
             self.result = res
+            self.result_context = {"alternative": alt, "leak": leak, "seed": req.seed, "own_record": own is not None}
             self.last_data, self.last_resim = data, resim
             for d in self.downloads:
                 d.disabled = False
@@ -488,7 +507,7 @@ class LeastSquaresPanel(Section):
                     + f". {resim_error}</p>")
             warn = "" if res.success else f"<div class='eha-warn'>{res.message}</div>"
             self.table.object = warn + lse_table_html(res, scenario if scenario != "custom" else None,
-                                                      hidden=self.state.hidden) + note
+                                                      hidden=self.state.hidden, **self.result_context) + note
             self.handin_button.disabled = not self.state.hidden
             if self.figure is None:
                 self.figure = plots.LseFitFigure()
@@ -514,13 +533,23 @@ class LeastSquaresPanel(Section):
         key = self.table4_key()
 
         def compute(token):
-            return {m: run_lse_table(params, disturbance_model=m, seed=seed, cancel=token)
-                    for m in ("constant", "harmonic")}
+            results = {m: run_lse_table(params, disturbance_model=m, seed=seed, cancel=token)
+                       for m in ("constant", "harmonic")}
+            leaks = {}
+            for scen in ("200 sin", "5000 sin"):
+                # the data of the two models' runs (the same simulation), for the regressors the sinusoid leaks into
+                data = lse_data(params, LSE_SCENARIOS[scen], seed=seed, cancel=token)
+                leak = disturbance_leak(results["constant"][scen], results["harmonic"][scen], data, params)
+                if leak is not None:
+                    leaks[scen] = leak
+            return results, leaks
 
-        def show(results, job):
+        def show(out, job):
+            results, leaks = out
             self.all_results = results
+            self.all_context = {"leaks": leaks, "seed": seed}
             self.table4.object = (f"<h4>Table 4: four scenarios, both disturbance models, beside the paper "
-                                  f"({job.run_s * 1e3:.0f} ms)</h4>" + table4_html(results))
+                                  f"({job.run_s * 1e3:.0f} ms)</h4>" + table4_html(results, **self.all_context))
             self.table4_view.shown(key)
             self._inputs_changed()
 
@@ -569,11 +598,12 @@ class LeastSquaresPanel(Section):
         req, _ = self.request()
         scenario = req.scenario if req.excitation == "paper" and req.scenario != "custom" else None
         return SectionSnapshot(self.key, self.title, self.settings(), stale=self.is_stale(),
-                               content=(self.result, self.last_data, self.last_resim, scenario, self.all_results))
+                               content=(self.result, self.last_data, self.last_resim, scenario, self.all_results,
+                                        dict(self.result_context), dict(self.all_context)))
 
     @classmethod
     def report(cls, snapshot: SectionSnapshot, hidden=()) -> ReportPart | None:
-        result, data, resim, scenario, all_results = snapshot.content or (None,) * 5
+        result, data, resim, scenario, all_results, context, all_context = snapshot.content or (None,) * 5 + ({}, {})
         if result is None and all_results is None:
             return None
         body, figures = stale_note(snapshot), {}
@@ -581,9 +611,10 @@ class LeastSquaresPanel(Section):
             fig = plots.LseFitFigure()
             fig.update(plots.lse_view(data, resim))
             figures["lse"] = fig.layout
-            body += lse_table_html(result, scenario, hidden=hidden) + "{{lse}}"
+            body += lse_table_html(result, scenario, hidden=hidden, **context) + "{{lse}}"
         if all_results is not None:
-            body += "<h3>Table 4: four scenarios, both disturbance models</h3>" + table4_html(all_results)
+            body += ("<h3>Table 4: four scenarios, both disturbance models</h3>"
+                     + table4_html(all_results, **all_context))
         return ReportPart("Least squares (eqs. 15-18)", body, figures)
 
     def __panel__(self):

@@ -108,7 +108,7 @@ def test_identification_least_squares_and_table4():
     lse.run()
     res = lse.result
     assert abs(res.rel_error["B"]) < 0.02
-    assert "paper (Table 3/4)" in lse.table.object and "1326.3" in lse.table.object
+    assert "Table 4, d = 5000 sin(2πt)" in lse.table.object and "1326.3" in lse.table.object
     assert len(lse.plot.objects) == 1 and len(lse.figure.resim.data["t"]) > 1000
     lse.run_all()
     assert set(lse.all_results) == {"constant", "harmonic"}
