@@ -122,8 +122,8 @@ def reading_mark(reading, nominal: str = "nominal") -> str:
     text, cls = _MARKS[reading.kind]
     if not text:
         return ""
-    return (f"<span class='eha-reading eha-reading-{reading.kind} {cls}' title='{_plain(reading.describe(nominal=nominal))}'>"
-            f"{text}</span>")
+    tip = _plain(reading.describe(nominal=nominal))
+    return f"<span class='eha-reading eha-reading-{reading.kind} {cls}' title='{tip}'>{text}</span>"
 
 
 def _plain(text: str) -> str:
@@ -417,8 +417,12 @@ def freq_summary_html(fi, hidden=()) -> str:
 
 def _s2_sentence(fi, b, lin) -> str:
     """Why λ̂1 is where it is, said only as far as this run backs it."""
-    ratio = b.l1 / lin.lambdas[0]
     l1 = f"The estimated s² coefficient λ̂<sub>1</sub> = {b.l1:.4g}"
+    if lin.lambdas[0] == 0 or fi.params.k_f == 0:
+        # no damping at all in the linearised model (B = 0, k_f A_f = 0), or no friction slope: nothing to compare
+        return (f"{l1}; the linearised model has λ<sub>1</sub> = {lin.lambdas[0]:.4g} (B = {num_html(fi.params.B)} "
+                f"N s/m, k<sub>f</sub> = {num_html(fi.params.k_f)} s/m): the s² coefficient is all the data's.")
+    ratio = b.l1 / lin.lambdas[0]
     where = f"{pct_text(ratio - 1, 1)} from the linearised {lin.lambdas[0]:.4g}"
     slope = (f"λ<sub>1</sub> holds the friction's slope at v = 0, 2k<sub>f</sub>A<sub>f</sub>/π = "
              f"{num_html(lin.friction_damping)} N s/m")
@@ -472,7 +476,7 @@ def backout_html(fi, hidden=()) -> str:
         v, nom = getattr(b, key), (b.damping_nominal if key == "damping" else b.beta_e_nominal)
         lo, hi = ci[key]
         interval = "" if math.isnan(lo) else f"[{_num(lo)}, {_num(hi)}]"
-        return [name, _num(nom), _num(v), pct_text(rel[key]), interval, unit]
+        return [name, _num(nom), _num(v), "" if math.isnan(rel[key]) else pct_text(rel[key]), interval, unit]
 
     rows = [row("B + 2k<sub>f</sub>A<sub>f</sub>/π = λ̂<sub>1</sub> M (eq. 27a)", "damping", "N s/m"),
             row("β<sub>e</sub> from the gain (eq. 27e-f)", "beta_e_from_gain", "Pa"),

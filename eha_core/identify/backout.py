@@ -100,10 +100,15 @@ class BackoutResult:
         return self.den_p[1] if len(self.den_p) > 1 else float("nan")
 
     def rel_errors(self) -> dict[str, float]:
+        """Each backed-out value relative to its nominal one, minus 1 (NaN where the nominal value is 0:
+        B = 0 with no Coulomb slope, k_f A_f = 0, has no relative error)."""
+        def rel(v, nom):
+            return v / nom - 1.0 if nom != 0 else math.nan
+
         return {
-            "damping": self.damping / self.damping_nominal - 1.0,
-            "beta_e_from_gain": self.beta_e_from_gain / self.beta_e_nominal - 1.0,
-            "beta_e_from_stiffness": self.beta_e_from_stiffness / self.beta_e_nominal - 1.0,
+            "damping": rel(self.damping, self.damping_nominal),
+            "beta_e_from_gain": rel(self.beta_e_from_gain, self.beta_e_nominal),
+            "beta_e_from_stiffness": rel(self.beta_e_from_stiffness, self.beta_e_nominal),
         }
 
     def ci95(self) -> dict[str, tuple[float, float]]:

@@ -263,3 +263,18 @@ def test_table_4_takes_the_seed_as_the_form_reads_it(monkeypatch):
     assert lse.table4_key() == key
     lse.run_all()
     assert seeds == [1000, 1000]
+
+
+@pytest.mark.parametrize("changes", [{"B": 0.0, "k_f": 0.0}, {"k_f": 0.0}, {"B": 0.0, "Af": 0.0}])
+def test_backout_without_damping_or_friction_slope_renders(changes):
+    """B = 0 with k_f A_f = 0 leaves the linearised model no damping (its relative error is undefined),
+    k_f = 0 no friction slope (1/k_f): the back-out is shown, not a ZeroDivisionError (long random walk)."""
+    from eha_app.render.tables import backout_html
+    from eha_core.experiments import FrequencyExperiment, run_frequency_identification
+    from eha_core.params import ActuatorParams
+
+    fi = run_frequency_identification(ActuatorParams().replace(**changes), FrequencyExperiment())
+    html = backout_html(fi)
+    assert "eq. 27a" in html and "nan" not in html.lower()
+    if changes.get("B") == 0.0 and fi.params.k_f * fi.params.Af == 0:
+        assert np.isnan(fi.backout.rel_errors()["damping"])
