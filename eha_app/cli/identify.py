@@ -234,6 +234,13 @@ def run_tf(args) -> int:
         print(f"input delay {tau:.6g} s = {tau / out['ts']:.4g} samples ({how}); G(s) above excludes it")
     if "open_loop" in out:
         print(tf_text(out["open_loop"]["num"], out["open_loop"]["den"], "P_hat(s)"))
+        from eha_core.identify.backout import open_loop_instability
+
+        unstable = open_loop_instability(out["num"], out["den"], args.kp)
+        if unstable is not None:
+            print(f"P_hat(s) is unstable: a pole at +{unstable[0]:.3g} rad/s"
+                  + (f", because H_hat(0) = {unstable[1]:.4g} > 1 (the actuator's P(s) has a pole at 0, so H(0) = 1)"
+                     if unstable[1] > 1 else ""))
         b = out["backout"]
         print(f"B + 2 k_f Af / pi = {b['damping_B_plus_2kfAf_over_pi']:.4g} N s/m "
               f"(linearised: {b['damping_nominal']:.4g})")

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from eha_core.experiments import PAPER_EQ25, PAPER_EQ26, PAPER_FIT_PERCENT, PAPER_TABLE3_BETA_E, PAPER_TABLE4
+from eha_core.identify.backout import open_loop_instability
 from eha_core.identify.lse_reading import read_all, read_estimate
 from eha_core.linear import linearize
 from eha_core.params import ActuatorParams
@@ -16,7 +17,7 @@ from .formatting import num_html, pct_text, poles_html, table_html, tf_html
 from .glossary import term
 
 __all__ = ["CSS", "SCENARIOS", "derived_html", "lse_table_html", "table4_html", "freq_summary_html", "backout_html",
-           "estimate_alert", "estimation_sentences", "reading_mark", "readings_html", "paper_gaps"]
+           "estimate_alert", "estimation_sentences", "reading_mark", "readings_html", "paper_gaps", "open_loop_note"]
 
 #: Styles of the formulas and tables (the app's page and the report).
 CSS = """
@@ -34,6 +35,7 @@ CSS = """
 .eha-undetermined { color: #8a5a00; font-weight: 600; }
 .eha-readings { font-size: 13px; margin: 4px 0 8px 0; padding-left: 18px; }
 .eha-cite { color: #666; }
+.eha-warn-note { font-size: 13px; margin: 2px 0 6px 0; }
 .eha-stale { color: #b00020; font-style: italic; }
 .eha-invalid input { border-color: #b00020 !important; background: #fff4f4 !important; }
 h4 { margin: 12px 0 4px 0; }
@@ -410,9 +412,25 @@ def freq_summary_html(fi, hidden=()) -> str:
                      f"fit <b>{fi.validation.fit_percent:.2f} %</b>.</p>")
     if fi.open_loop is not None:
         parts.append(tf_html("P̂(s)", *fi.open_loop, "eq. 26: Ĥ / (K<sub>p</sub>(1 − Ĥ))"))
+        parts.append(open_loop_note(fi.open_loop[1], open_loop_instability(e.num, e.den, fi.config.kp)))
         parts.append(tf_html("P̂<sub>paper</sub>(s)", PAPER_EQ26[0], PAPER_EQ26[1], "eq. 26 of the paper"))
     parts.append(estimation_sentences(e))
     return "".join(parts)
+
+
+def open_loop_note(den_p, instability) -> str:
+    """Say that P̂(s) is unstable, and why, where it is shown (empty when it is stable)."""
+    if instability is None:
+        return ""
+    pole, gain = instability
+    const = f" (its constant term {num_html(float(den_p[-1]))} &lt; 0)" if den_p[-1] < 0 else ""
+    slow = (f" A pole this slow (time constant {num_html(1.0 / pole, 3)} s) does not show within the record."
+            if pole > 0 and 1.0 / pole > 10.0 else "")
+    why = (f" because Ĥ(0) = {gain:.4g} &gt; 1{const}: the actuator's P(s) has an integrator (a pole at 0, eq. 21), "
+           "so its loop has H(0) = 1 exactly, and eq. 26 divides by 1 − Ĥ(s), which turns a static-gain error of "
+           f"{pct_text(gain - 1, 1)} into a pole on the wrong side of 0." if gain > 1 else ".")
+    return (f"<p class='eha-warn-note eha-unstable-phat'><b class='eha-warn'>P̂(s) is unstable</b>: a pole at "
+            f"+{num_html(pole, 3)} rad/s in the right half-plane{why}{slow}</p>")
 
 
 def _s2_sentence(fi, b, lin) -> str:

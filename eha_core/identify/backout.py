@@ -50,7 +50,7 @@ from ..linear import OperatingPoint, operating_point
 from ..params import ActuatorParams
 from ._stats import Z95
 
-__all__ = ["BackoutResult", "open_loop_from_closed", "backout"]
+__all__ = ["open_loop_instability", "BackoutResult", "open_loop_from_closed", "backout"]
 
 
 def open_loop_from_closed(num_h, den_h, kp: float) -> tuple[np.ndarray, np.ndarray]:
@@ -71,6 +71,27 @@ def open_loop_from_closed(num_h, den_h, kp: float) -> tuple[np.ndarray, np.ndarr
         raise not_allowed("num_h", num_h.tolist(), "with den_h it gives H_hat a feedthrough of 1, so "
                                                  "P = H / (Kp (1 - H)) is not proper")
     return num_h / (kp * lead), den_p / lead
+
+
+def open_loop_instability(num_h, den_h, kp: float) -> tuple[float, float] | None:
+    """Why P_hat = H_hat / (Kp (1 - H_hat)) (eq. 26) is unstable, or None when it is not.
+
+    Returns ``(pole, static_gain)``: the right-half-plane pole of P_hat with the
+    largest real part [rad/s] and H_hat(0). The actuator's P(s) has an
+    integrator (a pole at 0, eq. 21), so its loop has H(0) = 1 exactly; an
+    estimate with H_hat(0) > 1 makes the constant term of 1 - H_hat negative and
+    moves that pole into the right half-plane.
+    """
+    num_p, den_p = open_loop_from_closed(num_h, den_h, kp)
+    poles = np.roots(den_p) if den_p.size > 1 else np.array([])
+    unstable = poles[poles.real > 1e-12 * max(1.0, float(np.max(np.abs(poles), initial=0.0)))]
+    if unstable.size == 0:
+        return None
+    worst = unstable[np.argmax(unstable.real)]
+    den_h = np.atleast_1d(np.asarray(den_h, dtype=float))
+    num_h = np.atleast_1d(np.asarray(num_h, dtype=float))
+    gain = float(num_h[-1] / den_h[-1]) if den_h[-1] != 0 else math.inf
+    return float(worst.real), gain
 
 
 @dataclass(frozen=True)

@@ -278,3 +278,24 @@ def test_backout_without_damping_or_friction_slope_renders(changes):
     assert "eq. 27a" in html and "nan" not in html.lower()
     if changes.get("B") == 0.0 and fi.params.k_f * fi.params.Af == 0:
         assert np.isnan(fi.backout.rel_errors()["damping"])
+
+
+def test_an_unstable_open_loop_estimate_says_so_where_it_is_shown():
+    """eq. 26 on an Ĥ(s) whose static gain exceeds 1 gives P̂(s) a right-half-plane pole: the page says so
+    and why (Ĥ(0) > 1), with the numbers of this run."""
+    from eha_app.render.tables import freq_summary_html, open_loop_note
+    from eha_core.experiments import run_frequency_identification
+    from eha_core.identify.backout import open_loop_instability
+
+    fi = run_frequency_identification()
+    e = fi.estimate
+    found = open_loop_instability(e.num, e.den, fi.config.kp)
+    html = freq_summary_html(fi)
+    if fi.open_loop[1][-1] < 0:                 # the default run: Ĥ(0) = 1.025, P̂'s constant term -52
+        assert found is not None and found[1] > 1
+        assert "P̂(s) is unstable</b>: a pole at +" in html and f"Ĥ(0) = {found[1]:.4g} &gt; 1" in html
+    # an integrating plant's loop: H(0) = 1 exactly, P̂ keeps its pole at 0: nothing to say
+    assert open_loop_instability([2437.0], [1.0, 430.1, 1.721e4, 2437.0], 10.0) is None
+    pole, gain = open_loop_instability([2500.0], [1.0, 430.1, 1.721e4, 2437.0], 10.0)
+    assert gain == pytest.approx(2500 / 2437) and 0 < pole < 0.01
+    assert open_loop_note([1.0, 2.0, 3.0], None) == ""

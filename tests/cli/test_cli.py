@@ -269,3 +269,13 @@ def test_exercise_commands(capsys, tmp_path):
     assert main(["exercise", "results", str(tmp_path / "bad.json")]) == 2
     assert "not an exercise file" in capsys.readouterr().err
     assert main(["serve", "--exercise", str(tmp_path / "bad.json")]) == 2
+
+
+def test_identify_tf_says_when_p_hat_is_unstable(capsys):
+    code, out, _ = run(capsys, "identify", "tf")
+    assert code == 0
+    lines = out.splitlines()
+    p_hat = next(line for line in lines if line.startswith("P_hat(s) ="))
+    assert p_hat.endswith("s - 52.15)")                     # the paper's experiment: H_hat(0) = 1.025
+    assert any(line.startswith("P_hat(s) is unstable: a pole at +0.00305 rad/s") and "H_hat(0) = 1.025 > 1" in line
+               for line in lines)
