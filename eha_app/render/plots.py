@@ -45,6 +45,8 @@ from bokeh.models import (
 )
 from bokeh.plotting import figure
 
+from eha_core.identify.validate import FIT_DEFINITION, fit_conditions
+
 from .glossary import term
 
 __all__ = [
@@ -324,6 +326,7 @@ class FrequencyView:
     y_theory_mm: np.ndarray | None = None
     fit_label: str = ""
     theory_label: str = ""
+    fit_title: str = ""                       # how the fits were computed (the note under Fig. 11)
     w: np.ndarray | None = None
     est_db: np.ndarray | None = None
     est_deg: np.ndarray | None = None
@@ -405,8 +408,12 @@ def frequency_view(fi, hidden=()) -> FrequencyView:
     verdict = fi.residual_assessment
     view = FrequencyView(
         **base, fit_ok=True, y_hat_mm=fi.estimate_output * 1e3, y_theory_mm=theo.y_hat * 1e3,
-        fit_label=f"estimated H(s): fit {e.fit_percent:.1f} %",
+        fit_label=f"estimated H(s): fit {e.fit_percent:.1f} %"
+                  + ("" if fit_conditions(fi.config.initial_condition, fi.config.input_offset) == FIT_DEFINITION else
+                     f" ({fit_conditions(fi.config.initial_condition, fi.config.input_offset)})"),
         theory_label=f"linearised H(s), eq. 24: fit {theo.fit_percent:.1f} %",
+        fit_title=(f"Fit = 100 (1 − ‖x − x̂‖ / ‖x − mean x‖) as MATLAB's compare computes it, {FIT_DEFINITION} "
+                   "for each model (as on the model board)."),
         w=bode.w, est_db=bode.estimate.magnitude_db, est_deg=bode.estimate.phase_deg,
         theory_db=bode.theoretical.magnitude_db, theory_deg=bode.theoretical.phase_deg,
         data_w=np.asarray(bode.data_w), data_db=np.asarray(bode.data_magnitude_db), data_deg=bode.data_phase_deg,
@@ -498,8 +505,10 @@ class FitFigure:
                       LegendItem(label="estimated H(s)", renderers=[r1]),
                       LegendItem(label="linearised H(s), eq. 24", renderers=[r2])]
         _legend_above(self.fig, self.items)
+        self.note = Div(text="", sizing_mode="stretch_width", css_classes=["eha-fit-note"],
+                        styles={"font-size": "12px", "color": "#555"})
         _lean(self.fig)
-        self.layout = self.fig
+        self.layout = column(self.fig, self.note, sizing_mode="stretch_width")
 
     def update(self, view: FrequencyView, model: str = "nonlinear") -> None:
         if not view.fit_ok:
@@ -509,6 +518,7 @@ class FitFigure:
         self.source.data = {"t": _f32(t), "x": _f32(x), "est": _f32(est), "theory": _f32(theo)}
         _set_legend_label(self.items[0], f"measured ({model} model in the loop)")
         _set_legend_label(self.items[1], view.fit_label)
+        self.note.text = view.fit_title
         _set_legend_label(self.items[2], view.theory_label)
 
 

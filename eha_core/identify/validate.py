@@ -59,6 +59,8 @@ __all__ = [
     "compare",
     "etfe_periodic",
     "fit_percent",
+    "fit_conditions",
+    "FIT_DEFINITION",
     "frequency_response",
     "residual_analysis",
     "simulate_tf",
@@ -68,6 +70,36 @@ __all__ = [
 # ---------------------------------------------------------------------------
 # compare
 # ---------------------------------------------------------------------------
+#: How every fit of the project is computed unless its label says otherwise (MATLAB ``compare``).
+FIT_DEFINITION = "initial state and input offset fitted"
+
+
+def fit_conditions(initial_condition, input_offset) -> str:
+    """How a fit's simulation started, in words, for the label beside the number.
+
+    The project's one definition of fit is MATLAB ``compare``'s with the
+    initial state and a constant input offset fitted by least squares (the
+    model board, Figs. 11 and 13 and the estimates of Ĥ(s) by default); a
+    number computed otherwise says so.
+
+    >>> fit_conditions("estimate", "estimate")
+    'initial state and input offset fitted'
+    >>> fit_conditions("zero", None)
+    'from rest, no input offset'
+    """
+    ic = "estimate" if isinstance(initial_condition, str) and initial_condition == "estimate" else (
+        "zero" if initial_condition is None or (isinstance(initial_condition, str) and initial_condition == "zero")
+        else "given")
+    fitted_offset = isinstance(input_offset, str) and input_offset == "estimate"
+    no_offset = input_offset is None or (isinstance(input_offset, str) and input_offset == "zero")
+    if ic == "estimate":
+        return "initial state and input offset fitted" if fitted_offset else (
+            "initial state fitted, no input offset" if no_offset else "initial state fitted, input offset given")
+    start = "from rest" if ic == "zero" else "from a given initial state"
+    return f"{start}, input offset fitted" if fitted_offset else (
+        f"{start}, no input offset" if no_offset else f"{start}, input offset given")
+
+
 @dataclass(frozen=True, eq=False)
 class CompareResult:
     """Simulated output of a model against measured data (MATLAB ``compare``).

@@ -76,3 +76,22 @@ def test_the_experiment_takes_an_input_delay_and_says_how_its_residuals_fare():
         FrequencyExperiment(input_delay=-1)
     with pytest.raises(ValueError, match=r"input_delay = soon is not allowed"):
         FrequencyExperiment(input_delay="soon")
+
+
+def test_eq24_fit_is_the_boards_fit_without_a_jump(paper):
+    """Fig. 11's fit of the linearised H(s) is computed as the board's (MATLAB compare, initial state and
+    input offset fitted): it was -56.5 % with the offset left out, its fitted initial state jumping 10 mm."""
+    from eha_core.board import BoardModel, compare_on_record
+    from eha_core.identify.validate import FIT_DEFINITION, fit_conditions
+
+    theo = paper.theoretical_comparison
+    assert theo.initial_condition == "estimate" and theo.input_offset is not None
+    assert fit_conditions("estimate", "estimate") == FIT_DEFINITION
+    d = paper.data
+    record = type("Record", (), {"t": d.t, "r": d.r, "x": d.x})()
+    model = BoardModel(name="eq. 24", kind="reference", description="eq. 24", num=np.asarray(paper.theoretical[0]),
+                       den=np.asarray(paper.theoretical[1]))
+    assert compare_on_record(model, record).fit_percent == pytest.approx(theo.fit_percent, abs=1e-9)
+    assert theo.fit_percent > 70
+    # no step at the start bigger than the measured output's own largest step between samples
+    assert np.max(np.abs(np.diff(theo.y_hat[:20]))) <= np.max(np.abs(np.diff(d.x)))
