@@ -47,7 +47,8 @@ class BoardModel:
 
     ``kind``: ``"tf"`` (estimated from the frequency experiment), ``"record"``
     (from a student's file), ``"lse"`` (eq. 24 with a least-squares run's
-    estimates), ``"reference"``. ``estimate`` (a
+    estimates), ``"reference"``. ``params``: the actuator whose data it was
+    estimated from (None when unknown). ``estimate`` (a
     :class:`~eha_core.identify.tfest.TFEstimate`) gives the covariance behind
     the regions and bands; None for a model without one.
     """
@@ -61,6 +62,9 @@ class BoardModel:
     estimate: object | None = None
     ts: float | None = None
     kp: float | None = None       # the controller gain of the loop it describes (None: any)
+    # the actuator it was identified on (None: unknown, e.g. a student's own record): a record of
+    # another actuator compares it with a plant it was not made from, and the board says so
+    params: ActuatorParams | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -177,7 +181,7 @@ def lse_model(result, params: ActuatorParams, kp: float, name: str, description:
     est = result.estimated_params(params)
     num, den = linearize(est).closed_loop_coeffs(kp)
     return BoardModel(name=name, kind="lse", description=description, num=np.asarray(num), den=np.asarray(den),
-                      ts=float(result.ts), kp=float(kp))
+                      ts=float(result.ts), kp=float(kp), params=params)
 
 
 def nonlinear_step(params: ActuatorParams, kp: float, amplitude_m: float, *, cancel: CancelToken | None = None):

@@ -32,6 +32,7 @@ from eha_core.board import (
     reference_models,
     validation_record,
 )
+from eha_core.param_table import FIELD_INFO
 
 from ..render import board_plots
 from ..render.layout import side_by_side
@@ -418,7 +419,7 @@ class ModelBoard(Section):
         self.tables["step"].object = self.step_table(entries, amplitude)
 
     def fit_table(self, entries) -> str:
-        return fit_table(entries, self.record, self.fits, self.record_key, self.state.kp)
+        return fit_table(entries, self.record, self.fits, self.record_key, self.state.kp, self.state.hidden)
 
     def step_table(self, entries, amplitude: float) -> str:
         return step_table(entries, self.views, self.plant, amplitude)
@@ -445,7 +446,8 @@ class ModelBoard(Section):
         parts["board_step"].update(list(b.entries), b.views, b.plant, b.amplitude)
         parts["board_pz"].update(list(b.entries), b.views)
         return ReportPart("Model board (the models ticked)", stale_note(snapshot)
-                          + fit_table(b.entries, b.record, b.fits, b.record_key, b.kp) + "{{board_fit}}{{board_bode}}"
+                          + fit_table(b.entries, b.record, b.fits, b.record_key, b.kp, hidden)
+                          + "{{board_fit}}{{board_bode}}"
                           + step_table(b.entries, b.views, b.plant, b.amplitude) + "{{board_step}}{{board_pz}}",
                           {k: f.layout for k, f in parts.items()})
 
@@ -470,10 +472,29 @@ class BoardSnapshot:
     kp: float
 
 
-def fit_table(entries, record, fits, record_key, kp: float) -> str:
-    """The fits of ``entries`` on the validation record, with the residual tests' verdicts."""
+def actuator_change(before, now, limit: int = 3, hidden=()) -> str:
+    """What differs between two actuators, in the form's units: "M 4000 → 6000 kg" ("" when nothing
+    does); an exercise's ``hidden`` parameters are never named."""
+    changes = []
+    for name, info in FIELD_INFO.items():
+        a, b = getattr(before, name), getattr(now, name)
+        if a == b or name in hidden:
+            continue
+        def shown(v, info=info):
+            return "blank" if v is None else f"{v / info.display_scale:.5g}"
+        changes.append(f"{info.label or name} {shown(a)} → {shown(b)} {info.display_unit}")
+    if len(changes) > limit:
+        changes = changes[:limit] + [f"{len(changes) - limit} more"]
+    return ", ".join(changes)
+
+
+def fit_table(entries, record, fits, record_key, kp: float, hidden=()) -> str:
+    """The fits of ``entries`` on the validation record, with the residual tests' verdicts; a model
+    estimated on another actuator than the record's (tab 1 changed since) is marked and the change named."""
     if record is None:
         return ""
+    record_params = record_key[0] if record_key else None
+    moved = 0
     rows = []
     for e in entries:
         fit = fits.get(e.key)
@@ -483,6 +504,14 @@ def fit_table(entries, record, fits, record_key, kp: float) -> str:
         if fit.assessment is not None:
             verdicts = "".join(f"<div>{'✓' if v.passed else '✗'} {html.escape(v.sentence)}</div>"
                                for v in fit.assessment.verdicts)
+        made_on = getattr(e.model, "params", None)
+        if made_on is not None and record_params is not None and made_on != record_params:
+            moved += 1
+            change = actuator_change(made_on, record_params, hidden=hidden) or "hidden values"
+            verdicts = (f"<div class='eha-stale-note eha-board-other-actuator'>Estimated on another actuator "
+                        f"({html.escape(change)}): this record is tab 1's "
+                        "current one, so its fit compares the model with a plant it was not made from.</div>"
+                        + verdicts)
         if e.model.kp is not None and e.model.kp != kp:
             verdicts += (f"<div class='eha-warn'>Built for Kp = {e.model.kp:g} V/m; the record's loop has "
                          f"Kp = {kp:g} V/m (tab 1): a low fit says so, not that the model is "
@@ -496,7 +525,11 @@ def fit_table(entries, record, fits, record_key, kp: float) -> str:
             "validation record</th></tr>" + "".join(rows) + "</table></div>"
             f"<p class='eha-note'>Validation record: a closed-loop experiment on tab 1's actuator (idinput "
             f"sine, seed {seed}, N = 1000, Ts = 0.01 s). Each model's initial state and input offset are "
-            "fitted to it (MATLAB's compare); fit = 100 (1 − ‖x − x̂‖ / ‖x − mean x‖).</p>")
+            "fitted to it (MATLAB's compare); fit = 100 (1 − ‖x − x̂‖ / ‖x − mean x‖).</p>"
+            + (f"<p class='eha-stale-note eha-board-moved'>Tab 1's actuator changed after {moved} of these models "
+               f"{'was' if moved == 1 else 'were'} estimated: the record follows tab 1, so "
+               f"{'its fit is' if moved == 1 else 'their fits are'} against another plant (marked in the table)."
+               "</p>" if moved else ""))
 
 
 def step_table(entries, views, plant, amplitude: float) -> str:

@@ -417,7 +417,7 @@ class FrequencyPanel(Section):
                 # the board's list is rebuilt in a page update of its own: the result goes out first
                 apply_locked(partial(self.session.post, "board", BoardModel(
                     name="H", kind="tf", estimate=e, num=e.num, den=e.den,
-                    input_delay=getattr(e, "input_delay", 0.0), ts=cfg.ts, kp=cfg.kp,
+                    input_delay=getattr(e, "input_delay", 0.0), ts=cfg.ts, kp=cfg.kp, params=fi.params,
                     description=f"{e.n_poles} poles, {e.n_zeros} zeros; idinput {cfg.signal_type} seed {cfg.seed}, "
                                 f"N {cfg.n_samples}, {cfg.model} plant, Kp = {cfg.kp:g} V/m; fit "
                                 f"{e.fit_percent:.1f} %")))

@@ -139,3 +139,24 @@ def test_the_validation_record_is_marked_while_tab_1_is_not_valid(tab):
     state.set_text("k_f", "800")                   # valid again, and new parameters: two events at once
     assert state.valid and not any(b.disabled for b in sim.run_buttons.values())
     assert board.record_view.status == "current" and board.record_key[0].k_f == 800
+
+
+def test_a_model_of_a_previous_actuator_is_marked_with_the_change(tab):
+    """After M 4000 -> 6000 the record follows tab 1: the fits of models estimated on M = 4000 are against a
+    plant they were not made from, and the table says so and names the change (it said nothing)."""
+    board = tab.section("board")
+    tab.build("frequency").run()
+    h1 = board.entries[-1]
+    assert h1.name == "H1" and h1.model.params.M == 4000.0
+    fit_before = board.fits[h1.key].fit_percent
+    assert "another actuator" not in board.tables["fit"].object
+    tab.state.set_text("M", "6000")
+    assert board.record_key[0].M == 6000.0 and board.record_view.status == "current"
+    table = board.tables["fit"].object
+    assert "Estimated on another actuator (M 4000 → 6000 kg)" in table
+    assert "changed after 1 of these models was estimated" in table
+    assert board.fits[h1.key].fit_percent != fit_before
+    # the references follow tab 1: they are not marked
+    assert table.count("eha-board-other-actuator") == 1
+    tab.state.set_text("M", "4000")
+    assert "another actuator" not in board.tables["fit"].object
