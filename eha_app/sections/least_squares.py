@@ -52,6 +52,7 @@ LSE_COLUMNS = ("t", "x", "v", "p1", "p2", "u")
 
 
 _NAMES_HTML = {"M": "M", "B": "B", "Af": "A<sub>f</sub>", "beta_e": "β<sub>e</sub>"}
+_NAMES_PLAIN = {"Af": "Af", "beta_e": "βe"}
 EXCITATIONS = {"paper": "u = 6 sin(4πt), 5 s (default)",
                "rich": "u = 8 sin(4πt) + 4 sin(10πt), 20 s (narrows B)"}
 
@@ -417,6 +418,26 @@ class LeastSquaresPanel(Section):
         why = "a parameter on tab 1 is not valid" if not self.state.valid else ""
         self.view.inputs_changed(self.run_key(), why=why)
         self.table4_view.inputs_changed(self.table4_key(), why=why)
+        self._handin_tip()
+
+    def _handin_tip(self) -> None:
+        """The hand-in button's state and tooltip say what is true now (it said "run the least squares
+        first" after a run)."""
+        if not self.state.hidden:
+            return
+        names = ", ".join(_NAMES_PLAIN.get(n, n) for n in self.state.hidden)
+        if self.result is None:
+            self.handin_button.disabled = True
+            tip = "run the least squares first: the hand-in takes the estimates of its table"
+        elif self.view.status == "current":
+            self.handin_button.disabled = False
+            tip = f"hand in the estimates of {names} in the table"
+        else:
+            self.handin_button.disabled = False
+            tip = (f"hand in the estimates of {names} in the table, from the previous settings "
+                   "(run again to hand in estimates for the new ones)")
+        if self.handin_button.description != tip:
+            self.handin_button.description = tip
 
     def _update_enabled(self, *_events) -> None:
         _, errors = self.request()
@@ -508,7 +529,6 @@ class LeastSquaresPanel(Section):
             warn = "" if res.success else f"<div class='eha-warn'>{res.message}</div>"
             self.table.object = warn + lse_table_html(res, scenario if scenario != "custom" else None,
                                                       hidden=self.state.hidden, **self.result_context) + note
-            self.handin_button.disabled = not self.state.hidden
             if self.figure is None:
                 self.figure = plots.LseFitFigure()
                 self.figure.update(view)

@@ -85,7 +85,15 @@ def test_a_student_identifies_their_actuator_and_hands_in(exercise):
     tab3 = Session(state)
     lse = tab3.build("least_squares")
     assert not lse.all_button.visible and lse.handin_button.visible and lse.handin_button.disabled
+    assert lse.handin_button.description.startswith("run the least squares first")
     lse.run()
+    # the tooltip says what is true now (it said "run the least squares first" after a run)
+    assert not lse.handin_button.disabled
+    assert lse.handin_button.description.startswith("hand in the estimates of M, B, Af, βe in the table")
+    lse.form.values = {**lse.form.values, "lse_seed": "7"}
+    assert "from the previous settings" in lse.handin_button.description
+    lse.form.values = {**lse.form.values, "lse_seed": "0"}
+    assert lse.handin_button.description.endswith("in the table")
     assert "hidden" in lse.table.object and "nominal" not in lse.table.object
     lse.hand_in()
     assert "4 of 4 within tolerance" in lse.verdict.object
