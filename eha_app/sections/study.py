@@ -23,6 +23,7 @@ from bokeh.models import ColumnDataSource, Span
 from eha_core.experiments import FrequencyExperiment
 
 from ..render import plots
+from ..render.formatting import num_html
 from ..render.layout import side_by_side
 from ..runtime.tasks import apply_locked, on_click, served_document, watch
 from ..session import ReportPart, Section, SectionSnapshot
@@ -58,6 +59,21 @@ _TF_ONLY = ("study_model", "study_noise")
 _PROGRESS_HZ = 8.0
 
 
+#: How the study names its parameters: HTML for the table, plain text for the figures (as on tab 1), and units.
+_HTML_NAMES = {"Af": "A<sub>f</sub>", "d0": "d<sub>0</sub>", "d_sin": "d<sub>sin</sub>", "d_cos": "d<sub>cos</sub>",
+               "beta_e": "β<sub>e</sub>", "a1": "a<sub>1</sub>", "a2": "a<sub>2</sub>", "a3": "a<sub>3</sub>",
+               "b0": "b<sub>0</sub>"}
+_PLAIN_NAMES = {"beta_e": "βe"}
+_UNITS = {"M": "kg", "B": "N s/m", "Af": "N", "d0": "N", "d_sin": "N", "d_cos": "N", "beta_e": "Pa",
+          "a1": "1/s", "a2": "1/s²", "a3": "1/s³", "b0": "1/s³"}
+#: |bias| beyond this many standard errors of the mean reads as a bias, not the seeds' scatter.
+_BIAS_T = 3.0
+
+
+def plain_name(name: str) -> str:
+    return _PLAIN_NAMES.get(name, name)
+
+
 def study_hidden(texts: dict) -> list[str]:
     return list(_TF_ONLY if texts.get("study_kind", "lse") == "lse" else _LSE_ONLY)
 
@@ -72,7 +88,7 @@ class StudyFigure:
         for name in names:
             src = ColumnDataSource(data={"left": [], "right": [], "top": []})
             # fixed-size figures in a wrapping row: three across on a wide page, one on a narrow one
-            fig = plots._figure(width=width, height=210, sizing_mode="fixed", title=name,
+            fig = plots._figure(width=width, height=210, sizing_mode="fixed", title=plain_name(name),
                                 x_axis_label="estimate − nominal [%]", y_axis_label="seeds")
             fig.title.text_font_size = "11px"
             fig.xaxis.ticker.desired_num_ticks = 4
@@ -109,12 +125,14 @@ class StudyFigure:
                 self.sources[name].data = {"left": edges[:-1].tolist(), "right": edges[1:].tolist(),
                                            "top": counts.tolist()}
                 self.means[name].location = float(shown.mean())
-            fig.xaxis.axis_label = "estimate − nominal [%]" if relative else "estimate − nominal"
+            fig.xaxis.axis_label = ("estimate − nominal [%]" if relative
+                                    else f"estimate − nominal [{_UNITS.get(name, '-')}]")
             cov = result.coverage.get(name, np.nan)
             std = np.std(shown, ddof=1) if shown.size > 1 else np.nan
-            unit = " %" if relative else ""
-            fig.title.text = (f"{name}: mean {shown.mean():+.3g}{unit}, spread {std:.3g}{unit}, covered "
-                              f"{cov * 100:.0f} %" if shown.size else name)
+            unit = " %" if relative else f" {_UNITS.get(name, '')}".rstrip()
+            label = plain_name(name)
+            fig.title.text = (f"{label}: mean {shown.mean():+.3g}{unit}, spread {std:.3g}{unit}, covered "
+                              f"{cov * 100:.0f} %" if shown.size else label)
 
 
 class StudyPanel(Section):
@@ -304,6 +322,10 @@ class StudyPanel(Section):
         return side_by_side(controls, results)
 
 
+def _n(v: float, digits: int = 4) -> str:
+    return num_html(float(v), digits) if np.isfinite(v) else "—"
+
+
 def study_summary_html(result) -> str:
     """The study's table: per parameter the nominal value, mean, spread, mean reported standard error
     and how often the 95 % interval covered the truth, against the binomial range of an honest one."""
@@ -319,19 +341,36 @@ def study_summary_html(result) -> str:
         n_used = result.values(n).size
         p_lo, p_hi = coverage_band(max(n_used, 1))
         honest = p_lo <= cov <= p_hi
-        rows.append(f"<tr><td>{html.escape(n)}</td><td>{nom:.6g}</td><td>{result.mean[n]:.6g}</td>"
-                    f"<td>{result.std[n]:.3g}</td><td>{result.mean_std_error[n]:.3g}</td>"
+        bias = result.mean[n] - nom
+        # the bias against its own standard error (the spread over sqrt(seeds)): beyond 3 it is not scatter
+        se_mean = result.std[n] / np.sqrt(n_used) if n_used > 1 else np.nan
+        t = bias / se_mean if np.isfinite(se_mean) and se_mean > 0 else np.nan
+        if np.isfinite(t):
+            verdict = (f"<span class='eha-warn'>{t:+.1f} biased</span>" if abs(t) > _BIAS_T
+                       else f"<span class='eha-ok'>{t:+.1f}</span>")
+        else:
+            verdict = "—"
+        unit = _UNITS.get(n, "")
+        rows.append(f"<tr><td>{_HTML_NAMES.get(n, html.escape(n))}{f' [{unit}]' if unit else ''}</td>"
+                    f"<td>{_n(nom)}</td><td>{_n(result.mean[n])}</td><td>{_n(bias)}</td><td>{verdict}</td>"
+                    f"<td>{_n(result.std[n], 3)}</td><td>{_n(result.mean_std_error[n], 3)}</td>"
                     f"<td>{cov * 100:.1f} % {'✓' if honest else '✗'}</td></tr>")
     done = (f"{result.n_completed} of {result.n_requested} seeds" + (" (cancelled)" if result.cancelled else "")
             + f" in {result.elapsed_s:.1f} s")
+    swatches = (plots._swatch("estimates over the seeds", plots.CASE_COLORS[0], width=8)
+                + plots._swatch("nominal", "#333333", "dashed", width=2)
+                + plots._swatch("mean", plots.CASE_COLORS[1], width=2))
     out = (f"<p>Nominal values: {html.escape(result.reference)}.</p>"
            "<table class='eha-table eha-study-table'><tr><th>parameter</th><th>nominal</th><th>mean</th>"
+           "<th>bias (mean − nominal)</th><th>bias / its std error</th>"
            "<th>spread (std)</th><th>mean reported std error</th><th>95 % interval covered the truth</th></tr>"
            + "".join(rows) + "</table>"
            f"<p class='eha-note'>{done}. An honest 95 % interval covers the truth in {lo * 100:.1f}-"
            f"{hi * 100:.1f} % of {result.n_successful} seeds (binomial, 99 %): ✓ inside that range, ✗ outside. "
            "Where the spread is larger than the reported standard error, a single run's interval is too "
-           "narrow.</p>")
+           f"narrow. The bias is measured against its own standard error (spread / √seeds): beyond ±{_BIAS_T:g} "
+           "the estimator is biased, not unlucky.</p>"
+           f"<p class='eha-note eha-study-legend'>Histograms: {swatches}</p>")
     if result.message and result.message != "ok":
         out += f"<p class='eha-note'>{html.escape(result.message)}</p>"
     return out

@@ -96,3 +96,26 @@ def test_a_study_ending_while_tab_1_is_invalid_leaves_its_button_disabled():
     assert panel.button.disabled and panel.cancel_button.disabled
     state.set_text("pr", "0")
     assert state.valid and not panel.button.disabled
+
+
+def test_the_study_speaks_the_apps_vocabulary_and_shows_bias_against_its_error():
+    """β_e (not beta_e), numbers as 8.787·10⁸ (not 8.7873e+08), units in the table and axes, a legend
+    for the histograms, and each bias against its standard error (spread / √seeds)."""
+    import re
+
+    panel = Session(AppState()).build("study")
+    panel.form.values = {**panel.form.values, "study_seeds": "12"}
+    panel.run()
+    res, html = panel.result, panel.summary.object
+    assert "beta_e" not in html and "β<sub>e</sub> [Pa]" in html and "M [kg]" in html and "B [N s/m]" in html
+    assert not re.search(r"\d[eE][+-]\d", html)
+    assert "·10<sup>9</sup>" in html
+    assert "bias / its std error" in html and "Histograms:" in html and "nominal" in html and "mean" in html
+    # the t statistic of the bias, from the core's figures
+    n = res.values("M").size
+    t = (res.mean["M"] - res.nominal["M"]) / (res.std["M"] / np.sqrt(n))
+    assert f"{t:+.1f}" in html
+    titles = [f.title.text for f in panel.figure.figs]
+    assert titles[-1].startswith("βe:") and not any("beta_e" in t for t in titles)
+    d0 = panel.figure.figs[res.parameters.index("d0")]
+    assert d0.xaxis.axis_label == "estimate − nominal [N]"
