@@ -1921,8 +1921,12 @@ class Walker:
         lse = self._form_errors(LSE_FORM)
         if lse is not None:
             window = self._form_errors(LSE_WINDOW) or {}
-            out[LSE_RUN] = (valid and not lse and not window,
-                            f"{why_tab1}, the least squares' form {'has errors' if lse or window else 'is valid'}")
+            # a file waiting for its columns holds the run (it would otherwise use the simulated sensors)
+            mapping = s.one(css="eha-lse-mapping")
+            waiting = bool(mapping is not None and s.shown(mapping, tabs=False))
+            out[LSE_RUN] = (valid and not lse and not window and not waiting,
+                            f"{why_tab1}, the least squares' form {'has errors' if lse or window else 'is valid'}"
+                            + (", a file waits for its columns" if waiting else ""))
             out[TABLE4_RUN] = (valid and "lse_seed" not in lse,
                                f"{why_tab1}, its noise seed {'is not' if 'lse_seed' in lse else 'is'} valid")
             if self.o.exercise_hidden:
@@ -1940,9 +1944,12 @@ class Walker:
             # the record's estimate uses no parameter of tab 1: only the record and the form's model settings
             # (a message of the form as a whole shows in the panel's error line; with tab 1 invalid that
             # line speaks of tab 1 instead, and whether the form is whole cannot be told: not checked)
+            mapping = s.one(css="eha-freq-record-mapping")
+            waiting = bool(mapping is not None and s.shown(mapping, tabs=False))
             if valid or not (pane is not None and pane.attributes.get("visible")):
-                out[RECORD_RUN] = (bool(record) and not freq and not window and not config_error,
-                                   "a record is loaded" if record else "no record loaded")
+                out[RECORD_RUN] = (bool(record) and not freq and not window and not config_error and not waiting,
+                                   ("a record is loaded" if record else "no record loaded")
+                                   + (", a file waits for its columns" if waiting else ""))
         study = self._form_errors(STUDY_FORM)
         if study is not None:
             progress = s.one(css="eha-study-progress")

@@ -35,7 +35,8 @@ import numpy as np
 
 from ._checks import FieldError
 
-__all__ = ["DataError", "read_columns", "read_data", "write_data", "sample_time", "UNITS", "file_columns",
+__all__ = ["DataError", "guess_columns", "COLUMN_ALIASES",
+           "read_columns", "read_data", "write_data", "sample_time", "UNITS", "file_columns",
            "columns_text", "MAX_DATA_BYTES", "check_data_size", "csv_cell"]
 
 #: The most a data file may hold as it is read: the bytes of a CSV, the decompressed bytes of a
@@ -45,6 +46,71 @@ MAX_DATA_BYTES = 20_000_000
 #: Units a column name may carry, as ``name[unit]``, and their factor to SI.
 UNITS = {"s": 1.0, "ms": 1e-3, "m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "m/s": 1.0, "mm/s": 1e-3,
          "pa": 1.0, "kpa": 1e3, "mpa": 1e6, "bar": 1e5, "v": 1.0, "n": 1.0, "kn": 1e3}
+
+
+#: Names a needed column may go by in a file (compared lowercase, without unit, spaces or
+#: punctuation: "Pressure_A [bar]" is "pressurea"), and the units that mark its kind.
+COLUMN_ALIASES = {
+    "t": (("t", "time", "times", "timestamp", "zeit"), ("s", "ms")),
+    "x": (("x", "pos", "position", "displacement", "stroke", "xp"), ("m", "mm", "um", "µm")),
+    "v": (("v", "vel", "velocity", "speed", "xdot", "dx"), ("m/s", "mm/s")),
+    "p1": (("p1", "pa", "pressurea", "pcap", "pap", "pchamber1", "pa1"), ("pa", "kpa", "mpa", "bar")),
+    "p2": (("p2", "pb", "pressureb", "prod", "pbp", "pchamber2", "pb2"), ("pa", "kpa", "mpa", "bar")),
+    "u": (("u", "valve", "cmd", "command", "uv", "voltage", "valvecmd", "valvecommand", "input"), ("v",)),
+    "r": (("r", "ref", "reference", "setpoint", "xref", "rin"), ("m", "mm")),
+    "y": (("y", "out", "output", "x", "pos", "position"), ("m", "mm")),
+}
+
+
+def _key(header: str) -> tuple[str, str | None]:
+    """("pressurea", "bar") for "Pressure_A [bar]": the name as compared with the aliases, and its unit."""
+    h = header.strip()
+    unit = None
+    for open_, close in (("[", "]"), ("(", ")")):
+        if h.endswith(close) and open_ in h:
+            h, unit = h[: h.rindex(open_)], h[h.rindex(open_) + 1:-1].strip().lower()
+            break
+    return "".join(ch for ch in h.lower() if ch.isalnum()), unit
+
+
+def guess_columns(available: Sequence[str], needed: Sequence[str],
+                  aliases: dict[str, Sequence[str]] | None = None) -> dict[str, str | None]:
+    """Which of a file's columns is each needed one, guessed from the names, then from the units.
+
+    Each column goes to one need at most; a need without a guess maps to None.
+    First a column whose name is one of the need's :data:`COLUMN_ALIASES`
+    (``position[mm]`` is x, ``pA[bar]`` p1, ``valve[V]`` u); then, for the needs
+    left, the first free column whose unit marks that kind (two pressure
+    columns in bar: p1 and p2 in their order). ``aliases`` adds names a need
+    may go by (a record's input u may be the loop's reference r).
+
+    >>> guess_columns(["time", "position[mm]", "velocity[mm/s]", "pA[bar]", "pB[bar]", "valve[V]"],
+    ...               ["t", "x", "v", "p1", "p2", "u"])
+    {'t': 'time', 'x': 'position[mm]', 'v': 'velocity[mm/s]', 'p1': 'pA[bar]', 'p2': 'pB[bar]', 'u': 'valve[V]'}
+    >>> guess_columns(["s[ms]", "c1[bar]", "c2[bar]"], ["t", "p1", "p2", "u"])
+    {'t': 's[ms]', 'p1': 'c1[bar]', 'p2': 'c2[bar]', 'u': None}
+    """
+    keys = {h: _key(h) for h in available}
+    out: dict[str, str | None] = {c: None for c in needed}
+    used: set[str] = set()
+    for c in needed:
+        names = COLUMN_ALIASES.get(c, ((c,), ()))[0] + tuple(
+            "".join(ch for ch in a.lower() if ch.isalnum()) for a in (aliases or {}).get(c, ()))
+        for alias in (c, *names):
+            hit = next((h for h in available if h not in used and keys[h][0] == alias), None)
+            if hit is not None:
+                out[c] = hit
+                used.add(hit)
+                break
+    for c in needed:
+        if out[c] is not None:
+            continue
+        units = COLUMN_ALIASES.get(c, ((), ()))[1]
+        hit = next((h for h in available if h not in used and keys[h][1] in units), None)
+        if hit is not None:
+            out[c] = hit
+            used.add(hit)
+    return out
 
 
 class DataError(FieldError):

@@ -339,7 +339,7 @@ class LeastSquaresPanel(Section):
 
         def show(out, _job):
             if out[0] == "map":
-                self._ask_mapping(out[1], out[2])
+                self._ask_mapping(out[1], filename)
                 return
             _, measured, ts = out
             self.own_data = measured
@@ -347,6 +347,7 @@ class LeastSquaresPanel(Section):
             self.mapping.visible = False
             self.window_form.visible = True
             self.simulated_button.visible = True
+            self._update_enabled()          # the run waited for the columns
             self.upload_note.object = (f"<span class='eha-ok'>Using your data: {html.escape(filename)}, "
                                        f"{measured.t.size} samples every {ts * 1e3:.4g} ms. "
                                        "Run the least squares on it.</span>")
@@ -357,9 +358,13 @@ class LeastSquaresPanel(Section):
     def _upload_problem(self, message: str) -> None:
         self.upload_note.object = f"<span class='eha-warn'>{html.escape(message)}</span>"
 
-    def _ask_mapping(self, available: list, message: str) -> None:
-        """Which of the file's columns is t, x, v, p1, p2, u?"""
-        self.column_mapping.ask(available, message, lambda chosen: self.read_upload(mapping=chosen))
+    def _ask_mapping(self, available: list, filename: str) -> None:
+        """Which of the file's columns is t, x, v, p1, p2, u? (a question: the run waits for the answer)"""
+        self.column_mapping.ask(available, filename, lambda chosen: self.read_upload(mapping=chosen))
+        self.simulated_button.visible = True        # or give up on the file
+        self.upload_note.object = (f"<span class='eha-note'>{html.escape(filename)} is read once you say which "
+                                   "column is which (below).</span>")
+        self._update_enabled()
 
     @property
     def mapping_selects(self) -> dict:
@@ -375,7 +380,7 @@ class LeastSquaresPanel(Section):
         self.window_form.visible = False
         self.mapping.visible = False
         self.upload_note.object = "<span class='eha-note'>Using the simulated sensors again.</span>"
-        self._inputs_changed()
+        self._update_enabled()
 
     # -- downloads ---------------------------------------------------------------------
     def data_bytes(self, kind: str) -> bytes:
@@ -447,7 +452,8 @@ class LeastSquaresPanel(Section):
         self.window_form.errors = window_errors
         errors = {**errors, **window_errors}
         ok = self.state.valid
-        self.button.disabled = not ok or bool(errors)
+        waiting = self.column_mapping.waiting
+        self.button.disabled = not ok or bool(errors) or waiting
         self.all_button.disabled = not ok or "lse_seed" in errors
         if not ok:
             self.notice.object = ('<span class="eha-warn">The buttons are off: a parameter on tab 1 is not valid; '
@@ -455,7 +461,11 @@ class LeastSquaresPanel(Section):
         elif errors:
             self.notice.object = ('<span class="eha-warn">“Run least squares” is off until this input is fixed: '
                                   f'{next(iter(errors.values()))}</span>')
-        self.notice.visible = not ok or bool(errors)
+        elif waiting:
+            # it would otherwise run quietly on the simulated sensors (or on the previous file)
+            self.notice.object = ("<span class='eha-note'>“Run least squares” waits for your file's columns: "
+                                  "choose them above, or go back to simulated data.</span>")
+        self.notice.visible = not ok or bool(errors) or waiting
         self._inputs_changed()
 
     def _fail(self, message: str) -> None:
@@ -468,7 +478,7 @@ class LeastSquaresPanel(Section):
 
     def run(self):
         req, errors = self.request()
-        if errors or not self.state.valid:
+        if errors or not self.state.valid or self.column_mapping.waiting:
             return None
         u, t_end = req.input_signal()
         self.alert.visible = False
@@ -523,7 +533,9 @@ class LeastSquaresPanel(Section):
             self.last_data, self.last_resim = data, resim
             for d in self.downloads:
                 d.disabled = False
-            note = (f"<p class='eha-note'>Simulated, identified and re-simulated in {job.run_s * 1e3:.0f} ms"
+            # the student's record is identified, not simulated: one sentence that says so, not two that disagree
+            done = "Identified" if own is not None else "Simulated, identified and re-simulated"
+            note = (f"<p class='eha-note'>{done} in {job.run_s * 1e3:.0f} ms"
                     + (f" (and {job.wait_s:.1f} s waiting for the server)" if job.wait_s > 0.05 else "")
                     + f". {resim_error}</p>")
             warn = "" if res.success else f"<div class='eha-warn'>{res.message}</div>"

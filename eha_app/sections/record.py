@@ -116,7 +116,8 @@ class RecordPanel(Section):
 
     def inputs_changed(self) -> None:
         self.view.inputs_changed(self.run_key())
-        self.button.disabled = self.run_key() is None
+        # a file waiting for its columns: the button would estimate from the previous record
+        self.button.disabled = self.run_key() is None or self.mapping.waiting
 
     # -- reading the file ----------------------------------------------------------------------
     def _uploaded(self, _event) -> None:
@@ -157,9 +158,10 @@ class RecordPanel(Section):
 
         def show(out, _job):
             if out[0] == "map":
-                self.mapping.ask(out[1], out[2] + ". Choose which column is which:", self.read)
-                self.note.object = ("<span class='eha-warn'>Your record's columns are not named t, u, y: choose "
-                                    "them below.</span>")
+                # the question once, beside the upload (the note said it a second time)
+                self.mapping.ask(out[1], filename, self.read)
+                self.note.object = ""
+                self.inputs_changed()
                 return
             _, cols, ts = out
             self._uploads += 1              # a new file, even with the same name and length
@@ -228,7 +230,7 @@ class RecordPanel(Section):
         from eha_core.identify.record import identify_record
 
         cfg, key = self.orders(), self.run_key()
-        if key is None:
+        if key is None or self.mapping.waiting:
             return None
         t, u, y, name = self.columns
         (t_from, t_to), detrend = self.window(), self.detrend.value

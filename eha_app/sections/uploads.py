@@ -109,20 +109,37 @@ class ColumnMapping:
         self.selects: dict[str, pn.widgets.Select] = {}
         self.button: pn.widgets.Button | None = None
 
-    def ask(self, available: list[str], message: str, use: Callable[[dict], None]) -> None:
+    def ask(self, available: list[str], filename: str, use: Callable[[dict], None]) -> None:
+        """Show the file's columns with a guess for each needed one (names, then units) for the student
+        to check: a file waiting for its columns is a question, not an error."""
+        from eha_core.data import columns_text, guess_columns
+
         options = ["(none)", *available]
+        guesses = guess_columns(available, list(self.needed), {c: a for c, (_, a) in self.needed.items()})
         self.selects = {}
-        for c, (label, aliases) in self.needed.items():
-            guess = next((a for alias in (c, *aliases) for a in available
-                          if a.split("[")[0].strip().lower() == alias), "(none)")
-            self.selects[c] = pn.widgets.Select(label=f"{label} is", options=options, value=guess, width=250,
-                                                css_classes=[f"eha-map-{c}"])
+        for c, (label, _aliases) in self.needed.items():
+            self.selects[c] = pn.widgets.Select(label=f"{label} is", options=options, value=guesses[c] or "(none)",
+                                                width=250, css_classes=[f"eha-map-{c}"])
         self.button = pn.widgets.Button(label="Use these columns", color="primary", width=250,
                                         css_classes=["eha-map-go"])
         on_click(self.button, lambda _e: use({c: s.value for c, s in self.selects.items() if s.value != "(none)"}))
-        self.panel.objects = [pn.pane.HTML(f"<span class='eha-warn'>{html.escape(message)}</span>"),
-                              *self.selects.values(), self.button]
+        found = [c for c, g in guesses.items() if g]
+        missing = [self.needed[c][0] for c, g in guesses.items() if not g]
+        guessed = ("All guessed from the names and units: check them" if not missing else
+                   (f"Guessed {len(found)} of {len(guesses)} from the names and units; choose "
+                    f"{', '.join(missing)}") if found else "Choose which column is which")
+        self.panel.objects = [pn.pane.HTML(
+            f"<div class='eha-map-question'><b>Which columns of {html.escape(filename)} are which?</b> "
+            f"It has {html.escape(columns_text(available))}, not all named {', '.join(self.needed)}. {guessed}, "
+            "then press “Use these columns”. "
+            "Units in brackets are converted (position[mm], pA[bar]).</div>", css_classes=["eha-map-note"]),
+            *self.selects.values(), self.button]
         self.panel.visible = True
+
+    @property
+    def waiting(self) -> bool:
+        """Whether a file waits for the student to say which columns are which."""
+        return self.panel.visible
 
     def hide(self) -> None:
         self.panel.visible = False

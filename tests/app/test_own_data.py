@@ -57,13 +57,42 @@ def test_a_file_with_other_column_names_is_mapped(simulated):
     lse = Session(AppState()).build("least_squares")
     upload(lse, text.encode(), "lab.csv")
     assert lse.own_data is None and lse.mapping.visible
-    assert "no column t, x, v, p1, p2, u: the file has time, pos, vel, pa, pb, cmd" in lse.mapping.objects[0].object
-    for c, name in zip(("t", "x", "v", "p1", "p2", "u"), ("time", "pos", "vel", "pa", "pb", "cmd"), strict=True):
-        lse.mapping_selects[c].value = name
+    question = lse.mapping.objects[0].object
+    assert "Which columns of lab.csv are which?" in question and "is not allowed" not in question
+    # every column guessed from its name, for the student to check
+    assert {c: s.value for c, s in lse.mapping_selects.items()} == dict(
+        zip(("t", "x", "v", "p1", "p2", "u"), ("time", "pos", "vel", "pa", "pb", "cmd"), strict=True))
+    # while the file waits, the run does not quietly use the simulated sensors
+    assert lse.button.disabled and "waits for your file's columns" in lse.notice.object
+    assert lse.run() is None and lse.result is None
     lse.mapping_button.clicks += 1
-    assert lse.own_data is not None and not lse.mapping.visible
+    assert lse.own_data is not None and not lse.mapping.visible and not lse.button.disabled
     lse.run()
     np.testing.assert_allclose(lse.result.estimates["M"], estimates["M"], rtol=1e-6)
+
+
+def test_names_and_units_of_a_lab_file_are_guessed_and_converted(simulated):
+    """time, position[mm], velocity[mm/s], pA[bar], pB[bar], valve[V]: guessed, converted to SI, and the
+    result reads as the student's own record (no nominal or paper column, one status sentence)."""
+    import io
+
+    import pandas as pd
+
+    exported, estimates = simulated
+    df = pd.read_csv(io.BytesIO(exported.data_bytes("csv")))
+    lab = pd.DataFrame({"time": df["t"], "position[mm]": df["x"] * 1e3, "velocity[mm/s]": df["v"] * 1e3,
+                        "pA[bar]": df["p1"] / 1e5, "pB[bar]": df["p2"] / 1e5, "valve[V]": df["u"]})
+    lse = Session(AppState()).build("least_squares")
+    upload(lse, lab.to_csv(index=False, float_format="%.17g").encode(), "lab.csv")
+    assert {c: s.value for c, s in lse.mapping_selects.items()} == {
+        "t": "time", "x": "position[mm]", "v": "velocity[mm/s]", "p1": "pA[bar]", "p2": "pB[bar]", "u": "valve[V]"}
+    assert "All guessed from the names and units" in lse.mapping.objects[0].object
+    lse.mapping_button.clicks += 1
+    lse.run()
+    np.testing.assert_allclose(lse.result.estimates["M"], estimates["M"], rtol=1e-6)
+    table = lse.table.object
+    assert "<th>nominal</th>" not in table and "<th>paper</th>" not in table and "rel. error" not in table
+    assert "Identified in" in table and "re-simulated in" not in table
 
 
 @pytest.mark.parametrize("content, message", [
@@ -201,8 +230,11 @@ def test_a_record_with_other_column_names_is_mapped(closed_loop):
     panel = Session(AppState()).build("frequency")
     record = _upload_record(panel, blob, "lab.csv")
     assert record.columns is None and record.mapping.panel.visible
-    assert "it needs columns t, u, y (or t, r, x); the file has time, cmd, pos[mm]" in \
-        record.mapping.panel.objects[0].object
+    question = record.mapping.panel.objects[0].object
+    assert "Which columns of lab.csv are which?" in question and "is not allowed" not in question
+    # the question once, beside the upload: the note above it does not repeat it
+    assert record.note.object == "" and record.button.disabled
+    assert {c: s.value for c, s in record.mapping.selects.items()} == {"t": "time", "u": "cmd", "y": "pos[mm]"}
     record.mapping.selects["t"].value = "time"
     record.mapping.selects["u"].value = "cmd"
     record.mapping.selects["y"].value = "pos[mm]"
@@ -221,7 +253,8 @@ def test_a_record_with_other_column_names_is_mapped(closed_loop):
 def test_a_record_without_the_columns_gets_its_message():
     panel = Session(AppState()).build("frequency")
     record = _upload_record(panel, b"t,u\n0,1\n", "bad.csv")
-    assert "it needs columns t, u, y (or t, r, x); the file has t, u" in record.mapping.panel.objects[0].object
+    question = record.mapping.panel.objects[0].object
+    assert "It has t, u, not all named t, u, y. Guessed 2 of 3 from the names and units; choose output y" in question
     record.mapping.selects["t"].value = "t"
     record.mapping.selects["u"].value = "u"
     record.mapping.button.clicks += 1                                 # y still missing: the reader says so
