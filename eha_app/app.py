@@ -334,35 +334,49 @@ class Page(pn.viewable.Viewer):
                                css_classes=["eha-load-settings"])
         # The report takes about 0.8 s to draw: a worker draws it from a snapshot of the page taken
         # now (the page's thread serves the other students meanwhile), then it is offered.
+        # no tooltip: it would cover the download that appears beside the button under the pointer
         self.report_button = pn.widgets.Button(label="Report of this session", width=190,
-                                               css_classes=["eha-session-report"],
-                                               description="what you ran, as one HTML file: settings, plots, "
-                                                           "estimates")
+                                               css_classes=["eha-session-report"])
+        # who the report is of: typed outside an exercise; in one, the student's checked id
+        self.report_name = pn.widgets.TextInput(placeholder="your name, for the report", width=190,
+                                                css_classes=["eha-report-name"],
+                                                visible=not self.session.state.hidden)
         self.report_download = pn.widgets.FileDownload(filename="eha_session_report.html", label="Download the report",
                                                        visible=False, width=190, color="success",
                                                        css_classes=["eha-session-report-download"])
         on_click(self.report_button, lambda _e: self.prepare_report())
         watch(self.load, lambda _e: self._loaded(), "value")
         return pn.Row(save, pn.pane.HTML("<span class='eha-note'>Load settings:</span>", margin=(12, 4, 0, 10)),
-                      self.load, self.report_button, self.report_download, note, sizing_mode="stretch_width",
-                      css_classes=["eha-settings-row"])
+                      self.load, self.report_name, self.report_button, self.report_download, note,
+                      sizing_mode="stretch_width", css_classes=["eha-settings-row"])
 
     def prepare_report(self):
         from .render.report import session_report
 
-        session, download, note = self.session, self.report_download, self.settings_note
+        session, download, note, button = self.session, self.report_download, self.settings_note, self.report_button
         snapshot = session.snapshot()           # under the page's lock: a click
+        author = "" if session.state.hidden else " ".join(str(self.report_name.value or "").split())[:80]
+
+        def done():
+            button.label, button.disabled = "Report of this session", False
 
         def show(data, _job):
+            done()
             download.file = io.BytesIO(data)
             download.label = f"Download the report ({len(data) / 1e6:.1f} MB)"
             download.visible = True
+            note.object = "<span class='eha-ok'>The report is ready: “Download the report”, beside the button.</span>"
 
         def fail(message):
+            done()
             note.object = f"<span class='eha-warn'>The report could not be made: {html.escape(message)}</span>"
 
+        # at once, where the student looks: the button says it is working (the report takes ~3 s)
         download.visible = False
-        return session.runner.run("session report", lambda _token: session_report(session, snapshot), show, fail=fail)
+        button.label, button.disabled = "Preparing the report…", True
+        note.object = "<span class='eha-note'>Drawing every tab's results into one file…</span>"
+        return session.runner.run("session report", lambda _token: session_report(session, snapshot, author=author),
+                                  show, fail=fail)
 
     def _loaded(self) -> None:
         load, note = self.load, self.settings_note

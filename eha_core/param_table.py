@@ -54,6 +54,7 @@ __all__ = [
     "Saying",
     "Rule",
     "RULES",
+    "PAPER_SOURCES",
     "broken_rules",
     "piston_area",
     "rod_area",
@@ -99,6 +100,16 @@ FIELD_INFO: dict[str, FieldInfo] = {
     "v0": FieldInfo("m/s", "initial piston velocity", "mm/s", 1e-3, "initial", "v(0)"),
     "p1_0": FieldInfo("Pa", "initial piston-chamber pressure", "MPa", 1e6, "initial", "p1(0)"),
     "p2_0": FieldInfo("Pa", "initial rod-chamber pressure (blank: force balance)", "MPa", 1e6, "initial", "p2(0)"),
+}
+
+#: Where each default comes from in the paper (two are inferred from its eq. 23; d0 and the
+#: initial state are the experiments' own).
+PAPER_SOURCES: dict[str, str] = {
+    "M": "Table 3", "B": "Table 3", "Af": "Table 3", "beta_e": "Table 3", "Dc": "Table 3", "dc": "Table 3",
+    "d0": "Table 3 (no slow load)", "L0": "inferred from eq. 23's s coefficient",
+    "Kq1": "inferred from eq. 23's gain", "Kq2": "inferred from eq. 23's gain", "ps": "Table 1", "pr": "Table 1",
+    "k_f": "eq. 2", "x0": "section II-A", "v0": "section II-A", "p1_0": "section II-A",
+    "p2_0": "section II-A: the force balance",
 }
 
 #: Names accepted by ``--param NAME=VALUE`` and by :meth:`ActuatorParams.replace`.

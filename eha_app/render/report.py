@@ -445,16 +445,21 @@ def components_alone(figures: dict):
     return components(figures, theme=None)
 
 
-def session_report(session, snapshot) -> bytes:
+_SYMBOL_HTML = {"Af": "A<sub>f</sub>", "beta_e": "β<sub>e</sub>", "d0": "d<sub>0</sub>"}
+
+
+def session_report(session, snapshot, author: str = "") -> bytes:
     """What this student ran, as one self-contained HTML file: every section's part, in page order
     (its settings, plots, estimates with intervals...), drawn from ``snapshot`` (taken under the
     page's lock; this runs in a worker) by the same code as ``eha reproduce``; an exercise's hidden
-    values are left out as on the page."""
+    values are left out as on the page. ``author``: the name the student typed (in an exercise the
+    report names the student's checked id instead)."""
     figures, parts = {}, []
-    intro = ""
+    intro = f"<p>Student: <b>{html.escape(author)}</b>.</p>" if author else ""
     if snapshot.hidden:
+        names = ", ".join(_SYMBOL_HTML.get(n, html.escape(n)) for n in snapshot.hidden)
         intro = (f"<p>Exercise <b>{html.escape(snapshot.exercise_title)}</b>, student "
-                 f"<b>{html.escape(snapshot.student)}</b>; hidden: {html.escape(', '.join(snapshot.hidden))}.</p>")
+                 f"<b>{html.escape(snapshot.student)}</b>; hidden: {names}.</p>")
     for section, part in session.report_sections(snapshot):
         if part is None:
             continue

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import panel as pn
 
+from eha_core.param_table import FIELD_INFO
+
 from ..render.layout import side_by_side
 from ..render.tables import derived_html
 from ..runtime.tasks import on_click, watch
@@ -24,6 +26,11 @@ SCHEMATIC_PATH = Path(__file__).resolve().parents[1] / "assets" / "eha_schematic
 
 #: the labels, one list for the form and its messages (AppState words them)
 _PLAIN = FIELD_LABELS
+#: The report's symbols (the form shows plain text: its labels are inputs' labels).
+_SYMBOLS_HTML = {"Af": "A<sub>f</sub>", "beta_e": "β<sub>e</sub>", "Dc": "D<sub>c</sub>", "dc": "d<sub>c</sub>",
+                 "d0": "d<sub>0</sub>", "L0": "L<sub>0</sub>", "Kq1": "K<sub>q1</sub>", "Kq2": "K<sub>q2</sub>",
+                 "ps": "p<sub>s</sub>", "pr": "p<sub>r</sub>", "k_f": "k<sub>f</sub>", "x0": "x(0)", "v0": "v(0)",
+                 "p1_0": "p<sub>1</sub>(0)", "p2_0": "p<sub>2</sub>(0)", "kp": "K<sub>p</sub>"}
 
 
 def _field(name: str) -> Field:
@@ -121,16 +128,41 @@ class ParametersTab(Section):
 
     @classmethod
     def report(cls, snapshot: SectionSnapshot, hidden=()) -> ReportPart:
+        from eha_core.param_table import PAPER_SOURCES
+        from eha_core.params import ActuatorParams
+
+        from ..render.formatting import num_html
         from ..render.tables import table_html
 
-        rows = [[html.escape(FIELD_LABELS.get(k, k)), html.escape(v)] for k, v in snapshot.settings.items()]
-        body = table_html(["", "value (as typed, display units)"], rows)
+        params = errors = None
         if snapshot.content is not None:
-            params, kp, errors = snapshot.content
-            if errors:
-                body += "<p class='eha-warn'>Not valid: " + html.escape("; ".join(errors.values())) + "</p>"
-            else:
-                body += _derived(params, kp, False, tuple(hidden))
+            params, _kp, errors = snapshot.content
+        paper = ActuatorParams()
+        rows = []
+        for k, typed in snapshot.settings.items():
+            info = FORM_FIELDS.get(k)
+            unit = info.display_unit if info is not None else ""
+            label = _SYMBOLS_HTML.get(k, html.escape(FIELD_LABELS.get(k, k)))
+            shown = f"{html.escape(typed)} {unit}".strip() if typed.strip() else "(blank)"
+            si = ""
+            if params is not None and not errors and k in FIELD_INFO and k not in hidden:
+                value = params.p2_init if k == "p2_0" else getattr(params, k)
+                si = f"{num_html(value, 5)} {FIELD_INFO[k].unit}"
+                if k == "p2_0" and not typed.strip():
+                    si += " (force balance)"
+            source = PAPER_SOURCES.get(k)
+            ref = ""
+            if k == "kp":
+                ref = "10 V/m<br><small class='eha-cite'>eq. 24</small>"
+            elif source is not None:
+                value = paper.p2_init if k == "p2_0" else getattr(paper, k)
+                ref = f"{num_html(value, 5)} {FIELD_INFO[k].unit}<br><small class='eha-cite'>{source}</small>"
+            rows.append([f"{label} <small>{html.escape(info.description if info else '')}</small>", shown, si, ref])
+        body = table_html(["parameter", "as typed", "in SI units", "the paper's"], rows)
+        if errors:
+            body += "<p class='eha-warn'>Not valid: " + html.escape("; ".join(errors.values())) + "</p>"
+        elif params is not None:
+            body += _derived(params, snapshot.content[1], False, tuple(hidden))
         return ReportPart("Parameters (tab 1)", body)
 
     # -- the page ---------------------------------------------------------------------------------

@@ -162,3 +162,32 @@ def test_a_section_registered_with_one_line_is_in_the_page_settings_address_and_
         assert "A dummy panel" in text and "x is 7" in text
         assert json.loads(other.session.settings_bytes())["dummy"] == {"dummy_x": "7"}
     assert "dummy" not in SECTIONS and "dummy" not in create_app().session.settings()
+
+
+def test_the_report_names_the_student_and_every_parameter_with_its_symbol_unit_and_source():
+    """A name field; β_e with its unit, not "beta_e 1.1"; p2(0) filled (it was blank); the paper's value
+    and where it comes from; the study and the student's own record in it too."""
+    page = create_app(AppState())
+    session = page.session
+    page.report_name.value = "  Ada   Lovelace "
+    study = session.build("study")
+    study.form.values = {**study.form.values, "study_seeds": "4"}
+    study.run()
+    freq = session.build("frequency")
+    source = create_app(AppState()).session.build("frequency")
+    source.run()
+    freq.record.upload.filename = "loop.csv"
+    freq.record.upload.value = source.data_bytes("csv")
+    freq.record.run()
+    page.report_button.clicks += 1
+    assert page.report_button.label == "Report of this session" and not page.report_button.disabled
+    assert "The report is ready" in page.settings_note.object
+    text = page.report_download.file.getvalue().decode()
+    assert "Student: <b>Ada Lovelace</b>" in text
+    params = text.split("Parameters (tab 1)", 1)[1].split("</table>", 1)[0]
+    assert "β<sub>e</sub>" in params and "1.1 GPa" in params and "1.1·10<sup>9</sup> Pa" in params
+    assert "beta_e" not in params
+    p2 = params.split("p<sub>2</sub>(0)", 1)[1].split("</tr>", 1)[0]
+    assert "(blank)" in p2 and "1.8189·10<sup>7</sup> Pa (force balance)" in p2 and "section II-A" in p2
+    assert "inferred from eq. 23" in params and "Table 3" in params
+    assert "Study over seeds" in text and "Transfer function from your own record" in text
