@@ -279,6 +279,12 @@ class Page(pn.viewable.Viewer):
                              css_class="eha-main-tabs")
         session.active_tab = active
         watch(self.tabs.tabs, lambda e: setattr(session, "active_tab", e.new), "active")
+        # the way through the steps: the start card (on a first visit to tab 1) and the guide line
+        from .guide import Guide
+
+        self.guide = Guide(self.show, keys=tuple(p.key for p in session.registry if p.within is None),
+                           start=active == 0 and "tab" not in session.query)
+        watch(self.tabs.tabs, lambda _e: self._guide_follows(), "active")
         first_tab = names[active]
         if served_document() is not None:
             # The page's frame goes out now; its first tab once the browser has it
@@ -299,13 +305,29 @@ class Page(pn.viewable.Viewer):
             '<h2 style="margin:4px 0">Electro-hydraulic actuator: modeling and identification</h2>'
             f'<span style="color:#666">a single-rod cylinder driven by a proportional valve</span>{who}</div>',
             sizing_mode="stretch_width")
-        self.layout.objects = [self.connection, header, self._settings_row(), self.tabs.tabs]
+        self.layout.objects = [self.connection, header, self._settings_row(), self.guide.start, self.guide.line,
+                               self.tabs.tabs]
+        self._guide_follows()
+
+    def _guide_follows(self) -> None:
+        """The guide line says which section is shown (the student may have come by any way)."""
+        name = self.tabs.active_name
+        placements = self.session.registry.on_tab(name)
+        key = placements[0].key
+        content = self.tabs.built.get(name)
+        if isinstance(content, SubTabs):
+            key = content.keys.get(content.lazy.active_name, key)
+        if name != self.tabs.names[0]:
+            self.guide.hide_start()
+        self.guide.show_step(key)
 
     def _make_tab(self, name: str):
         placements = self.session.registry.on_tab(name)
         if len(placements) == 1:
             return self.session.build(placements[0].key)
-        return SubTabs(self.session, placements)
+        sub = SubTabs(self.session, placements)
+        watch(sub.lazy.tabs, lambda _e: self._guide_follows(), "active")
+        return sub
 
     def show(self, key: str):
         """Show section ``key`` (its tab and sub-tab), made now if needed; returns it."""

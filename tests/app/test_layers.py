@@ -6,6 +6,7 @@
     eha_app.session                  a page's session, its state, its forms, the section protocol
     eha_app.sections                 the tabs and panels (registered in eha_app/sections/__init__.py)
     eha_app.app, eha_app.eha         the page: the sections' tabs, the gate of an exercise
+    eha_app.guide                    the page: the start card and the guide line through the steps
     eha_app.cli                      the ``eha`` command: an interface beside the page
 
 Every import counts, lazy ones inside functions included.
@@ -44,7 +45,7 @@ def layer_of(module: str) -> str | None:
         return None
     if len(parts) == 1:
         return "app"
-    return {"eha": "app", "app": "app"}.get(parts[1], parts[1])
+    return {"eha": "app", "app": "app", "guide": "app"}.get(parts[1], parts[1])
 
 
 def imports_of(path: Path) -> list[tuple[int, str]]:
