@@ -42,6 +42,9 @@ FREQ_FORM = (
               tip=GLOSSARY["idinput"]),
         Field("n_samples", "samples N", "integer", lo=20, hi=20000, short="N"),
         Field("freq_seed", "seed", "integer", lo=0, hi=10**6, short="seed"),
+    )),
+    # folded at first: the run button stays in view at 1366 x 768 (the defaults are the paper's)
+    Group("Excitation details", (
         Field("band_lo", "band low", "number", unit="× Nyquist", lo=0.0, hi=1.0, short="band low"),
         Field("band_hi", "band high", "number", unit="× Nyquist", lo=0.0, hi=1.0, short="band high"),
         Field("range_lo", "range min", "number", unit="m", short="range min"),
@@ -51,12 +54,14 @@ FREQ_FORM = (
         Field("grid_skip", "grid skip", "integer", lo=1, hi=100, short="grid skip"),
         Field("ts", "Ts", "number", unit="s", lo=1e-4, hi=1.0, short="Ts",
               tip="sample time of the controller; its output is held between samples (ZOH: " + GLOSSARY["ZOH"] + ")"),
-    )),
+    ), collapsible=True, collapsed=True),
     Group("Loop and model", (
         Field("model", "model in the loop", "select", options=(("nonlinear", "nonlinear"), ("linear", "linearised")),
               short="model", tip="the actuator's model the closed loop is simulated with"),
         Field("n_poles", "poles", "integer", lo=1, hi=6, short="poles", tip="poles: " + GLOSSARY["poles"]),
         Field("n_zeros", "zeros", "integer", lo=0, hi=5, short="zeros", tip="zeros: " + GLOSSARY["zeros"]),
+    )),
+    Group("Estimation options", (
         Field("initial_condition", "initial condition", "select", options=(("estimate", "estimate"), ("zero", "zero")),
               short="initial condition", tip=GLOSSARY["initial condition"]),
         Field("input_offset", "input offset", "select", options=(("estimate", "estimate"), ("zero", "zero")),
@@ -64,7 +69,7 @@ FREQ_FORM = (
         Field("input_delay", "input delay", "text", unit="s", placeholder="0, a time, or estimate",
               short="input delay",
               tip="a dead time of the model's input (MATLAB's iodelay): 0 for none, a time in s, or estimate"),
-    )),
+    ), collapsible=True, collapsed=True),
 )
 _FREQ_FIELDS = {f.name: f for g in FREQ_FORM for f in g.fields}
 _CONFIG_NAME = {"signal_type": "signal_type", "n_samples": "n_samples", "freq_seed": "seed", "ts": "ts",

@@ -464,7 +464,7 @@ class LeastSquaresPanel(Section):
         elif waiting:
             # it would otherwise run quietly on the simulated sensors (or on the previous file)
             self.notice.object = ("<span class='eha-note'>“Run least squares” waits for your file's columns: "
-                                  "choose them above, or go back to simulated data.</span>")
+                                  "choose them below, or go back to simulated data.</span>")
         self.notice.visible = not ok or bool(errors) or waiting
         self._inputs_changed()
 
@@ -650,9 +650,9 @@ class LeastSquaresPanel(Section):
         return ReportPart("Least squares (eqs. 15-18)", body, figures)
 
     def __panel__(self):
-        controls = pn.Column(self.form, self.upload_note, self.upload, self.mapping, self.window_form,
-                             self.simulated_button,
-                             self.notice, self.button, self.all_button, self.handin_button, self.verdict,
+        # the run first, below its settings: in view at 1366 x 768; the student's own file after it
+        controls = pn.Column(self.form, self.notice, self.button, self.all_button, self.handin_button, self.verdict,
+                             self.upload_note, self.upload, self.mapping, self.window_form, self.simulated_button,
                              pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"), self.queue_note, width=280)
         explain = pn.pane.HTML(
             "<p class='eha-note'>Least squares on eq. 15 filtered by H(s) = 1/(0.01 s + 1) (eqs. 16-18): "
