@@ -243,6 +243,7 @@ class SimulationTab(Section):
         state = self.state
         self.preset = "all"
         self.results: list = []
+        self._last_job_wait = 0.0
         self.last_model = "nonlinear"
         self.last_elapsed_s = float("nan")
         self.run_count = 0
@@ -268,6 +269,14 @@ class SimulationTab(Section):
                          width=270, css_classes=["eha-sim-form"], margin=(5, 10))
         watch(self.form, self._typed, "values")
 
+        # with several cases and both models (8 traces), one case at a time is legible: the selector
+        # shows when a run has several cases and both models
+        self.case_select = pn.widgets.RadioButtonGroup(options=["all"], value="all", visible=False,
+                                                       css_classes=["eha-sim-case-select"], margin=(2, 10))
+        watch(self.case_select, lambda _e: self._draw(), "value")
+        # what the form describes: a paper case, the four cases (whose inputs are not the form's), or its own
+        self.form_note = pn.pane.HTML("", width=270, css_classes=["eha-sim-form-note"],
+                                      styles={"font-size": "12px", "color": "#444"})
         self.preset_buttons = []
         for k in (1, 2, 3, 4):
             b = pn.widgets.Button(label=f"Case {k}", width=62, margin=(2, 2), description=PAPER_CASES[k].title)
@@ -296,6 +305,7 @@ class SimulationTab(Section):
         state.param.watch(self._update_enabled, "valid")
         state.param.watch(self._inputs_changed, ["params", "valid"])
         self._update_enabled()
+        self._describe_form()
         apply_locked(self._build_plots)
 
     def _build_plots(self) -> None:
@@ -346,6 +356,7 @@ class SimulationTab(Section):
         changed = {k for k in set(old) | set(new) if old.get(k) != new.get(k)}
         if self.preset != "custom" and not all(k.startswith("sensor_") for k in changed):
             self.preset = "custom"        # editing an input leaves the preset (the sensors do not)
+            self._describe_form()
         self._update_enabled()
         self._inputs_changed()
 
@@ -382,6 +393,22 @@ class SimulationTab(Section):
         finally:
             self._applying_preset = False
         self._update_enabled()
+        self._describe_form()
+
+    def _describe_form(self) -> None:
+        """Say which case the form holds (the four cases' inputs are their own, not the form's)."""
+        preset = self.preset
+        if preset in (1, 2, 3, 4):
+            text = f"The form holds the paper's {PAPER_CASES[preset].title}."
+        elif preset == "all":
+            cases = "; ".join(f"{c.label}: u = {c.u.label}, d = {c.d.label}" for c in PAPER_CASES.values())
+            text = (f"All four cases of Figs. 2-7, each with its own input ({cases}): the form's u and d are not "
+                    "used for them.")
+        else:
+            text = "Your own inputs (the form's)."
+        text = f"<span class='eha-form-says'>{html.escape(text)}</span>"
+        if self.form_note.object != text:
+            self.form_note.object = text
 
     def _update_enabled(self, *_events) -> None:
         req, errors = self.request()
@@ -476,23 +503,48 @@ class SimulationTab(Section):
         self.queue_note.object = text
         self.queue_note.visible = bool(text)
 
+    def _draw(self) -> None:
+        """The grid and the status line for the case chosen (all of them unless the selector shows)."""
+        results = self.results
+        if self.grid is None or not results:
+            return
+        chosen = self.case_select.value
+        shown = [r for r in results if chosen == "all" or r.label == chosen] or results
+        self.grid.update(shown)
+        labels = list(dict.fromkeys(r.label for r in results))
+        models = " and ".join(dict.fromkeys(r.model for r in results))
+        elapsed = self.last_elapsed_s
+        timing = "" if math.isnan(elapsed) else f", computed in {elapsed * 1e3:.0f} ms"
+        if self._last_job_wait > 0.05:
+            timing += f" (of which {self._last_job_wait:.1f} s waiting for the server)"
+        what = ", ".join(labels)
+        if chosen != "all" and len(labels) > 1:
+            what = f"{chosen} of {what} (choose the case above the plots)"
+        self.info.text = (f"<b>{what}</b> — {models} model, {results[0].t[-1]:g} s{timing}. "
+                          f"<span class='eha-run-count' style='color:#999'>run {self.run_count}</span>"
+                          + beyond_range_html(results))
+
     def _show(self, results, job) -> None:
         """Show a run: the plots' data, then the status line, then the download."""
         if self.grid is None:
             self._build_plots()
         elapsed = float("nan") if job is None else job.elapsed_s
         self.run_count += 1
-        self.grid.update(results)
-        what = ", ".join(dict.fromkeys(r.label for r in results))
-        models = " and ".join(dict.fromkeys(r.model for r in results))
-        timing = "" if math.isnan(elapsed) else f", computed in {elapsed * 1e3:.0f} ms"
-        if job is not None and job.wait_s > 0.05:
-            timing += f" (of which {job.wait_s:.1f} s waiting for the server)"
-        self.info.text = (f"<b>{what}</b> — {models} model, {results[0].t[-1]:g} s{timing}. "
-                          f"<span class='eha-run-count' style='color:#999'>run {self.run_count}</span>"
-                          + beyond_range_html(results))
         self.results = list(results)
         self.last_elapsed_s = elapsed
+        self._last_job_wait = 0.0 if job is None else job.wait_s
+        labels = list(dict.fromkeys(r.label for r in results))
+        models = list(dict.fromkeys(r.model for r in results))
+        several = len(labels) > 1 and len(models) > 1
+        options = ["all", *labels] if several else ["all"]
+        if self.case_select.options != options:
+            self.case_select.options = options
+        if several and self.case_select.value not in labels:
+            self.case_select.value = labels[0]      # (redraws through its watcher, then once more below)
+        elif not several and self.case_select.value != "all":
+            self.case_select.value = "all"
+        self.case_select.visible = several
+        self._draw()
         failed = [r for r in results if not r.success]
         if failed:
             self.alert.object = "; ".join(f"{r.label} ({r.model}): {r.message}" for r in failed)
@@ -526,7 +578,7 @@ class SimulationTab(Section):
                             pn.FlexBox(*self.preset_buttons), width=280)
         runs = pn.Column(*self.run_buttons.values(), pn.Row(self.download, self.download_mat), self.queue_note,
                          width=280)
-        side = pn.Column(presets, runs, self.form, width=290)
-        main = pn.Column(self.notice, self.alert, self.view.banner, self.plot_area, sizing_mode="stretch_width",
-                         min_width=440)
+        side = pn.Column(presets, runs, self.form_note, self.form, width=290)
+        main = pn.Column(self.notice, self.alert, self.view.banner, self.case_select, self.plot_area,
+                         sizing_mode="stretch_width", min_width=440)
         return side_by_side(side, main)

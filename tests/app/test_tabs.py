@@ -42,6 +42,7 @@ def test_simulation_runs_four_case_comparison():
     assert {r.model for r in tab.results} == {"nonlinear", "linear"}
     assert all(r.success and r.t[-1] == 5.0 for r in tab.results)
     # the plot source holds the data (x in mm, p in MPa), one line per run, every ~2 ms
+    tab.case_select.value = "all"                     # (it opens on case 1: two lines)
     src = tab.grid.source.data
     assert tab.grid.line_count == 8
     np.testing.assert_allclose(src["x"][2][-1], tab.results[2].x[-1] * 1e3, rtol=1e-6)
@@ -299,3 +300,28 @@ def test_an_unstable_open_loop_estimate_says_so_where_it_is_shown():
     pole, gain = open_loop_instability([2500.0], [1.0, 430.1, 1.721e4, 2437.0], 10.0)
     assert gain == pytest.approx(2500 / 2437) and 0 < pole < 0.01
     assert open_loop_note([1.0, 2.0, 3.0], None) == ""
+
+
+def test_compare_both_over_four_cases_shows_one_case_at_a_time():
+    """Eight traces per plot hid case 1 under case 2: with several cases and both models a selector shows
+    one case (both models) at a time; the form says which case it holds."""
+    tab = Session(AppState()).build("simulation")
+    assert "four cases" in tab.form_note.object or "Case" in tab.form_note.object
+    tab._apply_preset("all")
+    assert "the form&#x27;s u and d are not used" in tab.form_note.object
+    tab.run("both")
+    assert len(tab.results) == 8 and tab.case_select.visible
+    assert tab.case_select.options == ["all", "Case 1", "Case 2", "Case 3", "Case 4"]
+    assert tab.case_select.value == "Case 1"
+    assert [sig[:2] for sig in tab.grid._signature] == [("Case 1", "nonlinear"), ("Case 1", "linear")]
+    assert "Case 1 of Case 1, Case 2, Case 3, Case 4" in tab.info.text
+    tab.case_select.value = "Case 3"
+    assert "Case 3 of" in tab.info.text and {sig[0] for sig in tab.grid._signature} == {"Case 3"}
+    tab.case_select.value = "all"
+    assert tab.info.text.startswith("<b>Case 1, Case 2, Case 3, Case 4</b>") and len(tab.grid._signature) == 8
+    tab.run("nonlinear")                              # Fig. 2: four traces, all shown
+    assert not tab.case_select.visible and tab.case_select.value == "all"
+    tab._apply_preset(3)
+    assert "The form holds the paper&#x27;s Case 3: u = " in tab.form_note.object
+    tab.set_inputs(u_amplitude="5")
+    assert "Your own inputs" in tab.form_note.object
