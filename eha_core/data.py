@@ -37,7 +37,7 @@ from ._checks import FieldError
 
 __all__ = ["DataError", "guess_columns", "COLUMN_ALIASES",
            "read_columns", "read_data", "write_data", "sample_time", "UNITS", "file_columns",
-           "columns_text", "MAX_DATA_BYTES", "check_data_size", "csv_cell"]
+           "columns_text", "MAX_DATA_BYTES", "check_data_size", "csv_cell", "signal_units", "SIGNAL_UNITS"]
 
 #: The most a data file may hold as it is read: the bytes of a CSV, the decompressed bytes of a
 #: .mat (a 10 minute record at 1 kHz is about 2 MB of CSV).
@@ -45,7 +45,33 @@ MAX_DATA_BYTES = 20_000_000
 
 #: Units a column name may carry, as ``name[unit]``, and their factor to SI.
 UNITS = {"s": 1.0, "ms": 1e-3, "m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "m/s": 1.0, "mm/s": 1e-3,
-         "pa": 1.0, "kpa": 1e3, "mpa": 1e6, "bar": 1e5, "v": 1.0, "n": 1.0, "kn": 1e3}
+         "pa": 1.0, "kpa": 1e3, "mpa": 1e6, "bar": 1e5, "v": 1.0, "n": 1.0, "kn": 1e3,
+         "rad/s": 1.0, "db": 1.0, "deg": 1.0, "samples": 1.0}
+
+#: The SI unit of each signal the project writes (a column ``x_resim`` or ``x_estimate`` is in x's).
+SIGNAL_UNITS = {"t": "s", "x": "m", "v": "m/s", "p1": "Pa", "p2": "Pa", "u": "V", "r": "m", "d": "N", "y": "m",
+                "w": "rad/s", "lag": "samples"}
+
+
+def signal_units(names) -> dict[str, str]:
+    """The unit of each of ``names`` that is a signal of the project (``x_resim``: m, ``estimate_db``: dB),
+    for the ``name[unit]`` headers of a written file.
+
+    >>> signal_units(["t", "x_resim", "estimate_db", "eq24_deg", "autocorrelation"])
+    {'t': 's', 'x_resim': 'm', 'estimate_db': 'dB', 'eq24_deg': 'deg'}
+    """
+    out = {}
+    for n in names:
+        base = n.split("_")[0]
+        if n in SIGNAL_UNITS:
+            out[n] = SIGNAL_UNITS[n]
+        elif n.endswith("_db"):
+            out[n] = "dB"
+        elif n.endswith("_deg"):
+            out[n] = "deg"
+        elif base in SIGNAL_UNITS:
+            out[n] = SIGNAL_UNITS[base]
+    return out
 
 
 #: Names a needed column may go by in a file (compared lowercase, without unit, spaces or
@@ -445,17 +471,17 @@ def read_data(source, columns: Sequence[str], *, name: str = "--data", filename:
     return out
 
 
-def write_data(columns: dict[str, np.ndarray], kind: str = "csv", units: dict[str, str] | None = None) -> bytes:
-    """``columns`` (SI) as the bytes of a CSV (``name[unit]`` headers when ``units`` say) or ``.mat`` file,
-    which :func:`read_data` reads back."""
+def write_data(columns: dict[str, np.ndarray], kind: str = "csv", units: dict[str, str] | str | None = None) -> bytes:
+    """``columns`` (SI) as the bytes of a CSV (``name[unit]`` headers when ``units`` say; ``units="si"``:
+    each known signal's SI unit, :func:`signal_units`) or ``.mat`` file, which :func:`read_data` reads back."""
     if kind == "mat":
         import scipy.io
 
         buf = io.BytesIO()
         scipy.io.savemat(buf, {k: np.asarray(v, dtype=float) for k, v in columns.items()})
         return buf.getvalue()
-    units = units or {}
     names = list(columns)
+    units = signal_units(names) if units == "si" else (units or {})
     scales = {k: UNITS[units[k].lower()] if k in units else 1.0 for k in names}
     header = [f"{k}[{units[k]}]" if k in units else k for k in names]
     buf = io.StringIO()

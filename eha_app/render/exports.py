@@ -46,12 +46,14 @@ def tf_estimate_rows(estimate) -> list[dict]:
     std = list(estimate.param_std) if estimate.param_std is not None else [np.nan] * len(values)
     rows = []
     for (name, part, power), value, s in zip(names, values, std, strict=True):
-        rows.append({"coefficient": name, "of": part, "power_of_s": power, "value": _finite(value),
+        # r and x are both in m: the coefficient of s^power has the unit 1/s^(n - power)
+        unit = "1" if n - power == 0 else f"1/s^{n - power}"
+        rows.append({"coefficient": name, "of": part, "power_of_s": power, "unit": unit, "value": _finite(value),
                      "std_error": _finite(s), "ci95_low": _finite(value - Z95 * s),
                      "ci95_high": _finite(value + Z95 * s)})
     if estimate.input_offset is not None:
         s = estimate.input_offset_std if estimate.input_offset_std is not None else np.nan
-        rows.append({"coefficient": "input_offset", "of": "input", "power_of_s": None,
+        rows.append({"coefficient": "input_offset", "of": "input", "power_of_s": None, "unit": "m",
                      "value": _finite(estimate.input_offset), "std_error": _finite(s),
                      "ci95_low": _finite(estimate.input_offset - Z95 * s),
                      "ci95_high": _finite(estimate.input_offset + Z95 * s)})
@@ -59,7 +61,8 @@ def tf_estimate_rows(estimate) -> list[dict]:
     if delay:
         s = getattr(estimate, "input_delay_std", None)
         s = np.nan if s is None else s
-        rows.append({"coefficient": "input_delay_s", "of": "input", "power_of_s": None, "value": _finite(delay),
+        rows.append({"coefficient": "input_delay_s", "of": "input", "power_of_s": None, "unit": "s",
+                     "value": _finite(delay),
                      "std_error": _finite(s), "ci95_low": _finite(delay - Z95 * s),
                      "ci95_high": _finite(delay + Z95 * s)})
     return rows
@@ -143,7 +146,7 @@ def frequency_figures_zip(fi, *, hidden: bool = False) -> bytes:
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
         for name, cols in tables.items():
-            z.writestr(f"{name}.csv", write_data(cols, "csv"))
+            z.writestr(f"{name}.csv", write_data(cols, "csv", units="si"))
         z.writestr("figures.mat", write_data({f"{name}_{k}": v for name, cols in tables.items()
                                               for k, v in cols.items()}, "mat"))
     return buf.getvalue()

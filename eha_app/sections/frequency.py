@@ -349,7 +349,7 @@ class FrequencyPanel(Section):
         from eha_core.data import write_data
 
         d = self.result.data
-        return write_data({"t": d.t, "r": d.r, "x": d.x, "u": d.u}, kind)
+        return write_data({"t": d.t, "r": d.r, "x": d.x, "u": d.u}, kind, units="si")
 
     def estimate_bytes(self, kind: str = "json") -> bytes:
         """The estimated transfer function with its intervals, fits and settings (CSV or JSON)."""

@@ -53,6 +53,9 @@ LSE_COLUMNS = ("t", "x", "v", "p1", "p2", "u")
 
 _NAMES_HTML = {"M": "M", "B": "B", "Af": "A<sub>f</sub>", "beta_e": "β<sub>e</sub>"}
 _NAMES_PLAIN = {"Af": "Af", "beta_e": "βe"}
+#: The estimates' symbols and SI units in the exported files (the tables' vocabulary).
+_SYMBOLS = {"Af": "A_f", "d0": "d_0", "beta_e": "β_e", "d_sin": "d_sin", "d_cos": "d_cos"}
+_UNITS_SI = {"M": "kg", "B": "N s/m", "Af": "N", "d0": "N", "d_sin": "N", "d_cos": "N", "beta_e": "Pa"}
 EXCITATIONS = {"paper": "u = 6 sin(4πt), 5 s (default)",
                "rich": "u = 8 sin(4πt) + 4 sin(10πt), 20 s (narrows B)"}
 
@@ -393,7 +396,7 @@ class LeastSquaresPanel(Section):
         r = self.last_resim
         if r is not None and r.t.size == d.t.size:
             cols.update(x_resim=r.x, v_resim=r.v, p1_resim=r.p1, p2_resim=r.p2)
-        return write_data(cols, kind)
+        return write_data(cols, kind, units="si")      # t[s], x[m], p1[Pa]...: read back as they are
 
     def estimates_bytes(self, kind: str) -> bytes:
         """The estimates with their standard errors and 95 % intervals (no hidden nominal value)."""
@@ -402,7 +405,8 @@ class LeastSquaresPanel(Section):
         for k, v in res.estimates.items():
             lo, hi = res.ci95[k]
             nominal = None if k in self.state.hidden else res.nominal.get(k)
-            rows.append({"parameter": k, "estimate": float(v), "std_error": float(res.std_errors[k]),
+            rows.append({"parameter": k, "symbol": _SYMBOLS.get(k, k), "unit": _UNITS_SI.get(k, ""),
+                         "estimate": float(v), "std_error": float(res.std_errors[k]),
                          "ci95_low": float(lo), "ci95_high": float(hi),
                          "nominal": None if nominal is None else float(nominal)})
         if kind == "json":

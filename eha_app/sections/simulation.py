@@ -227,8 +227,13 @@ def results_mat(results) -> bytes:
 
 
 def results_csv(results) -> str:
-    """All runs in one table: run, model, t, x, v, p1, p2, u, d (SI units)."""
-    return runs_to_pandas(results).to_csv(index=False, float_format="%.10g")
+    """All runs in one table: run, model, t[s], x[m], v[m/s], p1[Pa], p2[Pa], u[V], d[N] (SI units, named in
+    the header as the uploads read them)."""
+    from eha_core.data import signal_units
+
+    df = runs_to_pandas(results)
+    units = signal_units(df.columns)
+    return df.rename(columns={c: f"{c}[{u}]" for c, u in units.items()}).to_csv(index=False, float_format="%.10g")
 
 
 class SimulationTab(Section):

@@ -42,7 +42,7 @@ def test_estimates_download_as_csv_and_json(simulated):
     assert {r["parameter"]: r["estimate"] for r in rows} == pytest.approx(estimates)
     assert all(r["ci95_low"] <= r["estimate"] <= r["ci95_high"] for r in rows)
     header = lse.estimates_bytes("csv").decode().splitlines()[0]
-    assert header == "parameter,estimate,std_error,ci95_low,ci95_high,nominal"
+    assert header == "parameter,symbol,unit,estimate,std_error,ci95_low,ci95_high,nominal"
     # the data behind the plot: the measurements and the model re-simulated with the estimates
     from eha_core.data import read_data
 
@@ -53,7 +53,9 @@ def test_estimates_download_as_csv_and_json(simulated):
 
 def test_a_file_with_other_column_names_is_mapped(simulated):
     exported, estimates = simulated
-    text = exported.data_bytes("csv").decode().replace("t,x,v,p1,p2,u", "time,pos,vel,pa,pb,cmd", 1)
+    header = "t[s],x[m],v[m/s],p1[Pa],p2[Pa],u[V]"             # the export names its units
+    assert exported.data_bytes("csv").decode().startswith(header)
+    text = exported.data_bytes("csv").decode().replace(header, "time,pos,vel,pa,pb,cmd", 1)
     lse = Session(AppState()).build("least_squares")
     upload(lse, text.encode(), "lab.csv")
     assert lse.own_data is None and lse.mapping.visible
@@ -80,6 +82,7 @@ def test_names_and_units_of_a_lab_file_are_guessed_and_converted(simulated):
 
     exported, estimates = simulated
     df = pd.read_csv(io.BytesIO(exported.data_bytes("csv")))
+    df.columns = [c.split("[")[0] for c in df.columns]          # t[s], x[m], ...: SI
     lab = pd.DataFrame({"time": df["t"], "position[mm]": df["x"] * 1e3, "velocity[mm/s]": df["v"] * 1e3,
                         "pA[bar]": df["p1"] / 1e5, "pB[bar]": df["p2"] / 1e5, "valve[V]": df["u"]})
     lse = Session(AppState()).build("least_squares")

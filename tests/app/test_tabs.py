@@ -50,7 +50,7 @@ def test_simulation_runs_four_case_comparison():
     assert src["dash"][0] == "solid" and src["dash"][7] == "dashed"
     assert "computed in" in tab.info.text
     df = pd.read_csv(io.StringIO(tab._csv().read().decode()))
-    assert list(df.columns) == ["run", "model", "t", "x", "v", "p1", "p2", "u", "d"]
+    assert list(df.columns) == ["run", "model", "t[s]", "x[m]", "v[m/s]", "p1[Pa]", "p2[Pa]", "u[V]", "d[N]"]
     assert len(df) == 8 * 5001
 
 

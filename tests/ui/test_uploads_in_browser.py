@@ -76,14 +76,16 @@ def test_a_record_is_mapped_cut_detrended_drawn_and_estimated(student, tmp_path)
     page.get_by_role("button", name="Run experiment and estimate").click()
     page.wait_for_selector(".eha-freq-summary >> text=Validation on a fresh excitation", timeout=90_000)
     record = _download(page, "Data (CSV)").splitlines()
-    assert record[0] == "t,r,x,u"
+    assert record[0] == "t[s],r[m],x[m],u[V]"                 # the header names the units
     # the same record as a lab's logger would name it: time, cmd, pos in mm
     renamed = tmp_path / "lab.csv"
     rows = [line.split(",") for line in record[1:]]
     renamed.write_text("time,cmd,pos[mm]\n" + "".join(f"{r[0]},{r[1]},{float(r[2]) * 1e3:.9g}\n" for r in rows))
     page.locator(".eha-freq-upload input[type=file]").set_input_files(str(renamed))
     page.wait_for_selector(".eha-freq-record-mapping >> text=Use these columns", timeout=60_000)
-    page.wait_for_selector(".eha-freq-record-mapping >> text=the file has time, cmd, pos[mm]", timeout=10_000)
+    # a question with its guesses (names, then units), not an error
+    page.wait_for_selector(".eha-freq-record-mapping >> text=Which columns of lab.csv are which?", timeout=10_000)
+    assert page.locator(".eha-map-y select").input_value() == "pos[mm]"
     for column, name in (("t", "time"), ("u", "cmd"), ("y", "pos[mm]")):
         page.locator(f".eha-map-{column} select").select_option(name)
     page.get_by_role("button", name="Use these columns").click()
