@@ -18,6 +18,7 @@ from functools import lru_cache, partial
 import panel as pn
 
 from . import sections as _sections  # noqa: F401 - registers the page's sections
+from .render.layout import WRAP_TAB_HEADERS
 from .render.tables import CSS
 from .runtime.connection import ConnectionWatch
 from .runtime.tasks import (
@@ -83,7 +84,8 @@ class LazyTabs:
         # the open tab is set before the watcher: building it is the page's
         # first update, once the browser has the page (see create_app)
         self.tabs = pn.Tabs(*((name, self._slots[name]) for name in self.names), active=active,
-                            dynamic=False, sizing_mode="stretch_width", css_classes=[css_class] if css_class else [])
+                            dynamic=False, sizing_mode="stretch_width", css_classes=[css_class] if css_class else [],
+                            stylesheets=[WRAP_TAB_HEADERS])
         watch(self.tabs, self._on_active, "active")
 
     def _on_active(self, event) -> None:

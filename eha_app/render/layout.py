@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import panel as pn
 
-__all__ = ["side_by_side"]
+__all__ = ["WRAP_TAB_HEADERS", "side_by_side"]
 
 
 def side_by_side(*objects, css_classes=()) -> pn.FlexBox:
@@ -18,3 +18,8 @@ def side_by_side(*objects, css_classes=()) -> pn.FlexBox:
             obj.styles = {**obj.styles, "flex": f"1 1 {basis}px", "width": "auto"}
     return pn.FlexBox(*objects, flex_wrap="wrap", align_items="flex-start", sizing_mode="stretch_width",
                       css_classes=["eha-side-by-side", *css_classes])
+
+
+#: Tab headers that wrap onto a second line instead of running past a narrow window's edge (at 800 px
+#: the frequency panel's sixth figure tab, "Residuals", sat at x = 794, out of sight).
+WRAP_TAB_HEADERS = ":host .bk-header { flex-wrap: wrap; } :host .bk-header .bk-tab { white-space: nowrap; }"

@@ -22,7 +22,10 @@ __all__ = ["CSS", "SCENARIOS", "derived_html", "lse_table_html", "table4_html", 
 #: Styles of the formulas and tables (the app's page and the report).
 CSS = """
 .eha-tf { display: flex; align-items: center; gap: 8px; margin: 4px 0; font-size: 15px; }
-.eha-frac { display: inline-flex; flex-direction: column; text-align: center; }
+.eha-frac { display: inline-flex; flex-direction: column; text-align: center; white-space: nowrap; }
+.eha-tf { overflow-x: auto; }
+.eha-table-scroll { overflow-x: auto; max-width: 100%; }
+.eha-table4 td { white-space: nowrap; }
 .eha-frac .eha-num { border-bottom: 1px solid #333; padding: 0 6px; }
 .eha-frac .eha-den { padding: 0 6px; }
 .eha-tf-note { color: #666; font-size: 12px; margin-left: 8px; }
@@ -348,7 +351,8 @@ def table4_html(by_model: dict, leaks: dict | None = None, seed: int | None = No
             "numerical error (~0.003 %) and its interval collapses to that error; <b>covers</b> ✓ / <b>misses</b> ✗ "
             "the nominal value; <b>undetermined</b>: the interval is wider than the estimate; <b>impossible</b> ✗: "
             "no actuator has that value.</p>")
-    return (table_html(header, rows, cls="eha-table eha-table4") + note
+    # at 800 px its cells wrapped to 6-8 lines: they keep their lines and the table scrolls in its own box
+    return ("<div class='eha-table-scroll'>" + table_html(header, rows, cls="eha-table eha-table4") + "</div>" + note
             + (f"<ul class='eha-readings'>{items}</ul>" if items else ""))
 
 

@@ -35,7 +35,7 @@ from eha_core.board import (
 from eha_core.param_table import FIELD_INFO
 
 from ..render import board_plots
-from ..render.layout import side_by_side
+from ..render.layout import WRAP_TAB_HEADERS, side_by_side
 from ..runtime.tasks import on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot, stale_note
 from ..session.form import Field, Form, Group, parse_fields
@@ -123,7 +123,8 @@ class ModelBoard(Section):
                                       sizing_mode="stretch_width") for _, key in _VIEWS}
         self.view_tabs = pn.Tabs(*((title, pn.Column(self._slots[key], self.tables[key],
                                                      sizing_mode="stretch_width")) for title, key in _VIEWS),
-                                 dynamic=False, sizing_mode="stretch_width", css_classes=["eha-board-views"])
+                                 dynamic=False, sizing_mode="stretch_width", css_classes=["eha-board-views"],
+                                 stylesheets=[WRAP_TAB_HEADERS])
         self.area = pn.Column(self.view_tabs, sizing_mode="stretch_width")
         self.record_view = ResultView("board-record", self.area,
                                       run_hint="The board updates it by itself in a moment.")

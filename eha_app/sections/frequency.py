@@ -18,7 +18,7 @@ from eha_core.experiments import (
 from ..render import plots
 from ..render.exports import bode_csv, frequency_figures_zip, tf_estimate_bytes
 from ..render.glossary import GLOSSARY
-from ..render.layout import side_by_side
+from ..render.layout import WRAP_TAB_HEADERS, side_by_side
 from ..render.tables import (
     backout_html,
     estimate_alert,
@@ -223,7 +223,8 @@ class FrequencyPanel(Section):
         self.figure_tabs = pn.Tabs(*((title, pn.Column(self.views[key].banner, self._slots[key],
                                                        sizing_mode="stretch_width"))
                                      for title, key, _ in _FIGURES), dynamic=False,
-                                   sizing_mode="stretch_width", css_classes=["eha-freq-figures"])
+                                   sizing_mode="stretch_width", css_classes=["eha-freq-figures"],
+                                   stylesheets=[WRAP_TAB_HEADERS])
         self._shown = {"excitation"}
         watch(self.figure_tabs, self._on_figure_tab, "active")
         state.param.watch(self._update_enabled, "valid")
