@@ -119,19 +119,27 @@ class StudyFigure:
             values = values[np.isfinite(values)]
             nominal = result.nominal.get(name, np.nan)
             relative = np.isfinite(nominal) and nominal != 0
-            shown = (values / nominal - 1) * 100 if relative else values
-            if shown.size:
+            with np.errstate(all="ignore"):
+                shown = (values / nominal - 1) * 100 if relative else values
+                # an estimate of 1e308 against a nominal value of 1e-3 overflows, and so does the span of
+                # values near the largest float: np.histogram would refuse the figure (long random walk)
+                shown = shown[np.isfinite(shown)]
+                span_ok = shown.size and np.isfinite(float(np.max(shown)) - float(np.min(shown)))
+                mean = float(np.mean(shown)) if shown.size else np.nan
+                std = float(np.std(shown, ddof=1)) if shown.size > 1 else np.nan
+            if span_ok and np.isfinite(mean):
                 counts, edges = np.histogram(shown, bins=min(30, max(5, shown.size // 4)))
                 self.sources[name].data = {"left": edges[:-1].tolist(), "right": edges[1:].tolist(),
                                            "top": counts.tolist()}
-                self.means[name].location = float(shown.mean())
+                self.means[name].location = mean
+            else:
+                self.sources[name].data = {"left": [], "right": [], "top": []}
             fig.xaxis.axis_label = ("estimate − nominal [%]" if relative
                                     else f"estimate − nominal [{_UNITS.get(name, '-')}]")
             cov = result.coverage.get(name, np.nan)
-            std = np.std(shown, ddof=1) if shown.size > 1 else np.nan
             unit = " %" if relative else f" {_UNITS.get(name, '')}".rstrip()
             label = plain_name(name)
-            fig.title.text = (f"{label}: mean {shown.mean():+.3g}{unit}, spread {std:.3g}{unit}, covered "
+            fig.title.text = (f"{label}: mean {mean:+.3g}{unit}, spread {std:.3g}{unit}, covered "
                               f"{cov * 100:.0f} %" if shown.size else label)
 
 

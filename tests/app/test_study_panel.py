@@ -119,3 +119,23 @@ def test_the_study_speaks_the_apps_vocabulary_and_shows_bias_against_its_error()
     assert titles[-1].startswith("βe:") and not any("beta_e" in t for t in titles)
     d0 = panel.figure.figs[res.parameters.index("d0")]
     assert d0.xaxis.axis_label == "estimate − nominal [N]"
+
+
+def test_histograms_of_estimates_near_the_largest_float_are_drawn_not_refused():
+    """An estimate of 1e308 against a nominal value of 1e-3 overflowed to inf and np.histogram refused the
+    figure (a traceback in the server's log; found by the long random walk)."""
+    import types
+    import warnings
+
+    from eha_app.sections.study import StudyFigure
+
+    values = {"M": np.array([4000.0, 4100.0, 3900.0]), "B": np.array([1e308, -1e308, 1.0]),
+              "beta_e": np.array([np.inf, 1.0, 2.0])}
+    result = types.SimpleNamespace(values=lambda n: values[n], nominal={"M": 4000.0, "B": 1e-3, "beta_e": 1.5},
+                                   coverage={"M": 1.0, "B": 0.0, "beta_e": 0.5})
+    fig = StudyFigure(("M", "B", "beta_e"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                 # no overflow warning reaches the log either
+        fig.update(result)
+    assert sum(fig.sources["M"].data["top"]) == 3 and sum(fig.sources["beta_e"].data["top"]) == 2
+    assert sum(fig.sources["B"].data["top"]) == 1 and fig.figs[1].title.text.startswith("B: mean")
