@@ -445,6 +445,10 @@ def fit_linear_terms(columns: np.ndarray, residual: np.ndarray) -> np.ndarray:
     """
     if columns.shape[1] == 0:
         return np.zeros(0)
+    if not (np.all(np.isfinite(columns)) and np.all(np.isfinite(residual))):
+        # a diverging model's free responses (inf - inf): LAPACK would print "DLASCL ... illegal value"
+        # to the server's stderr; the coefficients are undefined, and NaN says so to the caller
+        return np.full(columns.shape[1], np.nan)
     norms = np.linalg.norm(columns, axis=0)
     norms[(norms == 0) | ~np.isfinite(norms)] = 1.0
     coef, *_ = np.linalg.lstsq(columns / norms, residual, rcond=None)

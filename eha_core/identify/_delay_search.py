@@ -60,6 +60,9 @@ def arx_delay_losses(u: np.ndarray, y: np.ndarray, n: int, d_max: int, offset: b
             check(cancel)
         lags = np.column_stack([u[k0 - d - 1 - j:u.size - d - 1 - j] for j in range(n_b)])
         lags -= q @ (q.T @ lags)
+        if not (np.all(np.isfinite(lags)) and np.all(np.isfinite(target))):
+            losses[d] = np.inf          # (LAPACK would print its complaint about NaN to stderr)
+            continue
         coef, *_ = np.linalg.lstsq(lags, target, rcond=None)
         r = target - lags @ coef
         losses[d] = r @ r

@@ -73,11 +73,15 @@ def oe_covariance(criterion: OutputError, theta: np.ndarray, scale: np.ndarray,
         jac[:, i] = -(r_plus - r_minus) / (2.0 * h)
     dof = residual.size - p.size - n_lin
     variance = float(residual @ residual) / dof
+    if not np.all(np.isfinite(jac)):
+        return nan                      # (an SVD of NaN would print LAPACK's complaint to stderr)
     jac_projected = jac
     if n_lin:
         columns = criterion.columns(theta)
         norms = np.linalg.norm(columns, axis=0)
         norms[norms == 0] = 1.0
+        if not (np.all(np.isfinite(columns)) and np.all(np.isfinite(norms))):
+            return nan
         u_l, s_l, vt_l = np.linalg.svd(columns / norms, full_matrices=False)
         keep_l = s_l > s_l[0] * max(columns.shape) * np.finfo(float).eps
         jac_projected = jac - u_l[:, keep_l] @ (u_l[:, keep_l].T @ jac)

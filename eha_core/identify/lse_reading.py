@@ -243,6 +243,8 @@ def disturbance_leak(constant, harmonic, data, params=None) -> DisturbanceLeak |
     k_f = (params if params is not None else ActuatorParams()).k_f
     cols = {"M": np.gradient(data.v, t), "B": data.v, "Af": (2.0 / math.pi) * np.arctan(k_f * data.v)}
     X = np.column_stack(list(cols.values()) + [np.ones_like(t)])
+    if not (np.all(np.isfinite(X)) and np.all(np.isfinite(d))):
+        return None
     partial = {}
     for j, k in enumerate(cols):
         others = np.delete(X, j, axis=1)

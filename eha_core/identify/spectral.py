@@ -426,8 +426,11 @@ def _local_polynomial(u_dft, y_dft, bins, kmax, half_width, degree) -> np.ndarra
         rr = r[rows]
         a = np.concatenate([u_dft[windows[rows]][:, :, None] * rr[:, :, None] ** np.arange(d + 1),
                             rr[:, :, None].astype(complex) ** np.arange(degree + 1)], axis=2)
-        solution = np.linalg.pinv(a) @ y_dft[windows[rows]][:, :, None]
-        out[rows] = solution[:, 0, 0]
+        ok = np.all(np.isfinite(a), axis=(1, 2)) & np.all(np.isfinite(y_dft[windows[rows]]), axis=1)
+        out[rows] = np.nan                  # a window with a non-finite value: no estimate (and no LAPACK
+        if ok.any():                        # complaint on the server's stderr)
+            solution = np.linalg.pinv(a[ok]) @ y_dft[windows[rows[ok]]][:, :, None]
+            out[rows[ok]] = solution[:, 0, 0]
     return out
 
 

@@ -285,3 +285,23 @@ def test_compare_rejects_bad_input_offset(value, typed):
     with pytest.raises(ValueError, match=f"^input_offset = {typed} is not allowed: use zero, estimate, None or a "
                                          "finite number"):
         compare([1.0], [1.0, 1.0], u, u, TS, input_offset=value)
+
+
+def test_a_diverging_model_prints_nothing_from_lapack(capfd):
+    """NaN columns (a diverging model's free responses, inf - inf) went to LAPACK, which printed
+    "On entry to DLASCL parameter number 4 had an illegal value" to the server's stderr (long random walk)."""
+    from eha_core.identify._ctmodels import fit_linear_terms
+    from eha_core.identify.validate import compare
+
+    cols = np.ones((50, 2))
+    cols[3, 1] = np.nan
+    assert np.isnan(fit_linear_terms(cols, np.ones(50))).all()
+    cols[3, 1] = np.inf
+    assert np.isnan(fit_linear_terms(cols, np.ones(50))).all()
+    # a model whose response overflows on a long record, compared with its initial state fitted
+    u = np.ones(4000)
+    with pytest.raises(ValueError, match="finite"):       # refused with a message, as before
+        compare([1.0], [1.0, -400.0], u, np.zeros(4000), 0.01, initial_condition="estimate",
+                input_offset="estimate")
+    out, err = capfd.readouterr()
+    assert "DLASCL" not in out + err and "illegal value" not in out + err
