@@ -34,11 +34,13 @@ Two stages, as MATLAB does it, each in a module of its own:
    discretised for it), so a fixed delay changes neither stage's
    consistency. With ``input_delay="estimate"`` the whole-sample part is
    searched first (ARX losses as MATLAB's ``delayest``, then SRIVC around
-   the best; :mod:`eha_core.identify._delay_search`), and the output-error
-   stage refines ``tau`` with the coefficients: it joins the parameter
-   vector (bounded to ``[0, max_delay]``); its standard error
-   (``input_delay_std``) and the coefficients' covariance come from the
-   joint Jacobian.
+   the best and, a few iterations per delay, over the whole range, since
+   the cost can have several local minima over the delay;
+   :mod:`eha_core.identify._delay_search`), and the output-error stage
+   refines ``tau`` with the coefficients from the best models of the lowest
+   few local minima: it joins the parameter vector (bounded to
+   ``[0, max_delay]``); its standard error (``input_delay_std``) and the
+   coefficients' covariance come from the joint Jacobian.
 
 Several SRIVC starts can converge to different models (the output-error
 criterion may have several minima); the best ``n_refine`` distinct ones are
@@ -211,8 +213,9 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
         ``y = G(s) e^(-s tau) (u + c)``, the input before the first sample
         taken as zero. A number ``>= 0`` (default 0, no delay), not
         necessarily a multiple of ``ts``, is fixed; ``"estimate"`` searches
-        ``[0, max_delay]`` (whole samples first, then the fraction with the
-        coefficients; see the module docstring). At most half the record.
+        ``[0, max_delay]`` (whole samples first, over the whole range, then
+        the fraction with the coefficients from the lowest few local minima
+        of the cost; see the module docstring). At most half the record.
         The result's ``input_delay`` (and ``input_delay_std`` when estimated)
         report it.
     max_delay : float, optional
@@ -229,7 +232,11 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
         Run the output-error stage (default True).
     n_refine : int
         How many of the best distinct SRIVC results the output-error stage
-        refines (default 2); the lowest final cost is kept.
+        refines (default 2); the lowest final cost is kept. With an estimated
+        delay the best model at each of the lowest local minima of the cost
+        over the whole-sample delays is refined too (up to three, those
+        within twice the lowest cost). The SRIVC estimate of least cost is
+        kept instead when no refinement ends below it.
     max_iter : int
         Maximum SRIVC iterations per start.
     max_nfev : int, optional
@@ -296,8 +303,9 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
     if estimate_delay:
         criterion = OutputError(u_arr, y_arr, ts_f, n, estimate_initial_state, estimate_offset, cancel,
                                  max_delay=max_delay_s)
-        candidates, nit_total = delay_candidates(criterion, m, starts, start_names, max_iter, tol)
+        candidates, nit_total, basins = delay_candidates(criterion, m, starts, start_names, max_iter, tol)
     else:
+        basins = []
         criterion = OutputError(u_arr, y_arr, ts_f, n, estimate_initial_state, estimate_offset, cancel,
                                  input_delay=fixed_delay)
         candidates, nit_total = srivc_candidates(criterion, m, starts, start_names, max_iter, tol)
@@ -323,7 +331,11 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
     # refine the best distinct SRIVC candidates and keep the lowest cost.
     criterion.nfev = 0
     refined = []
-    for cand in _distinct(candidates, n_refine, n, m, criterion.scale):
+    to_refine = _distinct(candidates, n_refine, n, m, criterion.scale)
+    # an estimated delay: the best model at each of the lowest local minima of
+    # the cost over the delay too (the cost may be lower in another one)
+    to_refine += [b for b in basins if all(b is not c for c in to_refine)]
+    for cand in to_refine:
         theta_oe, cost_oe, oe_success, oe_msg = oe_refine(criterion, cand[0], n, m, max_nfev, tol)
         refined.append((cost_oe, theta_oe, oe_success, oe_msg, cand))
     refined = [r for r in refined if np.isfinite(r[0])]
