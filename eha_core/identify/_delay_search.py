@@ -42,18 +42,21 @@ __all__ = ["BASIN_COST_RATIO", "MAX_SWEEP", "N_BASINS", "SWEEP_ITERATIONS", "arx
 
 
 def arx_delay_losses(u: np.ndarray, y: np.ndarray, n: int, d_max: int, offset: bool,
-                      cancel: CancelToken | None = None) -> np.ndarray:
+                      cancel: CancelToken | None = None, intersample: str = "zoh") -> np.ndarray:
     """ARX loss for every whole-sample delay ``d = 0..d_max`` (MATLAB ``delayest``'s approach).
 
     ``y[k] + a_1 y[k-1] + ... + a_n y[k-n] = b_0 u[k-d-1] + ... + b_n u[k-d-1-n] (+ const)``:
     the exact ZOH model of ``G(s) e^(-s (d + f) ts)`` (strictly proper) has
-    ``n + 1`` input lags from ``d + 1`` on. Every delay is fitted on the same
-    samples (``k >= d_max + n + 1``), so the losses compare. The output lags
-    (and the constant) are projected out once; each delay then costs one
-    small least-squares problem. ``cancel`` is looked at every 64 delays.
+    ``n + 1`` input lags from ``d + 1`` on; for an input linear between
+    samples (``intersample="foh"``) it has ``n + 2`` from ``d`` on (the
+    piece of input ending at the sample instant). Every delay is fitted on
+    the same samples (``k >= d_max + n + 1``), so the losses compare. The
+    output lags (and the constant) are projected out once; each delay then
+    costs one small least-squares problem. ``cancel`` is looked at every 64
+    delays.
     """
-    n_b = n + 1
-    k0 = max(n, d_max + n_b)
+    n_b, first = (n + 1, 1) if intersample == "zoh" else (n + 2, 0)
+    k0 = max(n, d_max + first + n_b - 1)
     n_rows = y.size - k0
     base = [-y[k0 - i:y.size - i] for i in range(1, n + 1)]
     if offset:
@@ -64,7 +67,7 @@ def arx_delay_losses(u: np.ndarray, y: np.ndarray, n: int, d_max: int, offset: b
     for d in range(d_max + 1):
         if d % 64 == 0:
             check(cancel)
-        lags = np.column_stack([u[k0 - d - 1 - j:u.size - d - 1 - j] for j in range(n_b)])
+        lags = np.column_stack([u[k0 - d - first - j:u.size - d - first - j] for j in range(n_b)])
         lags -= q @ (q.T @ lags)
         coef, *_ = np.linalg.lstsq(lags, target, rcond=None)
         r = target - lags @ coef
@@ -161,7 +164,7 @@ class _DelaySearch:
         """SRIVC at a delay of ``d`` samples: ``(candidates, stable candidates)``, costs recorded."""
         c = self.criterion
         fixed = OutputError(c.u, c.y, self.ts, self.n, c.estimate_initial_state, c.estimate_offset, c.cancel,
-                            input_delay=d * self.ts)
+                            input_delay=d * self.ts, intersample=c.intersample)
         found, nit = srivc_candidates(fixed, self.m, starts, names, iterations, self.tol)
         self.nit_total += nit
         found = [(np.r_[f[0], d * self.ts], f[1], f[2], f"{f[3]} (delay {d} samples)", f[4]) for f in found]
@@ -196,7 +199,8 @@ class _DelaySearch:
     def local_search(self, starts, start_names) -> None:
         """Step 1: from the delay of least ARX loss, while the lowest cost lies at an end of the range tried."""
         c = self.criterion
-        d_arx = int(np.argmin(arx_delay_losses(c.u, c.y, self.n, self.d_max, c.estimate_offset, c.cancel)))
+        d_arx = int(np.argmin(arx_delay_losses(c.u, c.y, self.n, self.d_max, c.estimate_offset, c.cancel,
+                                               c.intersample)))
         for d in (d_arx, d_arx - 1, d_arx + 1):
             if 0 <= d <= self.d_max:
                 self.run(d, starts, start_names)
