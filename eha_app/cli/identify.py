@@ -59,7 +59,8 @@ def add_parser(sub) -> None:
     tf = idsub.add_parser("tf", help="continuous-time transfer function (like MATLAB tfest)",
                           description="Transfer-function estimation. Without --data: the paper's closed-loop "
                                       "experiment (idinput sine reference, Kp = 10 at Ts = 0.01 s, nonlinear plant).")
-    tf.add_argument("--data", help="CSV with columns t,u,y (uniformly sampled; u held between samples)")
+    tf.add_argument("--data", help="CSV with columns t,u,y (uniformly sampled; u held or linear between samples, "
+                                   "see --intersample)")
     tf.add_argument("--ts", type=float, help="sample time [s]; default from t in --data, or 0.01")
     tf.add_argument("--np", dest="n_poles", type=int, default=3, help=f"number of poles, 1 to {MAX_POLES} (default 3)")
     tf.add_argument("--nz", dest="n_zeros", type=int, default=0, help="number of zeros, 0 to np - 1 (default 0)")
@@ -77,6 +78,9 @@ def add_parser(sub) -> None:
                          "sample time or not), or estimate; default 0 (none). With --data only")
     tf.add_argument("--max-delay", type=float, default=None, metavar="SECONDS",
                     help="upper bound of an estimated delay [s] (default a tenth of the record)")
+    tf.add_argument("--intersample", default=None, metavar="zoh|foh",
+                    help="the input between samples (MATLAB's InterSample): zoh, held (default, a digital "
+                         "controller's output), or foh, linear (a smooth signal sampled), with --data only")
     tf.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help=PARAM_HELP)
     tf.add_argument("--json", action="store_true", help="print JSON (default: a summary)")
     tf.set_defaults(handler=run_tf)
@@ -170,11 +174,20 @@ def _checked_delay(args):
     return delay
 
 
+def _checked_intersample(args) -> str:
+    """``--intersample`` (default zoh), checked against ``--data``."""
+    _choice("--intersample", args.intersample, ("zoh", "foh"))
+    if args.intersample == "foh" and not args.data:
+        raise refused("--intersample", args.intersample, "the paper experiment's reference is held between samples",
+                      context="without --data")
+    return args.intersample or "zoh"
+
+
 #: The core's names of the delay arguments, and the options that set them.
 _DELAY_OPTIONS = {"input_delay": "--delay", "max_delay": "--max-delay"}
 
 
-def _tf_on_data(args, delay) -> dict:
+def _tf_on_data(args, delay, intersample) -> dict:
     """``tfest`` on the CSV of ``--data``: the estimate's dictionary with ``ts``."""
     from eha_core.data import read_columns, sample_time
     from eha_core.identify.tfest import tfest
@@ -184,7 +197,7 @@ def _tf_on_data(args, delay) -> dict:
     try:
         est = tfest(cols["u"], cols["y"], ts, args.n_poles, args.n_zeros,
                     initial_condition=args.initial_condition or "zero", input_offset=args.input_offset or "zero",
-                    input_delay=delay, max_delay=args.max_delay)
+                    input_delay=delay, max_delay=args.max_delay, intersample=intersample)
     except FieldError as exc:
         # a delay the record cannot hold (that needs the record's length): name the option
         if exc.field in _DELAY_OPTIONS:
@@ -207,11 +220,12 @@ def run_tf(args) -> int:
     _choice("--initial-condition", args.initial_condition, ("zero", "estimate"))
     _choice("--input-offset", args.input_offset, ("zero", "estimate"))
     delay = _checked_delay(args)
+    intersample = _checked_intersample(args)
     check_input_file("--data", args.data)
     params = parse_params(args.param)
 
     if args.data:
-        out = _tf_on_data(args, delay)
+        out = _tf_on_data(args, delay, intersample)
         ok = out["success"]
     else:
         from eha_core.experiments import FrequencyExperiment, run_frequency_identification
@@ -232,6 +246,9 @@ def run_tf(args) -> int:
         tau, tau_std = out["input_delay"], out["input_delay_std"]
         how = "fixed" if tau_std is None else f"estimated, standard error {tau_std:.2g} s"
         print(f"input delay {tau:.6g} s = {tau / out['ts']:.4g} samples ({how}); G(s) above excludes it")
+    if args.data and args.intersample is not None:
+        how = "held" if out["intersample"] == "zoh" else "linear"
+        print(f"input {how} between samples ({out['intersample']})")
     if "open_loop" in out:
         print(tf_text(out["open_loop"]["num"], out["open_loop"]["den"], "P_hat(s)"))
         from eha_core.identify.backout import open_loop_instability

@@ -32,6 +32,15 @@ used by those two modules, and the public ones are re-exported by
   ``Gamma1 = e^(A (1-f) ts) int_0^(f ts) e^(A s) ds B`` applied to
   ``u[k-d-1]`` (Franklin, Powell & Workman, *Digital Control of Dynamic
   Systems*, 3rd ed., 1998, sec. 4.3.4); exact, like the delay-free case;
+* the exact first-order-hold (FOH) discretisation, for an input linear
+  between samples (MATLAB's ``InterSample = 'foh'``; ``intersample="foh"``
+  of :func:`discretise` and :func:`simulate_tf`): the exponential of
+  ``[[A ts, B ts, 0], [0, 0, 1], [0, 0, 0]]`` gives the held and the ramp
+  input matrices (:func:`foh_matrices`, as
+  ``scipy.signal.cont2discrete(method='foh')``), the delayed input's knot
+  inside the interval splits it in two (:func:`foh_numerators`), and the
+  ramp up to the first sample that the discrete filter implies is taken
+  off, so the system starts at rest;
 * the terms that enter the simulated output linearly, the response to a
   constant input offset and the free response to the initial state
   (:func:`linear_columns`), and their least-squares fit
@@ -57,18 +66,22 @@ from .._checks import not_allowed, positive_number
 __all__ = [
     "DiscreteModel",
     "FrequencyResponseData",
+    "INTERSAMPLE",
     "PADE13",
     "as_pair",
     "as_samples",
     "as_tf",
     "as_ts",
     "check_delay",
+    "check_intersample",
     "delayed",
     "discretise",
     "expm_balanced",
     "expm_pade13",
     "fit_linear_terms",
     "fit_percent",
+    "foh_matrices",
+    "foh_numerators",
     "frequency_response",
     "linear_columns",
     "markov_parameters",
@@ -147,6 +160,17 @@ def check_delay(value, name: str = "input_delay") -> float:
     if not (np.isfinite(out) and out >= 0.0):
         raise not_allowed(name, value, allowed)
     return out
+
+
+#: The input's behaviour between samples (MATLAB's ``InterSample``): held, or linear.
+INTERSAMPLE = ("zoh", "foh")
+
+
+def check_intersample(value, name: str = "intersample") -> str:
+    """``"zoh"`` (the input held between samples) or ``"foh"`` (linear between them)."""
+    if not isinstance(value, str) or value not in INTERSAMPLE:
+        raise not_allowed(name, value, "use zoh (held between samples) or foh (linear between samples)")
+    return value
 
 
 def _coefficients(value, name: str) -> np.ndarray:
@@ -281,6 +305,67 @@ def zoh_matrices(a_mat: np.ndarray, b_vec: np.ndarray, ts: float):
     return e[:n, :n], e[:n, n]
 
 
+def foh_matrices(a_mat: np.ndarray, b_vec: np.ndarray, h: float):
+    """``(e^(A h), Gamma(h), R(h))`` over an interval of length ``h``, from one exponential.
+
+    ``Gamma(h) = int_0^h e^(A s) ds B`` is the response of the state to a
+    unit input held over the interval, ``h R(h) = int_0^h e^(A (h - s)) s ds B``
+    the response to a unit ramp (slope 1 per second): the exponential of
+    ``[[A h, B h, 0], [0, 0, 1], [0, 0, 0]]`` holds ``e^(A h)``, ``Gamma(h)``
+    and ``R(h)`` (``scipy.signal.cont2discrete``'s ``foh``, whose ``gamma2`` is
+    ``R(ts)``).
+    """
+    n = a_mat.shape[0]
+    block = np.zeros((n + 2, n + 2))
+    block[:n, :n] = a_mat * h
+    block[:n, n] = b_vec * h
+    block[n, n + 1] = 1.0
+    e = expm_balanced(block)
+    return e[:n, :n], e[:n, n], e[:n, n + 1]
+
+
+def foh_numerators(a_mat, b_vec, c_mat, d_vec, ts, frac, ad, gamma, ramp, den_z):
+    """Exact discretisation for an input linear between samples, delayed by ``(d + frac) ts``.
+
+    ``ad, gamma, ramp`` are :func:`foh_matrices` over ``ts`` and ``den_z`` the
+    characteristic polynomial of ``ad``. Returns ``(num, start)``, rows per
+    row of ``c_mat``, numerators over ``den_z`` in powers of ``z^-1``, both
+    acting from ``d`` samples on:
+
+    * ``num`` (``n + 1`` columns, ``n + 2`` with a fraction): the response to
+      ``u`` linearly interpolated between its samples, the samples before the
+      first taken as zero. Over a sample interval the delayed input is one
+      linear piece (two with a fraction, which puts the knot ``frac ts`` into
+      the interval), so ``x[k+1] = Ad x[k] + p_lead u[k-d+1] + p_mid u[k-d]
+      + p_lag u[k-d-1]`` (``p_lag = 0`` without a fraction; ``u[k-d+1]``, one
+      sample ahead, because the piece ends there), and the output adds
+      ``D`` times the delayed input at the sample instant.
+    * ``start``: that interpolation ramps up from zero to ``u[0]`` over the
+      sample interval before the input starts; the record starts instead at
+      rest, the input jumping to ``u[0]`` at ``tau`` (as a held input does,
+      and as ``scipy.signal.lsim`` simulates a linearly interpolated input).
+      The response is exact when ``u[0]`` times the impulse response of
+      ``start`` (delayed by ``d``), the response to that ramp, is subtracted.
+    """
+    n = ad.shape[0]
+    if frac == 0.0:
+        num = state_numerators(ad, gamma - ramp + ad @ ramp, den_z, c_mat, d_vec + c_mat @ ramp)
+        return num, state_numerators(ad, ad @ ramp, den_z, c_mat, c_mat @ ramp)
+    # the interval [k ts, (k+1) ts) in two pieces, of frac ts and (1 - frac) ts
+    _, gamma_a, ramp_a = foh_matrices(a_mat, b_vec, frac * ts)
+    e_b, gamma_b, ramp_b = foh_matrices(a_mat, b_vec, (1.0 - frac) * ts)
+    p_lag = frac * e_b @ (gamma_a - ramp_a)
+    p_mid = e_b @ ((1.0 - frac) * gamma_a + frac * ramp_a) + gamma_b - (1.0 - frac) * ramp_b
+    p_lead = (1.0 - frac) * ramp_b
+    num = np.zeros((c_mat.shape[0], n + 2))
+    num[:, :n + 1] = state_numerators(ad, ad @ p_lead + p_mid, den_z, c_mat, c_mat @ p_lead + (1.0 - frac) * d_vec)
+    num[:, 1:] += state_numerators(ad, p_lag, den_z, c_mat, frac * d_vec)
+    # the ramp before the start: at sample d (inside it) the partial ramp's state
+    # and input, then the free response from the full ramp's state at tau
+    start = state_numerators(ad, e_b @ ramp, den_z, c_mat, c_mat @ p_lead + (1.0 - frac) * d_vec)
+    return num, start
+
+
 def state_numerators(ad: np.ndarray, bd: np.ndarray, den_z: np.ndarray,
                      c_mat: np.ndarray, d_vec: np.ndarray) -> np.ndarray:
     """Numerators over ``den_z`` of ``c_mat (zI - Ad)^-1 bd + d_vec``, one per row.
@@ -330,14 +415,20 @@ def delayed(u: np.ndarray, samples: int) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class DiscreteModel:
-    """Exact ZOH equivalent of ``num/den`` (with an input delay): state space and ``num_z/den_z``.
+    """Exact discrete equivalent of ``num/den`` (with an input delay): state space and ``num_z/den_z``.
 
     ``num_z / den_z`` (powers of ``z^-1``) acts on the input delayed by
     ``delay_samples``; with a fractional delay ``num_z`` has one more
     coefficient than ``den_z`` (the ``Gamma1`` term one sample later, see
-    :func:`discretise`). ``bd`` is the delay-free input vector. The free
+    :func:`discretise`). ``bd`` is the delay-free input vector (ZOH). The free
     response (:meth:`free_basis`) is that of the state, which a delay does
     not touch; the input before the first sample is taken as zero.
+
+    For an input linear between samples (``intersample="foh"``),
+    ``start_num / den_z`` is the response to the ramp from zero up to the
+    first sample that ``num_z / den_z`` implies before the start
+    (:func:`foh_numerators`); :meth:`forced` subtracts it. None for a held
+    input.
     """
 
     ad: np.ndarray
@@ -347,17 +438,30 @@ class DiscreteModel:
     num_z: np.ndarray
     den_z: np.ndarray
     delay_samples: int = 0
+    start_num: np.ndarray | None = None
 
     @property
     def order(self) -> int:
         return self.ad.shape[0]
 
     def forced(self, u: np.ndarray) -> np.ndarray:
-        """Zero-state response to the ZOH input ``u`` (C speed via lfilter)."""
+        """Zero-state response to the input ``u`` (C speed via lfilter)."""
+        if self.start_num is not None:
+            return self._forced_linear(u)
         u = delayed(u, self.delay_samples)
         if self.order == 0 and self.num_z.size == 1:
             return self.d * u
         return scipy.signal.lfilter(self.num_z, self.den_z, u)
+
+    def _forced_linear(self, u: np.ndarray) -> np.ndarray:
+        """:meth:`forced` for an input linear between samples: the ramp before the start taken off."""
+        y = scipy.signal.lfilter(self.num_z, self.den_z, delayed(u, self.delay_samples))
+        if u.size == 0 or u[0] == 0.0:
+            return y
+        impulse = np.zeros(u.size)
+        impulse[0] = 1.0
+        start = scipy.signal.lfilter(self.start_num, self.den_z, impulse)
+        return y - u[0] * delayed(start, self.delay_samples)
 
     def free_basis(self, n_samples: int) -> np.ndarray:
         """``O[k, i] = C Ad^k e_i``: the free response is ``O @ initial_state``."""
@@ -376,8 +480,13 @@ class DiscreteModel:
         return basis
 
 
-def discretise(num: np.ndarray, den: np.ndarray, ts: float, input_delay: float = 0.0) -> DiscreteModel:
-    """ZOH discretisation of a normalised (monic, proper) transfer function.
+def discretise(num: np.ndarray, den: np.ndarray, ts: float, input_delay: float = 0.0,
+               intersample: str = "zoh") -> DiscreteModel:
+    """Exact discretisation of a normalised (monic, proper) transfer function.
+
+    ``intersample="zoh"`` (default): the input held between samples;
+    ``"foh"``: linear between samples (:func:`_discretise_foh`). The rest of
+    this docstring is the held input's.
 
     With ``input_delay = (d + f) ts`` > 0 (seconds, :func:`split_delay`) the
     model is ``G(s) e^(-s input_delay)``. Over ``[k ts, (k+1) ts)`` the
@@ -389,6 +498,8 @@ def discretise(num: np.ndarray, den: np.ndarray, ts: float, input_delay: float =
     ``u(k ts - tau) = u[k-d-1]``. Exact for a held input, whatever ``f``.
     ``input_delay`` is not checked here (see :func:`check_delay`).
     """
+    if intersample != "zoh":
+        return _discretise_foh(num, den, ts, input_delay)
     n = den.size - 1
     if n == 0:
         gain = float(num[-1])
@@ -419,11 +530,36 @@ def discretise(num: np.ndarray, den: np.ndarray, ts: float, input_delay: float =
     return DiscreteModel(ad, bd, c_vec, d, num_z, den_z, d_samples)
 
 
+def _discretise_foh(num: np.ndarray, den: np.ndarray, ts: float, input_delay: float) -> DiscreteModel:
+    """:func:`discretise` for an input linear between samples (first-order hold, MATLAB's ``foh``).
+
+    The input is taken as zero before its first sample and linear between
+    samples from there, delayed by ``input_delay = (d + f) ts``: exact for
+    such an input (:func:`foh_numerators`), whatever ``f``.
+    """
+    n = den.size - 1
+    d_samples, frac = (0, 0.0) if input_delay == 0.0 else split_delay(input_delay, ts)
+    if n == 0:
+        gain = float(num[-1])
+        empty = np.zeros((0, 0))
+        if frac == 0.0:  # y[k] = gain u[k-d]: nothing between the samples shows
+            return DiscreteModel(empty, np.zeros(0), np.zeros(0), gain, np.array([gain]), np.array([1.0]),
+                                 d_samples)
+        # the delayed input at a sample instant is f u[k-d-1] + (1 - f) u[k-d], zero before tau
+        return DiscreteModel(empty, np.zeros(0), np.zeros(0), gain, np.array([(1.0 - frac) * gain, frac * gain]),
+                             np.array([1.0]), d_samples, np.array([(1.0 - frac) * gain]))
+    a_mat, b_vec, c_vec, d = observability_form(num, den)
+    ad, gamma, ramp = foh_matrices(a_mat, b_vec, ts)
+    den_z = np.real(np.poly(np.linalg.eigvals(ad)))
+    num_z, start = foh_numerators(a_mat, b_vec, c_vec[None, :], np.array([d]), ts, frac, ad, gamma, ramp, den_z)
+    return DiscreteModel(ad, gamma, c_vec, d, num_z[0], den_z, d_samples, start[0])
+
+
 def linear_columns(model: DiscreteModel, n_samples: int, *, offset: bool,
                    initial_state: bool) -> np.ndarray:
     """Responses that enter the output linearly: ``[step, free basis]``.
 
-    Column 0 (with ``offset``) is the ZOH-exact unit-step response, the
+    Column 0 (with ``offset``) is the exact unit-step response (held or linear: the same step), the
     response to a unit input offset; then (with ``initial_state``) the ``n`` columns of
     :meth:`DiscreteModel.free_basis`. Shape ``(n_samples, k)``.
     """
@@ -455,12 +591,13 @@ def fit_linear_terms(columns: np.ndarray, residual: np.ndarray) -> np.ndarray:
     return coef / norms
 
 
-def simulate_tf(num, den, u, ts, initial_state=None, input_delay=0.0) -> np.ndarray:
-    """Exact zero-order-hold response of a continuous-time transfer function.
+def simulate_tf(num, den, u, ts, initial_state=None, input_delay=0.0, intersample="zoh") -> np.ndarray:
+    """Exact sampled response of a continuous-time transfer function to a sampled input.
 
-    The input is held constant between samples (ZOH), so the sampled output
-    is exact: the model is discretised with the matrix exponential of the
-    augmented state matrix and simulated with :func:`scipy.signal.lfilter`.
+    The input is held constant between samples (ZOH, the default) or linear
+    between them (``intersample="foh"``), so the sampled output is exact: the
+    model is discretised with the matrix exponential of the augmented state
+    matrix and simulated with :func:`scipy.signal.lfilter`.
     Integrators and poles faster than the Nyquist frequency are handled.
 
     Parameters
@@ -480,6 +617,12 @@ def simulate_tf(num, den, u, ts, initial_state=None, input_delay=0.0) -> np.ndar
         the response is that of ``G(s) e^(-s tau)`` to the held input, exact
         (see :func:`discretise`); the input before the first sample is
         zero. Default 0.
+    intersample : {"zoh", "foh"}
+        The input between samples (MATLAB's ``InterSample``): ``"zoh"``
+        (default) held over ``[k ts, (k+1) ts)``; ``"foh"`` linear from
+        ``u[k]`` to ``u[k+1]``, as a smooth signal sampled, the system at rest
+        until the input starts at ``u[0]`` (``scipy.signal.lsim``'s
+        interpolation). The last sample is the end of the record either way.
 
     Returns
     -------
@@ -499,10 +642,16 @@ def simulate_tf(num, den, u, ts, initial_state=None, input_delay=0.0) -> np.ndar
 
     >>> simulate_tf([1.0], [1.0, 0.0], np.ones(5), ts=1.0, input_delay=1.5)
     array([0. , 0. , 0.5, 1.5, 2.5])
+
+    An integrator fed the ramp ``u = t`` sampled, linear between samples
+    (``y = t^2 / 2``):
+
+    >>> simulate_tf([1.0], [1.0, 0.0], np.arange(5.0), ts=1.0, intersample="foh")
+    array([0. , 0.5, 2. , 4.5, 8. ])
     """
     num_n, den_n = as_tf(num, den)
     u_arr = as_samples(u, "u")
-    model = discretise(num_n, den_n, as_ts(ts), check_delay(input_delay))
+    model = discretise(num_n, den_n, as_ts(ts), check_delay(input_delay), check_intersample(intersample))
     y = model.forced(u_arr)
     if initial_state is not None:
         state_arr = np.atleast_1d(np.asarray(initial_state, dtype=float))

@@ -14,8 +14,9 @@ It holds
   are optimised relative to their starting values; near-zero ones, an
   integrator's ``a_np``, get a floor from the model's frequency scale
   ``w0 = max_i |a_i|^(1/i)``);
-* :class:`OutputError`, the residual ``y - y_hat(theta)`` of the exact ZOH
-  simulation (:func:`eha_core.identify._ctmodels.discretise`), the terms that
+* :class:`OutputError`, the residual ``y - y_hat(theta)`` of the exact
+  simulation for the input's intersample behaviour, held (ZOH) or linear
+  (FOH) between samples (:func:`eha_core.identify._ctmodels.discretise`), the terms that
   enter it linearly (input offset, initial state) eliminated by linear least
   squares in every evaluation (variable projection: Golub & Pereyra, SIAM J.
   Numer. Anal. 10, 1973).
@@ -55,7 +56,7 @@ def parameter_scale(theta: np.ndarray, n: int, m: int) -> np.ndarray:
 
 
 class OutputError:
-    """Residual ``y - y_hat(theta)`` of the exact ZOH simulation.
+    """Residual ``y - y_hat(theta)`` of the exact simulation (``intersample``: ZOH or FOH input).
 
     The terms that enter ``y_hat`` linearly, the response ``c G(s) 1(t)`` to a
     constant input offset (with ``estimate_offset``) and the free response to
@@ -70,8 +71,9 @@ class OutputError:
 
     def __init__(self, u: np.ndarray, y: np.ndarray, ts: float, n: int, estimate_initial_state: bool,
                  estimate_offset: bool = False, cancel: CancelToken | None = None, *,
-                 input_delay: float = 0.0, max_delay: float | None = None):
+                 input_delay: float = 0.0, max_delay: float | None = None, intersample: str = "zoh"):
         self.u, self.y, self.ts, self.n = u, y, ts, n
+        self.intersample = intersample
         self.estimate_initial_state = estimate_initial_state
         self.estimate_offset = estimate_offset
         self.input_delay = input_delay
@@ -97,10 +99,10 @@ class OutputError:
         return theta, self.input_delay
 
     def model(self, theta: np.ndarray):
-        """The exact ZOH discretisation at ``theta`` (with its delay)."""
+        """The exact discretisation at ``theta`` (with its delay, for the input's intersample behaviour)."""
         coefficients, tau = self.split_delay(theta)
         num, den = split_theta(coefficients, self.n)
-        return discretise(num, den, self.ts, tau)
+        return discretise(num, den, self.ts, tau, self.intersample)
 
     def scale(self, theta: np.ndarray, n: int, m: int) -> np.ndarray:
         """:func:`parameter_scale`, and ``ts`` for an estimated delay (so it is counted in samples)."""

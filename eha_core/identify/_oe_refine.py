@@ -1,7 +1,8 @@
 """Stage 2 of :func:`eha_core.identify.tfest.tfest` (and all of ``oe_fit``): output-error refinement.
 
-Minimise ``||y - y_hat(theta)||^2`` where ``y_hat`` is the exact ZOH
-simulation of the continuous-time model
+Minimise ``||y - y_hat(theta)||^2`` where ``y_hat`` is the exact
+simulation of the continuous-time model (the input held or linear between
+samples)
 (:class:`eha_core.identify._oe_criterion.OutputError`, on the machinery of
 :func:`eha_core.identify.validate.simulate_tf`: matrix exponential of the
 augmented state matrix, then ``scipy.signal.lfilter``), with
@@ -105,7 +106,7 @@ def oe_covariance(criterion: OutputError, theta: np.ndarray, scale: np.ndarray,
 
 def oe_refine(criterion: OutputError, theta0: np.ndarray, n: int, m: int,
                max_nfev: int, tol: float):
-    """``least_squares`` on the exact ZOH output error, from ``theta0``.
+    """``least_squares`` on the exact output error, from ``theta0``.
 
     An estimated delay (the last parameter) is bounded to
     ``[0, criterion.max_delay]``; the coefficients are free.
@@ -135,7 +136,7 @@ def oe_refine(criterion: OutputError, theta0: np.ndarray, n: int, m: int,
 
 
 def failed_estimate(n, m, ts, n_samples, estimate_initial_state, estimate_offset, message, nit, nfev,
-                  input_delay=0.0):
+                  input_delay=0.0, intersample="zoh"):
     """A failed estimate; ``input_delay`` is the fixed delay, or None when it was to be estimated."""
     p = n + m + 1
     return TFEstimate(
@@ -148,7 +149,7 @@ def failed_estimate(n, m, ts, n_samples, estimate_initial_state, estimate_offset
         param_std=readonly(np.full(p, np.nan)), covariance=readonly(np.full((p, p), np.nan)),
         srivc_num=None, srivc_den=None, srivc_cost=np.nan, n_samples=n_samples,
         input_delay=np.nan if input_delay is None else float(input_delay),
-        input_delay_std=np.nan if input_delay is None else None,
+        input_delay_std=np.nan if input_delay is None else None, intersample=intersample,
     )
 
 
@@ -161,7 +162,7 @@ def estimate_result(criterion, theta, n, m, ts, success, message, method, nit, s
         return failed_estimate(n, m, ts, criterion.y.size, criterion.estimate_initial_state,
                              criterion.estimate_offset,
                              message + "; the final model cannot be simulated", nit, nfev,
-                             None if criterion.estimate_delay else criterion.input_delay)
+                             None if criterion.estimate_delay else criterion.input_delay, criterion.intersample)
     covariance, variance, cov_linear = oe_covariance(
         criterion, theta, criterion.scale(theta, n, m), residual, linear)
     theta, tau = criterion.split_delay(theta)
@@ -202,5 +203,5 @@ def estimate_result(criterion, theta, n, m, ts, success, message, method, nit, s
         srivc_num=None if srivc_num is None else readonly(srivc_num),
         srivc_den=None if srivc_den is None else readonly(srivc_den),
         srivc_cost=float(srivc_cost), n_samples=residual.size,
-        input_delay=float(tau), input_delay_std=tau_std,
+        input_delay=float(tau), input_delay_std=tau_std, intersample=criterion.intersample,
     )

@@ -10,7 +10,9 @@ the coefficients and is solved with instruments built from the noise-free
 output of the auxiliary model ``x_hat = B_hat/A_hat u``; ``A_hat`` is updated
 and the whole repeated until the coefficients stop changing.
 
-- ``u`` is filtered *exactly* (ZOH discretisation of the filter);
+- ``u`` is filtered *exactly*: the filter discretised for the input's
+  intersample behaviour, held between samples (ZOH, ``intersample="zoh"``)
+  or linear between them (``"foh"``, :func:`eha_core.identify._ctmodels.foh_numerators`);
 - ``y`` and ``x_hat`` are not piecewise constant: they are filtered with the
   first-order-hold (triangle-hold) discretisation, i.e. assuming linear
   interpolation between samples. At the fixed point (``A_hat = A``) the
@@ -52,7 +54,7 @@ import numpy as np
 import scipy.signal
 
 from ..cancel import check
-from ._ctmodels import delayed, expm_balanced, split_delay, state_numerators, zoh_matrices
+from ._ctmodels import delayed, expm_balanced, foh_numerators, split_delay, state_numerators, zoh_matrices
 from ._oe_criterion import OutputError, split_theta
 
 __all__ = [
@@ -79,6 +81,13 @@ def stabilise(den: np.ndarray) -> np.ndarray:
 class StateVariableFilter:
     """``s^k / A_f(s)``, ``k = 0..n``, discretised for ZOH and FOH inputs.
 
+    ``apply(signals, "zoh")`` filters held signals (the input, an offset's
+    step) exactly, delayed by ``input_delay``; ``apply(signals, "foh")``
+    filters the output and the auxiliary model's output as linear between
+    samples, undelayed. With ``intersample="foh"`` the input is linear
+    between samples: :meth:`apply_inputs` filters it exactly for that,
+    delayed (``"input"``), and the offset's step still as held.
+
     ``1/A_f`` is realised in controllable canonical form with states
     ``[w, w', ..., w^(n-1)]``; then ``w^(n) = input - a_1 w^(n-1) - ... - a_n w``.
     One exponential of the block matrix ``[[A ts, B ts, 0], [0, 0, 1], [0, 0, 0]]``
@@ -93,9 +102,10 @@ class StateVariableFilter:
     output, the auxiliary model's output) are not delayed.
     """
 
-    def __init__(self, den_f: np.ndarray, ts: float, input_delay: float = 0.0):
+    def __init__(self, den_f: np.ndarray, ts: float, input_delay: float = 0.0, intersample: str = "zoh"):
         n = den_f.size - 1
         self.den_f = den_f
+        self.intersample = intersample
         a_mat = np.eye(n, k=1)
         a_mat[-1, :] = -den_f[:0:-1]
         block = np.zeros((n + 2, n + 2))
@@ -115,6 +125,10 @@ class StateVariableFilter:
             num_delayed[:, 1:] += state_numerators(ad, g1 - gamma0, self.den_z, ident, np.zeros(n))
             self.num_zoh = num_delayed
         self.num_foh = state_numerators(ad, g1 - g2 + ad @ g2, self.den_z, ident, g2)
+        if intersample == "foh":
+            # the input linear between samples, delayed, from rest (foh_numerators)
+            self.num_input, self.start_input = foh_numerators(a_mat, ident[:, -1], ident, np.zeros(n), ts,
+                                                              self.delay_fraction, ad, g1, g2, self.den_z)
         # exact samples of the impulse responses of s^k / A_f, k < n: the
         # states' free response from x(0) = e_n (the input vector)
         self.num_impulse = state_numerators(ad, ad[:, -1], self.den_z, ident, ident[:, -1])
@@ -131,11 +145,26 @@ class StateVariableFilter:
         return np.column_stack([scipy.signal.lfilter(num, self.den_z, impulse)
                                 for num in self.num_impulse])
 
+    def apply_inputs(self, u: np.ndarray, offset: bool) -> np.ndarray:
+        """The input (and a unit step for an offset) filtered, shape ``(N, 1 or 2, n + 1)``."""
+        if self.intersample == "zoh":
+            # u, plus a unit step when the offset is estimated: both piecewise constant
+            inputs = np.column_stack([u, np.ones_like(u)]) if offset else u[:, None]
+            return self.apply(inputs, "zoh")
+        filtered = [self.apply(u[:, None], "input")]
+        if offset:  # a step is held between samples whatever the input is
+            filtered.append(self.apply(np.ones((u.size, 1)), "zoh"))
+        return np.concatenate(filtered, axis=1)
+
     def apply(self, signals: np.ndarray, hold: str) -> np.ndarray:
         """Filtered derivatives, shape ``(N, n_signals, n + 1)``: ``[..., k] = s^k/A_f x``.
 
-        ZOH signals are delayed by the filter's ``input_delay``.
+        ``hold``: ``"zoh"`` (held signals) and ``"input"`` (an input linear
+        between samples, with ``intersample="foh"``) are delayed by the
+        filter's ``input_delay``; ``"foh"`` (the outputs) is not.
         """
+        if hold == "input":
+            return self._apply_linear_input(signals)
         nums = self.num_zoh if hold == "zoh" else self.num_foh
         n = nums.shape[0]
         if hold == "zoh" and self.delay_samples:
@@ -146,6 +175,33 @@ class StateVariableFilter:
         # the top derivative's input term is the (delayed) input at the sample
         # instant: u(k ts - tau) = u[k-d-1] when the delay has a fraction
         top = delayed(signals, 1) if hold == "zoh" and self.delay_fraction else signals
+        out[..., n] = top - out[..., :n] @ self.den_f[:0:-1]
+        return out
+
+
+    def _apply_linear_input(self, signals: np.ndarray) -> np.ndarray:
+        """:meth:`apply` for an input linear between samples, exact, delayed by ``(d + f) ts``.
+
+        The ramp up to the first sample that the filter implies before the
+        start is taken off (:func:`eha_core.identify._ctmodels.foh_numerators`).
+        """
+        n = self.num_input.shape[0]
+        d, f = self.delay_samples, self.delay_fraction
+        shifted = delayed(signals, d)
+        impulse = np.zeros(signals.shape[0])
+        impulse[0] = 1.0
+        out = np.empty(signals.shape + (n + 1,))
+        for k in range(n):
+            start = delayed(scipy.signal.lfilter(self.start_input[k], self.den_z, impulse), d)
+            out[..., k] = (scipy.signal.lfilter(self.num_input[k], self.den_z, shifted, axis=0)
+                           - np.multiply.outer(start, signals[0]))
+        # the top derivative's input term: the delayed input at the sample
+        # instant, f u[k-d-1] + (1 - f) u[k-d], zero before tau
+        top = shifted
+        if f:
+            top = f * delayed(signals, d + 1) + (1.0 - f) * shifted
+            if d < signals.shape[0]:
+                top[d] -= (1.0 - f) * signals[0]
         out[..., n] = top - out[..., :n] @ self.den_f[:0:-1]
         return out
 
@@ -210,7 +266,8 @@ def srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
     iterates eliminates it by least squares.
 
     With ``criterion.input_delay`` (fixed) the inputs are filtered delayed
-    (:class:`StateVariableFilter`). The offset's regressor is then the
+    (:class:`StateVariableFilter`), held or linear between samples as
+    ``criterion.intersample`` says (the offset's step is held either way). The offset's regressor is then the
     delayed step through ``B_hat`` (:func:`offset_regressor` without initial
     conditions): the impulses of ``B(s)`` applied to the delayed step come at
     ``t = tau``, outside the span of the initial-condition regressors.
@@ -225,8 +282,7 @@ def srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
     ic = criterion.estimate_initial_state
     oc = criterion.estimate_offset
     n_extra = int(oc) + (n if ic else 0)
-    # u, plus a unit step when the offset is estimated: both piecewise constant
-    inputs = np.column_stack([u, np.ones_like(u)]) if oc else u[:, None]
+    intersample = criterion.intersample
 
     def extra_regressors(svf, uf_all, num):
         cols = []
@@ -239,8 +295,8 @@ def srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
     if kind == "lambda":
         # LSSVF: least squares with the fixed filter (s + lambda)^n.
         den_f = np.real(np.poly(np.full(n, -value)))
-        svf = StateVariableFilter(den_f, ts, tau)
-        uf_all = svf.apply(inputs, "zoh")
+        svf = StateVariableFilter(den_f, ts, tau, intersample)
+        uf_all = svf.apply_inputs(u, oc)
         yf = svf.apply(y, "foh")
         phi = np.hstack([regressors(yf, uf_all[:, 0], n, m),
                          extra_regressors(svf, uf_all, None)])
@@ -260,12 +316,12 @@ def srivc(u, y, ts, n, m, start, max_iter, tol, criterion):
         check(criterion.cancel)
         num, den = split_theta(theta, n)
         den_f = stabilise(den)
-        svf = StateVariableFilter(den_f, ts, tau)
-        uf_all = svf.apply(inputs, "zoh")
+        svf = StateVariableFilter(den_f, ts, tau, intersample)
+        uf_all = svf.apply_inputs(u, oc)
         uf = uf_all[:, 0]
         extra = extra_regressors(svf, uf_all, num)
         # auxiliary model B/A_f u (+ offset and initial-condition responses),
-        # exact under ZOH
+        # exact for the input's intersample behaviour
         x_hat = uf[:, m::-1] @ num + extra @ extra_coeffs
         yxf = svf.apply(np.column_stack([y, x_hat]), "foh")
         phi = np.hstack([regressors(yxf[:, 0], uf, n, m), extra])

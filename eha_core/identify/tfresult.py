@@ -5,8 +5,8 @@ Returned by :func:`eha_core.identify.tfest.tfest` and
 :class:`scipy.optimize.OptimizeResult` it carries the estimate, the fit, the
 statistics and how the estimator got there, so a failure is data. Its
 :meth:`~TFEstimate.simulate` and :meth:`~TFEstimate.frequency_response` use
-the exact ZOH machinery of :mod:`eha_core.identify._ctmodels`, with the
-estimated input delay. Only numpy is imported at module import;
+the exact machinery of :mod:`eha_core.identify._ctmodels`, with the
+estimated input delay and the input's intersample behaviour. Only numpy is imported at module import;
 :attr:`TFEstimate.tf` imports python-control lazily.
 """
 
@@ -84,6 +84,10 @@ class TFEstimate:
     input_delay_std : float or None
         Standard error of an estimated ``input_delay`` (seconds); None when
         the delay was fixed.
+    intersample : str
+        ``"zoh"`` (the input held between samples) or ``"foh"`` (linear
+        between them): the option the estimate was made with, and
+        :meth:`simulate`'s default.
     """
 
     num: np.ndarray
@@ -112,6 +116,7 @@ class TFEstimate:
     n_samples: int
     input_delay: float = 0.0
     input_delay_std: float | None = None
+    intersample: str = "zoh"
 
     @property
     def tf(self):
@@ -144,11 +149,14 @@ class TFEstimate:
                 "success": bool(self.success), "message": self.message, "method": self.method,
                 "n_poles": int(self.n_poles), "n_zeros": int(self.n_zeros),
                 "input_delay": float(self.input_delay),
-                "input_delay_std": None if self.input_delay_std is None else float(self.input_delay_std)}
+                "input_delay_std": None if self.input_delay_std is None else float(self.input_delay_std),
+                "intersample": self.intersample}
 
-    def simulate(self, u, ts=None, initial_state=None, input_offset=None) -> np.ndarray:
-        """Exact ZOH response to ``u`` sampled at ``ts`` (default: ``self.ts``), delayed by ``input_delay``.
+    def simulate(self, u, ts=None, initial_state=None, input_offset=None, intersample=None) -> np.ndarray:
+        """Exact response to ``u`` sampled at ``ts`` (default: ``self.ts``), delayed by ``input_delay``.
 
+        The input held (``"zoh"``) or linear (``"foh"``) between samples as
+        ``intersample`` says (default: the estimate's, ``self.intersample``).
         ``initial_state`` is an initial state (e.g. ``self.initial_state``); default zero.
         ``input_offset`` is a constant added to ``u`` (input units, e.g.
         ``self.input_offset``); default none. The offset estimated on one
@@ -164,7 +172,8 @@ class TFEstimate:
                 raise not_allowed("input_offset", input_offset, "must be None or a finite number (input units)")
             u = np.asarray(u, dtype=float) + offset
         return simulate_tf(self.num, self.den, u, self.ts if ts is None else ts, initial_state=initial_state,
-                           input_delay=self.input_delay)
+                           input_delay=self.input_delay,
+                           intersample=self.intersample if intersample is None else intersample)
 
     def frequency_response(self, w) -> FrequencyResponseData:
         """Bode data of the estimate at ``w`` rad/s, ``G(j w) e^(-j w input_delay)``.

@@ -1,9 +1,10 @@
 """Validation of identified transfer functions: simulation, fit, ETFE, residuals.
 
-The one exact zero-order-hold (ZOH) simulator of a continuous-time transfer
-function (:func:`simulate_tf`) and MATLAB's fit (:func:`fit_percent`) live in
-the private module :mod:`eha_core.identify._ctmodels`, with the discretisation
-behind them; :mod:`eha_core.identify.tfest` uses the same code for its
+The one exact simulator of a continuous-time transfer function on a sampled
+input, held (ZOH) or linear (FOH) between samples (:func:`simulate_tf`), and
+MATLAB's fit (:func:`fit_percent`) live in the private module
+:mod:`eha_core.identify._ctmodels`, with the discretisation behind them;
+:mod:`eha_core.identify.tfest` uses the same code for its
 output-error stage, so the fit reported by the estimator and the fit reported
 by :func:`compare` are computed by the same code. They are public here.
 
@@ -43,6 +44,7 @@ from ._ctmodels import (
     as_tf,
     as_ts,
     check_delay,
+    check_intersample,
     discretise,
     fit_linear_terms,
     fit_percent,
@@ -107,7 +109,7 @@ class CompareResult:
     Attributes
     ----------
     y_hat : numpy.ndarray
-        Simulated output (ZOH input).
+        Simulated output (the input held or linear between samples, ``intersample``).
     fit_percent : float
         ``100 (1 - ||y - y_hat|| / ||y - mean(y)||)``.
     initial_condition : str
@@ -119,6 +121,8 @@ class CompareResult:
         response to ``u + c``); None when no offset was applied.
     input_delay : float
         Input delay used, in seconds (0.0 when none).
+    intersample : str
+        ``"zoh"`` or ``"foh"``: the input's behaviour between samples used.
     """
 
     y_hat: np.ndarray
@@ -127,6 +131,7 @@ class CompareResult:
     initial_state: np.ndarray | None
     input_offset: float | None = None
     input_delay: float = 0.0
+    intersample: str = "zoh"
 
 
 def _check_compare_offset(input_offset):
@@ -147,7 +152,8 @@ def _check_compare_offset(input_offset):
                       "use zero, estimate, None or a finite number (input units)")
 
 
-def compare(num, den, u, y, ts, initial_condition="zero", input_offset="zero", input_delay=0.0) -> CompareResult:
+def compare(num, den, u, y, ts, initial_condition="zero", input_offset="zero", input_delay=0.0,
+            intersample="zoh") -> CompareResult:
     """Simulate a transfer function on data and report MATLAB's fit.
 
     Parameters
@@ -174,6 +180,10 @@ def compare(num, den, u, y, ts, initial_condition="zero", input_offset="zero", i
         the model is ``y = G(s) e^(-s tau) (u + c)``, simulated exactly for the
         held input (any ``tau``, not only multiples of ``ts``), the input
         before the first sample taken as zero. Default 0.
+    intersample : {"zoh", "foh"}
+        The input held (default) or linear between samples (MATLAB's
+        ``InterSample``; e.g. a ``TFEstimate.intersample``), see
+        :func:`simulate_tf`.
 
     Returns
     -------
@@ -201,7 +211,8 @@ def compare(num, den, u, y, ts, initial_condition="zero", input_offset="zero", i
     u_arr, y_arr = as_pair(u, y, ("u", "y"))
     estimate_offset, offset = _check_compare_offset(input_offset)
     tau = check_delay(input_delay)
-    model = discretise(num_n, den_n, as_ts(ts), tau)
+    intersample = check_intersample(intersample)
+    model = discretise(num_n, den_n, as_ts(ts), tau, intersample)
     initial_state = None
     estimate_initial_state = False
     allowed = f"use zero, estimate or an array of shape ({model.order},), one initial state per pole"
@@ -242,6 +253,7 @@ def compare(num, den, u, y, ts, initial_condition="zero", input_offset="zero", i
         initial_state=None if initial_state is None else readonly(initial_state),
         input_offset=offset,
         input_delay=tau,
+        intersample=intersample,
     )
 
 
