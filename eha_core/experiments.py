@@ -156,10 +156,12 @@ def run_lse(params: ActuatorParams | None = None, disturbance: str | Signal = "n
             disturbance_model: str = "constant", disturbance_freq_hz: float | None = None,
             u: Signal = LSE_INPUT, t_end: float = 5.0, dt: float = 1e-3, seed: int = 0,
             measurement_noise: dict[str, float] | None = None, tau_f: float = 0.01,
-            cancel: CancelToken | None = None):
+            estimator: str = "ls", intervals: str | None = None, cancel: CancelToken | None = None):
     """Simulate a scenario and identify it: the time-domain experiment in one call.
 
-    ``cancel`` reaches the simulation and :func:`~eha_core.identify.lse.identify_lse`.
+    ``estimator`` and ``intervals`` are those of
+    :func:`~eha_core.identify.lse.identify_lse` (the paper's least squares by
+    default); ``cancel`` reaches the simulation and the estimator.
     """
     from .identify.lse import identify_lse
 
@@ -167,7 +169,8 @@ def run_lse(params: ActuatorParams | None = None, disturbance: str | Signal = "n
     data = lse_data(params, disturbance, u=u, t_end=t_end, dt=dt, seed=seed, measurement_noise=measurement_noise,
                     cancel=cancel)
     return identify_lse(data, params, tau_f=tau_f, disturbance_model=disturbance_model,
-                        disturbance_freq_hz=disturbance_freq_hz, cancel=cancel)
+                        disturbance_freq_hz=disturbance_freq_hz, estimator=estimator, intervals=intervals,
+                        cancel=cancel)
 
 
 def lse_resimulation(result, params: ActuatorParams, measured, *, u: Signal = LSE_INPUT,
@@ -212,9 +215,13 @@ LSE_BYTES_PER_FINE_SAMPLE = 125
 #: identify_lse's time per measured sample [s]: 3-5 us (best of 3, records of
 #: 5 s to 250 s at 1 kHz, this project's 2-core machine). A rough guide.
 LSE_SECONDS_PER_SAMPLE = 5e-6
+#: The IV estimator's peak memory against the least squares': it holds the
+#: auxiliary model's record and regressors besides the data's (tracemalloc:
+#: 1.6-1.75 times, 5 s and 20 s records).
+LSE_IV_MEMORY_FACTOR = 1.75
 
 
-def lse_cost(t_end: float = 5.0, dt: float = 1e-3, *, resimulation: bool = False):
+def lse_cost(t_end: float = 5.0, dt: float = 1e-3, *, resimulation: bool = False, estimator: str = "ls"):
     """Estimated cost of the least-squares experiment, without running it.
 
     Parameters
@@ -224,6 +231,11 @@ def lse_cost(t_end: float = 5.0, dt: float = 1e-3, *, resimulation: bool = False
     resimulation : bool
         Count the re-simulation with the estimates too
         (:func:`lse_resimulation`).
+    estimator : {'ls', 'iv'}
+        The estimator (:func:`~eha_core.identify.lse.identify_lse`): the IV
+        simulates the model once per iteration, at most
+        :data:`~eha_core.identify.lse.IV_MAX_ITERATIONS` times, and forms the
+        regressors again each time (counted at the most).
 
     Returns
     -------
@@ -237,17 +249,25 @@ def lse_cost(t_end: float = 5.0, dt: float = 1e-3, *, resimulation: bool = False
     >>> c = lse_cost(5.0)
     >>> c.steps, c.output_samples, round(c.peak_bytes / 2**20)
     (10000, 5001, 10)
+    >>> c = lse_cost(5.0, estimator="iv")
+    >>> c.steps, c.output_samples, round(c.peak_bytes / 2**20)
+    (60000, 30006, 18)
     """
-    from .identify.lse import fine_grid_factor
+    from .identify.lse import IV_MAX_ITERATIONS, fine_grid_factor
+    from .identify.lse_choices import checked_choices
     from .simulate import SimulationCost, simulation_cost
 
+    checked_choices(estimator)
     sim = simulation_cost(t_end, dt)
     n = sim.output_samples
-    runs = 2 if resimulation else 1
+    iv = estimator == "iv"
+    runs = (2 if resimulation else 1) + (IV_MAX_ITERATIONS if iv else 0)
     estimation = n * (LSE_BYTES_PER_SAMPLE + LSE_BYTES_PER_FINE_SAMPLE * fine_grid_factor(n))
+    if iv:
+        estimation = int(estimation * LSE_IV_MEMORY_FACTOR)
     return SimulationCost(steps=runs * sim.steps, output_samples=runs * n,
                           peak_bytes=max(sim.peak_bytes, estimation), h=sim.h,
-                          other_seconds=n * LSE_SECONDS_PER_SAMPLE)
+                          other_seconds=n * LSE_SECONDS_PER_SAMPLE * (1 + IV_MAX_ITERATIONS if iv else 1))
 
 
 # -- frequency-domain identification (section III-B, eqs. 19-27, Figs. 8-13) ----------

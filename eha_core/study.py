@@ -17,6 +17,12 @@ Two experiments (:class:`StudyConfig`, ``kind``):
     the constant or harmonic disturbance model. Seed k draws the
     disturbance's noise exactly as ``run_lse(seed=k)`` does (and
     ``eha identify lse --seed k``). The truth is the parameters simulated.
+    The estimator is the paper's least squares (``estimator="ls"``) or
+    instrumental variables (``"iv"``, unbiased under the noisy load force
+    that biases M and beta_e of the least squares): the study's ``bias``,
+    against the reported standard errors (``bias_per_std_error``) and against
+    its own Monte Carlo error (:meth:`StudyResult.biased`), tells which is
+    biased.
 ``"tf"``
     The paper's closed-loop experiment (docs/model.md §4, eqs. 19-25): seed k
     draws the idinput excitation (as ``eha identify tf --seed k``) and the
@@ -72,7 +78,7 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from concurrent.futures import CancelledError, ThreadPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -89,7 +95,8 @@ __all__ = ["STUDY_KINDS", "MAX_SEEDS", "MAX_WORKERS", "DEFAULT_WORKERS", "TF_PAR
 #: The experiments a study repeats.
 STUDY_KINDS = ("lse", "tf")
 #: Seeds in one study at most: 1000 least-squares seeds take about 25-30 s
-#: on this project's two cores, 1000 transfer-function seeds 2-4 minutes.
+#: on this project's two cores (with the IV estimator 1-2 minutes), 1000
+#: transfer-function seeds 2-4 minutes.
 MAX_SEEDS = 1000
 #: Worker threads at most (more than the cores only adds contention).
 MAX_WORKERS = 16
@@ -182,6 +189,13 @@ class StudyConfig:
         ``lse``: record length [s] (0 < t_end <= 600).
     tau_f : float
         ``lse``: prefilter time constant [s] (eq. 17).
+    estimator : {'ls', 'iv'}
+        ``lse``: the paper's least squares (default) or instrumental
+        variables (:func:`eha_core.identify.lse.identify_lse`).
+    intervals : {'newey-west', 'ewc'}, optional
+        ``lse``: how the standard errors and intervals are computed; None
+        (the default) takes the estimator's own (Newey-West for ``ls``,
+        equal-weighted cosines for ``iv``), and is stored as that.
     experiment : FrequencyExperiment, optional
         ``tf``: the closed-loop experiment (excitation, Ts, Kp, controller,
         plant model, initial condition and input offset); its ``seed`` is
@@ -207,6 +221,8 @@ class StudyConfig:
     tau_f: float = 0.01
     experiment: FrequencyExperiment | None = None
     noise_m: float = 1e-4
+    estimator: str = "ls"
+    intervals: str | None = None
 
     def __post_init__(self):
         from .identify.disturbance import DISTURBANCE_MODELS, MAX_FREQ_HZ
@@ -239,6 +255,7 @@ class StudyConfig:
                                                                       else ""))
         if not (isinstance(self.noise_m, (int, float)) and math.isfinite(self.noise_m) and self.noise_m >= 0):
             raise not_allowed("noise_m", self.noise_m, "must be a standard deviation >= 0 m")
+        self._check_estimator()
         if self.kind == "lse":
             self._check_disturbance()
         else:
@@ -263,6 +280,18 @@ class StudyConfig:
                 raise not_allowed(f"sensor_noise[{name}]", sigma,
                                   "must be a standard deviation >= 0 (in the sensor's SI unit)")
         object.__setattr__(self, "sensor_noise", tuple((n, float(s)) for n, s in pairs if s > 0))
+
+    def _check_estimator(self) -> None:
+        """The least squares' estimator and intervals (stored resolved); the transfer function has its own."""
+        from .identify.lse_choices import checked_choices
+
+        estimator, intervals = checked_choices(self.estimator, self.intervals)
+        if self.kind == "tf" and (estimator, self.intervals) != ("ls", None):
+            name, value = ("estimator", estimator) if estimator != "ls" else ("intervals", intervals)
+            raise not_allowed(name, value, "the transfer-function study's estimator is tfest, with its own "
+                                            "standard errors; leave estimator and intervals to the least squares")
+        if self.kind == "lse":
+            object.__setattr__(self, "intervals", intervals)
 
     def _check_tf_noise(self) -> None:
         """The transfer-function study's noise is the position sensor's alone."""
@@ -301,7 +330,8 @@ class StudyConfig:
         if self.kind == "lse":
             out.update(disturbance=self.disturbance, disturbance_model=self.disturbance_model,
                        disturbance_freq_hz=self.disturbance_freq_hz, sensor_noise=dict(self.sensor_noise),
-                       u=self.u.spec, t_end_s=self.t_end, tau_f_s=self.tau_f)
+                       u=self.u.spec, t_end_s=self.t_end, tau_f_s=self.tau_f, estimator=self.estimator,
+                       intervals=self.intervals)
         else:
             e = self.experiment
             out.update(noise_m=self.noise_m, n_samples=e.n_samples, ts_s=e.ts, kp=e.kp,
@@ -322,6 +352,9 @@ class SeedEstimate:
     ``success`` False (``message`` says why: the estimator's message, or the
     simulation's failure) leaves the seed out of the statistics.
     ``elapsed_s`` is the run's wall time in its worker thread.
+    ``critical_value`` is the multiple of the standard error that makes the
+    run's 95 % interval: 1.96 (normal), or Student's t quantile for the
+    least squares' ``ewc`` intervals.
     """
 
     seed: int
@@ -330,11 +363,12 @@ class SeedEstimate:
     success: bool
     message: str
     elapsed_s: float
+    critical_value: float = Z95
 
     def interval(self, name: str) -> tuple[float, float]:
-        """The 95 % interval ``estimate +- 1.96 std_error`` of ``name``."""
+        """The 95 % interval ``estimate +- critical_value * std_error`` of ``name``."""
         e, s = self.estimates[name], self.std_errors[name]
-        return e - Z95 * s, e + Z95 * s
+        return e - self.critical_value * s, e + self.critical_value * s
 
     def covers(self, name: str, value: float) -> bool:
         """Whether the 95 % interval of ``name`` contains ``value``."""
@@ -349,7 +383,7 @@ class SeedEstimate:
     def to_dict(self) -> dict:
         """The run as plain values (JSON-ready; a failed run's missing numbers are None)."""
         return {"seed": self.seed, "estimates": _finite_or_none(self.estimates),
-                "std_errors": _finite_or_none(self.std_errors),
+                "std_errors": _finite_or_none(self.std_errors), "critical_value": self.critical_value,
                 "success": self.success, "message": self.message, "elapsed_s": self.elapsed_s}
 
 
@@ -385,6 +419,14 @@ class StudyResult:
     coverage : dict
         Per parameter with a nominal value: the fraction of successful seeds
         whose 95 % interval contains it (NaN without a successful seed).
+    bias, bias_std_error, bias_per_std_error : dict
+        Per parameter with a nominal value: ``mean - nominal``; its Monte
+        Carlo standard error ``std / sqrt(n)`` (how well the seeds pin the
+        bias down); and the bias in units of the mean reported standard error
+        (how far off the truth a single run sits, against its own interval's
+        half-width of about 2 of those). NaN without the data for them (fewer
+        than 2 seeds for the second). :meth:`biased` says whether the seeds
+        show a bias.
     elapsed_s : float
         Wall time of the study [s].
     workers : int
@@ -413,6 +455,21 @@ class StudyResult:
     workers: int
     cancelled: bool
     message: str
+    bias: dict[str, float] = field(default_factory=dict)
+    bias_std_error: dict[str, float] = field(default_factory=dict)
+    bias_per_std_error: dict[str, float] = field(default_factory=dict)
+
+    def biased(self, name: str, probability: float = 0.99) -> bool:
+        """Whether the seeds show that ``name``'s estimator is biased: ``|bias|`` beyond its two-sided
+        ``probability`` band, ``z bias_std_error`` (z = 2.58 for 0.99). False without the data to tell."""
+        from statistics import NormalDist
+
+        if not 0 < probability < 1:
+            raise not_allowed("probability", probability, "must be a probability in (0, 1)")
+        bias, err = self.bias.get(name, math.nan), self.bias_std_error.get(name, math.nan)
+        if not (math.isfinite(bias) and math.isfinite(err)):
+            return False
+        return abs(bias) > NormalDist().inv_cdf(0.5 + probability / 2) * err
 
     @property
     def n_successful(self) -> int:
@@ -444,6 +501,8 @@ class StudyResult:
             "n_seeds": self.n_requested, "n_completed": self.n_completed, "n_failed": self.n_failed,
             "mean": _finite_or_none(self.mean), "std": _finite_or_none(self.std),
             "mean_std_error": _finite_or_none(self.mean_std_error), "coverage": _finite_or_none(self.coverage),
+            "bias": _finite_or_none(self.bias), "bias_std_error": _finite_or_none(self.bias_std_error),
+            "bias_per_std_error": _finite_or_none(self.bias_per_std_error),
             "coverage_band_99": list(self.coverage_band()) if self.n_successful else None,
             "elapsed_s": self.elapsed_s, "seconds_per_seed": None if not self.n_completed else self.seconds_per_seed,
             "workers": self.workers, "cancelled": self.cancelled, "message": self.message,
@@ -503,13 +562,15 @@ class _LsePlan:
                 sensor_seed = int(_stream(seed, _SENSOR_STREAM).generate_state(1, np.uint64)[0])
                 data = data.with_noise(dict(cfg.sensor_noise), seed=sensor_seed)
             res = identify_lse(data, self.params, tau_f=cfg.tau_f, disturbance_model=cfg.disturbance_model,
-                               disturbance_freq_hz=cfg.disturbance_freq_hz, cancel=cancel)
+                               disturbance_freq_hz=cfg.disturbance_freq_hz, estimator=cfg.estimator,
+                               intervals=cfg.intervals, cancel=cancel)
         except (RuntimeError, ValueError, ArithmeticError) as exc:   # the simulation or the estimator failed
             return _failed(seed, self.parameters, exc, t0)
         # only the numbers are kept: a result's arrays (t, y1f, ...) would
         # take 200 kB a seed, 200 MB for a study of 1000
         return SeedEstimate(seed=seed, estimates=dict(res.estimates), std_errors=dict(res.std_errors),
-                            success=res.success, message=res.message, elapsed_s=time.perf_counter() - t0)
+                            success=res.success, message=res.message, elapsed_s=time.perf_counter() - t0,
+                            critical_value=res.critical_value)
 
 
 class _TfPlan:
@@ -565,18 +626,24 @@ def _failed(seed: int, names, exc: BaseException, t0: float) -> SeedEstimate:
                         message=" ".join(str(exc).split()) or type(exc).__name__, elapsed_s=time.perf_counter() - t0)
 
 
-def _statistics(plan, seeds: list[SeedEstimate]):
-    mean, std, mean_se, coverage = {}, {}, {}, {}
+def _statistics(plan, seeds: list[SeedEstimate]) -> dict[str, dict[str, float]]:
+    """The statistics of :class:`StudyResult`, by field name, each per parameter."""
+    out = {k: {} for k in ("mean", "std", "mean_std_error", "coverage", "bias", "bias_std_error",
+                           "bias_per_std_error")}
     for name in plan.parameters:
         used = [s for s in seeds if s.usable(name)]
         est = np.array([s.estimates[name] for s in used])
         se = np.array([s.std_errors[name] for s in used])
-        mean[name] = float(est.mean()) if est.size else math.nan
-        std[name] = float(est.std(ddof=1)) if est.size >= 2 else math.nan
-        mean_se[name] = float(se.mean()) if se.size else math.nan
+        mean = out["mean"][name] = float(est.mean()) if est.size else math.nan
+        std = out["std"][name] = float(est.std(ddof=1)) if est.size >= 2 else math.nan
+        mean_se = out["mean_std_error"][name] = float(se.mean()) if se.size else math.nan
         if name in plan.nominal:
-            coverage[name] = (sum(s.covers(name, plan.nominal[name]) for s in used) / len(used)) if used else math.nan
-    return mean, std, mean_se, coverage
+            out["coverage"][name] = ((sum(s.covers(name, plan.nominal[name]) for s in used) / len(used)) if used
+                                     else math.nan)
+            bias = out["bias"][name] = mean - plan.nominal[name]
+            out["bias_std_error"][name] = std / math.sqrt(est.size) if est.size >= 2 else math.nan
+            out["bias_per_std_error"][name] = bias / mean_se if mean_se > 0 else math.nan
+    return out
 
 
 def _message(config: StudyConfig, plan, seeds: list[SeedEstimate], cancelled: bool, reason: str) -> str:
@@ -664,14 +731,13 @@ def run_study(config: StudyConfig | None = None, params: ActuatorParams | None =
                     f.cancel()
     cancelled = cancel is not None and cancel.cancelled and len(done) < total
     done.sort(key=lambda s: s.seed)
-    mean, std, mean_se, coverage = _statistics(plan, done)
+    stats = _statistics(plan, done)
     return StudyResult(
         config=config, params=params, parameters=tuple(plan.parameters), nominal=dict(plan.nominal),
         nominal_is_truth=plan.nominal_is_truth, reference=plan.reference, seeds=tuple(done),
         n_requested=total, n_completed=len(done), n_failed=sum(not s.success for s in done),
-        mean=mean, std=std, mean_std_error=mean_se, coverage=coverage, elapsed_s=time.perf_counter() - t0,
-        workers=int(workers), cancelled=cancelled,
-        message=_message(config, plan, done, cancelled, cancel.reason if cancel is not None else ""),
+        elapsed_s=time.perf_counter() - t0, workers=int(workers), cancelled=cancelled,
+        message=_message(config, plan, done, cancelled, cancel.reason if cancel is not None else ""), **stats,
     )
 
 
@@ -689,13 +755,12 @@ def combine_studies(config: StudyConfig, parts, params: ActuatorParams | None = 
     plan = _LsePlan(config, params) if config.kind == "lse" else _TfPlan(config, params)
     done = sorted((s for part in parts for s in part.seeds), key=lambda s: s.seed)
     cancelled = bool(cancelled or any(part.cancelled for part in parts)) and len(done) < config.n_seeds
-    mean, std, mean_se, coverage = _statistics(plan, done)
+    stats = _statistics(plan, done)
     return StudyResult(
         config=config, params=params, parameters=tuple(plan.parameters), nominal=dict(plan.nominal),
         nominal_is_truth=plan.nominal_is_truth, reference=plan.reference, seeds=tuple(done),
         n_requested=config.n_seeds, n_completed=len(done), n_failed=sum(not s.success for s in done),
-        mean=mean, std=std, mean_std_error=mean_se, coverage=coverage,
         elapsed_s=float(sum(part.elapsed_s for part in parts)),
         workers=max((part.workers for part in parts), default=1), cancelled=cancelled,
-        message=_message(config, plan, done, cancelled, "the study was cancelled" if cancelled else ""),
+        message=_message(config, plan, done, cancelled, "the study was cancelled" if cancelled else ""), **stats,
     )

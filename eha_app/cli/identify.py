@@ -49,6 +49,12 @@ def add_parser(sub) -> None:
     le.add_argument("--t-end", type=float, default=5.0,
                     help=f"record length [s] (default 5, at most {MAX_LSE_T_END:g})")
     le.add_argument("--tau-f", type=float, default=0.01, help="prefilter time constant [s] (default 0.01, eq. 17)")
+    le.add_argument("--estimator", default="ls",
+                    help="ls (the paper's least squares, eq. 18; the default) or iv (instrumental variables from a "
+                         "noise-free simulation of the model: unbiased under a noisy load force)")
+    le.add_argument("--intervals", default=None,
+                    help="newey-west (normal quantile) or ewc (equal-weighted cosines, t quantile); default "
+                         "newey-west for ls, ewc for iv")
     le.add_argument("--data", help="identify from a CSV with columns t,x,v,p1,p2,u (SI units) instead of simulating")
     le.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                     help="known/nominal parameters (Dc, dc, L0, Kq1, Kq2, ps, pr, k_f are taken as measured); "
@@ -97,10 +103,13 @@ def _positive(option: str, value: float, unit: str) -> None:
 
 def run_lse(args) -> int:
     from eha_core.identify.disturbance import parse_disturbance_model
+    from eha_core.identify.lse_choices import checked_choices
     from eha_core.signals import parse_signal
 
     if args.seed < 0:
         raise refused("--seed", args.seed, "use a whole number >= 0")
+    estimator, intervals = checked_choices(args.estimator, args.intervals, name="--estimator",
+                                           intervals_name="--intervals")
     _positive("--tau-f", args.tau_f, "s")
     if not (math.isfinite(args.t_end) and 0 < args.t_end <= MAX_LSE_T_END):
         raise refused("--t-end", args.t_end, f"use a record length in (0, {MAX_LSE_T_END:g}] s")
@@ -120,13 +129,15 @@ def run_lse(args) -> int:
         u = u or LSE_INPUT
         data = lse_data(params, d, u=u, t_end=args.t_end, seed=args.seed)
         source = f"simulation: u = {u.label}, d = {d.label}"
-    res = identify_lse(data, params, tau_f=args.tau_f, disturbance_model=model, disturbance_freq_hz=freq)
+    res = identify_lse(data, params, tau_f=args.tau_f, disturbance_model=model, disturbance_freq_hz=freq,
+                       estimator=estimator, intervals=intervals)
     out = res.to_dict()
     out["source"] = source
     if args.json:
         print(json_text(out))
         return 0 if res.success else 1
-    print(f"least squares ({source}), disturbance model: {res.disturbance_model}"
+    method = "instrumental variables" if res.estimator == "iv" else "least squares"
+    print(f"{method} ({source}), disturbance model: {res.disturbance_model}"
           + (f" at {res.disturbance_freq_hz:.6g} Hz{' (estimated)' if res.freq_estimated else ''}"
              if res.disturbance_freq_hz else ""))
     print(f"{'':8s}{'nominal':>14s}{'estimate':>14s}{'rel. error':>12s}   95 % interval")
@@ -137,6 +148,9 @@ def run_lse(args) -> int:
         nominal = "" if nom is None else f"{nom:.6g}"
         relative = "" if rel is None else f"{100 * rel:+.3f} %"
         print(f"{k:8s}{nominal:>14s}{v:14.6g}{relative:>12s}   [{lo:.6g}, {hi:.6g}]")
+    if res.intervals == "ewc":
+        print(f"95 % interval: estimate +- {res.critical_value:.4g} standard errors (Student's t, "
+              f"{res.cosine_terms} equal-weighted cosines)")
     if not res.success:
         print(f"eha identify lse: warning: {res.message}", file=sys.stderr)
     return 0 if res.success else 1

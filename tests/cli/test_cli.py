@@ -116,6 +116,21 @@ def test_identify_lse_json(capsys):
     assert lo <= data["estimates"]["M"] <= hi
 
 
+def test_identify_lse_with_the_iv_estimator(capsys):
+    code, out, _ = run(capsys, "identify", "lse", "--disturbance", "white:2000", "--seed", "1", "--estimator", "iv",
+                       "--json")
+    assert code == 0
+    data = json.loads(out)
+    assert (data["estimator"], data["intervals"], data["cosine_terms"]) == ("iv", "ewc", 15)
+    assert data["iterations"] >= 1 and data["estimates"]["M"] == pytest.approx(4000, rel=0.03)
+    lo, hi = data["ci95"]["M"]
+    assert (hi - lo) / 2 == pytest.approx(data["critical_value"] * data["std_errors"]["M"], rel=1e-9)
+    code, out, _ = run(capsys, "identify", "lse", "--disturbance", "white:2000", "--estimator", "iv")
+    lines = out.splitlines()
+    assert code == 0 and lines[0].startswith("instrumental variables (simulation: ")
+    assert lines[-1] == "95 % interval: estimate +- 2.131 standard errors (Student's t, 15 equal-weighted cosines)"
+
+
 def test_identify_lse_from_a_csv(capsys, tmp_path):
     from eha_core.experiments import lse_simulation
 
@@ -160,6 +175,8 @@ def test_identify_tf_paper_experiment_json(capsys):
     (["identify", "lse", "--disturbance-model", "cubic"], "--disturbance-model"),
     (["identify", "lse", "--disturbance-model", "harmonic:x"], "--disturbance-model"),
     (["identify", "lse", "--data", "/nonexistent.csv"], "nonexistent"),
+    (["identify", "lse", "--estimator", "ols"], "--estimator = ols is not allowed: use ls (the paper's least"),
+    (["identify", "lse", "--estimator", "iv", "--intervals", "hac"], "--intervals = hac is not allowed: use "),
     (["identify", "tf", "--np", "0"], "--np = 0"),
     (["identify", "tf", "--model", "soft"], "--model = soft"),
     (["identify", "tf", "--data", "/nonexistent.csv"], "nonexistent"),
@@ -238,7 +255,8 @@ def test_a_port_in_use_is_refused_before_anything_starts(capsys):
 
 
 @pytest.mark.parametrize("argv", [["identify", "tf", "--np", "0"], ["identify", "lse", "--disturbance", "gust"],
-                                  ["identify", "tf", "--data", "/nonexistent.csv"]])
+                                  ["identify", "tf", "--data", "/nonexistent.csv"],
+                                  ["identify", "lse", "--estimator", "ols"]])
 def test_bad_identification_arguments_are_refused_before_the_estimators_load(argv):
     code = (f"import sys; from eha_app.cli import main; code = main({argv!r}); "
             "print(code, 'scipy' in sys.modules, 'numba' in sys.modules)")

@@ -44,7 +44,7 @@ def test_lse_table_and_sensor_noise(capsys):
     assert lines[0] == ("study: least squares, disturbance sine:5000:1, disturbance model harmonic, "
                         "sensor noise p1=10000, p2=10000")
     header = next(line for line in lines if line.startswith("parameter"))
-    assert header.split() == ["parameter", "nominal", "mean", "std", "mean", "std", "err", "coverage"]
+    assert header.split() == ["parameter", "nominal", "mean", "std", "mean", "std", "err", "bias/se", "coverage"]
     rows = {line.split()[0]: line.split() for line in lines[lines.index(header) + 1:] if line.split()}
     assert {"M", "B", "Af", "d0", "d_sin", "d_cos", "beta_e"} <= set(rows)
     assert float(rows["d_sin"][1]) == 5000 and float(rows["M"][1]) == 4000
@@ -76,6 +76,9 @@ def test_tf_json_on_the_linear_plant(capsys):
     (["lse", "--seeds", "3", "--model", "linear"], "--model = linear is not allowed: the least squares"),
     (["lse", "--seeds", "3", "--t-end", "0"], "--t-end = 0 is not allowed"),
     (["tf", "--seeds", "3", "--model", "arx"], "--model = arx is not allowed: use nonlinear or linear"),
+    (["lse", "--seeds", "3", "--estimator", "ols"], "--estimator = ols is not allowed: use ls (the paper's"),
+    (["lse", "--seeds", "3", "--intervals", "boot"], "--intervals = boot is not allowed: use newey-west or ewc"),
+    (["tf", "--seeds", "3", "--estimator", "iv"], "unrecognized arguments: --estimator iv"),
     (["tf", "--seeds", "3", "--noise", "-1"], "--noise = -1 is not allowed"),
     (["lse"], "the following arguments are required: --seeds"),
     ([], "study needs a METHOD: lse or tf"),
@@ -93,3 +96,16 @@ def test_arguments_are_refused_before_the_estimators_are_imported():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
     assert out.stdout.strip() == "2"
     assert out.stderr.strip() == "eha: error: --seeds = 0 is not allowed: use 1 to 1000 seeds"
+
+
+def test_lse_with_the_iv_estimator_reports_its_bias_against_the_standard_errors(capsys):
+    code, out, err = run(capsys, "study", "lse", "--seeds", "4", "--estimator", "iv", "--json")
+    assert code == 0 and err == ""
+    data = json.loads(out)
+    assert data["settings"]["estimator"] == "iv" and data["settings"]["intervals"] == "ewc"
+    core = run_study(StudyConfig("lse", n_seeds=4, estimator="iv"), workers=1)
+    assert data["bias_per_std_error"] == pytest.approx(core.bias_per_std_error, rel=1e-12)
+    assert data["seeds"][0]["critical_value"] == pytest.approx(2.1314, abs=1e-4)
+    code, out, err = run(capsys, "study", "lse", "--seeds", "2", "--estimator", "iv", "--intervals", "newey-west")
+    assert code == 0 and out.splitlines()[0].startswith("study: instrumental variables with newey-west intervals, ")
+    assert any(line.startswith("bias/se: ") for line in out.splitlines())

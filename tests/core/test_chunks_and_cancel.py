@@ -234,6 +234,7 @@ def test_cost_estimates_count_steps_samples_and_time():
     assert cost.seconds_estimate > cost.steps / cost.STEPS_PER_SECOND
     assert lse_cost(20.0).steps == 4 * lse_cost(5.0).steps
     assert lse_cost(5.0, resimulation=True).steps == 2 * lse_cost(5.0).steps
+    assert lse_cost(5.0, estimator="iv").steps == 6 * lse_cost(5.0).steps     # at most 5 auxiliary simulations
     both = simulation_cost(5.0, 1e-3) + simulation_cost(10.0, 1e-3)
     assert both.steps == 30000 and both.peak_bytes == simulation_cost(10.0, 1e-3).peak_bytes
     with pytest.raises(ValueError, match=r"n_runs = 0 is not allowed: must be"):
@@ -250,10 +251,13 @@ def test_frequency_experiment_memory_estimate_is_within_a_factor_two(n_samples, 
     assert 0.5 < cfg.cost().peak_bytes / peak < 2.0, (cfg.cost().peak_bytes, peak)
 
 
-@pytest.mark.parametrize("t_end, model", [(5.0, "constant"), (20.0, "harmonic")])
-def test_least_squares_memory_estimate_is_within_a_factor_two(t_end, model):
-    peak, _ = peak_bytes(lambda: run_lse(None, "sine:5000", disturbance_model=model, t_end=t_end))
-    assert 0.5 < lse_cost(t_end).peak_bytes / peak < 2.0, (lse_cost(t_end).peak_bytes, peak)
+@pytest.mark.parametrize("t_end, model, estimator", [(5.0, "constant", "ls"), (20.0, "harmonic", "ls"),
+                                                     (5.0, "constant", "iv"), (20.0, "harmonic", "iv")])
+def test_least_squares_memory_estimate_is_within_a_factor_two(t_end, model, estimator):
+    peak, _ = peak_bytes(lambda: run_lse(None, "sine:5000", disturbance_model=model, t_end=t_end,
+                                         estimator=estimator))
+    cost = lse_cost(t_end, estimator=estimator)
+    assert 0.5 < cost.peak_bytes / peak < 2.0, (cost.peak_bytes, peak)
 
 
 # -- cancellation ------------------------------------------------------------------
@@ -342,7 +346,15 @@ def test_cancel_reaches_every_stage_of_the_frequency_identification():
 def test_cancel_reaches_the_least_squares_estimation():
     token = RecordingToken()
     run_lse(None, "sine:5000", disturbance_model="harmonic", cancel=token)
-    assert {"_integrate_chunked", "identify_lse", "_solve", "f", "rss"} <= token.callers
+    assert {"_integrate_chunked", "identify_lse", "_newey_west", "f", "rss"} <= token.callers
+
+
+def test_cancel_reaches_every_iv_iteration_and_its_auxiliary_simulation():
+    data = lse_data(disturbance="white:1000", t_end=1.0)
+    token = RecordingToken()
+    identify_lse(data, estimator="iv", cancel=token)
+    # _integrate_chunked: the simulation of the instruments (the data were simulated without the token)
+    assert {"_integrate_chunked", "identify_lse", "_iv", "f"} <= token.callers
 
 
 def _square_wave_data():
@@ -419,11 +431,13 @@ def _lse_resimulation_call(token):
     _lse_resimulation_call,
     lambda tok: run_lse_table(t_end=1.0, cancel=tok),
     lambda tok: identify_lse(lse_data(t_end=1.0), cancel=tok),
+    lambda tok: identify_lse(lse_data(t_end=1.0), estimator="iv", cancel=tok),
     lambda tok: run_frequency_identification(config=FrequencyExperiment(n_samples=1000), cancel=tok),
     lambda tok: tfest(*_square_wave_data(), n_poles=2, cancel=tok),
     lambda tok: oe_fit(*_square_wave_data(), [20.0], [1.0, 6.0, 20.0], cancel=tok),
 ], ids=["simulate", "simulate_many", "simulate_closed_loop", "run_paper_cases", "lse_simulation", "lse_data",
-        "run_lse", "lse_resimulation", "run_lse_table", "identify_lse", "run_frequency_identification", "tfest",
+        "run_lse", "lse_resimulation", "run_lse_table", "identify_lse", "identify_lse_iv",
+        "run_frequency_identification", "tfest",
         "oe_fit"])
 def test_a_cancelled_token_stops_every_long_computation(call):
     token = CancelToken()
