@@ -277,10 +277,22 @@ def lse_table_html(res, scenario: str | None, hidden=(), *, alternative=None, le
     note = (f"<p class='eha-note'>Disturbance model: {res.disturbance_model}"
             + (f", frequency {res.disturbance_freq_hz:.6g} Hz ({'estimated' if res.freq_estimated else 'given'})"
                if res.disturbance_freq_hz else "")
-            + f". Intervals: {term('Newey-West')} over {res.hac_lags} lags (the prefilter colours the residual"
-              f"{compared}).</p>")
+            + f". {_how_estimated(res)} (the prefilter colours the residual{compared}).</p>")
     return (table_html(header, rows, cls="eha-table eha-lse-readings") + note
             + (f"<ul class='eha-readings'>{items}</ul>" if items else ""))
+
+
+def _how_estimated(res) -> str:
+    """The estimator and how its intervals were made, in one sentence."""
+    est = getattr(res, "estimator", "ls")
+    who = ("Estimator: instrumental variables (instruments from a noise-free simulation of the model, "
+           f"{getattr(res, 'iterations', 0)} passes)" if est == "iv" else "Estimator: least squares (the paper's)")
+    if getattr(res, "intervals", "newey-west") == "ewc":
+        how = (f"intervals: equal-weighted cosine standard errors ({res.cosine_terms} terms) with Student's t = "
+               f"{res.critical_value:.3g}")
+    else:
+        how = f"intervals: {term('Newey-West')} over {res.hac_lags} lags"
+    return f"{who}; {how}"
 
 
 def _lse_exercise_html(res, hidden) -> str:
@@ -294,8 +306,8 @@ def _lse_exercise_html(res, hidden) -> str:
         rows.append([f"{_NAMES.get(k, k)} [{_UNITS.get(k, '')}]", known, _num(v), f"[{_num(lo)}, {_num(hi)}]",
                      reading_mark(readings[k], nominal="known")])
     items = readings_html(readings.values(), nominal="known")
-    note = (f"<p class='eha-note'>Disturbance model: {res.disturbance_model}. Intervals: {term('Newey-West')} over "
-            f"{res.hac_lags} lags. Hand in the estimates of the hidden parameters below.</p>")
+    note = (f"<p class='eha-note'>Disturbance model: {res.disturbance_model}. {_how_estimated(res)}. Hand in the "
+            "estimates of the hidden parameters below.</p>")
     return (table_html(["parameter", "known value", "estimate", "95 % interval", "reading"], rows) + note
             + (f"<ul class='eha-readings'>{items}</ul>" if items else ""))
 

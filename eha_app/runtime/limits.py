@@ -82,10 +82,10 @@ def check_frequency(config) -> None:
                "lower N or Ts")
 
 
-def check_lse(t_end: float) -> None:
-    """The least-squares experiment (simulation and estimation)."""
+def check_lse(t_end: float, estimator: str = "ls") -> None:
+    """The least-squares experiment (simulation and estimation; the instrumental variables' passes too)."""
     from eha_core.experiments import lse_cost
 
-    cost = lse_cost(t_end, resimulation=True)
+    cost = lse_cost(t_end, resimulation=True, estimator=estimator)
     check_cost("least-squares excitation", f"{t_end:g} s", cost.steps, cost.peak_bytes, t_end,
                "use a shorter excitation")

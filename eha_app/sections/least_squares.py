@@ -70,6 +70,10 @@ LSE_FORM = (Group("Least squares", (
           short="disturbance model"),
     Field("lse_freq", "harmonic frequency", "text", unit="Hz", placeholder="blank: estimate it",
           short="harmonic frequency"),
+    Field("lse_estimator", "estimator", "select",
+          options=(("ls", "least squares (the paper's)"), ("iv", "instrumental variables")), short="estimator",
+          tip="least squares is biased when the force noise enters the filtered dv/dt (M, βe low); instrumental "
+              "variables take their regressors from a noise-free simulation of the model (as SRIVC) and are not"),
     Field("lse_seed", "noise seed", "integer", lo=0, hi=10**6, short="noise seed"),
     Field("lse_excitation", "excitation", "select", options=tuple(EXCITATIONS.items()), short="excitation"),
 )), Group("Sensor noise (simulated measurements)", (
@@ -81,6 +85,7 @@ LSE_FORM = (Group("Least squares", (
           tip="white Gaussian noise added to each pressure sensor"),
 ), collapsible=True, collapsed=True),)
 LSE_DEFAULTS = {"lse_scenario": "none", "lse_custom": "sine:1000:3", "lse_model": "constant", "lse_freq": "",
+                "lse_estimator": "ls",
                 "lse_seed": "0", "lse_excitation": "paper", "lse_noise_x": "0", "lse_noise_v": "0",
                 "lse_noise_p": "0"}
 _LSE_FIELDS = {f.name: f for g in LSE_FORM for f in g.fields}
@@ -97,6 +102,7 @@ class LseRequest:
     seed: int = 0
     excitation: str = "paper"
     noise: tuple[float, float, float] = (0.0, 0.0, 0.0)     # σ of x [mm], v [mm/s], p1 and p2 [MPa]
+    estimator: str = "ls"
 
     def measurement_noise(self) -> dict[str, float] | None:
         """The sensors' noise in SI, for :func:`eha_core.experiments.lse_data` (None: noise-free)."""
@@ -141,6 +147,7 @@ def parse_lse(texts: dict) -> tuple[LseRequest, dict]:
     req = LseRequest(scenario=values.get("lse_scenario", "none"), custom=texts.get("lse_custom", ""),
                      model=values.get("lse_model", "constant"), frequency_hz=freq,
                      seed=values.get("lse_seed", 0), excitation=values.get("lse_excitation", "paper"),
+                     estimator=values.get("lse_estimator", "ls"),
                      noise=tuple(float(values.get(k, 0.0)) for k in ("lse_noise_x", "lse_noise_v", "lse_noise_p")))
     if "lse_custom" not in hidden and not errors.get("lse_custom"):
         try:
@@ -156,7 +163,7 @@ def _beside(model: str, res, data, params, token):
     if model != "constant" or not res.success:
         return None, None
     try:
-        alt = identify_lse(data, params, disturbance_model="harmonic", cancel=token)
+        alt = identify_lse(data, params, disturbance_model="harmonic", estimator=res.estimator, cancel=token)
     except ComputationError:
         return None, None
     leak = disturbance_leak(res, alt, data, params)
@@ -487,7 +494,7 @@ class LeastSquaresPanel(Section):
         u, t_end = req.input_signal()
         self.alert.visible = False
         try:
-            check_lse(t_end)
+            check_lse(t_end, req.estimator)
         except ValueError as exc:
             self._fail(str(exc))
             return None
@@ -512,7 +519,7 @@ class LeastSquaresPanel(Section):
         def compute(token):
             if own is not None:     # the student's measurements: nothing to simulate
                 res = identify_lse(own, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
-                                   cancel=token)
+                                   estimator=req.estimator, cancel=token)
                 return (res, plots.lse_view(own, None), (f"Your data ({html.escape(own.source)}, {own.t.size} "
                                                          "samples): the model is not re-simulated (the input is "
                                                          "known only at its samples)."), own, None, board_model(res),
@@ -521,7 +528,7 @@ class LeastSquaresPanel(Section):
             data = lse_data(params, d, u=u, t_end=t_end, seed=req.seed, measurement_noise=req.measurement_noise(),
                             cancel=token)
             res = identify_lse(data, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
-                               cancel=token)
+                               estimator=req.estimator, cancel=token)
             try:
                 resim = lse_resimulation(res, params, data, u=u, cancel=token)
                 resim_error = ""

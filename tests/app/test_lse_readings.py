@@ -91,3 +91,28 @@ def test_table4_marks_and_leaks(lse):
     assert "impossible ✗" in t and "undetermined" in t and "exact ✓" in t
     assert t.count("why the constant model fails.") == 2          # 200 sin and 5000 sin
     assert "d = 5000 sin(2πt), const. — <b class='eha-warn'>impossible</b>" in t
+
+
+def test_the_instrumental_variables_are_chosen_in_the_form_and_named_in_the_table(lse):
+    type_into(lse.form, lse_scenario="white noise", lse_estimator="iv")
+    lse.run()
+    res = lse.result
+    assert res.estimator == "iv" and res.intervals == "ewc" and res.success
+    t = lse.table.object
+    assert "Estimator: instrumental variables" in t and "equal-weighted cosine standard errors" in t
+    assert f"Student's t = {res.critical_value:.3g}" in t
+    type_into(lse.form, lse_estimator="ls")
+    assert lse.view.status != "current"                       # the estimator is an input of the run
+    lse.run()
+    assert lse.result.estimator == "ls" and "Newey-West" in lse.table.object
+
+
+def test_a_study_of_the_instrumental_variables():
+    from eha_app.session import Session
+    from eha_app.session.state import AppState
+
+    panel = Session(AppState()).build("study")
+    panel.form.values = {**panel.form.values, "study_seeds": "6", "study_estimator": "iv"}
+    panel.run()
+    assert panel.result.config.estimator == "iv" and panel.result.n_completed == 6
+    assert "bias / its std error" in panel.summary.object
