@@ -75,8 +75,8 @@ class Guide:
         on_click(hide, lambda _e: self.hide_start())
         self.start = pn.Column(
             pn.Row(pn.pane.HTML("<b>Three steps</b>, as in the paper's app (its Fig. 14): parameters, simulation, "
-                                "identification. Start with step 1; the line below the tabs' titles always "
-                                "says what comes next.", sizing_mode="stretch_width"), hide,
+                                "identification. Start with step 1; the line above the tabs always says "
+                                "where you are and what comes next.", sizing_mode="stretch_width"), hide,
                    sizing_mode="stretch_width"),
             pn.FlexBox(*cards, sizing_mode="stretch_width"),
             visible=start, sizing_mode="stretch_width", css_classes=["eha-start"],

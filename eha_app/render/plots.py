@@ -412,8 +412,9 @@ def frequency_view(fi, hidden=()) -> FrequencyView:
                   + ("" if fit_conditions(fi.config.initial_condition, fi.config.input_offset) == FIT_DEFINITION else
                      f" ({fit_conditions(fi.config.initial_condition, fi.config.input_offset)})"),
         theory_label=f"linearised H(s), eq. 24: fit {theo.fit_percent:.1f} %",
-        fit_title=(f"Fit = 100 (1 − ‖x − x̂‖ / ‖x − mean x‖) as MATLAB's compare computes it, {FIT_DEFINITION} "
-                   "for each model (as on the model board)."),
+        fit_title=(f"Estimated Ĥ(s): fit {e.fit_percent:.1f} %; linearised H(s) of eq. 24: fit "
+                   f"{theo.fit_percent:.1f} %. Fit = 100 (1 − ‖x − x̂‖ / ‖x − mean x‖) as MATLAB's compare "
+                   f"computes it, {FIT_DEFINITION} for each model (as on the model board)."),
         w=bode.w, est_db=bode.estimate.magnitude_db, est_deg=bode.estimate.phase_deg,
         theory_db=bode.theoretical.magnitude_db, theory_deg=bode.theoretical.phase_deg,
         data_w=np.asarray(bode.data_w), data_db=np.asarray(bode.data_magnitude_db), data_deg=bode.data_phase_deg,

@@ -41,10 +41,10 @@ FREQ_FORM = (
               options=(("sine", "sine"), ("rgs", "rgs"), ("rbs", "rbs"), ("prbs", "prbs")), short="idinput type",
               tip=GLOSSARY["idinput"]),
         Field("n_samples", "samples N", "integer", lo=20, hi=20000, short="N"),
-        Field("freq_seed", "seed", "integer", lo=0, hi=10**6, short="seed"),
     )),
     # folded at first: the run button stays in view at 1366 x 768 (the defaults are the paper's)
     Group("Excitation details", (
+        Field("freq_seed", "seed", "integer", lo=0, hi=10**6, short="seed"),
         Field("band_lo", "band low", "number", unit="× Nyquist", lo=0.0, hi=1.0, short="band low"),
         Field("band_hi", "band high", "number", unit="× Nyquist", lo=0.0, hi=1.0, short="band high"),
         Field("range_lo", "range min", "number", unit="m", short="range min"),
@@ -479,7 +479,7 @@ class FrequencyPanel(Section):
 
     def __panel__(self):
         inner = self.inner()
-        config = pn.Column(self.kp_note, self.form, self.error, self.button,
+        config = pn.Column(self.form, self.error, self.button, self.kp_note,
                            pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"),
                            *[c for s in inner for c in s.controls()], self.queue_note, width=280)
         results = pn.Column(self.alert, self.figure_tabs, self.views["summary"].banner, self.area,

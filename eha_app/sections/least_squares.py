@@ -238,6 +238,8 @@ class LeastSquaresPanel(Section):
             Field("own_to", "to t", "text", unit="s", placeholder="its end", short="to t"),
         )).to_spec()], values={"own_from": "", "own_to": ""}, width=270, visible=False,
             css_classes=["eha-lse-window"], margin=(5, 10))
+        # shown through a box: the form's own "visible" did not hide it when the page first drew it
+        self.window_box = pn.Column(self.window_form, visible=False, margin=0)
         watch(self.window_form, lambda _e: self._update_enabled(), "values")
         self.simulated_button = pn.widgets.Button(label="Back to simulated data", width=260, visible=False,
                                                   css_classes=["eha-lse-simulated"])
@@ -355,7 +357,7 @@ class LeastSquaresPanel(Section):
             self.own_data = measured
             self.own_data_key = (filename, len(data), tuple(sorted((mapping or {}).items())))
             self.mapping.visible = False
-            self.window_form.visible = True
+            self.window_box.visible = True
             self.simulated_button.visible = True
             self._update_enabled()          # the run waited for the columns
             self.upload_note.object = (f"<span class='eha-ok'>Using your data: {html.escape(filename)}, "
@@ -387,7 +389,7 @@ class LeastSquaresPanel(Section):
     def use_simulated(self) -> None:
         self.own_data, self.own_data_key, self._upload = None, None, None
         self.simulated_button.visible = False
-        self.window_form.visible = False
+        self.window_box.visible = False
         self.mapping.visible = False
         self.upload_note.object = "<span class='eha-note'>Using the simulated sensors again.</span>"
         self._update_enabled()
@@ -663,7 +665,7 @@ class LeastSquaresPanel(Section):
     def __panel__(self):
         # the run first, below its settings: in view at 1366 x 768; the student's own file after it
         controls = pn.Column(self.form, self.notice, self.button, self.all_button, self.handin_button, self.verdict,
-                             self.upload_note, self.upload, self.mapping, self.window_form, self.simulated_button,
+                             self.upload_note, self.upload, self.mapping, self.window_box, self.simulated_button,
                              pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"), self.queue_note, width=280)
         explain = pn.pane.HTML(
             "<p class='eha-note'>Least squares on eq. 15 filtered by H(s) = 1/(0.01 s + 1) (eqs. 16-18): "

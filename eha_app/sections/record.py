@@ -99,6 +99,8 @@ class RecordPanel(Section):
             download(lambda: bode_csv(self.result.bode, theoretical=False), "eha_record_bode.csv",
                      "Bode curves (CSV)", "eha-dl-record-bode", width=260),
         ]
+        # shown through a box: the form's own "visible" did not hide it when the page first drew it
+        self.window_box = pn.Column(self.window_form, visible=False, margin=0)
         watch(self.window_form, lambda _e: self.preview(), "values")
         watch(self.detrend, lambda _e: self.preview(), "value")
 
@@ -174,7 +176,7 @@ class RecordPanel(Section):
             self.note.object = (f"<span class='eha-ok'>Your record: {html.escape(name)}, {t.size} samples every "
                                 f"{ts * 1e3:.4g} ms, t from {t[0]:g} to {t[-1]:g} s.</span>")
             self.window_form.values = {"rec_from": "", "rec_to": ""}
-            self.window_form.visible = self.detrend.visible = True
+            self.window_box.visible = self.detrend.visible = True
             self.inputs_changed()           # a record is loaded: its button now, not when the drawing comes
             self.preview()
 
@@ -340,7 +342,7 @@ class RecordPanel(Section):
 
     # -- layout ------------------------------------------------------------------------------------
     def controls(self) -> list:
-        return [self.note, self.upload, self.mapping.panel, self.window_form, self.detrend, self.button,
+        return [self.note, self.upload, self.mapping.panel, self.window_box, self.detrend, self.button,
                 pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed")]
 
     def results(self) -> list:

@@ -150,7 +150,7 @@ def test_a_time_range_of_the_own_record(simulated):
     exported, estimates = simulated
     lse = Session(AppState()).build("least_squares")
     upload(lse, exported.data_bytes("csv"), "run.csv")
-    assert lse.window_form.visible
+    assert lse.window_box.visible
     lse.window_form.values = {"own_from": "1", "own_to": "4"}
     lse.run()
     assert lse.last_data.t[0] == pytest.approx(1.0) and lse.last_data.t[-1] == pytest.approx(4.0)
