@@ -296,7 +296,9 @@ def lse_table_html(res, scenario: str | None, hidden=(), *, alternative=None, le
             + (f", frequency {res.disturbance_freq_hz:.6g} Hz ({'estimated' if res.freq_estimated else 'given'})"
                if res.disturbance_freq_hz else "")
             + f". {_how_estimated(res)} (the prefilter colours the residual{compared}).</p>")
-    return (table_html(header, rows, cls="eha-table eha-lse-readings") + note
+    # eight columns: at 800 px the table scrolls in its own box, the page does not
+    return ("<div class='eha-table-scroll'>" + table_html(header, rows, cls="eha-table eha-lse-readings") + "</div>"
+            + note
             + (f"<ul class='eha-readings'>{items}</ul>" if items else ""))
 
 

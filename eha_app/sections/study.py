@@ -371,10 +371,11 @@ def study_summary_html(result) -> str:
                 + plots._swatch("nominal", "#333333", "dashed", width=2)
                 + plots._swatch("mean", plots.CASE_COLORS[1], width=2))
     out = (f"<p>Nominal values: {html.escape(result.reference)}.</p>"
-           "<table class='eha-table eha-study-table'><tr><th>parameter</th><th>nominal</th><th>mean</th>"
+           "<div class='eha-table-scroll'><table class='eha-table eha-study-table'>"
+           "<tr><th>parameter</th><th>nominal</th><th>mean</th>"
            "<th>bias (mean − nominal)</th><th>bias / its std error</th>"
            "<th>spread (std)</th><th>mean reported std error</th><th>95 % interval covered the truth</th></tr>"
-           + "".join(rows) + "</table>"
+           + "".join(rows) + "</table></div>"
            f"<p class='eha-note'>{done}. An honest 95 % interval covers the truth in {lo * 100:.1f}-"
            f"{hi * 100:.1f} % of {result.n_successful} seeds (binomial, 99 %): ✓ inside that range, ✗ outside. "
            "Where the spread is larger than the reported standard error, a single run's interval is too "

@@ -149,6 +149,18 @@ def test_10_at_800_px_every_sub_tab_header_is_in_view(open_page):
     assert page.evaluate("() => document.documentElement.scrollWidth") <= 800
 
 
+def test_10_at_800_px_the_results_scroll_in_their_own_boxes(open_page):
+    """The least squares' eight columns and the study's table: their box scrolls, never the page."""
+    page = open_page("tab=3&lse_scenario=5000%20sin&study_seeds=4", width=800, height=768)
+    _run_lse(page)
+    assert page.evaluate("() => document.documentElement.scrollWidth") <= 800
+    page.locator(".bk-tab", has_text="Study over seeds").first.click()
+    page.get_by_role("button", name="Run the study").click()
+    wait_until(lambda: "bias / its std error" in text_of(page, ".eha-study-summary"), 120, message="the study")
+    wait_until(lambda: page.evaluate("() => document.documentElement.scrollWidth") <= 800, 10,
+               message="the study within 800 px")
+
+
 def test_11_compare_both_over_four_cases_shows_one_case_at_a_time(open_page):
     page = open_page("tab=2")
     page.get_by_role("button", name="All four cases").click()
