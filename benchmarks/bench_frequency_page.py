@@ -36,8 +36,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-FIGURE_TABS = ("Fig. 8 excitation", "Fig. 9 closed-loop data", "Fig. 11 fit", "Fig. 12 Bode",
-               "Fig. 13 validation", "Residuals")
+FIGURE_TABS = ("Fig. 8", "Fig. 9", "Fig. 11", "Fig. 12 Bode", "Fig. 13", "Residuals")
 #: the figure whose canvas is watched, for each figure tab: (title starts with, or the y axis label)
 _WATCHED = {"Fig. 8": "Excitation", "Fig. 9": "Position x", "Fig. 11": "Measured and simulated",
             "Fig. 12": "Bode diagram", "Fig. 13": "Validation", "Residuals": "Residual autocorrelation"}

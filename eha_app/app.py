@@ -372,9 +372,12 @@ class Page(pn.viewable.Viewer):
                                                        css_classes=["eha-session-report-download"])
         on_click(self.report_button, lambda _e: self.prepare_report())
         watch(self.load, lambda _e: self._loaded(), "value")
-        return pn.Row(save, pn.pane.HTML("<span class='eha-note'>Load settings:</span>", margin=(12, 4, 0, 10)),
-                      self.load, self.report_name, self.report_button, self.report_download, note,
-                      sizing_mode="stretch_width", css_classes=["eha-settings-row"])
+        # a row that wraps: at 800 px its six parts do not fit one line, and a row that does not wrap
+        # widened the whole page (every table and tab header with it)
+        return pn.FlexBox(save, pn.pane.HTML("<span class='eha-note'>Load settings:</span>", margin=(12, 4, 0, 10)),
+                          self.load, self.report_name, self.report_button, self.report_download, note,
+                          flex_wrap="wrap", align_items="flex-start", sizing_mode="stretch_width",
+                          css_classes=["eha-settings-row"])
 
     def prepare_report(self):
         from .render.report import session_report

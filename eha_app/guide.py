@@ -87,8 +87,10 @@ class Guide:
         self.next = pn.widgets.Button(label="", width=300, button_type="primary",
                                       css_classes=["eha-guide-next"])
         on_click(self.next, lambda _e: self.go_next())
-        self.line = pn.Row(self.where, self.next, sizing_mode="stretch_width", css_classes=["eha-guide"],
-                           margin=(0, 0, 4, 0))
+        # wraps at 800 px (the button goes under the text) rather than widening the page
+        self.where.styles = {**self.where.styles, "flex": "1 1 380px"}
+        self.line = pn.FlexBox(self.where, self.next, flex_wrap="wrap", align_items="center",
+                               sizing_mode="stretch_width", css_classes=["eha-guide"], margin=(0, 0, 4, 0))
         self.show_step(self.current)
 
     def go(self, key: str) -> None:

@@ -24,7 +24,8 @@ CSS = """
 .eha-tf { display: flex; align-items: center; gap: 8px; margin: 4px 0; font-size: 15px; }
 .eha-frac { display: inline-flex; flex-direction: column; text-align: center; white-space: nowrap; }
 .eha-tf { overflow-x: auto; }
-.eha-table-scroll { overflow-x: auto; max-width: 100%; }
+/* a wide table scrolls in its own box: "width: 0; min-width: 100%" keeps it from widening the boxes around it */
+.eha-table-scroll { overflow-x: auto; width: 0; min-width: 100%; }
 .eha-table4 td { white-space: nowrap; }
 .eha-frac .eha-num { border-bottom: 1px solid #333; padding: 0 6px; }
 .eha-frac .eha-den { padding: 0 6px; }

@@ -151,11 +151,12 @@ def parse_freq(texts: dict, kp: float = _DEFAULT_CONFIG.kp) -> tuple[FrequencyEx
 
 
 
-_FIGURES = (("Fig. 8 excitation", "excitation", plots.ExcitationFigure),
-            ("Fig. 9 closed-loop data", "data", plots.ClosedLoopFigure),
-            ("Fig. 11 fit", "fit", plots.FitFigure),
+# short titles: the six fit beside the form at 800 px (each figure's own title says what it shows)
+_FIGURES = (("Fig. 8", "excitation", plots.ExcitationFigure),
+            ("Fig. 9", "data", plots.ClosedLoopFigure),
+            ("Fig. 11", "fit", plots.FitFigure),
             ("Fig. 12 Bode", "bode", plots.BodeFigure),
-            ("Fig. 13 validation", "validation", plots.ValidationFigure),
+            ("Fig. 13", "validation", plots.ValidationFigure),
             ("Residuals", "residuals", plots.ResidualFigure))
 
 

@@ -21,14 +21,25 @@ JS_BUTTON_BOX = """(label) => {
   return [r.left, r.top, r.right, r.bottom];
 }"""
 
-JS_TAB_BOXES = """(css) => {
-  const host = document.querySelector('.' + css);
-  const root = host && (host.shadowRoot || host);
-  if (!root) return null;
-  return Array.from(root.querySelectorAll('.bk-tab')).map(t => {
-    const r = t.getBoundingClientRect();
-    return [t.textContent.trim(), r.left, r.right, r.top, r.bottom];
-  });
+JS_WATCH_REPORT_LABEL = """() => {
+  // every label the report's button shows, polled every millisecond (a report of a short session is
+  // ready in ~100 ms: the "Preparing" label is short-lived); the button's element is redrawn when its
+  // label changes, so it is looked up in its widget's host each time
+  const find = (root) => {
+    for (const el of root.querySelectorAll('.eha-session-report')) return el;
+    for (const el of root.querySelectorAll('*')) if (el.shadowRoot) { const f = find(el.shadowRoot); if (f) return f; }
+    return null;
+  };
+  const host = find(document);
+  const label = () => {
+    const b = (host.shadowRoot || host).querySelector('button');
+    return b ? b.textContent.trim() : '';
+  };
+  window.__ehaLabels = [label()];
+  setInterval(() => {
+    const t = label();
+    if (t !== window.__ehaLabels.at(-1)) window.__ehaLabels.push(t);
+  }, 1);
 }"""
 
 
@@ -143,9 +154,11 @@ def test_10_at_800_px_every_sub_tab_header_is_in_view(open_page):
     page = open_page("tab=3", width=800, height=768)
     page.locator(".bk-tab", has_text="Frequency domain").first.click()
     page.wait_for_selector(".eha-freq-form", timeout=60_000)
-    wait_until(lambda: page.evaluate(JS_TAB_BOXES, "eha-freq-figures"), 20, message="the figure tabs")
-    for title, left, right, _top, _bottom in page.evaluate(JS_TAB_BOXES, "eha-freq-figures"):
-        assert left >= 0 and right <= 800, (title, left, right)
+    tabs = page.locator(".eha-freq-figures .bk-tab")
+    wait_until(lambda: tabs.count() == 6, 20, message="the figure tabs")
+    for k in range(tabs.count()):
+        box = tabs.nth(k).bounding_box()
+        assert box["x"] >= 0 and box["x"] + box["width"] <= 800, (tabs.nth(k).inner_text(), box)
     assert page.evaluate("() => document.documentElement.scrollWidth") <= 800
 
 
@@ -195,8 +208,11 @@ def test_13_the_report_shows_progress_at_once_and_names_the_student(open_page):
     page = open_page()
     page.locator(".eha-report-name input").fill("Ada")
     page.locator(".eha-report-name input").press("Tab")
+    page.evaluate(JS_WATCH_REPORT_LABEL)
     page.get_by_role("button", name="Report of this session").click()
-    page.wait_for_selector("button:has-text('Preparing the report')", timeout=2_000)
+    # at once: the button says it is working (its label comes back when the file is ready)
+    wait_until(lambda: any("Preparing the report" in t for t in page.evaluate("() => window.__ehaLabels")), 30,
+               message="the report's progress on its button")
     page.wait_for_selector("button:has-text('Download the report')", timeout=60_000)
     with page.expect_download() as dl:
         page.get_by_role("button", name=re.compile("Download the report")).click()
