@@ -30,9 +30,9 @@ JS_WATCH_REPORT_LABEL = """() => {
     for (const el of root.querySelectorAll('*')) if (el.shadowRoot) { const f = find(el.shadowRoot); if (f) return f; }
     return null;
   };
-  const host = find(document);
   const label = () => {
-    const b = (host.shadowRoot || host).querySelector('button');
+    const host = find(document);            // looked up each time: the page may redraw the row
+    const b = host && (host.shadowRoot || host).querySelector('button');
     return b ? b.textContent.trim() : '';
   };
   window.__ehaLabels = [label()];
@@ -206,13 +206,15 @@ def test_12_a_lab_file_is_guessed_and_waits_for_the_student(open_page, tmp_path)
 
 def test_13_the_report_shows_progress_at_once_and_names_the_student(open_page):
     page = open_page()
+    page.wait_for_selector(".eha-derived >> text=Transfer functions", timeout=60_000)     # tab 1 is drawn
     page.locator(".eha-report-name input").fill("Ada")
     page.locator(".eha-report-name input").press("Tab")
+    page.wait_for_timeout(500)          # (clicked in the same instant, the label's change was not seen)
     page.evaluate(JS_WATCH_REPORT_LABEL)
     page.get_by_role("button", name="Report of this session").click()
     # at once: the button says it is working (its label comes back when the file is ready)
     wait_until(lambda: any("Preparing the report" in t for t in page.evaluate("() => window.__ehaLabels")), 30,
-               message="the report's progress on its button")
+               message=f"the report's progress on its button (labels: {page.evaluate('() => window.__ehaLabels')})")
     page.wait_for_selector("button:has-text('Download the report')", timeout=60_000)
     with page.expect_download() as dl:
         page.get_by_role("button", name=re.compile("Download the report")).click()
