@@ -230,3 +230,41 @@ def test_14_the_study_speaks_the_apps_vocabulary(open_page):
     summary = text_of(page, ".eha-study-summary")
     assert "βe [Pa]" in summary and "beta_e" not in summary and not re.search(r"\d[eE][+-]\d", summary)
     assert "Histograms:" in summary
+
+
+def test_7_the_instrumental_variables_are_chosen_in_the_form(open_page):
+    page = open_page("tab=3&lse_scenario=white%20noise&lse_estimator=iv")
+    table = _run_lse(page)
+    assert "Estimator: instrumental variables" in table and "equal-weighted cosine" in table
+
+
+JS_HANDIN_TIP = """() => {
+  for (const doc of window.Bokeh.documents)
+    for (const m of doc.all_models)
+      if (m.label === 'Hand in these estimates') {
+        // Panel sends a button's description as a Tooltip model (its text in "content")
+        const d = m.tooltip;
+        if (d == null) return null;
+        const c = typeof d === 'string' ? d : d.content;
+        return c == null ? null : (typeof c === 'string' ? c : String(c.text || c));
+      }
+  return null;
+}"""
+
+
+def test_15_the_hand_in_tooltip_says_what_is_true_now(browser, tmp_path):
+    from tests.ui.test_exercise_in_browser import EhaServer, make_exercise, student_session
+
+    _ex, path = make_exercise(tmp_path)
+    server = EhaServer(tmp_path, "--exercise", path)
+    context, page = student_session(browser, server.url, "S7")
+    try:
+        page.locator(".bk-header .bk-tab", has_text="3. Identification").first.click()
+        wait_until(lambda: page.evaluate(JS_HANDIN_TIP) is not None, 30, message="the hand-in button")
+        assert page.evaluate(JS_HANDIN_TIP).startswith("run the least squares first")
+        _run_lse(page)
+        wait_until(lambda: (page.evaluate(JS_HANDIN_TIP) or "").startswith("hand in the estimates of M, B, Af, βe"),
+                   30, message=f"the tooltip after a run ({page.evaluate(JS_HANDIN_TIP)})")
+    finally:
+        context.close()
+        server.stop()
