@@ -33,7 +33,8 @@ GLOSSARY = {
     "poles": "the roots of the denominator: each gives a mode e^(pt) of the response; the model is stable when "
              "all lie left of the imaginary axis",
     "zeros": "the roots of the numerator; n_zeros must be below n_poles (a strictly proper model)",
-    "fit": "100 (1 − ‖y − ŷ‖ / ‖y − mean(y)‖) %, as MATLAB's compare computes it: 100 % is a perfect match, "
+    "fit": "100 (1 − ‖y − ŷ‖ / ‖y − mean(y)‖) %, as MATLAB's compare computes it, with the model's initial "
+           "state and a constant input offset fitted (unless its label says otherwise): 100 % is a perfect match, "
            "0 % no better than a constant",
     "idinput": "the excitation generator of MATLAB's System Identification Toolbox: random Gaussian (rgs), "
                "random binary (rbs), pseudo-random binary (prbs) or a sum of sinusoids (sine)",
