@@ -544,7 +544,8 @@ class SimulationTab(Section):
         options = ["all", *labels] if several else ["all"]
         if self.case_select.options != options:
             self.case_select.options = options
-        if several and self.case_select.value not in labels:
+        if several and (not self.case_select.visible or self.case_select.value not in options):
+            # one case at first; later runs keep the student's choice ("all" included)
             self.case_select.value = labels[0]      # (redraws through its watcher, then once more below)
         elif not several and self.case_select.value != "all":
             self.case_select.value = "all"

@@ -319,6 +319,8 @@ def test_compare_both_over_four_cases_shows_one_case_at_a_time():
     assert "Case 3 of" in tab.info.text and {sig[0] for sig in tab.grid._signature} == {"Case 3"}
     tab.case_select.value = "all"
     assert tab.info.text.startswith("<b>Case 1, Case 2, Case 3, Case 4</b>") and len(tab.grid._signature) == 8
+    tab.run("both")                                   # the student's choice stays for the next run
+    assert tab.case_select.value == "all" and len(tab.grid._signature) == 8
     tab.run("nonlinear")                              # Fig. 2: four traces, all shown
     assert not tab.case_select.visible and tab.case_select.value == "all"
     tab._apply_preset(3)

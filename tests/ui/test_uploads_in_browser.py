@@ -113,7 +113,7 @@ def test_a_record_is_mapped_cut_detrended_drawn_and_estimated(student, tmp_path)
         page.locator(".eha-dl-record-csv").get_by_role("button").first.click()
     estimate = open(download.value.path(), encoding="utf-8").read().splitlines()
     assert "lab.csv" in json.loads(_download_class(page, "eha-dl-record-json"))["settings"]["file"]
-    assert estimate[0].startswith("coefficient,of,power_of_s,value,std_error")
+    assert estimate[0].startswith("coefficient,of,power_of_s,unit,value,std_error")        # units named
     assert [line.split(",")[0] for line in estimate[1:4]] == ["a1", "a2", "a3"]
     if SHOTS:
         page.locator(".eha-freq-record-data").scroll_into_view_if_needed()
