@@ -32,14 +32,13 @@ from eha_core.board import (
     reference_models,
     validation_record,
 )
-from eha_core.param_table import FIELD_INFO
 
 from ..render import board_plots
 from ..render.layout import WRAP_TAB_HEADERS, side_by_side
 from ..runtime.tasks import on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot, stale_note
 from ..session.form import Field, Form, Group, parse_fields
-from ..session.freshness import ResultView
+from ..session.freshness import ResultView, param_changes
 
 __all__ = ["ModelBoard", "BOARD_FORM", "BOARD_DEFAULTS", "MAX_MODELS", "fit_table", "step_table"]
 
@@ -473,22 +472,6 @@ class BoardSnapshot:
     kp: float
 
 
-def actuator_change(before, now, limit: int = 3, hidden=()) -> str:
-    """What differs between two actuators, in the form's units: "M 4000 → 6000 kg" ("" when nothing
-    does); an exercise's ``hidden`` parameters are never named."""
-    changes = []
-    for name, info in FIELD_INFO.items():
-        a, b = getattr(before, name), getattr(now, name)
-        if a == b or name in hidden:
-            continue
-        def shown(v, info=info):
-            return "blank" if v is None else f"{v / info.display_scale:.5g}"
-        changes.append(f"{info.label or name} {shown(a)} → {shown(b)} {info.display_unit}")
-    if len(changes) > limit:
-        changes = changes[:limit] + [f"{len(changes) - limit} more"]
-    return ", ".join(changes)
-
-
 def fit_table(entries, record, fits, record_key, kp: float, hidden=()) -> str:
     """The fits of ``entries`` on the validation record, with the residual tests' verdicts; a model
     estimated on another actuator than the record's (tab 1 changed since) is marked and the change named."""
@@ -508,7 +491,7 @@ def fit_table(entries, record, fits, record_key, kp: float, hidden=()) -> str:
         made_on = getattr(e.model, "params", None)
         if made_on is not None and record_params is not None and made_on != record_params:
             moved += 1
-            change = actuator_change(made_on, record_params, hidden=hidden) or "hidden values"
+            change = param_changes(made_on, record_params, hidden=hidden) or "hidden values"
             verdicts = (f"<div class='eha-stale-note eha-board-other-actuator'>Estimated on another actuator "
                         f"({html.escape(change)}): this record is tab 1's "
                         "current one, so its fit compares the model with a plant it was not made from.</div>"

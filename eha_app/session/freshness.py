@@ -37,19 +37,35 @@ from collections.abc import Hashable
 
 import panel as pn
 
-__all__ = ["ResultView", "STATUS_CLASSES"]
+__all__ = ["ResultView", "STATUS_CLASSES", "param_changes"]
 
 #: the container's class for each status
 STATUS_CLASSES = {"empty": "eha-empty", "current": "eha-current", "updating": "eha-updating",
                   "stale": "eha-out-of-date"}
 
 
+def param_changes(before, after, *, limit: int = 3, hidden=()) -> str:
+    """What differs between two actuators, in tab 1's labels and units ("M 4000 → 6000 kg, and 2 more");
+    an exercise's ``hidden`` parameters are never named. Empty when nothing (shown) differs."""
+    from eha_core.params import FIELD_INFO
+
+    from .state import FIELD_LABELS
+
+    changed = [n for n in FIELD_INFO if n not in hidden and getattr(before, n) != getattr(after, n)]
+    parts = []
+    for n in changed[:limit]:
+        info = FIELD_INFO[n]
+        a, b = getattr(before, n), getattr(after, n)
+        a_text, b_text = (("force balance" if v is None else f"{v / info.display_scale:.6g}") for v in (a, b))
+        parts.append(f"{FIELD_LABELS.get(n, n)} {a_text} → {b_text} {info.display_unit}")
+    more = f" and {len(changed) - limit} more" if len(changed) > limit else ""
+    return ", ".join(parts) + more
+
+
 def _what_changed(old, new) -> str:
     """What differs between two keys, for a student: the parameters of tab 1 by name
     ("tab 1 changed since this run (M 4000 → 6000 kg)"), else the settings."""
-    from eha_core.params import FIELD_INFO, ActuatorParams
-
-    from .state import FIELD_LABELS
+    from eha_core.params import ActuatorParams
 
     def params_of(key):
         return key[0] if isinstance(key, tuple) and key and isinstance(key[0], ActuatorParams) else None
@@ -57,15 +73,7 @@ def _what_changed(old, new) -> str:
     before, after = params_of(old), params_of(new)
     if before is None or after is None or before == after:
         return "the settings changed since this run"
-    changed = [n for n in FIELD_INFO if getattr(before, n) != getattr(after, n)]
-    parts = []
-    for n in changed[:3]:
-        info = FIELD_INFO[n]
-        a, b = getattr(before, n), getattr(after, n)
-        a_text, b_text = (("force balance" if v is None else f"{v / info.display_scale:.6g}") for v in (a, b))
-        parts.append(f"{FIELD_LABELS.get(n, n)} {a_text} → {b_text} {info.display_unit}")
-    more = f" and {len(changed) - 3} more" if len(changed) > 3 else ""
-    return f"tab 1 changed since this run ({', '.join(parts)}{more})"
+    return f"tab 1 changed since this run ({param_changes(before, after)})"
 
 
 class ResultView:
