@@ -19,7 +19,7 @@ import panel as pn
 
 from . import sections as _sections  # noqa: F401 - registers the page's sections
 from .render.layout import WRAP_TAB_HEADERS
-from .render.tables import CSS
+from .render.tables import CSS, SYMBOLS_HTML
 from .runtime.connection import ConnectionWatch
 from .runtime.tasks import (
     SessionRunner,
@@ -151,8 +151,7 @@ class ExerciseGate:
     def __init__(self, exercise, handins, state: AppState, on_start: Callable[[], None]):
         self.exercise, self.handins, self.state, self.on_start = exercise, handins, state, on_start
         # the tables' symbols (β<sub>e</sub>, not beta_e)
-        symbols = {"Af": "A<sub>f</sub>", "beta_e": "β<sub>e</sub>", "d0": "d<sub>0</sub>"}
-        hidden = ", ".join(symbols.get(n, html.escape(n)) for n in exercise.hide)
+        hidden = ", ".join(SYMBOLS_HTML.get(n, html.escape(n)) for n in exercise.hide)
         self.intro = pn.pane.HTML(
             f"<h3>{html.escape(exercise.title)}</h3><p>Your actuator is your own: its {hidden} are hidden and "
             f"differ from the paper's by up to ±{100 * exercise.vary:g} %. Simulate it, identify it (tab 3) and hand "

@@ -40,7 +40,7 @@ from eha_core.simulate import runs_to_pandas
 
 from . import plots
 from .formatting import json_default, num_html, table_html
-from .tables import CSS, backout_html, derived_html, freq_summary_html, lse_table_html, table4_html
+from .tables import CSS, SYMBOLS_HTML, backout_html, derived_html, freq_summary_html, lse_table_html, table4_html
 
 __all__ = ["ReportResult", "build_report", "differences_from_paper", "SECTIONS"]
 
@@ -445,9 +445,6 @@ def components_alone(figures: dict):
     return components(figures, theme=None)
 
 
-_SYMBOL_HTML = {"Af": "A<sub>f</sub>", "beta_e": "β<sub>e</sub>", "d0": "d<sub>0</sub>"}
-
-
 def session_report(session, snapshot, author: str = "") -> bytes:
     """What this student ran, as one self-contained HTML file: every section's part, in page order
     (its settings, plots, estimates with intervals...), drawn from ``snapshot`` (taken under the
@@ -457,7 +454,7 @@ def session_report(session, snapshot, author: str = "") -> bytes:
     figures, parts = {}, []
     intro = f"<p>Student: <b>{html.escape(author)}</b>.</p>" if author else ""
     if snapshot.hidden:
-        names = ", ".join(_SYMBOL_HTML.get(n, html.escape(n)) for n in snapshot.hidden)
+        names = ", ".join(SYMBOLS_HTML.get(n, html.escape(n)) for n in snapshot.hidden)
         intro = (f"<p>Exercise <b>{html.escape(snapshot.exercise_title)}</b>, student "
                  f"<b>{html.escape(snapshot.student)}</b>; hidden: {names}.</p>")
     for section, part in session.report_sections(snapshot):

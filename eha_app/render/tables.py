@@ -17,7 +17,8 @@ from .formatting import num_html, pct_text, poles_html, table_html, tf_html
 from .glossary import term
 
 __all__ = ["CSS", "SCENARIOS", "derived_html", "lse_table_html", "table4_html", "freq_summary_html", "backout_html",
-           "estimate_alert", "estimation_sentences", "reading_mark", "readings_html", "paper_gaps", "open_loop_note"]
+           "estimate_alert", "estimation_sentences", "SYMBOLS_HTML", "UNITS",
+           "reading_mark", "readings_html", "paper_gaps", "open_loop_note"]
 
 #: Styles of the formulas and tables (the app's page and the report).
 CSS = """
@@ -54,9 +55,18 @@ abbr.eha-term { text-decoration: underline dotted; cursor: help; }
 
 SCENARIOS = {"none": "d = 0", "200 sin": "d = 200 sin(2πt)", "5000 sin": "d = 5000 sin(2πt)",
              "white noise": "white noise, σ = 1000 N", "custom": "custom"}
-_UNITS = {"M": "kg", "B": "N s/m", "Af": "N", "d0": "N", "d_sin": "N", "d_cos": "N", "beta_e": "Pa"}
-_NAMES = {"M": "M", "B": "B", "Af": "A<sub>f</sub>", "d0": "d<sub>0</sub>", "d_sin": "d<sub>sin</sub>",
-          "d_cos": "d<sub>cos</sub>", "beta_e": "β<sub>e</sub>"}
+#: The one spelling of every name the pages and reports show: tab 1's parameters, the estimates'
+#: harmonic amplitudes, Kp, and the transfer-function coefficients of the study (HTML).
+SYMBOLS_HTML = {"M": "M", "B": "B", "Af": "A<sub>f</sub>", "d0": "d<sub>0</sub>", "d_sin": "d<sub>sin</sub>",
+                "d_cos": "d<sub>cos</sub>", "beta_e": "β<sub>e</sub>", "Dc": "D<sub>c</sub>", "dc": "d<sub>c</sub>",
+                "L0": "L<sub>0</sub>", "Kq1": "K<sub>q1</sub>", "Kq2": "K<sub>q2</sub>", "ps": "p<sub>s</sub>",
+                "pr": "p<sub>r</sub>", "k_f": "k<sub>f</sub>", "x0": "x(0)", "v0": "v(0)", "p1_0": "p<sub>1</sub>(0)",
+                "p2_0": "p<sub>2</sub>(0)", "kp": "K<sub>p</sub>", "a1": "a<sub>1</sub>", "a2": "a<sub>2</sub>",
+                "a3": "a<sub>3</sub>", "b0": "b<sub>0</sub>"}
+#: The SI unit of each estimate the pages show (the transfer-function coefficients' too: r and x in m).
+UNITS = {"M": "kg", "B": "N s/m", "Af": "N", "d0": "N", "d_sin": "N", "d_cos": "N", "beta_e": "Pa",
+         "a1": "1/s", "a2": "1/s²", "a3": "1/s³", "b0": "1/s³"}
+_UNITS, _NAMES = UNITS, SYMBOLS_HTML
 
 
 def hidden_note(hidden) -> str:

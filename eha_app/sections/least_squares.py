@@ -35,6 +35,8 @@ from ..render.glossary import term
 from ..render.layout import side_by_side
 from ..render.tables import (
     SCENARIOS,
+    SYMBOLS_HTML,
+    UNITS,
     lse_table_html,
     table4_html,
 )
@@ -43,6 +45,7 @@ from ..runtime.tasks import apply_locked, on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot, stale_note
 from ..session.form import Field, Form, Group, parse_fields
 from ..session.freshness import ResultView
+from ..session.state import FIELD_LABELS
 from .uploads import ColumnMapping, FileUpload, check_size, download, upload_name
 
 __all__ = ["LeastSquaresPanel", "LseRequest", "LSE_FORM", "LSE_DEFAULTS", "parse_lse"]
@@ -51,11 +54,9 @@ __all__ = ["LeastSquaresPanel", "LseRequest", "LSE_FORM", "LSE_DEFAULTS", "parse
 LSE_COLUMNS = ("t", "x", "v", "p1", "p2", "u")
 
 
-_NAMES_HTML = {"M": "M", "B": "B", "Af": "A<sub>f</sub>", "beta_e": "β<sub>e</sub>"}
-_NAMES_PLAIN = {"Af": "Af", "beta_e": "βe"}
 #: The estimates' symbols and SI units in the exported files (the tables' vocabulary).
 _SYMBOLS = {"Af": "A_f", "d0": "d_0", "beta_e": "β_e", "d_sin": "d_sin", "d_cos": "d_cos"}
-_UNITS_SI = {"M": "kg", "B": "N s/m", "Af": "N", "d0": "N", "d_sin": "N", "d_cos": "N", "beta_e": "Pa"}
+
 EXCITATIONS = {"paper": "u = 6 sin(4πt), 5 s (default)",
                "rich": "u = 8 sin(4πt) + 4 sin(10πt), 20 s (narrows B)"}
 
@@ -414,7 +415,7 @@ class LeastSquaresPanel(Section):
         for k, v in res.estimates.items():
             lo, hi = res.ci95[k]
             nominal = None if k in self.state.hidden else res.nominal.get(k)
-            rows.append({"parameter": k, "symbol": _SYMBOLS.get(k, k), "unit": _UNITS_SI.get(k, ""),
+            rows.append({"parameter": k, "symbol": _SYMBOLS.get(k, k), "unit": UNITS.get(k, ""),
                          "estimate": float(v), "std_error": float(res.std_errors[k]),
                          "ci95_low": float(lo), "ci95_high": float(hi),
                          "nominal": None if nominal is None else float(nominal)})
@@ -443,7 +444,7 @@ class LeastSquaresPanel(Section):
         first" after a run)."""
         if not self.state.hidden:
             return
-        names = ", ".join(_NAMES_PLAIN.get(n, n) for n in self.state.hidden)
+        names = ", ".join(FIELD_LABELS.get(n, n) for n in self.state.hidden)
         if self.result is None:
             self.handin_button.disabled = True
             tip = "run the least squares first: the hand-in takes the estimates of its table"
@@ -616,7 +617,7 @@ class LeastSquaresPanel(Section):
         def show(out, _job):
             verdicts, count = out
             tol = f"±{100 * exercise.tolerance:g} %"
-            items = "".join(f"<li>{_NAMES_HTML.get(n, n)} = {estimates[n]:.5g}: "
+            items = "".join(f"<li>{SYMBOLS_HTML.get(n, n)} = {estimates[n]:.5g}: "
                             + (f"<span class='eha-ok'>within {tol} ✓</span>" if ok else
                                f"<span class='eha-warn'>not within {tol} ✗</span>") + "</li>"
                             for n, ok in verdicts.items())

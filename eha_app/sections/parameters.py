@@ -12,7 +12,7 @@ import panel as pn
 from eha_core.param_table import FIELD_INFO
 
 from ..render.layout import side_by_side
-from ..render.tables import derived_html
+from ..render.tables import SYMBOLS_HTML, derived_html
 from ..runtime.tasks import on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot
 from ..session.form import Field, Form, Group
@@ -26,11 +26,6 @@ SCHEMATIC_PATH = Path(__file__).resolve().parents[1] / "assets" / "eha_schematic
 
 #: the labels, one list for the form and its messages (AppState words them)
 _PLAIN = FIELD_LABELS
-#: The report's symbols (the form shows plain text: its labels are inputs' labels).
-_SYMBOLS_HTML = {"Af": "A<sub>f</sub>", "beta_e": "β<sub>e</sub>", "Dc": "D<sub>c</sub>", "dc": "d<sub>c</sub>",
-                 "d0": "d<sub>0</sub>", "L0": "L<sub>0</sub>", "Kq1": "K<sub>q1</sub>", "Kq2": "K<sub>q2</sub>",
-                 "ps": "p<sub>s</sub>", "pr": "p<sub>r</sub>", "k_f": "k<sub>f</sub>", "x0": "x(0)", "v0": "v(0)",
-                 "p1_0": "p<sub>1</sub>(0)", "p2_0": "p<sub>2</sub>(0)", "kp": "K<sub>p</sub>"}
 
 
 def _field(name: str) -> Field:
@@ -142,7 +137,7 @@ class ParametersTab(Section):
         for k, typed in snapshot.settings.items():
             info = FORM_FIELDS.get(k)
             unit = info.display_unit if info is not None else ""
-            label = _SYMBOLS_HTML.get(k, html.escape(FIELD_LABELS.get(k, k)))
+            label = SYMBOLS_HTML.get(k, html.escape(FIELD_LABELS.get(k, k)))
             shown = f"{html.escape(typed)} {unit}".strip() if typed.strip() else "(blank)"
             si = ""
             if params is not None and not errors and k in FIELD_INFO and k not in hidden:

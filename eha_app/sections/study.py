@@ -25,9 +25,11 @@ from eha_core.experiments import FrequencyExperiment
 from ..render import plots
 from ..render.formatting import num_html
 from ..render.layout import side_by_side
+from ..render.tables import SYMBOLS_HTML, UNITS
 from ..runtime.tasks import apply_locked, on_click, served_document, watch
 from ..session import ReportPart, Section, SectionSnapshot
 from ..session.form import Field, Form, Group, parse_fields
+from ..session.state import FIELD_LABELS
 
 __all__ = ["StudyPanel", "STUDY_FORM", "STUDY_DEFAULTS", "MAX_APP_SEEDS"]
 
@@ -62,17 +64,9 @@ _TF_ONLY = ("study_model", "study_noise")
 _PROGRESS_HZ = 8.0
 
 
-#: How the study names its parameters: HTML for the table, plain text for the figures (as on tab 1), and units.
-_HTML_NAMES = {"Af": "A<sub>f</sub>", "d0": "d<sub>0</sub>", "d_sin": "d<sub>sin</sub>", "d_cos": "d<sub>cos</sub>",
-               "beta_e": "β<sub>e</sub>", "a1": "a<sub>1</sub>", "a2": "a<sub>2</sub>", "a3": "a<sub>3</sub>",
-               "b0": "b<sub>0</sub>"}
-_PLAIN_NAMES = {"beta_e": "βe"}
-_UNITS = {"M": "kg", "B": "N s/m", "Af": "N", "d0": "N", "d_sin": "N", "d_cos": "N", "beta_e": "Pa",
-          "a1": "1/s", "a2": "1/s²", "a3": "1/s³", "b0": "1/s³"}
-
-
 def plain_name(name: str) -> str:
-    return _PLAIN_NAMES.get(name, name)
+    """A parameter as the figures' plain text names it: tab 1's label (βe), else its own name."""
+    return FIELD_LABELS.get(name, name)
 
 
 def study_hidden(texts: dict) -> list[str]:
@@ -136,9 +130,9 @@ class StudyFigure:
             else:
                 self.sources[name].data = {"left": [], "right": [], "top": []}
             fig.xaxis.axis_label = ("estimate − nominal [%]" if relative
-                                    else f"estimate − nominal [{_UNITS.get(name, '-')}]")
+                                    else f"estimate − nominal [{UNITS.get(name, '-')}]")
             cov = result.coverage.get(name, np.nan)
-            unit = " %" if relative else f" {_UNITS.get(name, '')}".rstrip()
+            unit = " %" if relative else f" {UNITS.get(name, '')}".rstrip()
             label = plain_name(name)
             fig.title.text = (f"{label}: mean {mean:+.3g}{unit}, spread {std:.3g}{unit}, covered "
                               f"{cov * 100:.0f} %" if shown.size else label)
@@ -360,8 +354,8 @@ def study_summary_html(result) -> str:
                        else f"<span class='eha-ok'>{t:+.1f}</span>")
         else:
             verdict = "—"
-        unit = _UNITS.get(n, "")
-        rows.append(f"<tr><td>{_HTML_NAMES.get(n, html.escape(n))}{f' [{unit}]' if unit else ''}</td>"
+        unit = UNITS.get(n, "")
+        rows.append(f"<tr><td>{SYMBOLS_HTML.get(n, html.escape(n))}{f' [{unit}]' if unit else ''}</td>"
                     f"<td>{_n(nom)}</td><td>{_n(result.mean[n])}</td><td>{_n(bias)}</td><td>{verdict}</td>"
                     f"<td>{_n(result.std[n], 3)}</td><td>{_n(result.mean_std_error[n], 3)}</td>"
                     f"<td>{cov * 100:.1f} % {'✓' if honest else '✗'}</td></tr>")

@@ -50,7 +50,7 @@ READING_KINDS = ("exact", "covers", "undetermined", "estimated", "misses", "impo
 
 _FORCES = ("d0", "d_sin", "d_cos")
 _SYMBOLS = {"M": "M", "B": "B", "Af": "Af", "d0": "d0", "d_sin": "d_sin", "d_cos": "d_cos", "beta_e": "β_e"}
-_UNITS = {"M": "kg", "B": "N s/m", "Af": "N", "d0": "N", "d_sin": "N", "d_cos": "N", "beta_e": "Pa"}
+_UNITS = {**{n: FIELD_INFO[n].unit for n in ("M", "B", "Af", "d0", "beta_e")}, "d_sin": "N", "d_cos": "N"}
 _PHYSICAL = {"M": "a mass", "B": "a viscous friction coefficient", "Af": "a Coulomb friction amplitude",
              "beta_e": "a bulk modulus"}
 
