@@ -87,13 +87,13 @@ __all__ = [
 _TOKEN = re.compile(r'"token"\s*:\s*"([^"]+)"')
 
 
-def wait_served(proc: subprocess.Popen, url: str, timeout: float, log_tail: Callable[[], str],
-                stop: Callable[[], None], poll_s: float = 0.2) -> None:
-    """Wait until ``eha serve`` (``proc``) answers ``url`` with 200; RuntimeError if it exits or does not
-    answer within ``timeout`` seconds (``stop()`` first)."""
+def wait_served(proc: subprocess.Popen | None, url: str, timeout: float, log_tail: Callable[[], str] = str,
+                stop: Callable[[], None] = lambda: None, poll_s: float = 0.2) -> None:
+    """Wait until ``eha serve`` (``proc``; None: a server not ours, nginx say) answers ``url`` with 200;
+    RuntimeError if it exits or does not answer within ``timeout`` seconds (``stop()`` first)."""
     deadline = time.monotonic() + timeout
     while True:
-        if proc.poll() is not None:
+        if proc is not None and proc.poll() is not None:
             raise RuntimeError(f"eha serve exited with {proc.returncode}: {log_tail()[-2000:]}")
         try:
             with urllib.request.urlopen(url, timeout=10) as r:

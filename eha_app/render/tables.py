@@ -9,7 +9,7 @@ import numpy as np
 
 from eha_core.experiments import PAPER_EQ25, PAPER_EQ26, PAPER_FIT_PERCENT, PAPER_TABLE3_BETA_E, PAPER_TABLE4
 from eha_core.identify.backout import open_loop_instability
-from eha_core.identify.lse_reading import read_all, read_estimate
+from eha_core.identify.lse_reading import read_all
 from eha_core.linear import linearize
 from eha_core.params import ActuatorParams
 
@@ -355,6 +355,8 @@ def table4_html(by_model: dict, leaks: dict | None = None, seed: int | None = No
     first = by_model[models[0]][scenarios[0]]
     header = ["parameter", "nominal"] + [SCENARIOS[s] for s in scenarios]
     short = {"constant": "const.", "harmonic": "harm."}
+    # each result read once, for its cells and for the notes under the table
+    readings = {(m, scen): read_all(by_model[m][scen]) for m in models for scen in scenarios}
     rows = []
     for k in names:
         nom = first.nominal[k]
@@ -366,7 +368,7 @@ def table4_html(by_model: dict, leaks: dict | None = None, seed: int | None = No
                 v = res.estimates[k]
                 rel = res.rel_error.get(k)
                 lo, hi = res.ci95[k]
-                mark = reading_mark(read_estimate(res, k))
+                mark = reading_mark(readings[m, scen][k])
                 lines.append(f"<span class='eha-t4-{m}'>{short[m]}: <b>{_num(v)}</b>"
                              + (f" ({pct_text(rel)})" if rel is not None else "")
                              + f"<br><small>[{_num(lo)}, {_num(hi)}]</small> {mark}</span>")
@@ -381,7 +383,7 @@ def table4_html(by_model: dict, leaks: dict | None = None, seed: int | None = No
         for m in models:
             res = by_model[m][scen]
             prefix = f"{SCENARIOS[scen]}, {short[m]} — "
-            items += readings_html([r for r in read_all(res).values() if r.kind != "exact"], prefix=prefix)
+            items += readings_html([r for r in readings[m, scen].values() if r.kind != "exact"], prefix=prefix)
             gaps = [g for g in paper_gaps(res, scen) if g in names]
             if gaps:
                 gap_rows.append(f"{SCENARIOS[scen]}, {short[m]}: {', '.join(_NAMES.get(g, g) for g in gaps)}")

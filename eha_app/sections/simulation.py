@@ -544,13 +544,17 @@ class SimulationTab(Section):
         options = ["all", *labels] if several else ["all"]
         if self.case_select.options != options:
             self.case_select.options = options
-        if several and (not self.case_select.visible or self.case_select.value not in options):
-            # one case at first; later runs keep the student's choice ("all" included)
-            self.case_select.value = labels[0]      # (redraws through its watcher, then once more below)
-        elif not several and self.case_select.value != "all":
-            self.case_select.value = "all"
+        # one case at first; later runs keep the student's choice ("all" included)
+        chosen = self.case_select.value
+        if several and (not self.case_select.visible or chosen not in options):
+            chosen = labels[0]
+        elif not several:
+            chosen = "all"
         self.case_select.visible = several
-        self._draw()
+        if chosen != self.case_select.value:
+            self.case_select.value = chosen         # its watcher draws
+        else:
+            self._draw()
         failed = [r for r in results if not r.success]
         if failed:
             self.alert.object = "; ".join(f"{r.label} ({r.model}): {r.message}" for r in failed)

@@ -346,8 +346,7 @@ def study_summary_html(result) -> str:
         honest = p_lo <= cov <= p_hi
         # the bias against its own (Monte Carlo) standard error, the core's test at 99 %: beyond it the
         # estimator is biased, not unlucky
-        bias = result.bias.get(n, result.mean[n] - nom) if hasattr(result, "bias") else result.mean[n] - nom
-        err = getattr(result, "bias_std_error", {}).get(n, np.nan)
+        bias, err = result.bias.get(n, np.nan), result.bias_std_error.get(n, np.nan)
         t = bias / err if np.isfinite(err) and err > 0 else np.nan
         if np.isfinite(t):
             verdict = (f"<span class='eha-warn'>{t:+.1f} biased</span>" if result.biased(n)

@@ -10,13 +10,11 @@ from __future__ import annotations
 import socket
 import subprocess
 import sys
-import time
-import urllib.request
 from pathlib import Path
 
 import pytest
 
-from benchmarks.classroom_client import stop_server
+from benchmarks.classroom_client import stop_server, wait_served
 
 ROOT = Path(__file__).resolve().parents[2]
 EHA = Path(sys.executable).with_name("eha")
@@ -29,19 +27,11 @@ def free_port() -> int:
 
 
 def wait_http(url: str, proc=None, timeout: float = 120.0) -> None:
-    deadline = time.monotonic() + timeout
-    while True:
-        if proc is not None and proc.poll() is not None:
-            pytest.fail(f"the server exited with code {proc.returncode}")
-        try:
-            with urllib.request.urlopen(url, timeout=5) as r:
-                if r.status == 200:
-                    return
-        except OSError:
-            pass
-        if time.monotonic() > deadline:
-            pytest.fail(f"{url} did not answer within {timeout:g} s")
-        time.sleep(0.2)
+    """The benchmarks' wait for a server (:func:`benchmarks.classroom_client.wait_served`), failing the test."""
+    try:
+        wait_served(proc, url, timeout)
+    except RuntimeError as exc:
+        pytest.fail(str(exc))
 
 
 class EhaServer:
