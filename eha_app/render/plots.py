@@ -126,10 +126,11 @@ def _figure(**kwargs):
     return fig
 
 
-def _legend_above(fig, items) -> Legend:
-    """A horizontal legend above the plot area: never over the data."""
+def _legend_above(fig, items, ncols: str | int = "auto") -> Legend:
+    """A horizontal legend above the plot area: never over the data (``ncols=2``: long labels on two
+    rows, so that the legend does not widen a narrow page)."""
     legend = Legend(items=items, orientation="horizontal", location="top_left", click_policy="none",
-                    margin=0, padding=2, spacing=14, border_line_alpha=0, background_fill_alpha=0)
+                    margin=0, padding=2, spacing=14, border_line_alpha=0, background_fill_alpha=0, ncols=ncols)
     fig.add_layout(legend, "above")
     return legend
 
@@ -505,7 +506,7 @@ class FitFigure:
         self.items = [LegendItem(label="measured (nonlinear model in the loop)", renderers=[r0]),
                       LegendItem(label="estimated H(s)", renderers=[r1]),
                       LegendItem(label="linearised H(s), eq. 24", renderers=[r2])]
-        _legend_above(self.fig, self.items)
+        _legend_above(self.fig, self.items, ncols=2)       # three long labels: 668 px on one row
         self.note = Div(text="", sizing_mode="stretch_width", css_classes=["eha-fit-note"],
                         styles={"font-size": "12px", "color": "#555"})
         _lean(self.fig)
@@ -546,7 +547,7 @@ class BodeFigure:
         self.data_item = LegendItem(label="the data", renderers=[r3, r4])
         self.theory_item = LegendItem(label="linearised H(s), eq. 24", renderers=[r2])
         _legend_above(self.mag, [LegendItem(label="estimated H(s)", renderers=[r1]), self.theory_item,
-                                 self.data_item])
+                                 self.data_item], ncols=2)          # (861 px on one row at 800 px)
         self.note = Div(text="", sizing_mode="stretch_width", css_classes=["eha-bode-note"],
                         styles={"font-size": "12px", "color": "#555"})
         _lean(self.mag, self.phase)
