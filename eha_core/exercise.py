@@ -1,50 +1,89 @@
 """A class exercise: every student identifies an actuator of their own, with some parameters hidden.
 
 The teacher's exercise file holds a secret and the rules: which parameters are
-hidden, how far each student's actuator varies around the paper's values, and
-the tolerance for a correct answer. A student's actuator is derived from the
-secret and the student's id (HMAC-SHA256): the same id always gets the same
-actuator, different ids different ones, and only the holder of the secret can
-compute any of them. The file is read only by the server and the teacher's
-command line; a verdict says within tolerance or not, never the true value.
+hidden, how far each student's actuator varies around the paper's values, the
+tolerance of a correct answer per parameter, the conditions of the experiment
+(sensor noise floors, a disturbance the students cannot remove, the signals
+measured, the record's limits, the methods allowed), the deadline, the number
+of hand-ins and what a student is told after one.
+
+A student's actuator is derived from the secret and the student's id
+(HMAC-SHA256): the same id always gets the same actuator, different ids
+different ones, and only the holder of the secret can compute any of them.
+
+With a roster (``roster=[(id, name), ...]``) every student has a join code of
+their own: ten characters drawn from the secret and a random nonce (so not
+derivable from the id, and printable again by the teacher with the file); the
+file keeps only the code's hash, which is all the server compares. Without a
+roster the exercise is open: any id typed is taken as given (the teacher is
+told so).
+
+The file is read only by the server and the teacher's command line; a verdict
+says within tolerance or not, never the true value.
 
 Examples
 --------
->>> ex = Exercise.new(hide=("M", "B"), vary=0.25, tolerance=0.05, title="Lab 3", secret="00" * 32)
->>> p = ex.student_params("ada")
->>> p == ex.student_params(" Ada ")            # ids are compared without case and spaces
-True
+>>> ex = Exercise.new(hide=("M", "B"), vary=0.25, tolerance=0.05, title="Lab 3", secret="00" * 32,
+...                   roster=[("s1", "Ada Lovelace"), ("s2", "Alan Turing")])
+>>> p = ex.student_params("s1")
 >>> 0.75 * 4000 <= p.M <= 1.25 * 4000 and p.Af == 3000.0
 True
->>> ex.verdicts("ada", {"M": p.M * 1.04, "B": p.B * 0.5})
+>>> ex.verdicts("s1", {"M": p.M * 1.04, "B": p.B * 0.5})
 {'M': True, 'B': False}
->>> "00" * 16 in repr(ex)                      # the secret is not in its repr
+>>> code = ex.join_code("s1")
+>>> len(code), ex.entry_for_code(code.lower().replace("-", " ")).name
+(11, 'Ada Lovelace')
+>>> ex.entry_for_code("AAAAA-AAAAA") is None            # a wrong code names no one
+True
+>>> "00" * 16 in repr(ex) or code in ex.to_json()       # neither the secret in its repr nor a code in the file
 False
 """
 
 from __future__ import annotations
 
+import csv
 import dataclasses
+import datetime as _dt
 import hashlib
 import hmac
+import io
 import json
 import math
 import secrets
 import time
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ._checks import not_allowed
+from .param_table import FIELD_INFO
 from .params import ActuatorParams
 
-__all__ = ["Exercise", "HIDEABLE", "normalize_id", "MAX_VARY", "MAX_ID_LENGTH"]
+__all__ = ["Exercise", "Conditions", "RosterEntry", "HIDEABLE", "SIGNALS", "METHODS", "FEEDBACK", "SCORE_RULES",
+           "normalize_id", "normalize_code", "parse_deadline", "read_roster", "MAX_VARY", "MAX_ID_LENGTH"]
 
-#: The parameters an exercise may hide: the ones the least squares estimate (eqs. 15-18).
-HIDEABLE = ("M", "B", "Af", "beta_e")
+#: Every parameter of the actuator may be hidden (the blank-able p2(0) aside: it follows from the force balance).
+HIDEABLE = tuple(n for n in FIELD_INFO if n != "p2_0")
+#: A parameter whose paper value is 0 varies additively, by ``vary`` times this scale (SI).
+_ADDITIVE_SCALE = {"d0": 2000.0, "pr": 1e6, "x0": 0.05, "v0": 0.01}
 #: How far a student's actuator may vary around the paper's values (a fraction).
 MAX_VARY = 0.5
 MAX_ID_LENGTH = 64
-_FORMAT = "eha-exercise/1"
+MAX_ROSTER = 2000
+#: The measured signals (SI units) an exercise may put a noise floor on or leave out.
+SIGNALS = {"x": "m", "v": "m/s", "p1": "Pa", "p2": "Pa"}
+#: The routes a student can hand in from.
+METHODS = {"lse": "least squares (tab 3, time domain)", "frequency": "transfer function and back-out (tab 3, "
+           "frequency domain)", "greybox": "grey-box identification (tab 3)"}
+FEEDBACK = {"verdict": "within tolerance or not, after every hand-in",
+            "none": "only that the hand-in was stored",
+            "after-deadline": "the verdicts once the deadline has passed"}
+SCORE_RULES = ("best", "last")
+_FORMATS = ("eha-exercise/1", "eha-exercise/2")
+_FORMAT = _FORMATS[-1]
+#: Join codes: ten characters of an alphabet without look-alikes (0/O, 1/I/L), about 50 bits.
+_CODE_ALPHABET = "23456789ABCDEFGHJKMNPQRSTUVWXYZ"
+_CODE_LENGTH = 10
 
 
 def normalize_id(student_id: str) -> str:
@@ -68,9 +107,186 @@ def normalize_id(student_id: str) -> str:
     return text
 
 
+def normalize_code(code: str) -> str:
+    """A join code as typed, reduced to its characters: upper case, no spaces or dashes
+    (``"abcde-fghjk"`` and ``"ABCDEFGHJK"`` are the same code).
+
+    >>> normalize_code(" k7m2p-q9rst ")
+    'K7M2PQ9RST'
+    """
+    return "".join(ch for ch in str(code).upper() if ch.isalnum())[:4 * _CODE_LENGTH]
+
+
+def _code_hash(code: str) -> str:
+    return hashlib.sha256(("eha-join\0" + normalize_code(code)).encode()).hexdigest()
+
+
+def parse_deadline(text: str, name: str = "deadline") -> str:
+    """An ISO-8601 date and time, kept as typed once checked (no zone: the server's local time).
+
+    >>> parse_deadline("2026-12-01T17:00")
+    '2026-12-01T17:00'
+    >>> parse_deadline("next friday")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    eha_core._checks.FieldError: deadline = next friday is not allowed: give an ISO-8601 date and time, ...
+    """
+    text = str(text).strip()
+    try:
+        _dt.datetime.fromisoformat(text)
+    except ValueError:
+        raise not_allowed(name, text, "give an ISO-8601 date and time, e.g. 2026-12-01T17:00 or "
+                                      "2026-12-01T17:00+01:00") from None
+    return text
+
+
+def _as_utc(text: str) -> float:
+    """The deadline as a POSIX time (a zone-less one in the server's local time)."""
+    when = _dt.datetime.fromisoformat(text)
+    if when.tzinfo is None:
+        when = when.astimezone()
+    return when.timestamp()
+
+
+@dataclass(frozen=True)
+class RosterEntry:
+    """One student of the roster: the id the results carry, the name the page shows, the nonce
+    their code is drawn from and the code's hash (the code itself is not stored)."""
+
+    id: str
+    name: str
+    nonce: str
+    code_hash: str
+
+
+def read_roster(text: str, name: str = "roster") -> list[tuple[str, str]]:
+    """``(id, name)`` pairs of a CSV roster with columns ``id`` and ``name`` (more are ignored).
+
+    >>> read_roster("id,name,email\\ns1,Ada Lovelace,a@x\\n S2 ,Alan Turing,\\n")
+    [('s1', 'Ada Lovelace'), ('s2', 'Alan Turing')]
+    """
+    rows = list(csv.reader(io.StringIO(text.lstrip("\ufeff"))))
+    if not rows:
+        raise not_allowed(name, "(empty)", "a CSV file with the columns id and name, one student per line")
+    header = [h.strip().lower() for h in rows[0]]
+    if "id" not in header or "name" not in header:
+        raise not_allowed(name, ",".join(rows[0])[:60], "the first line must name the columns id and name")
+    i, j = header.index("id"), header.index("name")
+    out, seen = [], {}
+    for line, row in enumerate(rows[1:], start=2):
+        if not any(c.strip() for c in row):
+            continue
+        if len(row) <= max(i, j):
+            raise not_allowed(name, ",".join(row)[:60], f"line {line} has no {'id' if len(row) <= i else 'name'}")
+        try:
+            sid = normalize_id(row[i])
+        except ValueError as exc:
+            raise not_allowed(name, row[i][:40], f"line {line}: {exc}") from None
+        student_name = " ".join(row[j].split())
+        if not student_name or not student_name.isprintable() or len(student_name) > 120:
+            raise not_allowed(name, student_name[:40] or "(blank)", f"line {line}: a name of 1-120 printable "
+                                                                    "characters")
+        if sid in seen:
+            raise not_allowed(name, sid, f"line {line} repeats the id of line {seen[sid]}; every id once")
+        seen[sid] = line
+        out.append((sid, student_name))
+    if not out:
+        raise not_allowed(name, "(no students)", "at least one line with an id and a name")
+    if len(out) > MAX_ROSTER:
+        raise not_allowed(name, f"{len(out)} students", f"at most {MAX_ROSTER}")
+    return out
+
+
+@dataclass(frozen=True)
+class Conditions:
+    """What the student cannot change: the experiment's conditions.
+
+    ``noise``: σ per measured signal in SI (a floor: the student may raise it, not lower it);
+    ``disturbance``: a load force d(t) in the app's signal grammar added to whatever the
+    student simulates; ``measured``: the signals the student's sensors give (the others are
+    not in their records); ``max_record_s`` and ``min_ts_s``: the longest record and the
+    shortest sample time; ``methods``: the routes a hand-in may come from.
+    """
+
+    noise: Mapping[str, float] = field(default_factory=lambda: {"x": 1e-5, "v": 1e-3, "p1": 5e4, "p2": 5e4})
+    disturbance: str = "none"
+    measured: tuple[str, ...] = ("x", "v", "p1", "p2")
+    max_record_s: float = 60.0
+    min_ts_s: float = 1e-3
+    methods: tuple[str, ...] = ("lse", "frequency", "greybox")
+
+    def __post_init__(self):
+        for k, s in dict(self.noise).items():
+            if k not in SIGNALS:
+                raise not_allowed("noise", k, f"name a signal of {', '.join(SIGNALS)}")
+            if not (math.isfinite(float(s)) and float(s) >= 0):
+                raise not_allowed("noise", f"{k}={s}", f"σ of {k} must be a number ≥ 0 {SIGNALS[k]}")
+        for k in self.measured:
+            if k not in SIGNALS:
+                raise not_allowed("measured", ",".join(self.measured), f"{k} is not a signal; use {', '.join(SIGNALS)}")
+        if "x" not in self.measured:
+            raise not_allowed("measured", ",".join(self.measured), "the position x must be measured (every method "
+                                                                   "needs it)")
+        if not self.methods or any(m not in METHODS for m in self.methods):
+            raise not_allowed("methods", ",".join(self.methods), f"name at least one of {', '.join(METHODS)}")
+        if not (math.isfinite(self.max_record_s) and 1.0 <= self.max_record_s <= 3600.0):
+            raise not_allowed("max record", f"{self.max_record_s:g} s", "must lie in [1, 3600] s")
+        if not (math.isfinite(self.min_ts_s) and 1e-4 <= self.min_ts_s <= 0.1):
+            raise not_allowed("min Ts", f"{1e3 * self.min_ts_s:g} ms", "must lie in [0.1, 100] ms")
+        object.__setattr__(self, "noise", {k: float(v) for k, v in dict(self.noise).items()})
+        object.__setattr__(self, "measured", tuple(self.measured))
+        object.__setattr__(self, "methods", tuple(self.methods))
+
+    def noise_floor(self, signal: str) -> float:
+        """The σ (SI) a student's record of ``signal`` has at least."""
+        return float(self.noise.get(signal, 0.0))
+
+    def lse_refusal(self) -> str | None:
+        """Why the least squares cannot run under these conditions (None: they can)."""
+        if "lse" not in self.methods:
+            return "this exercise does not use the least squares"
+        missing = [s for s in ("p1", "p2") if s not in self.measured]
+        if missing:
+            return (f"the least squares need {' and '.join(missing)}, which this exercise does not measure; use "
+                    "the frequency domain")
+        return None
+
+    def describe(self) -> str:
+        """One line for the student's page and the teacher's table."""
+        shown = {"x": ("mm", 1e-3), "v": ("mm/s", 1e-3), "p1": ("MPa", 1e6), "p2": ("MPa", 1e6)}
+        noise = ", ".join(f"σ {k} ≥ {v / shown[k][1]:g} {shown[k][0]}" for k, v in self.noise.items() if v > 0)
+        parts = [f"sensor noise {noise}" if noise else "no sensor noise"]
+        if self.disturbance.strip().lower() not in ("", "none"):
+            parts.append(f"a load disturbance d(t) = {self.disturbance} always acts")
+        if tuple(self.measured) != tuple(SIGNALS):
+            parts.append(f"measured: {', '.join(self.measured)} only")
+        parts.append(f"records up to {self.max_record_s:g} s, Ts ≥ {1e3 * self.min_ts_s:g} ms")
+        parts.append(f"hand in from: {', '.join(METHODS[m].split(' (')[0] for m in self.methods)}")
+        return "; ".join(parts)
+
+    def to_dict(self) -> dict:
+        return {"noise": dict(self.noise), "disturbance": self.disturbance, "measured": list(self.measured),
+                "max_record_s": self.max_record_s, "min_ts_s": self.min_ts_s, "methods": list(self.methods)}
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> Conditions:
+        return cls(noise=dict(data.get("noise", {})), disturbance=str(data.get("disturbance", "none")),
+                   measured=tuple(data.get("measured", tuple(SIGNALS))),
+                   max_record_s=float(data.get("max_record_s", 60.0)), min_ts_s=float(data.get("min_ts_s", 1e-3)),
+                   methods=tuple(data.get("methods", tuple(METHODS))))
+
+
+#: The conditions of an exercise file of format 1 (before conditions existed): none.
+_NO_CONDITIONS = {"noise": {}, "disturbance": "none"}
+
+
 @dataclass(frozen=True)
 class Exercise:
-    """The rules of an exercise and its secret (``secret``: 64 hex digits; never shown to students)."""
+    """The rules of an exercise and its secret (``secret``: 64 hex digits; never shown to students).
+
+    ``tolerance`` is the relative error of a correct answer; ``tolerances`` overrides it per
+    parameter. ``attempts`` = 0: no limit. ``deadline``: ISO-8601 or "" (none).
+    """
 
     hide: tuple[str, ...]
     vary: float
@@ -78,20 +294,33 @@ class Exercise:
     title: str
     secret: str = dataclasses.field(repr=False)       # never in a log line or a traceback
     created: str = ""
+    tolerances: Mapping[str, float] = field(default_factory=dict)
+    conditions: Conditions = field(default_factory=Conditions)
+    deadline: str = ""
+    attempts: int = 0
+    feedback: str = "verdict"
+    score_rule: str = "best"
+    roster: tuple[RosterEntry, ...] = field(default=(), repr=False)
 
     def __post_init__(self):
         if not self.hide:
             raise not_allowed("hide", "", f"name at least one of {', '.join(HIDEABLE)}")
         for name in self.hide:
             if name not in HIDEABLE:
-                raise not_allowed("hide", ",".join(self.hide), f"{name} cannot be hidden; use {', '.join(HIDEABLE)} "
-                                  "(the parameters the least squares estimate)")
+                raise not_allowed("hide", ",".join(self.hide), f"{name} cannot be hidden; use any of "
+                                                               f"{', '.join(HIDEABLE)}")
         if len(set(self.hide)) != len(self.hide):
             raise not_allowed("hide", ",".join(self.hide), "name each parameter once")
         if not (math.isfinite(self.vary) and 0 <= self.vary <= MAX_VARY):
             raise not_allowed("vary", f"{100 * self.vary:g} %", f"must lie in [0, {100 * MAX_VARY:g}] %")
-        if not (math.isfinite(self.tolerance) and 0 < self.tolerance < 1):
-            raise not_allowed("tolerance", f"{100 * self.tolerance:g} %", "must lie in (0, 100) %")
+        for name, tol in {"": self.tolerance, **dict(self.tolerances)}.items():
+            if name and name not in self.hide:
+                raise not_allowed("tolerance", f"{name}={100 * tol:g}%", f"{name} is not hidden; give tolerances "
+                                                                         f"of {', '.join(self.hide)}")
+            if not (math.isfinite(tol) and 0 < tol < 1):
+                raise not_allowed("tolerance", f"{(name + '=') if name else ''}{100 * tol:g} %",
+                                  "must lie in (0, 100) %")
+        self._check_rules()
         try:
             ok = len(bytes.fromhex(self.secret)) >= 16
         except ValueError:
@@ -99,17 +328,53 @@ class Exercise:
         if not ok:
             raise not_allowed("secret", "(the file's secret)", "must be at least 32 hex digits: "
                               "make a new exercise file with `eha exercise new`")
+        object.__setattr__(self, "tolerances", {k: float(v) for k, v in dict(self.tolerances).items()})
+        ids = [e.id for e in self.roster]
+        if len(set(ids)) != len(ids):
+            raise not_allowed("roster", "(repeated id)", "every id once")
+
+    def _check_rules(self) -> None:
+        if self.deadline:
+            parse_deadline(self.deadline)
+        if not (isinstance(self.attempts, int) and 0 <= self.attempts <= 1000):
+            raise not_allowed("attempts", self.attempts, "a whole number of hand-ins in 0-1000 (0: no limit)")
+        if self.feedback not in FEEDBACK:
+            raise not_allowed("feedback", self.feedback, f"use {', '.join(FEEDBACK)}")
+        if self.score_rule not in SCORE_RULES:
+            raise not_allowed("score", self.score_rule, f"use {' or '.join(SCORE_RULES)}")
 
     # -- making, reading, writing --------------------------------------------------------
     @classmethod
-    def new(cls, hide, vary: float = 0.25, tolerance: float = 0.05, title: str = "EHA identification exercise",
-            secret: str | None = None) -> Exercise:
-        """A new exercise with a fresh random secret (``secrets.token_hex``)."""
-        return cls(hide=tuple(hide), vary=float(vary), tolerance=float(tolerance), title=str(title),
-                   secret=secret or secrets.token_hex(32), created=time.strftime("%Y-%m-%dT%H:%M:%S"))
+    def new(cls, hide, vary: float = 0.25, tolerance: float | Mapping[str, float] = 0.05,
+            title: str = "EHA identification exercise", secret: str | None = None, *,
+            roster: Iterable[tuple[str, str]] | None = None, conditions: Conditions | None = None,
+            deadline: str = "", attempts: int = 0, feedback: str = "verdict", score_rule: str = "best") -> Exercise:
+        """A new exercise with a fresh random secret (``secrets.token_hex``) and, with a roster,
+        a join code per student (see :meth:`join_code`)."""
+        secret = secret or secrets.token_hex(32)
+        if isinstance(tolerance, Mapping):
+            tolerances, default = dict(tolerance), 0.05
+        else:
+            tolerances, default = {}, float(tolerance)
+        entries = []
+        for sid, name in roster or ():
+            nonce = secrets.token_hex(8)
+            entries.append(RosterEntry(normalize_id(sid), str(name), nonce,
+                                       _code_hash(_derive_code(secret, nonce))))
+        return cls(hide=tuple(hide), vary=float(vary), tolerance=default, title=str(title), secret=secret,
+                   created=time.strftime("%Y-%m-%dT%H:%M:%S"), tolerances=tolerances,
+                   conditions=conditions if conditions is not None else Conditions(), deadline=deadline,
+                   attempts=int(attempts), feedback=feedback, score_rule=score_rule, roster=tuple(entries))
+
+    def replace(self, **changes) -> Exercise:
+        return dataclasses.replace(self, **changes)
 
     def to_json(self) -> str:
-        return json.dumps({"format": _FORMAT, **dataclasses.asdict(self)}, indent=1)
+        data = {"format": _FORMAT, **{f.name: getattr(self, f.name) for f in dataclasses.fields(self)}}
+        data["conditions"] = self.conditions.to_dict()
+        data["roster"] = [dataclasses.asdict(e) for e in self.roster]
+        data["hide"] = list(self.hide)
+        return json.dumps(data, indent=1, ensure_ascii=False)
 
     @classmethod
     def from_json(cls, text: str, name: str = "exercise file") -> Exercise:
@@ -117,14 +382,19 @@ class Exercise:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise not_allowed(name, "(not JSON)", f"line {exc.lineno}: {exc.msg}") from None
-        if not isinstance(data, dict) or data.get("format") != _FORMAT:
+        if not isinstance(data, dict) or data.get("format") not in _FORMATS:
             raise not_allowed(name, "(no exercise)", f"not an exercise file (format {_FORMAT!r} expected); "
                               "make one with `eha exercise new`")
         try:
+            conditions = Conditions.from_dict(data["conditions"] if "conditions" in data else _NO_CONDITIONS)
             return cls(hide=tuple(data["hide"]), vary=float(data["vary"]), tolerance=float(data["tolerance"]),
                        title=str(data.get("title", "")), secret=str(data["secret"]),
-                       created=str(data.get("created", "")))
-        except (KeyError, TypeError) as exc:
+                       created=str(data.get("created", "")), tolerances=dict(data.get("tolerances", {})),
+                       conditions=conditions, deadline=str(data.get("deadline", "")),
+                       attempts=int(data.get("attempts", 0)), feedback=str(data.get("feedback", "verdict")),
+                       score_rule=str(data.get("score_rule", "best")),
+                       roster=tuple(RosterEntry(**e) for e in data.get("roster", ())))
+        except (KeyError, TypeError, AttributeError) as exc:
             raise not_allowed(name, "(incomplete)", f"missing or wrong field {exc}") from None
 
     @classmethod
@@ -137,26 +407,137 @@ class Exercise:
         path.write_text(self.to_json(), encoding="utf-8")
         path.chmod(0o600)                   # the teacher's: the secret is not for the class
 
+    # -- the roster and its codes ----------------------------------------------------------
+    @property
+    def has_roster(self) -> bool:
+        return bool(self.roster)
+
+    def entry(self, student_id: str) -> RosterEntry | None:
+        """The roster entry of ``student_id`` (None if it is not in the roster)."""
+        try:
+            sid = normalize_id(student_id)
+        except ValueError:
+            return None
+        return next((e for e in self.roster if e.id == sid), None)
+
+    def join_code(self, student_id: str) -> str:
+        """The student's join code, ``XXXXX-XXXXX`` (the teacher's, from the secret and the entry's nonce)."""
+        e = self.entry(student_id)
+        if e is None:
+            raise not_allowed("student id", student_id, "not in the exercise's roster")
+        code = _derive_code(self.secret, e.nonce)
+        return f"{code[:5]}-{code[5:]}"
+
+    def entry_for_code(self, code: str) -> RosterEntry | None:
+        """The roster entry whose code is ``code`` as typed (None: no one's; the answer does not
+        depend on which ids exist)."""
+        wanted = _code_hash(code)
+        found = None
+        for e in self.roster:                   # every entry compared, in constant time
+            if hmac.compare_digest(e.code_hash, wanted):
+                found = e
+        return found
+
+    def teacher_token(self) -> str:
+        """The token of the teacher's dashboard: drawn from the secret, so every server process of
+        the exercise knows it and a restart keeps the teacher's link; it never reaches a student."""
+        digest = hmac.new(bytes.fromhex(self.secret), b"eha-teacher-dashboard", hashlib.sha256).digest()
+        return digest[:20].hex()
+
     # -- a student's actuator --------------------------------------------------------------
-    def _factor(self, student: str, name: str) -> float:
-        digest = hmac.new(bytes.fromhex(self.secret), f"{student}\0{name}".encode(), hashlib.sha256).digest()
-        unit = int.from_bytes(digest[:8], "big") / 2.0**64          # uniform in [0, 1)
-        return 1.0 + self.vary * (2.0 * unit - 1.0)
+    def _unit(self, student: str, name: str, attempt: int) -> float:
+        salt = f"{student}\0{name}" + (f"\0{attempt}" if attempt else "")
+        digest = hmac.new(bytes.fromhex(self.secret), salt.encode(), hashlib.sha256).digest()
+        return int.from_bytes(digest[:8], "big") / 2.0**64          # uniform in [0, 1)
+
+    def _value(self, base: ActuatorParams, student: str, name: str, attempt: int) -> float:
+        w = self.vary * (2.0 * self._unit(student, name, attempt) - 1.0)
+        b = getattr(base, name)
+        return b + w * _ADDITIVE_SCALE[name] if b == 0 and name in _ADDITIVE_SCALE else b * (1.0 + w)
 
     def student_params(self, student_id: str, base: ActuatorParams | None = None) -> ActuatorParams:
-        """The student's actuator: each hidden parameter of ``base`` (the paper's) times a
-        factor in [1 - vary, 1 + vary] drawn from the secret and the id."""
+        """The student's actuator: each hidden parameter of ``base`` (the paper's) times a factor in
+        [1 - vary, 1 + vary] drawn from the secret and the id (a parameter whose paper value is 0,
+        d0 for one, moves by up to ``vary`` times a scale of its own: 2000 N for d0). A draw that
+        breaks a rule of the parameters (a rod wider than the bore) is drawn again."""
         base = base if base is not None else ActuatorParams()
         student = normalize_id(student_id)
-        return base.replace(**{n: getattr(base, n) * self._factor(student, n) for n in self.hide})
+        for attempt in range(64):
+            try:
+                return base.replace(**{n: self._value(base, student, n, attempt) for n in self.hide})
+            except ValueError:
+                continue
+        return base
 
-    def verdicts(self, student_id: str, estimates: dict) -> dict[str, bool]:
-        """Per hidden parameter: is the estimate within ``tolerance`` (relative) of the truth?
-        A missing or non-finite estimate is not."""
+    def tolerance_of(self, name: str) -> float:
+        return float(self.tolerances.get(name, self.tolerance))
+
+    def errors(self, student_id: str, estimates: Mapping) -> dict[str, float | None]:
+        """Per hidden parameter: the estimate's relative error against the truth (the teacher's;
+        for a parameter whose truth is near 0, relative to its scale); None for a missing one."""
         truth = self.student_params(student_id)
         out = {}
         for n in self.hide:
             v = estimates.get(n)
-            ok = v is not None and math.isfinite(float(v))
-            out[n] = bool(ok and abs(float(v) / getattr(truth, n) - 1.0) <= self.tolerance)
+            try:
+                v = float(v)
+            except (TypeError, ValueError):
+                v = math.nan
+            t = getattr(truth, n)
+            scale = max(abs(t), self.vary * _ADDITIVE_SCALE.get(n, 0.0)) or 1.0
+            out[n] = (v - t) / scale if math.isfinite(v) else None
         return out
+
+    def verdicts(self, student_id: str, estimates: Mapping) -> dict[str, bool]:
+        """Per hidden parameter: is the estimate within its tolerance (relative) of the truth?
+        A missing or non-finite estimate is not."""
+        return {n: e is not None and abs(e) <= self.tolerance_of(n)
+                for n, e in self.errors(student_id, estimates).items()}
+
+    # -- the hand-in rules ------------------------------------------------------------------
+    def deadline_at(self, override: str | None = None) -> float | None:
+        """The deadline as a POSIX time (``override``: the teacher's extension), None without one."""
+        text = override or self.deadline
+        return _as_utc(text) if text else None
+
+    def refusal(self, count: int, *, now: float | None = None, method: str | None = None, open_: bool = True,
+                deadline: str | None = None) -> str | None:
+        """Why a student who has handed in ``count`` times may not hand in now (None: they may)."""
+        now = time.time() if now is None else now
+        if not open_:
+            return "hand-ins are closed by your teacher"
+        due = self.deadline_at(deadline)
+        if due is not None and now > due:
+            return f"the deadline ({deadline or self.deadline}) has passed; hand-ins are no longer accepted"
+        if self.attempts and count >= self.attempts:
+            return f"you have handed in {count} of {self.attempts} times allowed"
+        if method is not None and method not in self.conditions.methods:
+            return f"this exercise does not take hand-ins from the {METHODS.get(method, method).split(' (')[0]}"
+        return None
+
+    def shows_verdicts(self, *, now: float | None = None, deadline: str | None = None,
+                       revealed: bool = False) -> bool:
+        """Are the verdicts shown to the student now (the feedback rule, the deadline, a reveal)?"""
+        if revealed or self.feedback == "verdict":
+            return True
+        if self.feedback == "none":
+            return False
+        due = self.deadline_at(deadline)
+        return due is not None and (time.time() if now is None else now) > due
+
+    def score(self, verdicts_per_handin: list[Mapping[str, bool]]) -> float:
+        """The score by the exercise's rule (best or last hand-in): the fraction within tolerance."""
+        scores = [sum(bool(v) for v in h.values()) / max(len(h), 1) for h in verdicts_per_handin]
+        if not scores:
+            return 0.0
+        return max(scores) if self.score_rule == "best" else scores[-1]
+
+
+def _derive_code(secret: str, nonce: str) -> str:
+    digest = hmac.new(bytes.fromhex(secret), f"join\0{nonce}".encode(), hashlib.sha256).digest()
+    n = int.from_bytes(digest, "big")
+    out = []
+    for _ in range(_CODE_LENGTH):
+        n, r = divmod(n, len(_CODE_ALPHABET))
+        out.append(_CODE_ALPHABET[r])
+    return "".join(out)

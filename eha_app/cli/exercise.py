@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import csv
 import io
+import re
 import sys
 from pathlib import Path
 
+from eha_core.data import csv_cell
 from eha_core.errors import FieldError
 
 from .common import (
@@ -23,27 +25,51 @@ from .common import (
 def add_parser(sub) -> None:
     ex = sub.add_parser("exercise", help="a class exercise with a hidden actuator per student (teacher's tools)",
                         description="Make an exercise file (it holds a secret: keep it on the server, never give it "
-                                    "to students), list the hand-ins, reveal a student's actuator after the "
-                                    "deadline. Serve it with: eha serve --exercise FILE")
+                                    "to students), print the students' join codes, list the results, reveal a "
+                                    "student's actuator. Serve it with: eha serve --exercise FILE")
     cmds = ex.add_subparsers(dest="exercise_command", metavar="ACTION", parser_class=Parser)
     new = cmds.add_parser("new", help="make an exercise file")
-    new.add_argument("--hide", required=True, metavar="NAMES",
-                     help="comma-separated parameters to hide, of M, B, Af, beta_e (e.g. M,B,Af,beta_e)")
+    new.add_argument("--hide", default="M,B,Af,beta_e", metavar="NAMES",
+                     help="comma-separated parameters to hide, any of the actuator's (default M,B,Af,beta_e)")
+    new.add_argument("--roster", metavar="FILE.csv", help="the class: a CSV with columns id and name (more are "
+                     "ignored); every student gets a join code of their own. Without it, any id typed is taken "
+                     "as given (not checked)")
     new.add_argument("--vary", default="25%", help="how far each student's actuator varies around the paper's "
                      "values (default 25%%; at most 50%%)")
-    new.add_argument("--tolerance", default="5%", help="relative error of a correct answer (default 5%%)")
+    new.add_argument("--tolerance", default="5%", help="relative error of a correct answer: one for all (5%%) or "
+                     "per parameter (M=3%%,beta_e=10%%; the others 5%%)")
+    new.add_argument("--deadline", default="", help="ISO-8601 date and time after which hand-ins are refused "
+                     "(e.g. 2026-12-01T17:00; no zone: this machine's)")
+    new.add_argument("--attempts", type=int, default=3, help="hand-ins allowed per student (default 3; 0: no limit)")
+    new.add_argument("--feedback", default="verdict", choices=("verdict", "none", "after-deadline"),
+                     help="what a student is told after a hand-in: the verdict per parameter (default), nothing "
+                          "but that it was stored, or the verdicts once the deadline has passed")
+    new.add_argument("--score", default="best", choices=("best", "last"), help="which hand-in counts (default best)")
+    new.add_argument("--noise", default="x=0.01mm,v=1mm/s,p=0.05MPa", metavar="SPEC",
+                     help="the sensors' noise floor, σ per signal (students may raise it, not lower it); default "
+                          "x=0.01mm,v=1mm/s,p=0.05MPa (p: both pressures); 'none' for noise-free sensors")
+    new.add_argument("--disturbance", default="none", metavar="SIGNAL",
+                     help="a load force always acting, in the app's signal grammar (e.g. white:200, sine:500:3)")
+    new.add_argument("--measured", default="x,v,p1,p2", help="the signals measured (x always; e.g. x,p1,p2: no "
+                     "velocity sensor)")
+    new.add_argument("--methods", default="lse,frequency,greybox", help="the routes a hand-in may come from")
+    new.add_argument("--max-record", default="60", metavar="S", help="the longest record, in s (default 60)")
     new.add_argument("--title", default="EHA identification exercise", help="shown to the students")
     new.add_argument("--out", required=True, help="the exercise file to write (e.g. class.json)")
     new.add_argument("--force", action="store_true", help="overwrite an existing file (its secret is lost: "
-                     "every student's actuator changes)")
+                     "every student's actuator and code changes)")
     new.set_defaults(handler=run_new)
-    res = cmds.add_parser("results", help="the class's table: id, last hand-in, verdicts, score")
+    codes = cmds.add_parser("codes", help="the students' join codes, one line each (hand them out)")
+    codes.add_argument("exercise", help="the exercise file")
+    codes.add_argument("--csv", metavar="FILE", help="also write id, name, code as CSV (for a mail merge)")
+    codes.set_defaults(handler=run_codes)
+    res = cmds.add_parser("results", help="the class's table: joined, hand-ins, values, errors, verdicts, score")
     res.add_argument("exercise", help="the exercise file")
     res.add_argument("--csv", metavar="FILE", help="also write the table as CSV")
     res.set_defaults(handler=run_results)
     rev = cmds.add_parser("reveal", help="one student's true actuator (after the deadline)")
     rev.add_argument("exercise", help="the exercise file")
-    rev.add_argument("--student", required=True, help="the student's name or id, as they typed it")
+    rev.add_argument("--student", required=True, help="the student's id (as in the roster, or as they typed it)")
     rev.set_defaults(handler=run_reveal)
     ex.set_defaults(handler=lambda args: (ex.print_help(), 2)[1])
 
@@ -57,6 +83,52 @@ def _fraction(option: str, text: str) -> float:
     return value
 
 
+def _tolerances(text: str):
+    """``5%`` (one for all) or ``M=3%,beta_e=10%`` (per parameter)."""
+    if "=" not in text:
+        return _fraction("--tolerance", text)
+    out = {}
+    for part in text.split(","):
+        name, _, value = part.partition("=")
+        if not name.strip() or not value.strip():
+            raise refused("--tolerance", text, "give NAME=PERCENT pairs, e.g. M=3%,beta_e=10%")
+        out[name.strip()] = _fraction("--tolerance", value)
+    return out
+
+
+_NOISE_UNITS = {"x": {"m": 1.0, "mm": 1e-3, "um": 1e-6}, "v": {"m/s": 1.0, "mm/s": 1e-3},
+                "p": {"pa": 1.0, "kpa": 1e3, "mpa": 1e6, "bar": 1e5}}
+
+
+def _noise(text: str) -> dict:
+    """``x=0.01mm,v=1mm/s,p=0.05MPa`` -> σ per signal in SI (p: both pressures)."""
+    if text.strip().lower() in ("none", "0", ""):
+        return {}
+    out = {}
+    for part in text.split(","):
+        name, _, value = part.partition("=")
+        name, value = name.strip().lower(), value.strip().replace(" ", "")
+        signals = ("p1", "p2") if name == "p" else (name,)
+        kind = "p" if name in ("p", "p1", "p2") else name
+        if kind not in _NOISE_UNITS:
+            raise refused("--noise", text, f"{name or '(blank)'} is not a signal; use x, v, p (or p1, p2)")
+        m = re.fullmatch(r"([-+0-9.eE]*?)([a-zA-Z/]*)", value)
+        number, unit = (m.group(1), m.group(2).lower()) if m else (value, "")
+        scale = _NOISE_UNITS[kind].get(unit) if unit else next(iter(_NOISE_UNITS[kind].values()))
+        try:
+            sigma = float(number) * scale
+        except (TypeError, ValueError):
+            raise refused("--noise", text, f"σ of {name} as a number with a unit of "
+                                           f"{', '.join(_NOISE_UNITS[kind])}, e.g. x=0.01mm") from None
+        for sig in signals:
+            out[sig] = sigma
+    return out
+
+
+def _names(option: str, text: str) -> tuple[str, ...]:
+    return tuple(n.strip() for n in str(text).split(",") if n.strip())
+
+
 def _load(path: str):
     from eha_core.exercise import Exercise
 
@@ -65,30 +137,76 @@ def _load(path: str):
 
 
 def run_new(args) -> int:
-    from eha_core.exercise import Exercise
+    from eha_core.exercise import Conditions, Exercise, parse_deadline, read_roster
 
-    hide = tuple(n.strip() for n in args.hide.split(",") if n.strip())
-    vary, tolerance = _fraction("--vary", args.vary), _fraction("--tolerance", args.tolerance)
+    hide = _names("--hide", args.hide)
+    vary, tolerance = _fraction("--vary", args.vary), _tolerances(args.tolerance)
     check_output_file("--out", args.out)
     if Path(args.out).exists() and not args.force:
-        raise refused_file("--out", args.out, "it exists (its secret defines every student's actuator); choose "
-                                              "another name or add --force")
+        raise refused_file("--out", args.out, "it exists (its secret defines every student's actuator and code); "
+                                              "choose another name or add --force")
+    roster = None
+    options = {"hide": "--hide", "vary": "--vary", "tolerance": "--tolerance", "noise": "--noise",
+               "measured": "--measured", "methods": "--methods", "max record": "--max-record",
+               "deadline": "--deadline", "attempts": "--attempts", "roster": "--roster"}
     try:
-        ex = Exercise.new(hide=hide, vary=vary, tolerance=tolerance, title=args.title)
+        if args.roster:
+            check_input_file("--roster", args.roster)
+            roster = read_roster(Path(args.roster).read_text(encoding="utf-8-sig", errors="replace"),
+                                 name="--roster")
+        try:
+            max_record = float(args.max_record)
+        except ValueError:
+            raise refused("--max-record", args.max_record, "a number of seconds, e.g. 60") from None
+        from eha_core.signals import SignalSpecError, parse_signal
+
+        try:
+            parse_signal(args.disturbance, name="--disturbance", hold_s=1e-3)
+        except (ValueError, SignalSpecError) as exc:
+            raise refused("--disturbance", args.disturbance, str(exc).split(": ", 1)[-1]) from None
+        conditions = Conditions(noise=_noise(args.noise), disturbance=args.disturbance,
+                                measured=_names("--measured", args.measured),
+                                methods=_names("--methods", args.methods), max_record_s=max_record)
+        ex = Exercise.new(hide=hide, vary=vary, tolerance=tolerance, title=args.title, roster=roster,
+                          conditions=conditions, deadline=parse_deadline(args.deadline) if args.deadline else "",
+                          attempts=args.attempts, feedback=args.feedback, score_rule=args.score)
     except FieldError as exc:
-        raise as_option(exc, {"hide": "--hide", "vary": "--vary", "tolerance": "--tolerance"}) from None
+        raise as_option(exc, options) from None
     ex.save(args.out)
-    print(f"wrote {args.out}: hides {', '.join(ex.hide)}, each student's values vary by up to ±{100 * ex.vary:g} %, "
-          f"an answer within ±{100 * ex.tolerance:g} % counts. Keep this file on the server.")
+    tol = ", ".join(f"{n} ±{100 * ex.tolerance_of(n):g} %" for n in ex.hide)
+    print(f"wrote {args.out}: hides {', '.join(ex.hide)}, each student's values vary by up to ±{100 * ex.vary:g} %; "
+          f"an answer counts within {tol}. Keep this file on the server.")
+    print(f"conditions: {ex.conditions.describe()}")
+    print(f"hand-ins: {ex.attempts or 'no limit on the number of'} per student"
+          + (f", until {ex.deadline}" if ex.deadline else ", no deadline")
+          + f"; feedback: {ex.feedback}; score: the {ex.score_rule} hand-in")
+    if ex.has_roster:
+        print(f"roster: {len(ex.roster)} students; print their join codes with:  eha exercise codes {args.out}")
+    else:
+        print("no roster: students type any id and it is taken as given (ids are not checked; anyone can type "
+              "anyone's). Add --roster FILE.csv to give each student a join code")
     print(f"serve it with:  eha serve --exercise {args.out} --address 0.0.0.0")
     return 0
 
 
-def _table(ex, handins) -> tuple[list[str], list[list[str]]]:
-    header = ["student", "last hand-in", "hand-ins", *[f"{n} ok" for n in ex.hide], "score"]
-    rows = [[h.student, h.time, str(h.count), *["yes" if h.verdicts.get(n) else "no" for n in ex.hide],
-             f"{h.score:.2f}"] for h in handins]
-    return header, rows
+def run_codes(args) -> int:
+    ex = _load(args.exercise)
+    if not ex.has_roster:
+        raise refused_file("exercise", args.exercise, "it has no roster (make it with --roster FILE.csv): students "
+                                                      "type their own id")
+    if args.csv:
+        check_output_file("--csv", args.csv)
+    rows = [(e.id, e.name, ex.join_code(e.id)) for e in ex.roster]
+    width = max(len(terminal_text(r[1])) for r in rows)
+    for sid, name, code in rows:
+        print(f"{code}  {terminal_text(name).ljust(width)}  {terminal_text(sid)}")
+    if args.csv:
+        buf = io.StringIO()
+        csv.writer(buf).writerows([["id", "name", "code"], *[[csv_cell(c) for c in r] for r in rows]])
+        Path(args.csv).write_text(buf.getvalue(), encoding="utf-8")
+        Path(args.csv).chmod(0o600)
+        print(f"wrote {args.csv}", file=sys.stderr)
+    return 0
 
 
 def _store(path: str):
@@ -102,24 +220,23 @@ def _store(path: str):
 
 
 def run_results(args) -> int:
-    from eha_app.runtime.handins import handins_path
-    from eha_core.data import csv_cell
+    from eha_app.runtime.classbook import class_rows, results_cells, results_csv, results_header
 
     ex = _load(args.exercise)
     if args.csv:
         check_output_file("--csv", args.csv)
-    handins = _store(args.exercise).latest() if handins_path(args.exercise).exists() else []
-    header, rows = _table(ex, handins)
+    rows = class_rows(ex, _store(args.exercise))
+    header = results_header(ex)
     # what students typed reaches the teacher's terminal and spreadsheet: neither may act on it
-    shown = [[terminal_text(c) for c in row] for row in rows]
+    shown = [[terminal_text(c) for c in results_cells(ex, row)] for row in rows]
     widths = [max(len(c) for c in col) for col in zip(header, *shown, strict=False)]
-    print(f"{terminal_text(ex.title)}: {len(rows)} student{'s' if len(rows) != 1 else ''} handed in")
+    handed = sum(1 for r in rows if r.count)
+    print(f"{terminal_text(ex.title)}: {handed} student{'s' if handed != 1 else ''} handed in"
+          + (f" of {len(ex.roster)} in the roster" if ex.has_roster else ""))
     for line in (header, *shown):
         print("  ".join(c.ljust(w) for c, w in zip(line, widths, strict=True)).rstrip())
     if args.csv:
-        buf = io.StringIO()
-        csv.writer(buf).writerows([[csv_cell(c) for c in row] for row in (header, *rows)])
-        Path(args.csv).write_text(buf.getvalue(), encoding="utf-8")
+        Path(args.csv).write_text(results_csv(ex, rows), encoding="utf-8")
         print(f"wrote {args.csv}", file=sys.stderr)
     return 0
 
@@ -133,8 +250,16 @@ def run_reveal(args) -> int:
         student = normalize_id(args.student)
     except FieldError as exc:
         raise as_option(exc, {"student id": "--student"}) from None
+    if ex.has_roster:
+        if ex.entry(student) is None:
+            raise refused("--student", args.student, "no student with this id in the exercise's roster")
+    elif student not in _store(args.exercise).presence() and not _store(args.exercise).of(student):
+        raise refused("--student", args.student, "no student with this id has joined the exercise (ids are those "
+                                                 "typed on the exercise's first page)")
     p = ex.student_params(student)
-    print(f"{terminal_text(student)}'s actuator in {terminal_text(repr(ex.title))}:")
+    entry = ex.entry(student)
+    who = f"{entry.name} ({student})" if entry else student
+    print(f"{terminal_text(who)}'s actuator in {terminal_text(repr(ex.title))}:")
     for n in ex.hide:
         info = FIELD_INFO[n]
         print(f"  {n} = {getattr(p, n):.6g} {info.unit}  ({info.description})")

@@ -29,10 +29,10 @@ import os
 import sqlite3
 import time
 from contextlib import closing
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["HandIns", "HandIn", "StoreError", "handins_path"]
+__all__ = ["HandIns", "HandIn", "StoreError", "Refused", "handins_path"]
 
 log = logging.getLogger("eha_app")
 
@@ -50,7 +50,12 @@ CREATE TABLE IF NOT EXISTS handins (
     score REAL NOT NULL
 );
 CREATE INDEX IF NOT EXISTS handins_student ON handins (student, id);
+CREATE TABLE IF NOT EXISTS control (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS presence (student TEXT PRIMARY KEY, joined TEXT NOT NULL, last_seen TEXT NOT NULL);
 """
+#: Columns added since the first version (a database made by it gets them at the next start).
+_ADDED = (("method", "TEXT NOT NULL DEFAULT 'lse'"), ("settings", "TEXT NOT NULL DEFAULT '{}'"),
+          ("conditions", "TEXT NOT NULL DEFAULT '{}'"), ("errors", "TEXT NOT NULL DEFAULT '{}'"))
 
 
 def handins_path(exercise_path: str | Path) -> Path:
@@ -68,10 +73,27 @@ class HandIn:
     verdicts: dict
     score: float
     count: int = 1          # hand-ins of this student so far (in :meth:`HandIns.latest`)
+    method: str = "lse"
+    settings: dict = field(default_factory=dict)
+    conditions: dict = field(default_factory=dict)
+    errors: dict = field(default_factory=dict)      # relative errors against the truth: the teacher's only
+
+
+_COLUMNS = "id, time, student, estimates, verdicts, score, method, settings, conditions, errors"
+
+
+def _row(r) -> HandIn:
+    return HandIn(r[0], r[1], r[2], json.loads(r[3]), json.loads(r[4]), r[5], method=r[6],
+                  settings=json.loads(r[7]), conditions=json.loads(r[8]), errors=json.loads(r[9]))
+
+
+def _now() -> str:
+    return time.strftime("%Y-%m-%d %H:%M:%S")
 
 
 class HandIns:
-    """The hand-ins of the exercise at ``exercise_path``."""
+    """The hand-ins of the exercise at ``exercise_path``, the teacher's switches (``control``: open or
+    closed, an extended deadline, revealed) and who has joined and when they were last seen."""
 
     def __init__(self, exercise_path: str | Path):
         self.path = handins_path(exercise_path)
@@ -80,10 +102,13 @@ class HandIns:
     def check(self) -> HandIns:
         """Open the database (made if missing) and check it: :class:`StoreError` if it is not usable.
         The server and the teacher's commands call it before anything else."""
+        if self.path.parent.exists() and not os.access(self.path.parent, os.W_OK):
+            raise StoreError(f"the folder {str(self.path.parent)!r} of the hand-in database is read-only; the "
+                             "server could not store a single hand-in: serve from a folder you can write to")
         try:
             with closing(self._connect()) as db:
                 db.execute("PRAGMA journal_mode=WAL")
-                db.executescript(_SCHEMA)
+                self._schema(db)
                 problem = db.execute("PRAGMA quick_check").fetchone()[0]
         except sqlite3.Error as exc:
             raise self._unusable(exc) from None
@@ -91,6 +116,17 @@ class HandIns:
             raise self._unusable(problem)
         self._opened = True
         return self
+
+    @staticmethod
+    def _schema(db) -> None:
+        db.executescript(_SCHEMA)           # a database made again since has no table yet
+        have = {r[1] for r in db.execute("PRAGMA table_info(handins)")}
+        for name, decl in _ADDED:
+            if name not in have:
+                try:
+                    db.execute(f"ALTER TABLE handins ADD COLUMN {name} {decl}")
+                except sqlite3.OperationalError:
+                    pass                    # another process added it meanwhile
 
     def _unusable(self, what) -> StoreError:
         return StoreError(f"the hand-in database {str(self.path)!r} cannot be used ({what}); move it away to start "
@@ -109,21 +145,18 @@ class HandIns:
                 log.warning("the hand-in database %s was missing: an empty one was made", self.path.name)
         return sqlite3.connect(self.path, timeout=30.0, isolation_level=None)
 
-    def add(self, student: str, estimates: dict, verdicts: dict) -> int:
-        """Store a hand-in; returns its row id. :class:`StoreError` if the database cannot take it."""
-        score = sum(bool(v) for v in verdicts.values()) / max(len(verdicts), 1)
-        now = time.strftime("%Y-%m-%d %H:%M:%S")
+    def _write(self, fn):
+        """Run ``fn(db)`` in one immediate transaction; :class:`StoreError` if the database cannot take it."""
         try:
             db = self._connect()
         except sqlite3.Error as exc:
             raise self._unusable(exc) from None
         try:
-            db.executescript(_SCHEMA)           # a database made again since has no table yet
+            self._schema(db)
             db.execute("BEGIN IMMEDIATE")
-            cur = db.execute("INSERT INTO handins (time, student, estimates, verdicts, score) VALUES (?, ?, ?, ?, ?)",
-                             (now, student, json.dumps(estimates), json.dumps(verdicts), score))
+            out = fn(db)
             db.execute("COMMIT")
-            return int(cur.lastrowid)
+            return out
         except sqlite3.Error as exc:
             try:
                 if db.in_transaction:
@@ -134,14 +167,51 @@ class HandIns:
         finally:
             db.close()
 
-    def all(self) -> list[HandIn]:
+    def _read(self, sql: str, args=()) -> list:
         try:
             with closing(self._connect()) as db:
-                db.executescript(_SCHEMA)
-                rows = db.execute("SELECT id, time, student, estimates, verdicts, score FROM handins "
-                                  "ORDER BY id").fetchall()
-            return [HandIn(r[0], r[1], r[2], json.loads(r[3]), json.loads(r[4]), r[5]) for r in rows]
-        except (sqlite3.Error, ValueError, TypeError) as exc:
+                self._schema(db)
+                return db.execute(sql, args).fetchall()
+        except sqlite3.Error as exc:
+            raise self._unusable(exc) from None
+
+    def add(self, student: str, estimates: dict, verdicts: dict, *, method: str = "lse", settings: dict | None = None,
+            conditions: dict | None = None, errors: dict | None = None, refusal=None) -> int:
+        """Store a hand-in; returns its row id. :class:`StoreError` if the database cannot take it.
+
+        ``refusal(count)``, if given, is asked inside the transaction with the student's number of
+        hand-ins so far (two pages of one student handing in at once cannot both take the last
+        attempt): a message it returns is raised as :class:`Refused` and nothing is stored."""
+        score = sum(bool(v) for v in verdicts.values()) / max(len(verdicts), 1)
+
+        def insert(db):
+            if refusal is not None:
+                count = db.execute("SELECT COUNT(*) FROM handins WHERE student = ?", (student,)).fetchone()[0]
+                why = refusal(count)
+                if why:
+                    raise Refused(why)
+            cur = db.execute("INSERT INTO handins (time, student, estimates, verdicts, score, method, settings, "
+                             "conditions, errors) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                             (_now(), student, json.dumps(estimates), json.dumps(verdicts), score, method,
+                              json.dumps(settings or {}), json.dumps(conditions or {}), json.dumps(errors or {})))
+            return int(cur.lastrowid)
+        try:
+            return self._write(insert)
+        except Refused:
+            raise
+
+    def all(self) -> list[HandIn]:
+        try:
+            return [_row(r) for r in self._read(f"SELECT {_COLUMNS} FROM handins ORDER BY id")]
+        except (ValueError, TypeError) as exc:
+            raise self._unusable(exc) from None
+
+    def of(self, student: str) -> list[HandIn]:
+        """One student's hand-ins, oldest first."""
+        try:
+            return [_row(r) for r in self._read(f"SELECT {_COLUMNS} FROM handins WHERE student = ? ORDER BY id",
+                                                (student,))]
+        except (ValueError, TypeError) as exc:
             raise self._unusable(exc) from None
 
     def latest(self) -> list[HandIn]:
@@ -152,3 +222,36 @@ class HandIns:
             last[h.student] = h
             counts[h.student] = counts.get(h.student, 0) + 1
         return [HandIn(**{**h.__dict__, "count": counts[s]}) for s, h in sorted(last.items())]
+
+    # -- the teacher's switches and the class's presence ------------------------------------
+    def control(self) -> dict[str, str]:
+        """``open`` ("1"/"0"), ``deadline`` (an extension, ISO-8601) and ``revealed`` ("1"/"0"), as set."""
+        return dict(self._read("SELECT key, value FROM control"))
+
+    def set_control(self, key: str, value: str) -> None:
+        if key not in ("open", "deadline", "revealed"):
+            raise ValueError(f"unknown switch {key!r}")
+        self._write(lambda db: db.execute("INSERT INTO control (key, value) VALUES (?, ?) ON CONFLICT(key) DO "
+                                          "UPDATE SET value = excluded.value", (key, str(value))))
+
+    def seen(self, student: str) -> None:
+        """The student is here now (joined the first time)."""
+        now = _now()
+        self._write(lambda db: db.execute("INSERT INTO presence (student, joined, last_seen) VALUES (?, ?, ?) ON "
+                                          "CONFLICT(student) DO UPDATE SET last_seen = excluded.last_seen",
+                                          (student, now, now)))
+
+    def presence(self) -> dict[str, tuple[str, str]]:
+        """student -> (joined, last seen)."""
+        return {r[0]: (r[1], r[2]) for r in self._read("SELECT student, joined, last_seen FROM presence")}
+
+    def version(self) -> tuple:
+        """Changes whenever a hand-in, a switch or a presence changes (what a live page polls)."""
+        rows = self._read("SELECT (SELECT COUNT(*) FROM handins), (SELECT MAX(id) FROM handins), "
+                          "(SELECT group_concat(key || '=' || value) FROM control), "
+                          "(SELECT COUNT(*) FROM presence), (SELECT MAX(last_seen) FROM presence)")
+        return tuple(rows[0])
+
+
+class Refused(StoreError):
+    """A hand-in the exercise's rules refuse (deadline, attempts, closed): the message says which."""

@@ -35,8 +35,12 @@ def test_actuators_are_per_student_deterministic_and_within_the_variation():
 
 
 def test_bad_exercise_settings_are_refused_with_their_names():
-    with pytest.raises(ValueError, match=r"hide = M,x0 is not allowed: x0 cannot be hidden"):
-        Exercise.new(hide=("M", "x0"))
+    with pytest.raises(ValueError, match=r"hide = M,p2_0 is not allowed: p2_0 cannot be hidden"):
+        Exercise.new(hide=("M", "p2_0"))
+    with pytest.raises(ValueError, match=r"tolerance = B=5% is not allowed: B is not hidden"):
+        Exercise.new(hide=("M",), tolerance={"B": 0.05})
+    with pytest.raises(ValueError, match=r"feedback = often is not allowed: use verdict, none, after-deadline"):
+        Exercise.new(hide=("M",), feedback="often")
     with pytest.raises(ValueError, match=r"vary = 80 % is not allowed"):
         Exercise.new(hide=("M",), vary=0.8)
     with pytest.raises(ValueError, match=r"student id = \(empty\) is not allowed"):

@@ -270,10 +270,13 @@ def test_exercise_commands(capsys, tmp_path):
     assert "hides M, B" in capsys.readouterr().out
     assert main(["exercise", "new", "--hide", "M", "--out", path]) == 2          # would change every actuator
     assert "it exists" in capsys.readouterr().err
-    assert main(["exercise", "new", "--hide", "M,x0", "--out", str(tmp_path / "b.json")]) == 2
-    assert "--hide = M,x0 is not allowed: x0 cannot be hidden" in capsys.readouterr().err
+    assert main(["exercise", "new", "--hide", "M,p2_0", "--out", str(tmp_path / "b.json")]) == 2
+    assert "--hide = M,p2_0 is not allowed: p2_0 cannot be hidden" in capsys.readouterr().err
     assert main(["exercise", "new", "--hide", "M", "--vary", "lots", "--out", str(tmp_path / "c.json")]) == 2
     assert "--vary = lots is not allowed" in capsys.readouterr().err
+    from eha_app.runtime.handins import HandIns
+
+    HandIns(path).check().seen("ada")
     assert main(["exercise", "reveal", path, "--student", " Ada "]) == 0
     out = capsys.readouterr().out
     from eha_core.exercise import Exercise
@@ -282,6 +285,12 @@ def test_exercise_commands(capsys, tmp_path):
     assert f"M = {truth.M:.6g} kg" in out and f"B = {truth.B:.6g} N s/m" in out
     assert main(["exercise", "results", path]) == 0
     assert "0 students handed in" in capsys.readouterr().out
+    # an open exercise: only an id that joined has an actuator to reveal
+    from eha_app.runtime.handins import HandIns
+
+    HandIns(path).check().seen("ada")
+    assert main(["exercise", "reveal", path, "--student", "nobody"]) == 2
+    assert "--student = nobody is not allowed: no student with this id has joined" in capsys.readouterr().err
     assert main(["exercise", "results", str(tmp_path / "nothere.json")]) == 2
     (tmp_path / "bad.json").write_text("{}")
     assert main(["exercise", "results", str(tmp_path / "bad.json")]) == 2
@@ -297,3 +306,41 @@ def test_identify_tf_says_when_p_hat_is_unstable(capsys):
     assert p_hat.endswith("s - 52.15)")                     # the paper's experiment: H_hat(0) = 1.025
     assert any(line.startswith("P_hat(s) is unstable: a pole at +0.00305 rad/s") and "H_hat(0) = 1.025 > 1" in line
                for line in lines)
+
+
+def test_a_roster_gives_every_student_a_code_and_reveal_knows_only_the_roster(capsys, tmp_path):
+    roster = tmp_path / "class.csv"
+    roster.write_text("id,name,email\ns1,Ada Lovelace,a@x\ns2,=HYPERLINK(\"http://x\"),b@x\n", encoding="utf-8")
+    path = str(tmp_path / "lab.json")
+    assert main(["exercise", "new", "--roster", str(roster), "--tolerance", "M=3%,beta_e=10%", "--attempts", "2",
+                 "--deadline", "2030-01-01T17:00", "--feedback", "after-deadline", "--hide", "M,B,Af,beta_e,Kq1,d0",
+                 "--out", path]) == 0
+    out = capsys.readouterr().out
+    assert "M ±3 %" in out and "beta_e ±10 %" in out and "B ±5 %" in out and "roster: 2 students" in out
+    assert "sensor noise σ x ≥ 0.01 mm" in out
+    text = open(path, encoding="utf-8").read()
+    assert main(["exercise", "codes", path, "--csv", str(tmp_path / "codes.csv")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    codes = [line.split()[0] for line in lines]
+    assert len(codes) == 2 and all(len(c.replace("-", "")) == 10 for c in codes) and codes[0] != codes[1]
+    assert not any(c in text or c.replace("-", "") in text for c in codes)       # the file keeps only hashes
+    assert "'=HYPERLINK" in (tmp_path / "codes.csv").read_text()                  # neutralised in the CSV
+    from eha_core.exercise import Exercise
+
+    ex = Exercise.load(path)
+    assert ex.entry_for_code(codes[1]).id == "s2" and ex.tolerance_of("M") == 0.03 and ex.attempts == 2
+    assert main(["exercise", "reveal", path, "--student", "s3"]) == 2
+    assert "--student = s3 is not allowed: no student with this id in the exercise's roster" in capsys.readouterr().err
+    assert main(["exercise", "reveal", path, "--student", "S1 "]) == 0
+    assert f"Kq1 = {ex.student_params('s1').Kq1:.6g}" in capsys.readouterr().out
+    assert main(["exercise", "results", path]) == 0
+    out = capsys.readouterr().out
+    assert "0 students handed in of 2 in the roster" in out and "Ada Lovelace" in out
+    for bad, message in ((["--deadline", "friday"], "--deadline = friday is not allowed"),
+                         (["--tolerance", "Q=3%"], "--tolerance = Q=3% is not allowed: Q is not hidden"),
+                         (["--noise", "y=1mm"], "--noise = y=1mm is not allowed: y is not a signal"),
+                         (["--measured", "v,p1"], "--measured = v,p1 is not allowed: the position x must be measured"),
+                         (["--roster", str(tmp_path / "none.csv")], "--roster")):
+        assert main(["exercise", "new", *bad, "--out", str(tmp_path / "x.json")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
