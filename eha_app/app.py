@@ -12,6 +12,7 @@ import html
 import io
 import logging
 import os
+import time
 from collections.abc import Callable
 from functools import lru_cache, partial
 
@@ -146,19 +147,46 @@ def current_exercise():
 
 
 class ExerciseGate:
-    """The first screen of an exercise: the student's name or id, then their actuator."""
+    """The first screen of an exercise: the student's join code (with a roster) or their id (without
+    one), then their actuator. A wrong code is refused without saying whether anyone has it; after
+    a few wrong codes the page waits before it tries again (a code has about 50 bits: guessing is
+    hopeless, but not free)."""
+
+    #: Wrong codes a page may try before each further try waits.
+    FREE_TRIES = 5
+    WAIT_S = 10.0
 
     def __init__(self, exercise, handins, state: AppState, on_start: Callable[[], None]):
         self.exercise, self.handins, self.state, self.on_start = exercise, handins, state, on_start
+        self.wrong = 0
+        self.blocked_until = 0.0
         # the tables' symbols (β<sub>e</sub>, not beta_e)
+        tol = ", ".join(f"{SYMBOLS_HTML.get(n, html.escape(n))} ±{100 * exercise.tolerance_of(n):g} %"
+                        for n in exercise.hide)
         hidden = ", ".join(SYMBOLS_HTML.get(n, html.escape(n)) for n in exercise.hide)
+        rules = []
+        if exercise.deadline:
+            rules.append(f"hand in before {html.escape(exercise.deadline)}")
+        if exercise.attempts:
+            rules.append(f"you may hand in {exercise.attempts} time{'s' if exercise.attempts > 1 else ''}")
+        rules.append({"verdict": "each hand-in tells you which values are within tolerance",
+                      "none": "a hand-in is only stored: your teacher tells you the result",
+                      "after-deadline": "the verdicts are shown after the deadline"}[exercise.feedback])
+        who = ("Type the join code your teacher gave you." if exercise.has_roster else
+               "The same name or id always gives the same actuator (ids are not checked in this exercise: type "
+               "your own).")
         self.intro = pn.pane.HTML(
             f"<h3>{html.escape(exercise.title)}</h3><p>Your actuator is your own: its {hidden} are hidden and "
             f"differ from the paper's by up to ±{100 * exercise.vary:g} %. Simulate it, identify it (tab 3) and hand "
-            f"in your estimates; an estimate within ±{100 * exercise.tolerance:g} % counts. The same name or id "
-            "always gives the same actuator.</p>", sizing_mode="stretch_width")
-        self.student_id = pn.widgets.TextInput(label="Your name or student id", placeholder="e.g. s1234567",
-                                               width=300, css_classes=["eha-student-id"])
+            f"in your estimates; an estimate counts within {tol}. "
+            f"Conditions: {html.escape(exercise.conditions.describe())}. {'; '.join(rules).capitalize()}.</p>"
+            f"<p>{who}</p>", sizing_mode="stretch_width", css_classes=["eha-gate-intro"])
+        if exercise.has_roster:
+            self.student_id = pn.widgets.TextInput(label="Your join code", placeholder="e.g. K7M2P-Q9RST", width=300,
+                                                   css_classes=["eha-join-code"])
+        else:
+            self.student_id = pn.widgets.TextInput(label="Your name or student id", placeholder="e.g. s1234567",
+                                                   width=300, css_classes=["eha-student-id"])
         self.button = pn.widgets.Button(label="Start", color="primary", width=120, css_classes=["eha-start"])
         self.message = pn.pane.HTML("", css_classes=["eha-error", "eha-error-student"],
                                     styles={"color": "#b00020", "font-size": "12px"})
@@ -167,9 +195,27 @@ class ExerciseGate:
                                 width=620, css_classes=["eha-gate"])
 
     def start(self) -> None:
+        typed = self.student_id.value_input or self.student_id.value
+        if self.exercise.has_roster:
+            now = time.monotonic()
+            if now < self.blocked_until:
+                self.message.object = (f"Too many wrong codes: wait {self.blocked_until - now:.0f} s and type the "
+                                       "code on your slip again.")
+                return
+            entry = self.exercise.entry_for_code(typed)
+            if entry is None:
+                self.wrong += 1
+                if self.wrong >= self.FREE_TRIES:
+                    self.blocked_until = now + self.WAIT_S
+                shown = html.escape(" ".join(str(typed).split())[:40]) or "(empty)"
+                self.message.object = (f"join code = {shown} is not allowed: it is no code of this exercise; type "
+                                       "the ten characters on your slip (dashes and case do not matter)")
+                return
+            student, name = entry.id, entry.name
+        else:
+            student, name = typed, ""
         try:
-            self.state.start_exercise(self.exercise, self.student_id.value_input or self.student_id.value,
-                                      handins=self.handins)
+            self.state.start_exercise(self.exercise, student, handins=self.handins, name=name)
         except ValueError as exc:
             self.message.object = html.escape(" ".join(str(exc).split()))
             return
@@ -302,7 +348,7 @@ class Page(pn.viewable.Viewer):
         else:
             self.tabs.build(first_tab)
         who = (f'<span class="eha-student" style="color:#1a56c4">{html.escape(session.exercise.title)} — '
-               f'{html.escape(session.student)}</span>' if session.student else "")
+               f'{html.escape(session.state.student_name or session.student)}</span>' if session.student else "")
         header = pn.pane.HTML(
             '<div style="display:flex;align-items:baseline;gap:16px;flex-wrap:wrap">'
             '<h2 style="margin:4px 0">Electro-hydraulic actuator: modeling and identification</h2>'

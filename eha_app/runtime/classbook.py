@@ -65,10 +65,20 @@ def class_rows(exercise, store: HandIns) -> list[ClassRow]:
             id=sid, name=names.get(sid, ""), joined=joined, last_seen=seen, count=len(hs),
             last_time=last.time if last else "", method=last.method if last else "",
             estimates=last.estimates if last else {},
-            errors=last.errors if last and last.errors else (exercise.errors(sid, last.estimates) if last else {}),
+            errors=last.errors if last and last.errors else _errors(exercise, sid, last),
             verdicts=last.verdicts if last else {}, score=exercise.score([h.verdicts for h in hs]),
             conditions=last.conditions if last else {}, settings=last.settings if last else {}))
     return rows
+
+
+def _errors(exercise, sid: str, last: HandIn | None) -> dict:
+    """The errors of a hand-in stored before they were kept (none for an id the app now refuses)."""
+    if last is None:
+        return {}
+    try:
+        return exercise.errors(sid, last.estimates)
+    except ValueError:
+        return {}
 
 
 def results_header(exercise) -> list[str]:
@@ -85,7 +95,7 @@ def results_cells(exercise, row: ClassRow) -> list[str]:
     for n in exercise.hide:
         v, e = row.estimates.get(n), row.errors.get(n)
         cells += [f"{v:.6g}" if isinstance(v, (int, float)) else "",
-                  f"{100 * e:+.2f}" if isinstance(e, (int, float)) else "",
+                  f"{100 * e:.2f}" if isinstance(e, (int, float)) else "",
                   ("yes" if row.verdicts.get(n) else "no") if row.count else ""]
     return cells + [f"{row.score:.2f}" if row.count else ""]
 

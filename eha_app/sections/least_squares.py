@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import html
 import io
 import json
@@ -35,7 +36,6 @@ from ..render.glossary import term
 from ..render.layout import side_by_side
 from ..render.tables import (
     SCENARIOS,
-    SYMBOLS_HTML,
     UNITS,
     lse_table_html,
     table4_html,
@@ -46,6 +46,7 @@ from ..session import ReportPart, Section, SectionSnapshot, stale_note
 from ..session.form import Field, Form, Group, parse_fields
 from ..session.freshness import ResultView
 from ..session.state import FIELD_LABELS
+from .handin import HandInBox
 from .uploads import ColumnMapping, FileUpload, check_size, download, upload_name
 
 __all__ = ["LeastSquaresPanel", "LseRequest", "LSE_FORM", "LSE_DEFAULTS", "parse_lse"]
@@ -130,10 +131,11 @@ def lse_hidden(texts: dict) -> list[str]:
     return hidden
 
 
-def parse_lse(texts: dict) -> tuple[LseRequest, dict]:
-    """The least-squares request the form describes, and a message per invalid field."""
+def parse_lse(texts: dict, fields: dict | None = None) -> tuple[LseRequest, dict]:
+    """The least-squares request the form describes, and a message per invalid field (``fields``: the
+    form's fields as an exercise bounds them, see :func:`exercise_fields`)."""
     hidden = set(lse_hidden(texts))
-    values, errors = parse_fields(_LSE_FIELDS.values(), texts, skip=hidden)
+    values, errors = parse_fields((fields or _LSE_FIELDS).values(), texts, skip=hidden)
     freq = None
     text = str(texts.get("lse_freq", "")).strip()
     if "lse_freq" not in hidden and text:
@@ -156,6 +158,47 @@ def parse_lse(texts: dict) -> tuple[LseRequest, dict]:
         except (ValueError, SignalSpecError) as exc:
             errors["lse_custom"] = " ".join(str(exc).split())
     return req, errors
+
+
+#: The sensor-noise fields and the signals whose σ they set, with the display scale (value_SI / scale).
+_NOISE_FIELDS = {"lse_noise_x": (("x",), 1e-3), "lse_noise_v": (("v",), 1e-3), "lse_noise_p": (("p1", "p2"), 1e6)}
+#: The parameters the least squares estimate (eqs. 15-18): the ones a hand-in from them can carry.
+LSE_ESTIMATED = ("M", "B", "Af", "beta_e", "d0")
+
+
+def exercise_fields(conditions) -> dict:
+    """The form's fields under an exercise's conditions: each σ field's lower bound is the exercise's
+    noise floor (a student may raise the noise, not lower it)."""
+    if conditions is None:
+        return dict(_LSE_FIELDS)
+    fields = dict(_LSE_FIELDS)
+    for name, (signals, scale) in _NOISE_FIELDS.items():
+        floor = max(conditions.noise_floor(sig) for sig in signals) / scale
+        if floor > 0:
+            fields[name] = dataclasses.replace(fields[name], lo=float(f"{floor:.6g}"),
+                                               tip=fields[name].tip + f" (this exercise: at least {floor:g} "
+                                                                      f"{fields[name].unit})")
+    return fields
+
+
+def _with_floors(texts: dict, fields: dict) -> dict:
+    """Texts whose σ fields are raised to the exercise's floors (the defaults are 0)."""
+    out = dict(texts)
+    for name in _NOISE_FIELDS:
+        lo = fields[name].lo or 0.0
+        try:
+            below = float(str(out.get(name, "0")).replace(",", ".")) < lo
+        except ValueError:
+            below = False
+        if lo > 0 and below:
+            out[name] = f"{lo:g}"
+    return out
+
+
+def velocity_from_position(data):
+    """The record without a velocity sensor: v as the central difference of the measured x (its noise
+    amplified by 1/Ts; the least squares' filter H(s) of eqs. 16-18 then smooths it like the others)."""
+    return dataclasses.replace(data, v=np.gradient(data.x, data.t), source=data.source + ", v from dx/dt")
 
 
 def _beside(model: str, res, data, params, token):
@@ -185,8 +228,15 @@ class LeastSquaresPanel(Section):
         self.result_context = {}            # what the table shows beside the result (lse_table_html's keywords)
         self.all_results = None
         self.all_context = {}
-        texts = self.initial_texts()
-        self.form = Form(spec=[g.to_spec() for g in LSE_FORM], values=texts, url_defaults=LSE_DEFAULTS, width=270,
+        # an exercise's conditions: the noise floors bound the σ fields, its disturbance always acts
+        ex = state.exercise if state.hidden else None
+        self.conditions = ex.conditions if ex is not None else None
+        self.fields = exercise_fields(self.conditions)
+        self.last_settings: dict = {}
+        self.last_conditions: dict = {}
+        texts = _with_floors(self.initial_texts(), self.fields)
+        groups = [dataclasses.replace(g, fields=tuple(self.fields[f.name] for f in g.fields)) for g in LSE_FORM]
+        self.form = Form(spec=[g.to_spec() for g in groups], values=texts, url_defaults=LSE_DEFAULTS, width=270,
                          css_classes=["eha-lse-form"], margin=(5, 10))
         watch(self.form, self._update_enabled, "values")
         self.table = pn.pane.HTML("<p>Choose a disturbance and run the least squares.</p>",
@@ -214,11 +264,8 @@ class LeastSquaresPanel(Section):
         on_click(self.all_button, lambda _e: self.run_all())
         # an exercise: hand in the hidden parameters' estimates (Table 4 would show the truth)
         self.all_button.visible = not state.hidden
-        self.handin_button = pn.widgets.Button(label="Hand in these estimates", color="warning", width=260,
-                                               css_classes=["eha-handin"], visible=bool(state.hidden), disabled=True,
-                                               description="run the least squares first")
-        on_click(self.handin_button, lambda _e: self.hand_in())
-        self.verdict = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-verdict"])
+        self.handin = HandInBox(self, "lse", self._handin_estimates)
+        self.handin_button, self.verdict = self.handin.button, self.handin.verdict
         # the student's own data (CSV or .mat), instead of the simulated sensors
         self.own_data = None                # MeasuredData of an upload, when one is in use
         self.own_data_key = None
@@ -257,7 +304,29 @@ class LeastSquaresPanel(Section):
         self._update_enabled()
 
     def request(self) -> tuple[LseRequest, dict]:
-        return parse_lse(self.form.values)
+        return parse_lse(self.form.values, self.fields)
+
+    def _conditions_refusal(self, req) -> str | None:
+        """Why the exercise's conditions refuse this run (None: they allow it)."""
+        c = self.conditions
+        if c is None:
+            return None
+        why = c.lse_refusal()
+        if why:
+            return why
+        if req.input_signal()[1] > c.max_record_s:
+            return (f"excitation = {EXCITATIONS[req.excitation]} is not allowed: this exercise's records are at most "
+                    f"{c.max_record_s:g} s")
+        return None
+
+    def _disturbance(self, req):
+        """d(t) as the student chose it, plus the load the exercise always applies."""
+        extra = self.conditions.disturbance.strip() if self.conditions is not None else "none"
+        if extra.lower() in ("", "none"):
+            return req.disturbance()
+        spec = req.custom if req.scenario == "custom" else LSE_SCENARIOS[req.scenario]
+        text = extra if spec.strip().lower() in ("", "none") else f"{spec}+{extra}"
+        return parse_signal(text, name="custom d(t)", seed=req.seed, hold_s=1e-3)
 
     def run_key(self):
         """What a least-squares run with the current inputs is computed from (None if they are not valid)."""
@@ -444,19 +513,17 @@ class LeastSquaresPanel(Section):
         first" after a run)."""
         if not self.state.hidden:
             return
-        names = ", ".join(FIELD_LABELS.get(n, n) for n in self.state.hidden)
+        names = ", ".join(FIELD_LABELS.get(n, n) for n in self.state.hidden if n in LSE_ESTIMATED)
         if self.result is None:
-            self.handin_button.disabled = True
-            tip = "run the least squares first: the hand-in takes the estimates of its table"
+            self.handin.set_tip(False, "run the least squares first: the hand-in takes the estimates of its table")
+        elif self.result_context.get("own_record"):
+            self.handin.set_tip(False, "a hand-in comes from your actuator's experiment, not from a file: run the "
+                                       "least squares on the simulated sensors")
         elif self.view.status == "current":
-            self.handin_button.disabled = False
-            tip = f"hand in the estimates of {names} in the table"
+            self.handin.set_tip(True, f"hand in the estimates of {names} in the table")
         else:
-            self.handin_button.disabled = False
-            tip = (f"hand in the estimates of {names} in the table, from the previous settings "
-                   "(run again to hand in estimates for the new ones)")
-        if self.handin_button.description != tip:
-            self.handin_button.description = tip
+            self.handin.set_tip(True, f"hand in the estimates of {names} in the table, from the previous settings "
+                                      "(run again to hand in estimates for the new ones)")
 
     def _update_enabled(self, *_events) -> None:
         _, errors = self.request()
@@ -501,6 +568,15 @@ class LeastSquaresPanel(Section):
         except ValueError as exc:
             self._fail(str(exc))
             return None
+        refusal = self._conditions_refusal(req)
+        if refusal:
+            self._fail(refusal)
+            return None
+        measured = self.conditions.measured if self.conditions is not None else ("x", "v", "p1", "p2")
+        run_settings = self.settings()
+        run_conditions = ({"noise": req.measurement_noise() or {}, "disturbance_applied": self._disturbance_text(req),
+                           "v": "measured" if "v" in measured else "dx/dt of the measured x"}
+                          if self.conditions is not None else {})
         params = self.state.params
         key = self.run_key()
         scenario = req.scenario if req.excitation == "paper" else None
@@ -527,9 +603,11 @@ class LeastSquaresPanel(Section):
                                                          "samples): the model is not re-simulated (the input is "
                                                          "known only at its samples)."), own, None, board_model(res),
                         _beside(req.model, res, own, params, token))
-            d = req.disturbance()
+            d = self._disturbance(req)
             data = lse_data(params, d, u=u, t_end=t_end, seed=req.seed, measurement_noise=req.measurement_noise(),
                             cancel=token)
+            if "v" not in measured:
+                data = velocity_from_position(data)
             res = identify_lse(data, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
                                estimator=req.estimator, cancel=token)
             try:
@@ -543,6 +621,7 @@ class LeastSquaresPanel(Section):
         def show(out, job):
             res, view, resim_error, data, resim, model, (alt, leak) = out
             self.result = res
+            self.last_settings, self.last_conditions = run_settings, run_conditions
             self.result_context = {"alternative": alt, "leak": leak, "seed": req.seed, "own_record": own is not None}
             self.last_data, self.last_resim = data, resim
             for d in self.downloads:
@@ -601,40 +680,25 @@ class LeastSquaresPanel(Section):
 
         return self.runner.run("Table 4", compute, show, fail=self._fail, busy=[self.table4_area], note=self._note)
 
-    def hand_in(self):
-        """Hand in the last estimates of the exercise's hidden parameters; show the verdicts (never the truth)."""
-        s = self.state
-        if self.result is None or not s.hidden:
+    def _handin_estimates(self):
+        """The hidden parameters the least squares estimate, from the last run, with its settings."""
+        if self.result is None:
             return None
-        estimates = {n: float(self.result.estimates[n]) for n in s.hidden}
-        exercise, student, store = s.exercise, s.student, s.handins
+        estimates = {n: float(self.result.estimates[n]) for n in self.state.hidden if n in self.result.estimates}
+        settings = dict(self.last_settings or self.settings())
+        if self.own_data is not None:
+            settings["record"] = "the student's own file"
+        settings["_conditions"] = dict(self.last_conditions)
+        return estimates, settings
 
-        def compute(_token):
-            verdicts = exercise.verdicts(student, estimates)
-            store.add(student, estimates, verdicts)
-            return verdicts, len([h for h in store.all() if h.student == student])
+    def _disturbance_text(self, req) -> str:
+        spec = req.custom if req.scenario == "custom" else LSE_SCENARIOS[req.scenario]
+        extra = self.conditions.disturbance if self.conditions is not None else "none"
+        return spec if extra.strip().lower() in ("", "none") else f"{spec} + {extra} (the exercise's)"
 
-        def show(out, _job):
-            verdicts, count = out
-            tol = f"±{100 * exercise.tolerance:g} %"
-            items = "".join(f"<li>{SYMBOLS_HTML.get(n, n)} = {estimates[n]:.5g}: "
-                            + (f"<span class='eha-ok'>within {tol} ✓</span>" if ok else
-                               f"<span class='eha-warn'>not within {tol} ✗</span>") + "</li>"
-                            for n, ok in verdicts.items())
-            score = sum(verdicts.values())
-            self.verdict.object = (f"<div class='eha-verdict-box'><b>Handed in</b> (hand-in {count} of "
-                                   f"{html.escape(student)}): {score} of {len(verdicts)} within tolerance."
-                                   f"<ul>{items}</ul></div>")
-            self.verdict.visible = True
-
-        def fail(message):
-            # nothing was stored (the class's database is damaged or gone): say so, not "identification failed"
-            self.verdict.object = (f"<div class='eha-verdict-box'><span class='eha-warn'>Your hand-in was not "
-                                   f"stored: {html.escape(message)}. Tell your teacher; your estimates stay "
-                                   "here and you can hand in again.</span></div>")
-            self.verdict.visible = True
-
-        return self.runner.run("hand-in", compute, show, fail=fail, note=self._note)
+    def hand_in(self):
+        """Hand in the last estimates of the exercise's hidden parameters (see HandInBox)."""
+        return self.handin.hand_in()
 
     # -- the section's protocol -----------------------------------------------------------
     def result_views(self) -> list:

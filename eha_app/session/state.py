@@ -268,6 +268,7 @@ class AppState(param.Parameterized):
     # An exercise (eha serve --exercise): the student's id, and the values of the hidden
     # parameters, which the server uses and never sends (their texts read "hidden").
     student = param.String(default="", doc="the student's normalised id in an exercise")
+    student_name = param.String(default="", doc="the student's name in the exercise's roster (\"\" without one)")
     secret = param.Dict(default={}, doc="hidden parameters' SI values: used, never shown")
     exercise = param.Parameter(default=None, doc="the eha_core.exercise.Exercise being run, if any")
     handins = param.Parameter(default=None, doc="where the exercise's hand-ins go (eha_app.runtime.handins.HandIns)")
@@ -291,8 +292,9 @@ class AppState(param.Parameterized):
         """The parameters an exercise hides (none outside one)."""
         return tuple(self.secret)
 
-    def start_exercise(self, exercise, student_id: str, handins=None) -> None:
-        """Run ``exercise`` as ``student_id``: their actuator, its hidden values kept here."""
+    def start_exercise(self, exercise, student_id: str, handins=None, name: str = "") -> None:
+        """Run ``exercise`` as ``student_id`` (the roster's id of a checked code, or the id typed in an
+        open exercise): their actuator, its hidden values kept here; the store notes them as here."""
         from eha_core.exercise import normalize_id
 
         student = normalize_id(student_id)
@@ -302,9 +304,19 @@ class AppState(param.Parameterized):
         self.exercise = exercise
         self.handins = handins
         self.student = student
+        self.student_name = name
         self.secret = {n: getattr(actuator, n) for n in exercise.hide}
         keep_out_of_logs(exercise.secret, *self.secret.values())
         self.reset_defaults()
+        if handins is not None:
+            from ..runtime.handins import StoreError
+
+            try:
+                handins.seen(student)
+            except StoreError as exc:       # a damaged store must not keep a student out (hand-ins say so)
+                import logging
+
+                logging.getLogger("eha_app").warning("could not note a student's arrival: %s", exc)
 
     @property
     def kp_text(self) -> str:

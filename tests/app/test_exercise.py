@@ -4,7 +4,7 @@ import threading
 
 import pytest
 
-from eha_app.app import create_app
+from eha_app.app import ExerciseGate, create_app
 from eha_app.runtime.handins import HandIns
 from eha_app.session import Session
 from eha_app.session.state import AppState
@@ -15,7 +15,7 @@ HIDE = ("M", "B", "Af", "beta_e")
 
 @pytest.fixture
 def exercise(tmp_path, monkeypatch):
-    ex = Exercise.new(hide=HIDE, vary=0.25, tolerance=0.05, title="Lab 3")
+    ex = Exercise.new(hide=HIDE, vary=0.25, tolerance=0.05, title="Lab 3", secret="5a" * 32)   # the same class
     path = tmp_path / "class.json"
     ex.save(path)
     monkeypatch.setenv("EHA_EXERCISE", str(path))
@@ -68,10 +68,12 @@ def test_two_students_handing_in_at_the_same_moment_lose_nothing(tmp_path):
 
 
 def test_a_student_identifies_their_actuator_and_hands_in(exercise):
+    """An open exercise (no roster): the id typed is taken as given, the actuator is the id's."""
     ex, path = exercise
     state = AppState()
     page = create_app(state)
     gate = page.gate
+    assert "ids are not checked" in gate.intro.object
     gate.student_id.value = "  "
     gate.start()
     assert "student id = (empty) is not allowed" in gate.message.object and not state.student
@@ -79,6 +81,7 @@ def test_a_student_identifies_their_actuator_and_hands_in(exercise):
     gate.start()
     truth = ex.student_params("ada")
     assert state.student == "ada" and state.params == truth
+    assert "ada" in HandIns(path).presence()
     tab1 = Session(state).build("parameters")
     shown = tab1.derived.object + str(tab1.form.values) + str(tab1.form.spec)
     for n in HIDE:
@@ -100,15 +103,141 @@ def test_a_student_identifies_their_actuator_and_hands_in(exercise):
     assert lse.handin_button.description.endswith("in the table")
     assert "hidden" in lse.table.object and "nominal" not in lse.table.object
     lse.hand_in()
-    assert "4 of 4 within tolerance" in lse.verdict.object
+    verdicts = ex.verdicts("ada", lse.result.estimates)
+    assert f"{sum(verdicts.values())} of 4 within tolerance" in lse.verdict.object
     for n in HIDE:
         assert f"{getattr(truth, n):.6g}" not in lse.verdict.object.replace(f"{lse.result.estimates[n]:.5g}", "")
-    rows = HandIns(path).latest()
-    assert [(r.student, r.score) for r in rows] == [("ada", 1.0)]
-    assert rows[0].verdicts == {n: True for n in HIDE}
+    rows = HandIns(path).all()
+    assert [(r.student, r.method) for r in rows] == [("ada", "lse")] and rows[0].verdicts == verdicts
+    # the hand-in says how it was obtained: the settings and the data's conditions
+    assert rows[0].settings["lse_seed"] == "0" and rows[0].settings["lse_noise_x"] == "0.01"
+    assert rows[0].conditions["noise"] == {"x": 1e-5, "v": 1e-3, "p1": 5e4, "p2": 5e4}
+    assert rows[0].errors["M"] == pytest.approx(lse.result.estimates["M"] / truth.M - 1)
     freq = tab3.build("frequency")
     freq.run()
     assert "linearised at v = 0" not in freq.summary.object and "Hidden in this exercise" in freq.backout.object
+
+
+def test_the_default_exercise_is_not_solved_by_one_click(exercise):
+    """With `eha exercise new`'s conditions the default least squares err at the level of the sensor
+    noise (the noise-free exercise gave the hidden values to five digits), and the intervals say so."""
+    ex, _ = exercise
+    page = create_app(AppState())
+    page.gate.student_id.value = "ada"
+    page.gate.start()
+    truth = ex.student_params("ada")
+    lse = page.session.build("least_squares")
+    # the noise floor is the form's lower bound: lowering it is refused beside the field
+    lse.form.values = {**lse.form.values, "lse_noise_x": "0"}
+    assert "σ x = 0 is not allowed: must lie in [0.01, 10] mm" in lse.request()[1]["lse_noise_x"]
+    lse.form.values = {**lse.form.values, "lse_noise_x": "0.01"}
+    lse.run()
+    res = lse.result
+    rel = {n: res.estimates[n] / getattr(truth, n) - 1 for n in HIDE}
+    half = {n: (res.ci95[n][1] - res.ci95[n][0]) / 2 / abs(getattr(truth, n)) for n in HIDE}
+    assert all(abs(e) > 1e-3 for e in rel.values()), rel                 # no estimate is exact
+    assert max(abs(e) for e in rel.values()) > 0.01, rel
+    assert all(h > 1e-3 for h in half.values()), half                    # no interval has collapsed
+    assert half["B"] > 0.25                                               # the data do not determine B
+    # instrumental variables (honest intervals): each error within two of its 95 % half-widths
+    # (3.9 standard errors), no interval collapsed
+    lse.form.values = {**lse.form.values, "lse_estimator": "iv"}
+    lse.run()
+    res = lse.result
+    for n in HIDE:
+        lo, hi = res.ci95[n]
+        err = res.estimates[n] - getattr(truth, n)
+        assert abs(err) <= hi - lo and (hi - lo) / 2 > 1e-3 * getattr(truth, n), n
+
+
+def _joined(ex, path, code):
+    page = create_app(AppState())
+    page.gate.student_id.value = code
+    page.gate.start()
+    return page
+
+
+def test_a_roster_student_joins_with_their_code_only(tmp_path, monkeypatch):
+    ex = Exercise.new(hide=HIDE, roster=[("s1", "Ada <b>Lovelace</b>"), ("s2", "Alan Turing")])
+    path = tmp_path / "class.json"
+    ex.save(path)
+    monkeypatch.setenv("EHA_EXERCISE", str(path))
+    page = create_app(AppState())
+    gate = page.gate
+    assert "join code" in gate.intro.object and "eha-join-code" in gate.student_id.css_classes
+    for typed in ("s1", "Ada Lovelace", "AAAAA-AAAAA"):        # an id, a name or a wrong code: the same answer
+        gate.student_id.value = typed
+        gate.start()
+        assert "it is no code of this exercise" in gate.message.object and not page.session.student
+    gate.student_id.value = ex.join_code("s2")
+    gate.start()                                            # the fourth try still counts
+    assert page.session.student == "s2" and page.session.state.student_name == "Alan Turing"
+    page = create_app(AppState())
+    gate = page.gate
+    for _ in range(ExerciseGate.FREE_TRIES):
+        gate.student_id.value = "ZZZZZ-ZZZZZ"
+        gate.start()
+    gate.student_id.value = ex.join_code("s1").lower().replace("-", " ")
+    gate.start()                                            # too many wrong codes: the page waits
+    assert "Too many wrong codes" in gate.message.object and not page.session.student
+    gate.blocked_until = 0.0
+    gate.start()
+    assert page.session.student == "s1"
+    header = page.layout.objects[1].object
+    assert "Ada &lt;b&gt;Lovelace&lt;/b&gt;" in header and "<b>Lovelace" not in header      # escaped
+
+
+def test_attempts_deadline_closing_and_feedback_hold_at_hand_in(tmp_path, monkeypatch):
+    ex = Exercise.new(hide=("M",), roster=[("s1", "Ada")], attempts=2, feedback="none")
+    path = tmp_path / "class.json"
+    ex.save(path)
+    monkeypatch.setenv("EHA_EXERCISE", str(path))
+    page = _joined(ex, path, ex.join_code("s1"))
+    lse = page.session.build("least_squares")
+    lse.run()
+    for k in (1, 2):
+        lse.hand_in()
+        box = lse.verdict.object
+        assert f"hand-in {k} of 2 allowed" in box and "within" not in box and "Your teacher will tell you" in box
+    lse.hand_in()
+    assert "Not handed in: you have handed in 2 of 2 times allowed" in lse.verdict.object
+    assert len(HandIns(path).all()) == 2
+    # the teacher closes hand-ins; a deadline passed (a new exercise file: attempts unlimited)
+    ex2 = ex.replace(attempts=0, deadline="2020-01-01T00:00", feedback="after-deadline")
+    ex2.save(path)
+    lse.state.exercise = ex2
+    lse.hand_in()
+    assert "Not handed in: the deadline (2020-01-01T00:00) has passed" in lse.verdict.object
+    store = HandIns(path)
+    store.set_control("deadline", "2100-01-01T00:00")       # extended by the teacher
+    lse.hand_in()
+    assert "hand-in 3" in lse.verdict.object and "shown after the deadline" in lse.verdict.object
+    store.set_control("open", "0")
+    lse.hand_in()
+    assert "Not handed in: hand-ins are closed by your teacher" in lse.verdict.object
+    assert len(store.all()) == 3
+
+
+def test_concurrent_hand_ins_of_one_student_cannot_pass_the_attempts(tmp_path):
+    ex = Exercise.new(hide=("M",), attempts=3)
+    store = HandIns(tmp_path / "class.json").check()
+    barrier = threading.Barrier(8)
+    outcome = []
+
+    def hand_in():
+        barrier.wait()
+        try:
+            store.add("s1", {"M": 1.0}, {"M": False}, refusal=lambda count: ex.refusal(count))
+            outcome.append("stored")
+        except Exception as exc:           # noqa: BLE001
+            outcome.append(type(exc).__name__)
+
+    threads = [threading.Thread(target=hand_in) for _ in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert sorted(outcome) == ["Refused"] * 5 + ["stored"] * 3 and len(store.all()) == 3
 
 
 def test_without_an_exercise_the_app_is_as_before(monkeypatch):

@@ -1,0 +1,116 @@
+"""The exercise's hand-in, one box for every route (least squares, the frequency domain's back-out).
+
+A section gives the box its estimates, its settings and a word for its method; the box checks the
+exercise's rules (open, deadline, attempts, the route allowed) inside the store's transaction, so
+two pages of one student cannot both take the last attempt, stores the hand-in with the data's
+conditions and the errors against the truth (the teacher's), and tells the student what the
+exercise's feedback rule allows: the verdict per parameter, only that it was stored, or the
+verdicts once the deadline has passed. The truth itself reaches the student only after the
+teacher reveals it (:meth:`eha_app.app.Page` shows it then).
+"""
+
+from __future__ import annotations
+
+import html
+from collections.abc import Callable
+
+import panel as pn
+
+from eha_core.exercise import METHODS
+
+from ..render.tables import SYMBOLS_HTML
+from ..runtime.tasks import on_click
+
+__all__ = ["HandInBox", "handin_status"]
+
+
+def handin_status(state) -> tuple[str | None, int]:
+    """(why a hand-in is refused now or None, hand-ins so far) for the session's student; the
+    teacher's switches are read from the store (a closed or extended exercise holds at once)."""
+    ex, store = state.exercise, state.handins
+    control = store.control()
+    count = len(store.of(state.student))
+    return ex.refusal(count, open_=control.get("open", "1") == "1", deadline=control.get("deadline")), count
+
+
+class HandInBox:
+    """A button and the verdict under it: ``estimates()`` gives ``({name: value}, settings)`` or
+    None (nothing to hand in yet), ``tip()`` the button's tooltip as the section sees it."""
+
+    def __init__(self, section, method: str, estimates: Callable[[], tuple[dict, dict] | None], *,
+                 label: str = "Hand in these estimates"):
+        self.section, self.method, self.estimates = section, method, estimates
+        state = section.state
+        allowed = bool(state.hidden) and (state.exercise is None or method in state.exercise.conditions.methods)
+        self.button = pn.widgets.Button(label=label, color="warning", width=260, css_classes=["eha-handin"],
+                                        visible=allowed, disabled=True, description="run first")
+        on_click(self.button, lambda _e: self.hand_in())
+        self.verdict = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-verdict"])
+
+    def set_tip(self, enabled: bool, tip: str) -> None:
+        self.button.disabled = not enabled
+        if self.button.description != tip:
+            self.button.description = tip
+
+    def hand_in(self):
+        """Store the section's estimates as a hand-in; show what the feedback rule allows."""
+        s = self.section.state
+        got = self.estimates()
+        if got is None or not s.hidden:
+            return None
+        estimates, settings = got
+        exercise, student, store, method = s.exercise, s.student, s.handins, self.method
+        conditions = {**exercise.conditions.to_dict(), **settings.pop("_conditions", {})}
+
+        def compute(_token):
+            from ..runtime.handins import Refused
+
+            control = store.control()
+            opened, deadline = control.get("open", "1") == "1", control.get("deadline")
+            verdicts = exercise.verdicts(student, estimates)
+            try:
+                store.add(student, estimates, verdicts, method=method, settings=settings, conditions=conditions,
+                          errors=exercise.errors(student, estimates),
+                          refusal=lambda count: exercise.refusal(count, open_=opened, deadline=deadline,
+                                                                 method=method))
+            except Refused as exc:
+                return None, str(exc), 0, False
+            count = len(store.of(student))
+            shows = exercise.shows_verdicts(deadline=deadline, revealed=control.get("revealed") == "1")
+            return verdicts, "", count, shows
+
+        def show(out, _job):
+            verdicts, refused, count, shows = out
+            if refused:
+                self.verdict.object = (f"<div class='eha-verdict-box eha-handin-refused'><span class='eha-warn'>"
+                                       f"Not handed in: {html.escape(refused)}.</span></div>")
+                self.verdict.visible = True
+                return
+            limit = f" of {exercise.attempts} allowed" if exercise.attempts else ""
+            head = (f"<b>Handed in</b> (hand-in {count}{limit}, from the "
+                    f"{html.escape(METHODS[method].split(' (')[0])})")
+            values = "".join(f"<li>{SYMBOLS_HTML.get(n, html.escape(n))} = {v:.5g}" for n, v in estimates.items())
+            if shows:
+                score = sum(verdicts.values())
+                items = "".join(
+                    f"<li>{SYMBOLS_HTML.get(n, html.escape(n))} = {estimates[n]:.5g}: "
+                    + (f"<span class='eha-ok'>within ±{100 * exercise.tolerance_of(n):g} % ✓</span>" if ok else
+                       f"<span class='eha-warn'>not within ±{100 * exercise.tolerance_of(n):g} % ✗</span>") + "</li>"
+                    for n, ok in verdicts.items())
+                body = f"{head}: {score} of {len(verdicts)} within tolerance.<ul>{items}</ul>"
+            elif exercise.feedback == "after-deadline":
+                body = (f"{head}.<ul>{values}</ul>The verdicts are shown after the deadline"
+                        + (f" ({html.escape(exercise.deadline)})" if exercise.deadline else "") + ".")
+            else:
+                body = f"{head}.<ul>{values}</ul>Your teacher will tell you the result."
+            self.verdict.object = f"<div class='eha-verdict-box'>{body}</div>"
+            self.verdict.visible = True
+
+        def fail(message):
+            # nothing was stored (the class's database is damaged or gone): say so, not "identification failed"
+            self.verdict.object = (f"<div class='eha-verdict-box'><span class='eha-warn'>Your hand-in was not "
+                                   f"stored: {html.escape(message)}. Tell your teacher; your estimates stay "
+                                   "here and you can hand in again.</span></div>")
+            self.verdict.visible = True
+
+        return self.section.runner.run("hand-in", compute, show, fail=fail, note=self.section._note)
