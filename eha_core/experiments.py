@@ -11,6 +11,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -330,6 +331,7 @@ class FrequencyExperiment:
     initial_condition: str = "estimate"
     input_offset: str = "estimate"
     input_delay: float | str = 0.0
+    noise_x: float = 0.0
 
     def __post_init__(self):
         def bad(name, allowed):
@@ -359,6 +361,8 @@ class FrequencyExperiment:
                                 or not 0 <= d <= 0.5 * self.n_samples * self.ts):
             raise bad("input_delay", f"must be a time in [0, {0.5 * self.n_samples * self.ts:g}] s (half the "
                                      "record), or estimate")
+        if not (isinstance(self.noise_x, (int, float)) and math.isfinite(self.noise_x) and 0 <= self.noise_x <= 0.01):
+            raise bad("noise_x", "must be a σ in [0, 0.01] m")
 
     def excitation(self, seed: int | None = None):
         """The reference signal (an :class:`~eha_core.excitation.Excitation`)."""
@@ -372,9 +376,15 @@ class FrequencyExperiment:
         """Run the loop on ``excitation.u`` and record r, u, x at Ts."""
         from .simulate import simulate_closed_loop
 
-        return simulate_closed_loop(params, excitation.u, kp=self.kp, ts=self.ts,
-                                    controller=self.controller, model=self.model,
-                                    label=f"closed loop, seed {excitation.seed}", cancel=cancel)
+        res = simulate_closed_loop(params, excitation.u, kp=self.kp, ts=self.ts,
+                                   controller=self.controller, model=self.model,
+                                   label=f"closed loop, seed {excitation.seed}", cancel=cancel)
+        if self.noise_x > 0 and res.success:
+            # the position sensor's white noise on the record (the controller is fed the true position:
+            # the noise is the measurement's, not the loop's), drawn from the excitation's seed
+            rng = np.random.default_rng([int(excitation.seed), 0x5E45])
+            res = dataclasses.replace(res, x=res.x + self.noise_x * rng.standard_normal(res.x.shape))
+        return res
 
     def cost(self):
         """Estimated cost of :func:`run_frequency_identification`, without running it.

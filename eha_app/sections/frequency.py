@@ -27,8 +27,9 @@ from ..render.tables import (
 from ..runtime.limits import check_frequency
 from ..runtime.tasks import apply_locked, held, on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot, stale_note
-from ..session.form import Field, Form, Group, parse_fields
+from ..session.form import Field, Form, Group, parse_fields, raised_to_bounds, regrouped, with_lower_bounds
 from ..session.freshness import ResultView
+from .handin import HandInBox
 from .uploads import download
 
 __all__ = ["FrequencyPanel", "FREQ_FORM", "FREQ_DEFAULTS", "parse_freq"]
@@ -54,6 +55,9 @@ FREQ_FORM = (
         Field("grid_skip", "grid skip", "integer", lo=1, hi=100, short="grid skip"),
         Field("ts", "Ts", "number", unit="s", lo=1e-4, hi=1.0, short="Ts",
               tip="sample time of the controller; its output is held between samples (ZOH: " + GLOSSARY["ZOH"] + ")"),
+        Field("noise_x", "σ of x", "number", unit="mm", lo=0.0, hi=10.0, short="σ x",
+              tip="white noise of the position sensor on the record, drawn from the seed (the controller is fed "
+                  "the true position)"),
     ), collapsible=True, collapsed=True),
     Group("Loop and model", (
         Field("model", "model in the loop", "select", options=(("nonlinear", "nonlinear"), ("linear", "linearised")),
@@ -86,7 +90,7 @@ FREQ_DEFAULTS = {
     "ts": f"{_DEFAULT_CONFIG.ts:g}", "model": _DEFAULT_CONFIG.model,
     "n_poles": str(_DEFAULT_CONFIG.n_poles), "n_zeros": str(_DEFAULT_CONFIG.n_zeros),
     "initial_condition": _DEFAULT_CONFIG.initial_condition, "input_offset": _DEFAULT_CONFIG.input_offset,
-    "input_delay": "0",
+    "input_delay": "0", "noise_x": "0",
 }
 
 
@@ -119,13 +123,15 @@ def _parse_delay(text) -> tuple[float | str, str]:
     return value, ""
 
 
-def parse_freq(texts: dict, kp: float = _DEFAULT_CONFIG.kp) -> tuple[FrequencyExperiment | None, dict]:
+def parse_freq(texts: dict, kp: float = _DEFAULT_CONFIG.kp, fields: dict | None = None,
+               ) -> tuple[FrequencyExperiment | None, dict]:
     """The experiment the form describes (None if invalid), and a message per invalid field ("" for the rest).
 
-    ``kp`` is the controller gain: tab 1's, the one H(s) is shown with everywhere.
+    ``kp`` is the controller gain: tab 1's, the one H(s) is shown with everywhere; ``fields``: the
+    form's fields as an exercise bounds them (:func:`exercise_fields`).
     """
     hidden = set(freq_hidden(texts))
-    values, errors = parse_fields(_FREQ_FIELDS.values(), texts, skip=hidden | {"input_delay"})
+    values, errors = parse_fields((fields or _FREQ_FIELDS).values(), texts, skip=hidden | {"input_delay"})
     delay, delay_error = _parse_delay(texts.get("input_delay", "0"))
     if delay_error:
         errors["input_delay"] = delay_error
@@ -140,7 +146,7 @@ def parse_freq(texts: dict, kp: float = _DEFAULT_CONFIG.kp) -> tuple[FrequencyEx
                       values.get("grid_skip", d.sinedata[2])),
             seed=values["freq_seed"], kp=kp, model=values["model"], n_poles=values["n_poles"],
             n_zeros=values["n_zeros"], initial_condition=values["initial_condition"],
-            input_offset=values["input_offset"], input_delay=delay)
+            input_offset=values["input_offset"], input_delay=delay, noise_x=values.get("noise_x", 0.0) * 1e-3)
     except (ValueError, TypeError) as exc:
         message = " ".join(str(exc).split())
         if getattr(exc, "field", "") == "input_delay":   # the field's label and the text as typed
@@ -149,6 +155,21 @@ def parse_freq(texts: dict, kp: float = _DEFAULT_CONFIG.kp) -> tuple[FrequencyEx
         return None, {_field_of(exc): message}
     return cfg, {}
 
+
+
+def exercise_fields(conditions) -> dict:
+    """The form's fields under an exercise's conditions: σ of x at least the position sensor's floor,
+    Ts at least the shortest sample time."""
+    if conditions is None:
+        return dict(_FREQ_FIELDS)
+    return with_lower_bounds(_FREQ_FIELDS, {"noise_x": conditions.noise_floor("x") / 1e-3, "ts": conditions.min_ts_s},
+                             "this exercise's conditions")
+
+
+#: The physical parameters the frequency route hands in (eq. 27): β_e alone (the back-out's damping is
+#: B + 2 k_f A_f / π, not B; Table 3's lesson) from the s coefficient (eq. 27b-d) or the gain (eq. 27e-f).
+BACKOUT_SOURCES = {"beta_e_from_stiffness": "the s coefficient (eq. 27b-d)",
+                   "beta_e_from_gain": "the gain (eq. 27e-f)"}
 
 
 # short titles: the six fit beside the form at 800 px (each figure's own title says what it shows)
@@ -178,8 +199,12 @@ class FrequencyPanel(Section):
         self.result = None
         self.view: plots.FrequencyView | None = None
         self.preview = None
-        texts = self.initial_texts()
-        self.form = Form(spec=[g.to_spec() for g in FREQ_FORM], values=texts, url_defaults=FREQ_DEFAULTS, width=270,
+        ex = state.exercise if state.hidden else None
+        self.conditions = ex.conditions if ex is not None else None
+        self.fields = exercise_fields(self.conditions)
+        texts = raised_to_bounds(self.initial_texts(), self.fields, ("noise_x", "ts"))
+        self.form = Form(spec=[g.to_spec() for g in regrouped(FREQ_FORM, self.fields)], values=texts,
+                         url_defaults=FREQ_DEFAULTS, width=270,
                          css_classes=["eha-freq-form"], margin=(5, 10))
         watch(self.form, self._on_config, "values")
         self.error = pn.pane.HTML("", visible=False, width=260, css_classes=["eha-error", "eha-error-freq"],
@@ -209,6 +234,16 @@ class FrequencyPanel(Section):
                      description="Figs. 8-13 and the residuals: one CSV per figure and a .mat"),
         ]
         self.area = pn.Column(self.unstable, self.summary, self.backout, sizing_mode="stretch_width")
+        # an exercise: hand in the back-out's β_e, computed with the student's own values of what eq. 27
+        # takes as measured (a hidden M is their least-squares estimate, or the paper's 4000 kg)
+        self.handin = HandInBox(self, "frequency", self._handin_estimates, label="Hand in the back-out's βe")
+        self.handin_button, self.verdict = self.handin.button, self.handin.verdict
+        if "beta_e" not in state.hidden:
+            self.handin_button.visible = False
+        self.handin_source = pn.widgets.Select(name="βe from", options={v: k for k, v in BACKOUT_SOURCES.items()},
+                                               width=260, visible=self.handin_button.visible,
+                                               css_classes=["eha-handin-source"])
+        watch(self.handin_source, lambda _e: self._handin_tip(), "value")
         self.kp_note = pn.pane.HTML("", width=260, css_classes=["eha-freq-kp"], margin=(0, 10))
         self.config_errors: dict = {}
         self.excitation_errors: dict = {}
@@ -234,7 +269,7 @@ class FrequencyPanel(Section):
 
     def config(self):
         """The experiment the form and tab 1's Kp describe (None if invalid), and the messages."""
-        return parse_freq(self.form.values, self.state.kp)
+        return parse_freq(self.form.values, self.state.kp, self.fields)
 
     def run_key(self, cfg=None):
         """What the experiment's results are computed from (None if the inputs are not valid)."""
@@ -389,6 +424,14 @@ class FrequencyPanel(Section):
         except ValueError as exc:
             self._fail(str(exc))
             return None
+        c = self.conditions
+        if c is not None and "frequency" not in c.methods:
+            self._fail("this exercise does not use the frequency domain")
+            return None
+        if c is not None and cfg.n_samples * cfg.ts > c.max_record_s:
+            self._fail(f"samples N × Ts = {cfg.n_samples * cfg.ts:g} s is not allowed: this exercise's records are "
+                       f"at most {c.max_record_s:g} s")
+            return None
         params = self.state.params
         run_key = (params, cfg)
 
@@ -402,6 +445,7 @@ class FrequencyPanel(Section):
             fi, view = out
             self.result = fi
             self.view = view
+            self._handin_tip()
             self.preview = (view.excitation_t, view.excitation_r, view.excitation_title)
             timing = (f"<p class='eha-note'>Experiment, estimation and validation in {job.run_s:.2f} s "
                       f"(estimation alone {fi.timings.get('tfest', float('nan')):.2f} s)"
@@ -431,6 +475,66 @@ class FrequencyPanel(Section):
 
         return self.runner.run("frequency experiment", compute, show, fail=self._fail, busy=[self.area],
                                note=self._note)
+
+    def assumed_params(self):
+        """The actuator eq. 27 takes as measured, as the student knows it: tab 1's values, and for a
+        hidden parameter their least-squares estimate (the last run) or else the paper's value."""
+        from eha_core.params import ActuatorParams
+
+        state, paper = self.state, ActuatorParams()
+        lse = self.session.section("least_squares")
+        estimates = lse.result.estimates if lse is not None and lse.result is not None else {}
+        values, sources = {}, {}
+        for n in state.hidden:
+            if n in estimates and float(estimates[n]) > 0:
+                values[n], sources[n] = float(estimates[n]), "your least-squares estimate"
+            else:
+                values[n], sources[n] = getattr(paper, n), "the paper's value"
+        try:
+            return state.params.replace(**values), sources
+        except ValueError:
+            return state.params.replace(**{n: getattr(paper, n) for n in values}), {n: "the paper's value"
+                                                                                    for n in values}
+
+    def _backout_for_handin(self):
+        from eha_core.identify.backout import backout
+        from eha_core.linear import operating_point
+
+        fi = self.result
+        if fi is None or fi.open_loop is None:
+            return None
+        assumed, sources = self.assumed_params()
+        b = backout(*fi.open_loop, assumed, operating_point(assumed), std_h=fi.estimate.param_std, kp=fi.config.kp)
+        return b, assumed, sources
+
+    def _handin_estimates(self):
+        """β_e backed out of the last run with the student's own values (see assumed_params)."""
+        got = self._backout_for_handin()
+        if got is None:
+            return None
+        b, assumed, sources = got
+        key = self.handin_source.value
+        settings = {**self.settings(), "beta_e_from": key,
+                    "assumed": {n: getattr(assumed, n) for n in sources}, "assumed_from": sources}
+        settings["_conditions"] = {"noise": {"x": self.result.config.noise_x}}
+        return {"beta_e": float(getattr(b, key))}, settings
+
+    def hand_in(self):
+        """Hand in the back-out's β_e (see HandInBox)."""
+        return self.handin.hand_in()
+
+    def _handin_tip(self) -> None:
+        if not self.handin_button.visible:
+            return
+        if self.result is None:
+            self.handin.set_tip(False, "run the experiment first: the hand-in takes the back-out of its estimate")
+        elif self.result.open_loop is None:
+            self.handin.set_tip(False, "the back-out (eq. 27) needs a model with 3 poles and no zero")
+        else:
+            _, sources = self.assumed_params()
+            used = "; ".join(f"{n} = {src}" for n, src in sources.items() if n != "beta_e")
+            self.handin.set_tip(True, f"hand in βe from {BACKOUT_SOURCES[self.handin_source.value]}"
+                                      + (f", with {used}" if used else ""))
 
     # -- what the sections within it use ----------------------------------------------------------
     @property
@@ -480,7 +584,8 @@ class FrequencyPanel(Section):
 
     def __panel__(self):
         inner = self.inner()
-        config = pn.Column(self.form, self.error, self.button, self.kp_note,
+        config = pn.Column(self.form, self.error, self.button, self.handin_source, self.handin_button, self.verdict,
+                           self.kp_note,
                            pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"),
                            *[c for s in inner for c in s.controls()], self.queue_note, width=280)
         results = pn.Column(self.alert, self.figure_tabs, self.views["summary"].banner, self.area,

@@ -93,10 +93,12 @@ class HandInBox:
             if shows:
                 score = sum(verdicts.values())
                 items = "".join(
-                    f"<li>{SYMBOLS_HTML.get(n, html.escape(n))} = {estimates[n]:.5g}: "
-                    + (f"<span class='eha-ok'>within ±{100 * exercise.tolerance_of(n):g} % ✓</span>" if ok else
-                       f"<span class='eha-warn'>not within ±{100 * exercise.tolerance_of(n):g} % ✗</span>") + "</li>"
-                    for n, ok in verdicts.items())
+                    f"<li>{SYMBOLS_HTML.get(n, html.escape(n))} "
+                    + ("not handed in from this route ✗" if n not in estimates else
+                       f"= {estimates[n]:.5g}: "
+                       + (f"<span class='eha-ok'>within ±{100 * exercise.tolerance_of(n):g} % ✓</span>" if ok else
+                          f"<span class='eha-warn'>not within ±{100 * exercise.tolerance_of(n):g} % ✗</span>"))
+                    + "</li>" for n, ok in verdicts.items())
                 body = f"{head}: {score} of {len(verdicts)} within tolerance.<ul>{items}</ul>"
             elif exercise.feedback == "after-deadline":
                 body = (f"{head}.<ul>{values}</ul>The verdicts are shown after the deadline"

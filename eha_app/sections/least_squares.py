@@ -43,7 +43,7 @@ from ..render.tables import (
 from ..runtime.limits import check_lse
 from ..runtime.tasks import apply_locked, on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot, stale_note
-from ..session.form import Field, Form, Group, parse_fields
+from ..session.form import Field, Form, Group, parse_fields, raised_to_bounds, regrouped, with_lower_bounds
 from ..session.freshness import ResultView
 from ..session.state import FIELD_LABELS
 from .handin import HandInBox
@@ -171,28 +171,9 @@ def exercise_fields(conditions) -> dict:
     noise floor (a student may raise the noise, not lower it)."""
     if conditions is None:
         return dict(_LSE_FIELDS)
-    fields = dict(_LSE_FIELDS)
-    for name, (signals, scale) in _NOISE_FIELDS.items():
-        floor = max(conditions.noise_floor(sig) for sig in signals) / scale
-        if floor > 0:
-            fields[name] = dataclasses.replace(fields[name], lo=float(f"{floor:.6g}"),
-                                               tip=fields[name].tip + f" (this exercise: at least {floor:g} "
-                                                                      f"{fields[name].unit})")
-    return fields
-
-
-def _with_floors(texts: dict, fields: dict) -> dict:
-    """Texts whose σ fields are raised to the exercise's floors (the defaults are 0)."""
-    out = dict(texts)
-    for name in _NOISE_FIELDS:
-        lo = fields[name].lo or 0.0
-        try:
-            below = float(str(out.get(name, "0")).replace(",", ".")) < lo
-        except ValueError:
-            below = False
-        if lo > 0 and below:
-            out[name] = f"{lo:g}"
-    return out
+    lows = {name: max(conditions.noise_floor(sig) for sig in signals) / scale
+            for name, (signals, scale) in _NOISE_FIELDS.items()}
+    return with_lower_bounds(_LSE_FIELDS, lows, "this exercise's sensor noise")
 
 
 def velocity_from_position(data):
@@ -234,9 +215,9 @@ class LeastSquaresPanel(Section):
         self.fields = exercise_fields(self.conditions)
         self.last_settings: dict = {}
         self.last_conditions: dict = {}
-        texts = _with_floors(self.initial_texts(), self.fields)
-        groups = [dataclasses.replace(g, fields=tuple(self.fields[f.name] for f in g.fields)) for g in LSE_FORM]
-        self.form = Form(spec=[g.to_spec() for g in groups], values=texts, url_defaults=LSE_DEFAULTS, width=270,
+        texts = raised_to_bounds(self.initial_texts(), self.fields, _NOISE_FIELDS)
+        self.form = Form(spec=[g.to_spec() for g in regrouped(LSE_FORM, self.fields)], values=texts,
+                         url_defaults=LSE_DEFAULTS, width=270,
                          css_classes=["eha-lse-form"], margin=(5, 10))
         watch(self.form, self._update_enabled, "values")
         self.table = pn.pane.HTML("<p>Choose a disturbance and run the least squares.</p>",

@@ -20,7 +20,9 @@ field's own unit (``NAME = TEXT is not allowed: WHAT``).
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import param
@@ -412,3 +414,36 @@ export function render({ model, el }) {
     def set_values(self, **texts) -> None:
         """Write texts into fields (an explicit action: reset, preset, restored link)."""
         self.values = {**self.values, **{k: str(v) for k, v in texts.items()}}
+
+
+def with_lower_bounds(fields: Mapping[str, Field], lows: Mapping[str, float], why: str) -> dict[str, Field]:
+    """``fields`` with the lower bounds ``lows`` (display units) raised where they are higher; the
+    tooltip says ``why`` (an exercise's floor: the student may go above it, not below)."""
+    out = dict(fields)
+    for name, lo in lows.items():
+        f = out[name]
+        lo = float(f"{lo:.6g}")
+        if lo > (f.lo if f.lo is not None else -math.inf):
+            out[name] = dataclasses.replace(f, lo=lo, tip=(f.tip + " " if f.tip else "") +
+                                            f"({why}: at least {lo:g}{' ' + f.unit if f.unit else ''})")
+    return out
+
+
+def raised_to_bounds(texts: Mapping[str, str], fields: Mapping[str, Field], names) -> dict[str, str]:
+    """``texts`` with each of ``names`` below its field's lower bound raised to it (a default of 0
+    under an exercise's floor), the others as typed."""
+    out = dict(texts)
+    for name in names:
+        lo = fields[name].lo
+        try:
+            below = lo is not None and float(str(out.get(name, "")).replace(",", ".")) < lo
+        except ValueError:
+            below = False
+        if below:
+            out[name] = f"{lo:g}"
+    return out
+
+
+def regrouped(groups, fields: Mapping[str, Field]) -> list:
+    """The form's groups with their fields replaced by ``fields``' (same names)."""
+    return [dataclasses.replace(g, fields=tuple(fields[f.name] for f in g.fields)) for g in groups]

@@ -258,3 +258,34 @@ def test_the_harmonic_disturbance_model_in_an_exercise(exercise):
     lse.run()
     assert not lse.alert.visible and "hidden" in lse.table.object and "<table" in lse.table.object
     assert len([k for k in lse.result.estimates if k not in HIDE]) > len(("d0",))   # the amplitudes too
+
+
+def test_the_frequency_route_hands_in_the_back_outs_beta_e_with_the_students_own_values(exercise):
+    ex, path = exercise
+    page = create_app(AppState())
+    page.gate.student_id.value = "ada"
+    page.gate.start()
+    truth = ex.student_params("ada")
+    freq = page.session.build("frequency")
+    assert freq.form.values["noise_x"] == "0.01" and freq.handin_button.visible and freq.handin_button.disabled
+    freq.form.values = {**freq.form.values, "noise_x": "0.001"}
+    assert "σ x = 0.001 is not allowed: must lie in [0.01, 10] mm" in freq.config()[1]["noise_x"]
+    freq.form.values = {**freq.form.values, "noise_x": "0.01", "n_samples": "7000"}
+    freq.run()                                   # 7000 × 0.01 s = 70 s: longer than the exercise's 60 s
+    assert "N × Ts = 70 s is not allowed: this exercise's records are at most 60 s" in freq.alert.object
+    freq.form.values = {**freq.form.values, "n_samples": "1000"}
+    freq.run()
+    assert freq.result.config.noise_x == 1e-5 and "M = the paper's value" in freq.handin_button.description
+    lse = page.session.build("least_squares")
+    lse.run()
+    freq._handin_tip()
+    assert "M = your least-squares estimate" in freq.handin_button.description
+    freq.hand_in()
+    row = HandIns(path).all()[-1]
+    assert row.method == "frequency" and set(row.estimates) == {"beta_e"}
+    assert row.settings["assumed"]["M"] == pytest.approx(lse.result.estimates["M"])
+    assert row.settings["beta_e_from"] == "beta_e_from_stiffness" and row.conditions["noise"]["x"] == 1e-5
+    # the value is eq. 27b-d's with the student's M: β_e scales with the M assumed
+    assert row.estimates["beta_e"] / truth.beta_e == pytest.approx(
+        freq.result.backout.beta_e_from_stiffness / truth.beta_e * lse.result.estimates["M"] / truth.M, rel=1e-9)
+    assert "from the transfer function and back-out" in freq.verdict.object
