@@ -137,3 +137,29 @@ def test_outside_an_exercise_nothing_is_kept(monkeypatch, tmp_path):
     assert page.work is None
     page.show("least_squares").run()
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_own_record_of_the_frequency_domain_comes_back_with_its_range(exercise):
+    _, path = exercise
+    page = join("s1")
+    freq = page.show("frequency")
+    freq.form.set_values(n_samples="2000")
+    freq.run()
+    rec = page.session.section("record")
+    loop = freq.data_bytes("csv")
+    rec.upload.param.update(filename="loop.csv", value=loop)
+    assert rec.columns is not None
+    rec.window_form.set_values(rec_from="0.5")
+    rec.detrend.value = "mean"
+    rec.run()
+    assert rec.view.is_current
+    num, den = rec.result.estimate.num, rec.result.estimate.den
+
+    again = join("s1")
+    rec2 = again.session.section("record")
+    assert rec2.columns[3] == "loop.csv" and rec2.window_form.values["rec_from"] == "0.5"
+    assert rec2.detrend.value == "mean" and rec2.view.is_current
+    assert np.array_equal(rec2.result.estimate.num, num) and np.array_equal(rec2.result.estimate.den, den)
+    assert "Your own record" in again.settings_note.object
+    kept = WorkStore(HandIns(path)).load("s1")
+    assert [(f.slot, f.name, f.data == loop, f.mapping) for f in kept.files] == [("record", "loop.csv", True, None)]
