@@ -119,6 +119,7 @@ class WorkKeeper:
         self._told = False
         self._watched: set[int] = set()
         self._changed_sections: list[str] | None = None     # set when kept work was put back
+        self._planned: list[str] = []                       # the results being computed again
 
     # -- threads ------------------------------------------------------------------------------------
     def _off_page(self, key, fn: Callable[[], None]) -> None:
@@ -171,7 +172,8 @@ class WorkKeeper:
                    if any(str(v) != str(p.cls.defaults.get(k, v)) for k, v in (settings.get(p.key) or {}).items())]
         steps = self._steps(work, settings)
         self._changed_sections = changed
-        self._restored_note(changed, running=bool(steps))
+        self._planned = [title for title, _ in steps if title]
+        self._restored_note(changed, running=bool(self._planned))
         self._next(steps)
 
     def _steps(self, work: Work, settings: dict) -> list[tuple[str, Callable]]:
@@ -250,9 +252,10 @@ class WorkKeeper:
         parts = []
         if changed:
             parts.append("settings of " + ", ".join(changed))
-        if self.restored or running:
-            results = ", ".join(dict.fromkeys(self.restored)) or "…"
-            parts.append(("results of " if not running else "computing again the results of ") + results)
+        if running:
+            parts.append("computing again the results of " + ", ".join(dict.fromkeys(self._planned)))
+        elif self.restored:
+            parts.append("results of " + ", ".join(dict.fromkeys(self.restored)))
         what = f" ({'; '.join(parts)})" if parts else ""
         self.note(f"<span class='eha-ok eha-work-restored'>Your work was restored{html.escape(what)}.</span>")
 
