@@ -28,6 +28,7 @@ from functools import partial
 import panel as pn
 
 from ..runtime.handins import StoreError
+from ..runtime.jobs import JobState
 from ..runtime.tasks import apply_locked, served_document
 from ..runtime.work_store import MAX_WORK_FILE_BYTES, StoredFile, Work, WorkStore, submit
 from ..session import SettingsError
@@ -234,12 +235,15 @@ class WorkKeeper:
             except Exception as exc:  # noqa: BLE001 - a step that cannot be taken: the others still are
                 log.warning("restoring a student's work: a step failed: %s", exc, exc_info=exc)
                 continue
-            if title and job is not None:
-                self.restored.append(title)
             if job is not None:
-                self.session.runner.then(job, lambda _job: self._next(steps))
+                self.session.runner.then(job, partial(self._step_done, title, steps))
                 return
         self._done()
+
+    def _step_done(self, title: str, steps: list, job) -> None:
+        if title and job.state == JobState.DONE:        # a run that failed is not said to be restored
+            self.restored.append(title)
+        self._next(steps)
 
     def _done(self) -> None:
         if self.restoring and self._changed_sections is not None:
