@@ -30,6 +30,7 @@ from .runtime.tasks import (
     served_document,
     watch,
 )
+from .sections.work import keep_work
 from .session import MAX_SETTINGS_BYTES, Session, SettingsError
 from .session.state import FORM_FIELDS, AppState, shown_text
 
@@ -299,6 +300,7 @@ class Page(pn.viewable.Viewer):
         self.session = session
         self.tabs: LazyTabs | None = None
         self.gate: ExerciseGate | None = None
+        self.work = None            # the keeper of an exercise's student's work (eha_app.sections.work)
         self.settings_note = pn.pane.HTML("", css_classes=["eha-settings-note"], styles={"font-size": "12px"},
                                           sizing_mode="stretch_width")
         self.layout = pn.Column(sizing_mode="stretch_width", margin=(0, 10))
@@ -357,6 +359,8 @@ class Page(pn.viewable.Viewer):
         self.layout.objects = [self.connection, header, self._settings_row(), self.guide.start, self.guide.line,
                                self.tabs.tabs]
         self._guide_follows()
+        # in an exercise: the student's kept work back on the page, and kept from now on
+        self.work = keep_work(session, lambda text: setattr(self.settings_note, "object", text))
 
     def _guide_follows(self) -> None:
         """The guide line says which section is shown (the student may have come by any way)."""

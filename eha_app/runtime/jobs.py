@@ -122,6 +122,10 @@ class Job:
     finished_at: float | None = None
     result: Any = None
     error: BaseException | None = None
+    #: Set once the page has handled the job's end (shown, said, or dropped as replaced), and what
+    #: waits for that moment (:meth:`eha_app.runtime.tasks.SessionRunner.then`): both the page's.
+    settled: bool = False
+    then: list = field(default_factory=list)
 
     def __repr__(self) -> str:
         # not the dataclass's: its owner, function and result are no business of a log line

@@ -251,6 +251,7 @@ class SessionRunner:
         self._queue = queue
         self._root = self
         self._subs: set = set()
+        self._after_each: list[Callable[[Job], None]] = []
 
     def sub(self, name: str) -> SessionRunner:
         """A runner of the same session whose requests do not replace this one's (a preview, the
@@ -259,6 +260,29 @@ class SessionRunner:
         child._root = self._root
         self._root._subs.add(child.owner)
         return child
+
+    def after_each(self, fn: Callable[[Job], None]) -> None:
+        """Call ``fn(job)`` on the page once each job of the session (its sub-runners' included) has been
+        handled there: its result shown, its failure said, or it was replaced."""
+        self._root._after_each.append(fn)
+
+    @staticmethod
+    def then(job: Job, fn: Callable[[Job], None]) -> None:
+        """Call ``fn(job)`` on the page once ``job`` has been handled there (now, if it was): what
+        depends on a run's result being on the page waits for it (the next job of a sequence would
+        otherwise replace this one in the queue, or read the page before the result is on it)."""
+        if job.settled:
+            fn(job)
+        else:
+            job.then.append(fn)
+
+    def _settled(self, job: Job) -> None:
+        for fn in [*self._root._after_each, *job.then]:
+            try:
+                fn(job)
+            except Exception:  # noqa: BLE001 - what follows a run must not break the page
+                log.exception("what follows the job %r failed", job.label)
+        job.then.clear()
 
     def cancel_all(self, reason: str = "cancelled") -> list[Job]:
         """Cancel every computation of the session, its sub-runners' included (its page was closed).
@@ -288,7 +312,7 @@ class SessionRunner:
         with "" when there is nothing to say.
         """
         note = note or (lambda _text: None)
-        outcome = _Outcome(show, fail, failed, cancelled, tuple(busy), note)
+        outcome = _Outcome(show, fail, failed, cancelled, tuple(busy), note, self._settled)
         doc = served_document()
         if doc is None:
             return self._run_here(label, compute, outcome)
@@ -352,6 +376,9 @@ class SessionRunner:
                 for c in outcome.busy:
                     if c.loading:
                         c.loading = False
+            job.settled = True
+            if outcome.settled is not None:
+                outcome.settled(job)
 
     def _run_here(self, label, compute, outcome: _Outcome) -> Job:
         job = Job(owner=self.owner, label=label, fn=compute)
@@ -380,3 +407,4 @@ class _Outcome:
     cancelled: Callable[[Job], None] | None
     busy: tuple
     note: Callable[[str], None]
+    settled: Callable[[Job], None] | None = None

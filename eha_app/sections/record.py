@@ -183,7 +183,7 @@ class RecordPanel(Section):
         def fail(message):
             self.note.object = f"<span class='eha-warn'>{html.escape(message)}</span>"
 
-        self.runner.run("reading your record", compute, show, fail=fail, note=self._note)
+        return self.runner.run("reading your record", compute, show, fail=fail, note=self._note)
 
     # -- preprocessing, drawn as it is chosen ----------------------------------------------------
     def preview(self) -> None:

@@ -1,0 +1,364 @@
+"""A student's work in an exercise, kept for their id and given back when they join again.
+
+A reload, a closed laptop or a restart of the server must not cost a student their afternoon:
+in an exercise (only there: outside one nothing is stored), a page's :class:`WorkKeeper` saves
+the session's settings, which results were on the page and the records the student uploaded
+(:mod:`eha_app.runtime.work_store`), and when the student joins again with the same id, it
+types the settings back in, reads their records again and runs again what had a result. The
+runs are deterministic (the same inputs and seeds give the same numbers) and go through the
+session's runner like a click: a restored student waits their turn in the fair queue like
+everyone else. They run one after another, each once the previous one is on the page: the
+session's runner keeps one waiting job per session, and a second request would replace the
+first.
+
+Saves follow the page's changes without costing it: a run that ends or an input that changes
+starts a timer, and the page is read (under its lock) and written (on the store's own thread)
+at most once per :attr:`WorkKeeper.SAVE_DELAY_S`, not once per keystroke. A database that cannot
+be used is said once on the page and in the server's log; the page goes on without it.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import logging
+from collections.abc import Callable
+from functools import partial
+
+import panel as pn
+
+from ..runtime.handins import StoreError
+from ..runtime.jobs import JobState
+from ..runtime.tasks import apply_locked, served_document
+from ..runtime.work_store import MAX_WORK_FILE_BYTES, StoredFile, Work, WorkStore, submit
+from ..session import SettingsError
+from ..session.form import Form
+
+__all__ = ["WorkKeeper", "keep_work"]
+
+log = logging.getLogger("eha_app")
+
+#: The name a restored settings file goes by in the page's notes.
+_SAVED = "your saved work"
+
+
+def keep_work(session, note: Callable[[str], None]) -> WorkKeeper | None:
+    """Restore and keep the work of the session's student (in an exercise; else None). ``note(html)``
+    tells the student, on the page, what was restored (or that the database could not be read).
+    Call under the page's lock, once the student has joined."""
+    state = session.state
+    if not session.student or state.exercise is None or state.handins is None:
+        return None
+    keeper = WorkKeeper(session, note)
+    keeper.restore()
+    return keeper
+
+
+# -- what each section keeps: its results to run again and its uploads ----------------------------
+
+def _current(view) -> bool:
+    return view.status == "current"
+
+
+def _kept_simulation(section) -> tuple[dict | None, StoredFile | None]:
+    # the paper's Fig. 2 is drawn when the tab opens: only a run of the student's own is kept
+    if section.run_count > 1 and _current(section.view):
+        preset = section.preset
+        return {"views": ["simulation"], "model": section.last_model, "preset": preset}, None
+    return None, None
+
+
+def _kept_least_squares(section) -> tuple[dict | None, StoredFile | None]:
+    views = [name for name, view in (("lse", section.view), ("table4", section.table4_view)) if _current(view)]
+    upload = None
+    entry: dict = {"views": views}
+    if section.own_data is not None and section._upload is not None:
+        data, name = section._upload
+        mapping = dict(section.own_data_key[2]) if section.own_data_key and section.own_data_key[2] else None
+        upload = StoredFile(section.key, name, data, mapping)
+        entry["window"] = {k: str(section.window_form.values.get(k, "")) for k in ("own_from", "own_to")}
+    return (entry if views or upload is not None else None), upload
+
+
+def _kept_frequency(section) -> tuple[dict | None, StoredFile | None]:
+    return ({"views": ["summary"]} if _current(section.views["summary"]) else None), None
+
+
+def _kept_record(section) -> tuple[dict | None, StoredFile | None]:
+    upload = None
+    if section.columns is not None and section._upload is not None:
+        data, name = section._upload
+        upload = StoredFile(section.key, name, data, dict(section._mapping) if section._mapping else None)
+    views = ["freq-record"] if _current(section.view) else []
+    return ({"views": views} if views or upload is not None else None), upload
+
+
+#: The sections whose results and uploads are kept (the study and the model board are not: the
+#: study is closed in an exercise, and the board is filled again by the runs it was sent).
+_KEPT = {"simulation": _kept_simulation, "least_squares": _kept_least_squares, "frequency": _kept_frequency,
+         "record": _kept_record}
+
+
+class WorkKeeper:
+    """One page's saving and restoring of its student's work (see the module docstring)."""
+
+    #: Seconds between a change and its save: a burst of typing is one write.
+    SAVE_DELAY_S = 2.0
+
+    def __init__(self, session, note: Callable[[str], None]):
+        self.session = session
+        self.student = session.student
+        self.store = WorkStore(session.state.handins)
+        self.note = note
+        self.doc = served_document()
+        self.restoring = True           # nothing is saved before what was kept is back on the page
+        self.restored: list[str] = []   # what was restored, for the page's note
+        self._dirty = False
+        self._timer = False
+        self._closed = False
+        self._last = None               # what was last saved, to skip a save of the same
+        self._told = False
+        self._watched: set[int] = set()
+        self._changed_sections: list[str] | None = None     # set when kept work was put back
+        self._planned: list[str] = []                       # the results being computed again
+
+    # -- threads ------------------------------------------------------------------------------------
+    def _off_page(self, key, fn: Callable[[], None]) -> None:
+        """``fn()`` on the store's thread (at once without a server)."""
+        if self.doc is None:
+            fn()
+        else:
+            submit(key, fn)
+
+    def _on_page(self, fn: Callable[[], None]) -> None:
+        apply_locked(fn, self.doc)
+
+    @property
+    def _key(self):
+        return "work", str(self.store.handins.path), self.student
+
+    # -- restoring ----------------------------------------------------------------------------------
+    def restore(self) -> None:
+        """Read the student's kept work (off the page), then put it back on the page."""
+        store, student = self.store, self.student
+
+        def read():
+            try:
+                work, error = store.load(student), None
+            except StoreError as exc:
+                work, error = None, exc
+            self._on_page(lambda: self._put_back(work, error))
+
+        self._off_page(("read", id(self)), read)
+
+    def _put_back(self, work: Work | None, error: StoreError | None) -> None:
+        self._watch()
+        if error is not None:
+            log.warning("a student's saved work could not be read: %s", error)
+            self._tell(f"Your earlier work could not be read ({error}); you start afresh. Tell your teacher.")
+            self._done()
+            return
+        if work is None:
+            self._done()
+            return
+        session = self.session
+        try:
+            session.load_settings(work.settings, _SAVED)
+        except SettingsError as exc:
+            log.warning("a student's saved settings could not be loaded: %s", exc)
+            self._done()
+            return
+        settings = json.loads(work.settings)
+        changed = [p.cls.title for p in session.registry
+                   if any(str(v) != str(p.cls.defaults.get(k, v)) for k, v in (settings.get(p.key) or {}).items())]
+        steps = self._steps(work, settings)
+        self._changed_sections = changed
+        self._planned = [title for title, _ in steps if title]
+        self._restored_note(changed, running=bool(self._planned))
+        self._next(steps)
+
+    def _steps(self, work: Work, settings: dict) -> list[tuple[str, Callable]]:
+        """What brings the kept results back, in page order: ``(title, step)``, a step returning the
+        job it started (None: nothing to wait for)."""
+        session, runs = self.session, work.runs
+        files = {f.slot: f for f in work.files}
+        steps: list[tuple[str, Callable]] = []
+        sim = runs.get("simulation")
+        if sim and sim.get("model") in ("nonlinear", "linear", "both"):
+            def simulate():
+                section = session.build("simulation")
+                preset = sim.get("preset")
+                section.preset = preset if preset in ("all", "custom", 1, 2, 3, 4) else "custom"
+                section._describe_form()
+                return section.run(sim["model"])
+            steps.append(("Simulation", simulate))
+        lse, upload = runs.get("least_squares"), files.get("least_squares")
+        if lse or upload:
+            lse = lse or {}
+            if upload is not None:
+                def read_lse(upload=upload):
+                    section = session.build("least_squares")
+                    section._upload = (upload.data, upload.name)
+                    return section.read_upload(upload.mapping)
+                steps.append(("", read_lse))
+                if lse.get("window"):
+                    window = lse["window"]
+                    steps.append(("", lambda: session.build("least_squares").window_form.set_values(**window)))
+            if "lse" in lse.get("views", ()):
+                steps.append(("Least squares", lambda: session.build("least_squares").run()))
+            if "table4" in lse.get("views", ()):
+                steps.append(("Table 4", lambda: session.build("least_squares").run_all()))
+        if "summary" in (runs.get("frequency") or {}).get("views", ()):
+            steps.append(("Transfer function", lambda: session.build("frequency").run()))
+        rec, rec_upload = runs.get("record"), files.get("record")
+        if rec_upload is not None:
+            def record():
+                session.build("frequency")
+                return session.section("record")
+            def read_record(upload=rec_upload):
+                section = record()
+                section._upload = (upload.data, upload.name)
+                return section.read(upload.mapping)
+            steps.append(("", read_record))
+            # reading a record clears its range: the kept one goes back after it
+            steps.append(("", lambda: record().load(settings.get("record") or {})))
+            if "freq-record" in (rec or {}).get("views", ()):
+                steps.append(("Your own record", lambda: record().run()))
+        return steps
+
+    def _next(self, steps: list) -> None:
+        """Take the steps in turn, each once the previous one's job is handled on the page."""
+        while steps:
+            title, step = steps.pop(0)
+            try:
+                job = step()
+            except Exception as exc:  # noqa: BLE001 - a step that cannot be taken: the others still are
+                log.warning("restoring a student's work: a step failed: %s", exc, exc_info=exc)
+                continue
+            if job is not None:
+                self.session.runner.then(job, partial(self._step_done, title, steps))
+                return
+        self._done()
+
+    def _step_done(self, title: str, steps: list, job) -> None:
+        if title and job.state == JobState.DONE:        # a run that failed is not said to be restored
+            self.restored.append(title)
+        self._next(steps)
+
+    def _done(self) -> None:
+        if self.restoring and self._changed_sections is not None:
+            self._restored_note(self._changed_sections, running=False)
+        self.restoring = False
+        if self._dirty:
+            self.changed()
+
+    def _restored_note(self, changed: list[str], running: bool) -> None:
+        parts = []
+        if changed:
+            parts.append("settings of " + ", ".join(changed))
+        if running:
+            parts.append("computing again the results of " + ", ".join(dict.fromkeys(self._planned)))
+        elif self.restored:
+            parts.append("results of " + ", ".join(dict.fromkeys(self.restored)))
+        what = f" ({'; '.join(parts)})" if parts else ""
+        self.note(f"<span class='eha-ok eha-work-restored'>Your work was restored{html.escape(what)}.</span>")
+
+    def _tell(self, text: str) -> None:
+        self.note(f"<span class='eha-warn eha-work-problem'>{html.escape(text)}</span>")
+
+    # -- saving ---------------------------------------------------------------------------------------
+    def _watch(self) -> None:
+        """Save after every run of the session and every change of its inputs (debounced)."""
+        session = self.session
+        session.runner.after_each(lambda _job: self.changed())
+        session.state.param.watch(lambda _e: self.changed(), ["texts"])
+        for section in session.built():
+            self._watch_section(section)
+        session.when_built(self._watch_section)
+        if self.doc is not None:
+            self.doc.on_session_destroyed(lambda _context: self._closing())
+
+    def _watch_section(self, section) -> None:
+        if id(section) in self._watched:
+            return
+        self._watched.add(id(section))
+        for obj in list(vars(section).values()):
+            if isinstance(obj, Form):
+                obj.param.watch(lambda _e: self.changed(), ["values"])
+            elif isinstance(obj, pn.widgets.Select):
+                obj.param.watch(lambda _e: self.changed(), ["value"])
+
+    def changed(self) -> None:
+        """Something to save: in :attr:`SAVE_DELAY_S` (at once without a server)."""
+        if self.restoring:
+            self._dirty = True
+            return
+        if self.doc is None:
+            self.save()
+            return
+        if self._timer or self._closed:
+            return
+        self._timer = True
+        try:
+            self.doc.add_timeout_callback(self._due, int(self.SAVE_DELAY_S * 1000))
+        except Exception:  # noqa: BLE001 - the page is closing
+            self._timer = False
+
+    def _due(self) -> None:
+        self._timer = False
+        self.save()
+
+    def _closing(self) -> None:
+        self._closed = True
+        if self._timer:             # a change not saved yet: saved now, before the page goes
+            self._timer = False
+            self.save()
+
+    def collect(self) -> Work:
+        """The session's work now (read under the page's lock)."""
+        session = self.session
+        runs, files, size = {}, [], 0
+        for section in session.built():
+            kept = _KEPT.get(section.key)
+            if kept is None:
+                continue
+            entry, upload = kept(section)
+            if upload is not None:
+                if size + len(upload.data) > MAX_WORK_FILE_BYTES:
+                    log.info("a student's upload %r is not kept: their uploads pass %d MB", upload.name,
+                             MAX_WORK_FILE_BYTES // 10**6)
+                else:
+                    size += len(upload.data)
+                    files.append(upload)
+            if entry is not None:
+                runs[section.key] = entry
+        return Work(self.student, session.settings_bytes(), runs, tuple(files))
+
+    def save(self) -> None:
+        """Write the session's work (on the store's thread), unless it is what was written last."""
+        if self.restoring:
+            self._dirty = True
+            return
+        work = self.collect()
+        mark = (work.settings, json.dumps(work.runs, sort_keys=True),
+                tuple((f.slot, f.name, id(f.data), repr(f.mapping)) for f in work.files))
+        if mark == self._last:
+            return
+        self._last = mark
+        store = self.store
+
+        def write():
+            try:
+                store.save(work)
+            except StoreError as exc:
+                log.warning("a student's work could not be saved: %s", exc)
+                self._on_page(partial(self._not_saved, exc))
+
+        self._off_page(self._key, write)
+
+    def _not_saved(self, error: StoreError) -> None:
+        self._last = None               # tried again at the next change
+        if not self._told:
+            self._told = True
+            self._tell(f"Your work is not being kept for a reload ({error}). Tell your teacher; you can "
+                       "go on working, and “Save settings” keeps your inputs.")

@@ -1,0 +1,165 @@
+"""A student's work in an exercise survives a reload and a restart: settings, results, uploads."""
+
+import logging
+
+import numpy as np
+import pytest
+
+from eha_app.app import create_app
+from eha_app.runtime.handins import HandIns, handins_path
+from eha_app.runtime.work_store import WorkStore
+from eha_app.session.state import AppState
+from eha_core.exercise import Exercise
+
+HIDE = ("M", "B", "Af", "beta_e")
+
+
+@pytest.fixture
+def exercise(tmp_path, monkeypatch):
+    ex = Exercise.new(hide=HIDE, roster=[("s1", "Ada"), ("s2", "Alan")], title="Lab 3")
+    path = tmp_path / "class.json"
+    ex.save(path)
+    monkeypatch.setenv("EHA_EXERCISE", str(path))
+    return ex, path
+
+
+def join(student: str):
+    """A new page (a reload, or a server started again: nothing but the database is shared), joined
+    as ``student`` through the exercise's gate."""
+    page = create_app(AppState())
+    page.gate.student_id.value = student
+    page.gate.start()
+    assert page.session.student == student
+    return page
+
+
+def _settings(page) -> dict:
+    return {k: v for k, v in page.session.settings().items() if k != "tab"}
+
+
+def test_settings_and_results_come_back_for_the_same_student_only(exercise):
+    ex, path = exercise
+    page = join("s1")
+    session = page.session
+    session.state.set_text("kp", "12")
+    session.state.set_text("Dc", "125")
+    lse = page.show("least_squares")
+    lse.form.set_values(lse_seed="7", lse_noise_p="0.05", lse_model="harmonic")
+    lse.run()
+    freq = page.show("frequency")
+    freq.form.set_values(freq_seed="3", n_samples="2000")
+    freq.run()
+    assert lse.view.is_current and freq.views["summary"].is_current
+    estimates = dict(lse.result.estimates)
+    num, den = freq.result.estimate.num, freq.result.estimate.den
+    kept = WorkStore(HandIns(path)).load("s1")
+    assert set(kept.runs) == {"least_squares", "frequency"} and kept.files == ()
+
+    again = join("s1")              # a fresh page: only the database remembers
+    lse2, freq2 = again.session.section("least_squares"), again.session.section("frequency")
+    assert _settings(again) == _settings(page)
+    assert again.session.state.params == session.state.params
+    assert lse2.view.is_current and freq2.views["summary"].is_current
+    assert dict(lse2.result.estimates) == estimates                  # to the last digit
+    assert np.array_equal(freq2.result.estimate.num, num) and np.array_equal(freq2.result.estimate.den, den)
+    note = again.settings_note.object
+    assert "Your work was restored" in note and "results of Least squares, Transfer function" in note
+    assert "settings of Parameters" in note and "computing again" not in note
+    # the board was sent the restored estimates, as by a click
+    assert [m.name for m in again.session.mail("board")] == ["LS", "H"]
+
+    other = join("s2")              # nothing of s1's
+    assert other.session.section("least_squares") is None and other.session.section("frequency") is None
+    assert other.session.settings()["least_squares"]["lse_seed"] == "0"
+    assert other.session.state.texts["Dc"] != "125" and other.settings_note.object == ""
+    assert WorkStore(HandIns(path)).load("s2") is None
+
+
+def test_settings_alone_are_kept_and_a_changed_run_is_not_run_again(exercise):
+    _, path = exercise
+    page = join("s1")
+    lse = page.show("least_squares")
+    lse.run()
+    lse.form.set_values(lse_seed="5")           # the table is out of date: not a result to compute again
+    assert not lse.view.is_current
+    again = join("s1")
+    lse2 = again.session.section("least_squares")
+    assert lse2 is None or lse2.result is None
+    assert again.session.settings()["least_squares"]["lse_seed"] == "5"
+    assert "results of" not in again.settings_note.object
+
+
+def test_an_uploaded_record_with_its_columns_comes_back(exercise):
+    ex, path = exercise
+    page = join("s1")
+    lse = page.show("least_squares")
+    lse.form.set_values(lse_seed="2")
+    lse.run()
+    csv = lse.data_bytes("csv").replace(b"t[s],x[m]", b"time[s],pos[m]", 1)
+    lse.upload.param.update(filename="mine.csv", value=csv)
+    assert lse.column_mapping.waiting
+    lse.mapping_selects["t"].value, lse.mapping_selects["x"].value = "time[s]", "pos[m]"
+    lse.mapping_button.clicks += 1
+    assert lse.own_data is not None
+    lse.window_form.set_values(own_from="1", own_to="4")
+    lse.run()
+    estimates = dict(lse.result.estimates)
+    assert "mine.csv" in lse.table.object + lse.upload_note.object
+
+    again = join("s1")
+    lse2 = again.session.section("least_squares")
+    assert lse2.own_data is not None and lse2.windowed().t.size == lse.windowed().t.size
+    assert lse2.window_form.values["own_from"] == "1" and lse2.window_form.values["own_to"] == "4"
+    assert dict(lse2.result.estimates) == estimates and lse2.view.is_current
+    kept = WorkStore(HandIns(path)).load("s1").files
+    assert [(f.slot, f.name, f.data == csv) for f in kept] == [("least_squares", "mine.csv", True)]
+    assert kept[0].mapping["t"] == "time[s]"
+
+
+def test_a_damaged_database_is_said_and_the_page_goes_on(exercise, caplog):
+    _, path = exercise
+    join("s1").show("least_squares").run()
+    handins_path(path).write_bytes(b"this is not a database" * 100)
+    caplog.set_level(logging.WARNING, logger="eha_app")
+    page = join("s1")
+    assert "Your earlier work could not be read" in page.settings_note.object
+    assert "move it away to start an empty one" in page.settings_note.object
+    lse = page.show("least_squares")
+    lse.form.set_values(lse_seed="3")
+    lse.run()                                   # the page works; the save says it could not be made
+    assert lse.result is not None and lse.view.is_current
+    assert "could not be saved" in caplog.text and "could not be read" in caplog.text
+
+
+def test_outside_an_exercise_nothing_is_kept(monkeypatch, tmp_path):
+    monkeypatch.delenv("EHA_EXERCISE", raising=False)
+    page = create_app(AppState())
+    assert page.work is None
+    page.show("least_squares").run()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_own_record_of_the_frequency_domain_comes_back_with_its_range(exercise):
+    _, path = exercise
+    page = join("s1")
+    freq = page.show("frequency")
+    freq.form.set_values(n_samples="2000")
+    freq.run()
+    rec = page.session.section("record")
+    loop = freq.data_bytes("csv")
+    rec.upload.param.update(filename="loop.csv", value=loop)
+    assert rec.columns is not None
+    rec.window_form.set_values(rec_from="0.5")
+    rec.detrend.value = "mean"
+    rec.run()
+    assert rec.view.is_current
+    num, den = rec.result.estimate.num, rec.result.estimate.den
+
+    again = join("s1")
+    rec2 = again.session.section("record")
+    assert rec2.columns[3] == "loop.csv" and rec2.window_form.values["rec_from"] == "0.5"
+    assert rec2.detrend.value == "mean" and rec2.view.is_current
+    assert np.array_equal(rec2.result.estimate.num, num) and np.array_equal(rec2.result.estimate.den, den)
+    assert "Your own record" in again.settings_note.object
+    kept = WorkStore(HandIns(path)).load("s1")
+    assert [(f.slot, f.name, f.data == loop, f.mapping) for f in kept.files] == [("record", "loop.csv", True, None)]
