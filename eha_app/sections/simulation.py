@@ -21,7 +21,16 @@ from ..render.plots import TimeSeriesGrid
 from ..runtime.limits import check_simulation
 from ..runtime.tasks import apply_locked, on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot, stale_note
-from ..session.form import Field, Form, Group, InputError, parse_fields
+from ..session.form import (
+    Field,
+    Form,
+    Group,
+    InputError,
+    parse_fields,
+    raised_to_bounds,
+    regrouped,
+    with_lower_bounds,
+)
 from ..session.freshness import ResultView
 
 __all__ = ["SimulationTab", "SimulationRequest", "SIMULATION_FORM", "build_inputs", "parse_t_end", "compute_runs"]
@@ -113,14 +122,29 @@ def hidden_fields(u_kind: str, d_kind: str) -> list[str]:
     return [name for name, shown in _SHOWN.items() if kinds[name[0]] not in shown]
 
 
-def parse_request(texts: dict, preset) -> tuple[SimulationRequest, dict]:
-    """The request the form's texts describe, and a message per invalid field.
+#: The sensor-noise fields, the signals whose σ each sets and the display scale (value_SI / scale).
+_SENSOR_FIELDS = {"sensor_x": (("x",), 1e-3), "sensor_v": (("v",), 1e-3), "sensor_p": (("p1", "p2"), 1e6)}
+
+
+def exercise_fields(conditions) -> dict:
+    """The form's fields under an exercise's conditions: the sensors' σ at least the exercise's floors
+    (every record of the student's actuator that reaches the page is measured, as in the lab)."""
+    if conditions is None:
+        return dict(_FIELDS)
+    lows = {name: max(conditions.noise_floor(sig) for sig in signals) / scale
+            for name, (signals, scale) in _SENSOR_FIELDS.items()}
+    return with_lower_bounds(_FIELDS, lows, "this exercise's sensor noise")
+
+
+def parse_request(texts: dict, preset, fields: dict | None = None) -> tuple[SimulationRequest, dict]:
+    """The request the form's texts describe, and a message per invalid field (``fields``: as an
+    exercise bounds them, see :func:`exercise_fields`).
 
     Fields hidden by the chosen kinds are not checked: they take no part in the run.
     """
     kinds, _ = parse_fields([_U, _D], texts)
     hidden = set(hidden_fields(kinds.get("u_kind", "sine"), kinds.get("d_kind", "sine")))
-    values, errors = parse_fields([f for f in _FIELDS.values() if f.name != "t_end"], texts, skip=hidden)
+    values, errors = parse_fields([f for f in (fields or _FIELDS).values() if f.name != "t_end"], texts, skip=hidden)
     if preset != "all":
         try:
             values["t_end"] = parse_t_end(texts.get("t_end", ""))
@@ -268,9 +292,13 @@ class SimulationTab(Section):
                                    css_classes=["eha-sim-alert"])
         self.queue_note = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-queue-note"],
                                        styles={"color": "#555", "font-size": "12px"})
+        ex = state.exercise if state.hidden else None
+        self.fields = exercise_fields(ex.conditions if ex is not None else None)
         texts = self.initial_texts()
         restored = {k: v for k, v in texts.items() if v != DEFAULT_TEXTS.get(k)}
-        self.form = Form(spec=[g.to_spec() for g in SIMULATION_FORM], values=texts, url_defaults=DEFAULT_TEXTS,
+        texts = raised_to_bounds(texts, self.fields, _SENSOR_FIELDS)
+        self.form = Form(spec=[g.to_spec() for g in regrouped(SIMULATION_FORM, self.fields)], values=texts,
+                         url_defaults=DEFAULT_TEXTS,
                          width=270, css_classes=["eha-sim-form"], margin=(5, 10))
         watch(self.form, self._typed, "values")
 
@@ -325,11 +353,18 @@ class SimulationTab(Section):
         # updates per second of a dragged slider).
         self.info = Div(text="Choose a case or an input, then run a model.", sizing_mode="stretch_width",
                         css_classes=["eha-sim-info"])
-        self._show(list(_paper_figure_2(self.state.params)), None)
         req, _ = self.request()
-        # the paper's Fig. 2 as computed: the four cases, nonlinear, no sensor noise
-        self.view.shown((self.state.params, "all", "nonlinear", (0.0, 0.0, 0.0), req.sensor_seed))
-        if self.preset == "custom" or any(req.sensor_noise) or not self.state.valid:
+        runs = list(_paper_figure_2(self.state.params))
+        if self.state.hidden and self.preset == "all" and any(req.sensor_noise):
+            # an exercise: the student's actuator is seen through its noisy sensors from the first draw
+            # (noise-free curves of it would reach the browser's data, and the hidden values with them)
+            self._show(with_sensor_noise(runs, req), None)
+            self.view.shown(self.run_key("nonlinear"))
+        else:
+            self._show(runs, None)
+            # the paper's Fig. 2 as computed: the four cases, nonlinear, no sensor noise
+            self.view.shown((self.state.params, "all", "nonlinear", (0.0, 0.0, 0.0), req.sensor_seed))
+        if self.preset == "custom" or (any(req.sensor_noise) and not self.state.hidden) or not self.state.valid:
             # opened from a link (or a reload) with inputs of its own: run those, as typed; or
             # opened while tab 1 is not valid: Fig. 2 of its last valid parameters, marked so
             self._inputs_changed()
@@ -338,7 +373,7 @@ class SimulationTab(Section):
 
     # -- inputs ------------------------------------------------------------------------
     def request(self) -> tuple[SimulationRequest, dict]:
-        return parse_request(self.form.values, self.preset)
+        return parse_request(self.form.values, self.preset, self.fields)
 
     def set_inputs(self, **texts) -> None:
         """Type into the form (tests, presets): values as text or numbers."""
@@ -347,7 +382,7 @@ class SimulationTab(Section):
     def run_key(self, model: str, preset=None):
         """What a run of ``model`` with the current inputs is computed from (None if they are not valid)."""
         preset = self.preset if preset is None else preset
-        req, errors = parse_request(self.form.values, preset)
+        req, errors = parse_request(self.form.values, preset, self.fields)
         if errors or not self.state.valid:
             return None
         if preset == "all":             # the four cases ignore the form's inputs, not the sensors

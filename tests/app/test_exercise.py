@@ -289,3 +289,22 @@ def test_the_frequency_route_hands_in_the_back_outs_beta_e_with_the_students_own
     assert row.estimates["beta_e"] / truth.beta_e == pytest.approx(
         freq.result.backout.beta_e_from_stiffness / truth.beta_e * lse.result.estimates["M"] / truth.M, rel=1e-9)
     assert "from the transfer function and back-out" in freq.verdict.object
+
+
+def test_every_record_of_the_students_actuator_is_measured_through_noisy_sensors(exercise):
+    """Tab 2's curves and downloads carry the exercise's sensor noise from the first draw: noise-free
+    records of the hidden actuator would let a student fit it exactly away from the app."""
+    ex, _ = exercise
+    page = create_app(AppState())
+    page.gate.student_id.value = "ada"
+    page.gate.start()
+    sim = page.session.build("simulation")
+    sim._build_plots()
+    assert sim.form.values["sensor_x"] == "0.01" and sim.form.values["sensor_p"] == "0.05"
+    assert sim.results and all(r.label.endswith("+ sensor noise") for r in sim.results)
+    assert sim.view.status == "current"
+    sim.form.values = {**sim.form.values, "sensor_v": "0"}
+    assert "sensor σ v = 0 is not allowed: must lie in [1, 1000] mm/s" in sim.request()[1]["sensor_v"]
+    sim.form.values = {**sim.form.values, "sensor_v": "1"}
+    sim.run("both")
+    assert all(r.label.endswith("+ sensor noise") for r in sim.results) and len(sim.results) == 8

@@ -1,6 +1,7 @@
 """A student's work in an exercise survives a reload and a restart: settings, results, uploads."""
 
 import logging
+import os
 
 import numpy as np
 import pytest
@@ -27,7 +28,7 @@ def join(student: str):
     """A new page (a reload, or a server started again: nothing but the database is shared), joined
     as ``student`` through the exercise's gate."""
     page = create_app(AppState())
-    page.gate.student_id.value = student
+    page.gate.student_id.value = Exercise.load(os.environ["EHA_EXERCISE"]).join_code(student)   # their slip's code
     page.gate.start()
     assert page.session.student == student
     return page
