@@ -223,6 +223,10 @@ class ExerciseGate:
         self.on_start()
 
 
+#: How often a student's page looks whether their result may be shown (a reveal, the deadline).
+RESULT_POLL_MS = 5000
+
+
 def _log_to_stderr() -> None:
     """The app's notices (a closed page's cancelled runs, failures) in the server's log: through the
     server's own handler (``eha serve`` sets its format), or one of their own if it has none."""
@@ -356,11 +360,32 @@ class Page(pn.viewable.Viewer):
             '<h2 style="margin:4px 0">Electro-hydraulic actuator: modeling and identification</h2>'
             f'<span style="color:#666">a single-rod cylinder driven by a proportional valve</span>{who}</div>',
             sizing_mode="stretch_width")
-        self.layout.objects = [self.connection, header, self._settings_row(), self.guide.start, self.guide.line,
-                               self.tabs.tabs]
+        self.result_pane = pn.pane.HTML("", visible=False, sizing_mode="stretch_width",
+                                        css_classes=["eha-student-result"])
+        self.layout.objects = [self.connection, header, self.result_pane, self._settings_row(), self.guide.start,
+                               self.guide.line, self.tabs.tabs]
         self._guide_follows()
+        if session.student:
+            self.check_result()
+            if served_document() is not None:
+                # the teacher's reveal (or the deadline) reaches the student's open page within seconds
+                pn.state.add_periodic_callback(self.check_result, period=RESULT_POLL_MS)
         # in an exercise: the student's kept work back on the page, and kept from now on
         self.work = keep_work(session, lambda text: setattr(self.settings_note, "object", text))
+
+    def check_result(self) -> None:
+        """Show the student's result once the exercise allows it (one small read of the database)."""
+        from .runtime.handins import StoreError
+        from .sections.handin import result_for_student
+
+        state = self.session.state
+        try:
+            text = result_for_student(state.exercise, state.student, state.handins)
+        except StoreError:
+            return                                  # the hand-in box says so when it matters
+        if text != self.result_pane.object:
+            self.result_pane.object = text
+            self.result_pane.visible = bool(text)
 
     def _guide_follows(self) -> None:
         """The guide line says which section is shown (the student may have come by any way)."""

@@ -21,7 +21,7 @@ from eha_core.exercise import METHODS
 from ..render.tables import SYMBOLS_HTML
 from ..runtime.tasks import on_click
 
-__all__ = ["HandInBox", "handin_status"]
+__all__ = ["HandInBox", "handin_status", "result_for_student"]
 
 
 def handin_status(state) -> tuple[str | None, int]:
@@ -116,3 +116,51 @@ class HandInBox:
             self.verdict.visible = True
 
         return self.section.runner.run("hand-in", compute, show, fail=fail, note=self.section._note)
+
+
+def result_for_student(exercise, student: str, store, control: dict | None = None) -> str:
+    """What the student may now see of their result ("" for nothing yet): after the teacher's reveal,
+    their actuator's true hidden values and each hand-in's errors; after the deadline (feedback
+    "after-deadline"), the verdicts of their hand-ins."""
+    control = store.control() if control is None else control
+    revealed = control.get("revealed") == "1"
+    deadline = control.get("deadline")
+    if not revealed and not (exercise.feedback == "after-deadline"
+                             and exercise.shows_verdicts(deadline=deadline)):
+        return ""
+    handins = store.of(student)
+    names = exercise.hide
+
+    def sym(n):
+        return SYMBOLS_HTML.get(n, html.escape(n))
+
+    rows = []
+    for k, h in enumerate(handins, start=1):
+        cells = []
+        for n in names:
+            v, ok = h.estimates.get(n), h.verdicts.get(n)
+            if v is None:
+                cells.append("—")
+                continue
+            text = f"{v:.5g} {'✓' if ok else '✗'}"
+            if revealed:
+                err = exercise.errors(student, h.estimates).get(n)
+                text += f" ({100 * err:+.2f} %)" if err is not None else ""
+            cells.append(text)
+        rows.append(f"<tr><td>{k}</td><td>{html.escape(METHODS.get(h.method, h.method).split(' (')[0])}</td>"
+                    + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+    head = "".join(f"<th>{sym(n)}</th>" for n in names)
+    table = (f"<table class='eha-table'><tr><th>hand-in</th><th>route</th>{head}</tr>{''.join(rows)}</table>"
+             if rows else "<p>You handed nothing in.</p>")
+    score = exercise.score([h.verdicts for h in handins]) if handins else 0.0
+    if revealed:
+        truth = exercise.student_params(student)
+        from eha_core.param_table import FIELD_INFO
+
+        values = ", ".join(f"{sym(n)} = {getattr(truth, n) / FIELD_INFO[n].display_scale:.5g} "
+                           f"{FIELD_INFO[n].display_unit}" for n in names)
+        title = f"Your teacher has revealed your actuator: {values}."
+    else:
+        title = "The deadline has passed: your hand-ins' verdicts."
+    return (f"<div class='eha-reveal'><b>{title}</b> Score ({exercise.score_rule} hand-in): "
+            f"{100 * score:.0f} %.{table}</div>")

@@ -308,3 +308,36 @@ def test_every_record_of_the_students_actuator_is_measured_through_noisy_sensors
     sim.form.values = {**sim.form.values, "sensor_v": "1"}
     sim.run("both")
     assert all(r.label.endswith("+ sensor noise") for r in sim.results) and len(sim.results) == 8
+
+
+def test_the_reveal_shows_each_student_their_truth_and_errors_and_no_one_elses(tmp_path, monkeypatch):
+    ex = Exercise.new(hide=("M", "beta_e"), roster=[("s1", "Ada"), ("s2", "Alan")], feedback="after-deadline",
+                      deadline="2100-01-01T00:00", secret="7c" * 32)
+    path = tmp_path / "class.json"
+    ex.save(path)
+    monkeypatch.setenv("EHA_EXERCISE", str(path))
+    pages = {s: _joined(ex, path, ex.join_code(s)) for s in ("s1", "s2")}
+    lse = pages["s1"].session.build("least_squares")
+    lse.run()
+    lse.hand_in()
+    assert "shown after the deadline" in lse.verdict.object and "within" not in lse.verdict.object
+    for page in pages.values():
+        page.check_result()
+        assert not page.result_pane.visible
+    store = HandIns(path)
+    store.set_control("deadline", "2020-01-01T00:00")        # the deadline has passed: the verdicts, no truth
+    pages["s1"].check_result()
+    text = pages["s1"].result_pane.object
+    truth = {s: ex.student_params(s) for s in ("s1", "s2")}
+    assert "The deadline has passed" in text and ("✓" in text or "✗" in text)
+    assert f"{truth['s1'].M:.5g}" not in text
+    store.set_control("revealed", "1")
+    for s, page in pages.items():
+        page.check_result()
+        text = page.result_pane.object
+        assert page.result_pane.visible and f"M = {truth[s].M:.5g} kg" in text
+        other = "s2" if s == "s1" else "s1"
+        assert f"{truth[other].M:.5g}" not in text
+    err = ex.errors("s1", lse.result.estimates)["M"]
+    assert f"({100 * err:+.2f} %)" in pages["s1"].result_pane.object
+    assert "You handed nothing in" in pages["s2"].result_pane.object
