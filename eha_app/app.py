@@ -147,6 +147,16 @@ def current_exercise():
     return _exercise_at(path, os.path.getmtime(path))
 
 
+def signed_in_user() -> str | None:
+    """The user an identity provider signed in (``eha serve --oauth-provider ...``: Panel's OAuth),
+    or None. Only a server with a provider has one: Panel's ``is_guest`` cookie, which any page can
+    set, names no one here."""
+    if not pn.config.oauth_provider:
+        return None
+    user = pn.state.user
+    return user if user and user != "guest" else None
+
+
 class ExerciseGate:
     """The first screen of an exercise: the student's join code (with a roster) or their id (without
     one), then their actuator. A wrong code is refused without saying whether anyone has it; after
@@ -194,6 +204,19 @@ class ExerciseGate:
         on_click(self.button, lambda _e: self.start())
         self.layout = pn.Column(self.intro, self.student_id, self.button, self.message, margin=(10, 20),
                                 width=620, css_classes=["eha-gate"])
+
+    def start_as_user(self, user: str) -> None:
+        """Join as the identity provider's ``user`` (the roster's id, compared as ids are): their
+        actuator without a code; a user not in the roster is told so and may not type a code."""
+        entry = self.exercise.entry(user) if self.exercise.has_roster else None
+        if self.exercise.has_roster and entry is None:
+            self.student_id.disabled = self.button.disabled = True
+            self.message.object = (f"You are signed in as {html.escape(user)}, who is not in this exercise's roster: "
+                                   "ask your teacher to add you.")
+            return
+        self.state.start_exercise(self.exercise, entry.id if entry else user, handins=self.handins,
+                                  name=entry.name if entry else "")
+        self.on_start()
 
     def start(self) -> None:
         typed = self.student_id.value_input or self.student_id.value
@@ -316,6 +339,10 @@ class Page(pn.viewable.Viewer):
         if exercise is not None and not session.student:
             self.gate = ExerciseGate(*exercise, session.state, self._start)
             self.layout.objects = [self.connection, self.gate.layout]
+            user = signed_in_user()
+            if user is not None:
+                # the identity provider checked who this is: their roster entry, without a code
+                self.gate.start_as_user(user)
         else:
             self._start(first=True)
 

@@ -341,3 +341,27 @@ def test_the_reveal_shows_each_student_their_truth_and_errors_and_no_one_elses(t
     err = ex.errors("s1", lse.result.estimates)["M"]
     assert f"({100 * err:+.2f} %)" in pages["s1"].result_pane.object
     assert "You handed nothing in" in pages["s2"].result_pane.object
+
+
+def test_a_user_signed_in_by_an_identity_provider_gets_their_roster_actuator(tmp_path, monkeypatch):
+    """Panel's OAuth (eha serve --oauth-provider ...): pn.state.user is the roster's id; no code is asked."""
+    import panel as pn
+
+    ex = Exercise.new(hide=HIDE, roster=[("ada@uni.example", "Ada"), ("s2", "Alan")], secret="42" * 32)
+    path = tmp_path / "class.json"
+    ex.save(path)
+    monkeypatch.setenv("EHA_EXERCISE", str(path))
+    monkeypatch.setattr(type(pn.state), "user", property(lambda self: "Ada@Uni.example"))
+    monkeypatch.setattr(pn.config, "oauth_provider", "generic")
+    page = create_app(AppState())
+    assert page.session.student == "ada@uni.example" and page.session.state.student_name == "Ada"
+    assert page.session.state.params == ex.student_params("ada@uni.example")
+    monkeypatch.setattr(type(pn.state), "user", property(lambda self: "mallory"))
+    page = create_app(AppState())
+    assert not page.session.student and page.gate.button.disabled
+    assert "signed in as mallory, who is not in this exercise's roster" in page.gate.message.object
+    # without a provider, Panel's guest cookie (any page can set it) names no one
+    monkeypatch.setattr(pn.config, "oauth_provider", None)
+    monkeypatch.setattr(type(pn.state), "user", property(lambda self: "ada@uni.example"))
+    page = create_app(AppState())
+    assert not page.session.student and not page.gate.button.disabled
