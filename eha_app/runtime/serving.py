@@ -38,11 +38,13 @@ from pathlib import Path
 
 from eha_core.data import MAX_DATA_BYTES
 
-__all__ = ["ENTRY_POINT", "LOG_FORMAT", "UNUSED_SESSION_MS", "WEBSOCKET_MAX_MESSAGE_BYTES", "serve_argv",
-           "default_origins", "lan_address", "local_names", "nginx_config", "nginx_standalone_config",
+__all__ = ["ENTRY_POINT", "TEACHER_ENTRY_POINT", "LOG_FORMAT", "UNUSED_SESSION_MS", "WEBSOCKET_MAX_MESSAGE_BYTES",
+           "serve_argv", "default_origins", "lan_address", "local_names", "nginx_config", "nginx_standalone_config",
            "use_local_resources", "supervise", "quiet_closed_websockets"]
 
 ENTRY_POINT = Path(__file__).resolve().parents[1] / "eha.py"
+#: The teacher's dashboard, served at /teacher beside the app in an exercise (see runtime/teacher_access.py).
+TEACHER_ENTRY_POINT = ENTRY_POINT.with_name("teacher.py")
 #: A closed page's session (and its computations) ends this long after its websocket closed.
 UNUSED_SESSION_MS = 4000
 #: How often the server looks for closed sessions.
@@ -238,13 +240,15 @@ def default_origins(address: str, port: int) -> list[str]:
 
 
 def serve_argv(*, port: int, address: str, num_procs: int = 1, allow_websocket_origin=None,
-               show: bool = False, behind_proxy: bool = False) -> list[str]:
+               show: bool = False, behind_proxy: bool = False, teacher: bool = False) -> list[str]:
     """The `panel serve` command line for `eha serve`.
 
     ``allow_websocket_origin``: the ``host:port`` of pages allowed to connect; by
     default :func:`default_origins` (``*``, any website, only when asked for).
+    ``teacher``: serve the teacher's dashboard at /teacher too (an exercise).
     """
-    argv = ["panel", "serve", str(ENTRY_POINT), "--port", str(port), "--address", address,
+    entries = [str(ENTRY_POINT)] + ([str(TEACHER_ENTRY_POINT)] if teacher else [])
+    argv = ["panel", "serve", *entries, "--port", str(port), "--address", address,
             "--num-procs", str(num_procs), "--reuse-sessions",
             "--unused-session-lifetime", str(UNUSED_SESSION_MS), "--check-unused-sessions", str(CHECK_SESSIONS_MS),
             "--websocket-max-message-size", str(WEBSOCKET_MAX_MESSAGE_BYTES), "--log-format", LOG_FORMAT]
