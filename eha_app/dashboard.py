@@ -44,18 +44,18 @@ POLL_MS = 2000
 EVERYONE = "(everyone)"
 
 CSS = """
-.eha-dash table { border-collapse: collapse; font-size: 13px; width: 100%; }
-.eha-dash th, .eha-dash td { border-bottom: 1px solid #ddd; padding: 3px 6px; text-align: left; vertical-align: top; }
-.eha-dash th { background: #f3f5f8; position: sticky; top: 0; }
-.eha-dash td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
-.eha-dash .ok { color: #11703a; } .eha-dash .no { color: #b00020; } .eha-dash .dim { color: #777; }
-.eha-dash .small { font-size: 11px; color: #555; }
-.eha-dash dl { display: grid; grid-template-columns: max-content 1fr; gap: 2px 12px; margin: 0; font-size: 13px; }
-.eha-dash dt { color: #555; } .eha-dash dd { margin: 0; }
-.eha-dash .scroll { max-height: 360px; overflow-y: auto; }
-.eha-dash .badge { padding: 1px 6px; border-radius: 3px; font-weight: 600; }
-.eha-dash .badge.open { background: #dff3e6; color: #11703a; }
-.eha-dash .badge.closed { background: #fbe3e6; color: #b00020; }
+table { border-collapse: collapse; font-size: 13px; width: 100%; }
+th, td { border-bottom: 1px solid #ddd; padding: 3px 6px; text-align: left; vertical-align: top; }
+th { background: #f3f5f8; position: sticky; top: 0; white-space: nowrap; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
+.ok { color: #11703a; } .no { color: #b00020; } .dim { color: #777; }
+.small { font-size: 11px; color: #555; font-weight: normal; }
+dl { display: grid; grid-template-columns: max-content 1fr; gap: 3px 12px; margin: 0; font-size: 13px; }
+dt { color: #555; } dd { margin: 0; }
+.scroll { max-height: 360px; overflow-y: auto; }
+.badge { padding: 1px 6px; border-radius: 3px; font-weight: 600; }
+.badge.open { background: #dff3e6; color: #11703a; }
+.badge.closed { background: #fbe3e6; color: #b00020; }
 """
 
 
@@ -131,10 +131,14 @@ class Dashboard(pn.viewable.Viewer):
         self.control: dict[str, str] = {}
         self.rows = []
         self.handins = []
-        self.rules = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-rules"])
-        self.summary = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-summary"])
-        self.roster = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-roster"])
-        self.history = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-history"])
+        self.rules = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-rules"],
+                                   stylesheets=[CSS])
+        self.summary = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-summary"],
+                                   stylesheets=[CSS])
+        self.roster = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-roster"],
+                                   stylesheets=[CSS])
+        self.history = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-history"],
+                                   stylesheets=[CSS])
         self.who = pn.widgets.Select(label="Hand-ins of", options=[EVERYONE], value=EVERYONE, width=260,
                                      css_classes=["eha-dash-who"])
         self.open_button = pn.widgets.Button(label="Close hand-ins", width=170, css_classes=["eha-dash-open"])
@@ -170,8 +174,7 @@ class Dashboard(pn.viewable.Viewer):
             pn.Row(self.rules, actions, sizing_mode="stretch_width"),
             self.summary, self.roster,
             pn.Row(pn.pane.HTML("<h3 style='margin:8px 0 0'>Every hand-in, newest first</h3>"), self.who),
-            self.history, sizing_mode="stretch_width", margin=(0, 12), css_classes=["eha-dash"],
-            stylesheets=[CSS])
+            self.history, sizing_mode="stretch_width", margin=(0, 12), css_classes=["eha-dash"])
         self.poll()
 
     # -- reading and drawing --------------------------------------------------------------------------
