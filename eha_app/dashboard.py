@@ -268,7 +268,7 @@ class Dashboard(pn.viewable.Viewer):
             f"<dt>Hand-ins</dt><dd>{status}</dd>"
             f"<dt>Verdicts revealed</dt><dd>{'yes' if self.revealed else 'no'}</dd></dl>")
         self.open_button.label = "Close hand-ins" if self.is_open else "Open hand-ins"
-        self.open_button.button_type = "danger" if self.is_open else "success"
+        self.open_button.color = "danger" if self.is_open else "success"
         self.reveal_button.disabled = self.revealed
         self.reveal_button.label = ("Verdicts revealed" if self.revealed else "Reveal the verdicts to the students")
 
