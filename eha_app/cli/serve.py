@@ -101,6 +101,16 @@ def _check_exercise(args) -> None:
               f"{args.exercise.rsplit('.', 1)[0]}.handins.sqlite", flush=True)
 
 
+def _announce_dashboard(host: str, port: int) -> None:
+    """The dashboard's link, printed here only: the token in it opens the teacher's dashboard (it is
+    in no page and no log line; the server's access log shows it as [hidden])."""
+    from eha_app.app import current_exercise
+
+    token = current_exercise()[0].teacher_token()
+    print(f"Teacher's dashboard (for you only, do not show it to the class): http://{host}:{port}/teacher?token={token}",
+          flush=True)
+
+
 def run(args) -> int:
     _validate(args)
     if args.nginx_config is not None:
@@ -115,7 +125,7 @@ def run(args) -> int:
         check_port_free(args.address, args.port)
     argv = serve_argv(port=args.port, address=args.address, num_procs=1,
                       allow_websocket_origin=args.allow_websocket_origin, show=args.show and args.num_procs == 1,
-                      behind_proxy=args.behind_proxy)
+                      behind_proxy=args.behind_proxy, teacher=bool(args.exercise))
     os.environ["EHA_WORKERS"] = str(args.workers or os.environ.get("EHA_WORKERS") or max(1, _cores() // args.num_procs))
     host = "localhost" if args.address in ("127.0.0.1", "localhost", "0.0.0.0", "::") else args.address
     url = f"http://{host}:{args.port}/eha"
@@ -125,6 +135,8 @@ def run(args) -> int:
             lan = lan_address()
             if lan:
                 print(f"for the class (same network): http://{lan}:{args.port}/eha", flush=True)
+        if args.exercise:
+            _announce_dashboard(host, args.port)
         origins = args.allow_websocket_origin or default_origins(args.address, args.port)
         print(f"Pages may connect from {', '.join(origins)}"
               + ("" if args.allow_websocket_origin else " (--allow-websocket-origin names others)"), flush=True)
@@ -160,9 +172,11 @@ def run(args) -> int:
         bind_port_shared()
     from panel.command import main as panel_main
 
-    from eha_app.runtime.patches import refuse_foreign_components
+    from eha_app.runtime.patches import guard_paths, refuse_foreign_components
+    from eha_app.runtime.teacher_access import route
 
     refuse_foreign_components()
+    guard_paths(route)          # /teacher answers the teacher only (and 404 without an exercise)
     sys.argv = argv
     panel_main()
     return 0

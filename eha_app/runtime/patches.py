@@ -46,6 +46,16 @@ One port, several processes (Bokeh 3.9, ``bokeh.server.server.bind_sockets``)
     public route, ``BaseServer`` with sockets of our own, would mean building
     Panel's server by hand instead of running ``panel serve``.
 
+The teacher's pages (Tornado 6.5-6.6 ``Application.find_handler``, on Bokeh 3.9's ``BokehTornado``)
+    The dashboard's app at ``/teacher`` must answer nobody but the teacher:
+    not its page, nor its websocket, autoload script or metadata, which
+    Bokeh routes to handlers of its own and Panel's. :func:`guard_paths`
+    puts a function in front of every route (``find_handler`` and
+    ``get_handler_delegate`` are public Tornado methods; overriding them on
+    Bokeh's application class is what no API offers):
+    :func:`eha_app.runtime.teacher_access.route` answers 403 without the
+    teacher's cookie, before any Bokeh code runs.
+
 The strict mode (Bokeh 3.9, ``DocumentCallbackManager.trigger_on_change``)
     Every change to a served page must be made under its document's lock, on
     the server's event loop: from a locked callback (a click, a next-tick or
@@ -63,7 +73,7 @@ import sys
 
 __all__ = ["COMPONENT_PACKAGES", "WRITTEN_FOR", "component_allowed", "refuse_foreign_components",
            "strict_page_changes", "UnlockedChange", "strict_mode_on", "LAYOUT_ONCE_JS", "loop_has_work",
-           "bind_port_shared"]
+           "bind_port_shared", "guard_paths"]
 
 #: The library versions these changes were written against (checked by the tests; pyproject.toml
 #: keeps both below their next minor version).
@@ -199,6 +209,25 @@ def bind_port_shared() -> None:
 
     bind_sockets.eha_shared = True
     bokeh_server.bind_sockets = bind_sockets
+
+
+def guard_paths(route) -> None:
+    """Let ``route(request)`` answer any request first: it returns ``(handler class, its kwargs)``,
+    or None to leave the request to the server's own routes. Calling it again does nothing."""
+    from bokeh.server.tornado import BokehTornado
+
+    find = BokehTornado.find_handler
+    if getattr(find, "eha_guarded", False):
+        return
+
+    def find_handler(self, request, **kwargs):
+        answer = route(request)
+        if answer is not None:
+            return self.get_handler_delegate(request, answer[0], answer[1])
+        return find(self, request, **kwargs)
+
+    find_handler.eha_guarded = True
+    BokehTornado.find_handler = find_handler
 
 
 class UnlockedChange(RuntimeError):

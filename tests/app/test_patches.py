@@ -67,3 +67,34 @@ def test_the_layout_patch_reports_itself_and_is_in_every_page():
     assert "model.patches = applied" in ConnectionWatch._esm
     page = create_app()
     assert isinstance(page.connection, ConnectionWatch) and page.layout.objects[0] is page.connection
+
+
+def test_the_teacher_paths_are_answered_before_bokehs_routes(monkeypatch, tmp_path):
+    """Bokeh's application asks :func:`eha_app.runtime.teacher_access.route` first (patches.guard_paths)."""
+    from bokeh.application import Application
+    from bokeh.server.tornado import BokehTornado
+    from tornado.httputil import HTTPHeaders, HTTPServerRequest, RequestStartLine
+
+    from eha_app.runtime import teacher_access
+    from eha_core.exercise import Exercise
+
+    patches.guard_paths(teacher_access.route)
+    patches.guard_paths(teacher_access.route)             # a second call changes nothing
+    app = BokehTornado({"/eha": Application(), "/teacher": Application()})
+
+    def handler(uri, cookie=None):
+        headers = HTTPHeaders({"Host": "localhost"})
+        if cookie:
+            headers["Cookie"] = f"{teacher_access.COOKIE}={cookie}"
+        d = app.find_handler(HTTPServerRequest(headers=headers, start_line=RequestStartLine("GET", uri, "HTTP/1.1")))
+        return d.handler_class.__name__, (d.handler_kwargs or {}).get("status_code")
+
+    monkeypatch.delenv("EHA_EXERCISE", raising=False)
+    assert handler("/teacher") == ("ErrorHandler", 404)
+    ex = Exercise.new(hide=("M",))
+    ex.save(tmp_path / "class.json")
+    monkeypatch.setenv("EHA_EXERCISE", str(tmp_path / "class.json"))
+    assert handler("/teacher/ws") == ("ErrorHandler", 403)
+    assert handler(f"/teacher?token={ex.teacher_token()}")[0] == "_Login"
+    assert handler("/teacher/ws", teacher_access.cookie_value(ex.teacher_token()))[0] == "WSHandler"
+    assert handler("/eha")[0] == "DocHandler"

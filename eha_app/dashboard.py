@@ -1,0 +1,421 @@
+"""The teacher's dashboard (``/teacher``): the exercise's rules, the class's results live, the switches.
+
+The page shows the rules of the running exercise (hidden parameters with their
+tolerances, the conditions, the deadline with the teacher's extension, attempts,
+feedback, score rule, open or closed, revealed or not), the class table of
+:func:`~eha_app.runtime.classbook.class_rows` (the one ``eha exercise results``
+prints, with each value's error against the truth: the teacher's only) and every
+hand-in, newest first. It follows the class without a reload: every
+:data:`POLL_MS` the page asks the hand-in database for its version (off the
+event loop) and draws again only when it changed, or when the deadline passed.
+
+Its buttons write through :meth:`~eha_app.runtime.handins.HandIns.set_control`,
+so every server process (and ``eha exercise results``) sees the same switches:
+open or close hand-ins, move the deadline, reveal the verdicts to the students
+once the deadline has passed; and it offers the results as CSV and, with a
+roster, the join-code slips to print.
+
+Everything a student typed (an id) or the teacher's roster holds (a name) is
+HTML-escaped before it is drawn. Nothing here reaches a student: the page is
+served at /teacher, which answers the teacher's cookie only
+(:mod:`eha_app.runtime.teacher_access`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import html
+import io
+import time
+
+import panel as pn
+
+from eha_core.exercise import FEEDBACK, METHODS, parse_deadline
+
+from .render.tables import SYMBOLS_HTML, UNITS
+from .runtime.classbook import class_rows, results_csv
+from .runtime.handins import StoreError
+from .runtime.tasks import held, on_click, watch
+
+__all__ = ["Dashboard", "serve_dashboard", "POLL_MS", "join_slips_html"]
+
+#: How often the page asks the database whether anything changed.
+POLL_MS = 2000
+EVERYONE = "(everyone)"
+
+CSS = """
+table { border-collapse: collapse; font-size: 13px; width: 100%; }
+th, td { border-bottom: 1px solid #ddd; padding: 3px 6px; text-align: left; vertical-align: top; }
+th { background: #f3f5f8; position: sticky; top: 0; white-space: nowrap; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
+.ok { color: #11703a; } .no { color: #b00020; } .dim { color: #777; }
+.small { font-size: 11px; color: #555; font-weight: normal; }
+dl { display: grid; grid-template-columns: max-content 1fr; gap: 3px 12px; margin: 0; font-size: 13px; }
+dt { color: #555; } dd { margin: 0; }
+.scroll { max-height: 360px; overflow-y: auto; }
+.badge { padding: 1px 6px; border-radius: 3px; font-weight: 600; }
+.badge.open { background: #dff3e6; color: #11703a; }
+.badge.closed { background: #fbe3e6; color: #b00020; }
+"""
+
+
+def _esc(text) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def _when(stamp: str, today: str) -> str:
+    """A stored time (``YYYY-MM-DD HH:MM:SS``) as the table shows it: the time alone if it is today's."""
+    if not stamp:
+        return "<span class='dim'>—</span>"
+    shown = stamp[11:] if stamp.startswith(today) else stamp
+    return f"<span title='{_esc(stamp)}'>{_esc(shown)}</span>"
+
+
+def _param_head(exercise, name: str) -> str:
+    unit = UNITS.get(name, "SI")
+    return (f"{SYMBOLS_HTML.get(name, _esc(name))} <span class='small'>[{_esc(unit)}] "
+            f"±{100 * exercise.tolerance_of(name):g} %</span>")
+
+
+def _param_cell(value, error, verdict, count: int) -> str:
+    """A value with its error against the truth and its verdict, in one cell."""
+    if not count:
+        return "<td class='num dim'>—</td>"
+    shown = f"{value:.6g}" if isinstance(value, (int, float)) else "<span class='dim'>none</span>"
+    err = f"{100 * error:+.2f} %" if isinstance(error, (int, float)) else "—"
+    mark = "<span class='ok'>✓</span>" if verdict else "<span class='no'>✗</span>"
+    return f"<td class='num'>{shown} <span class='small {'ok' if verdict else 'no'}'>{err}</span> {mark}</td>"
+
+
+def _method(method: str) -> str:
+    return _esc(METHODS.get(method, method).split(" (")[0]) if method else ""
+
+
+def _conditions(conditions: dict) -> str:
+    if not conditions:
+        return ""
+    text = "; ".join(f"{k} = {v}" for k, v in conditions.items())
+    cut = text if len(text) <= 80 else text[:79] + "…"
+    return f"<span class='small' title='{_esc(text)}'>{_esc(cut)}</span>"
+
+
+def join_slips_html(exercise, student_url: str) -> str:
+    """A page of slips to print and cut: each student's name, id, join code and the app's address."""
+    slips = "".join(
+        f"<div class='slip'><div class='name'>{_esc(e.name)}</div><div>id: <b>{_esc(e.id)}</b></div>"
+        f"<div>join code: <b class='code'>{_esc(exercise.join_code(e.id))}</b></div>"
+        f"<div>open <b>{_esc(student_url)}</b></div></div>" for e in exercise.roster)
+    return f"""<!DOCTYPE html><html><head><meta charset="utf-8"><title>{_esc(exercise.title)}: join codes</title>
+<style>
+body {{ font-family: sans-serif; margin: 10mm; }}
+.slips {{ display: grid; grid-template-columns: 1fr 1fr; gap: 0; }}
+.slip {{ border: 1px dashed #888; padding: 6mm; break-inside: avoid; font-size: 12pt; line-height: 1.6; }}
+.name {{ font-size: 14pt; font-weight: bold; }}
+.code {{ font-family: monospace; font-size: 15pt; letter-spacing: 1px; }}
+</style></head><body><h3>{_esc(exercise.title)}: your join code (keep it to yourself)</h3>
+<div class="slips">{slips}</div></body></html>
+"""
+
+
+class Dashboard(pn.viewable.Viewer):
+    """The teacher's page for ``exercise`` and its hand-in ``store`` (see the module docstring).
+
+    ``clock``: the time now (tests); ``student_url``: the app's address for the join-code slips.
+    """
+
+    def __init__(self, exercise, store, *, clock=time.time, student_url: str = "", **params):
+        super().__init__(**params)
+        self.exercise, self.store, self.clock, self.student_url = exercise, store, clock, student_url
+        self._key = None            # what was drawn: the database's version and whether the deadline had passed
+        self._busy = False
+        self.control: dict[str, str] = {}
+        self.rows = []
+        self.handins = []
+        self.rules = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-rules"],
+                                   stylesheets=[CSS])
+        self.summary = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-summary"],
+                                   stylesheets=[CSS])
+        self.roster = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-roster"],
+                                   stylesheets=[CSS])
+        self.history = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-history"],
+                                   stylesheets=[CSS])
+        self.who = pn.widgets.Select(label="Hand-ins of", options=[EVERYONE], value=EVERYONE, width=260,
+                                     css_classes=["eha-dash-who"])
+        self.open_button = pn.widgets.Button(label="Close hand-ins", width=170, css_classes=["eha-dash-open"])
+        self.deadline_input = pn.widgets.TextInput(label="New deadline (ISO-8601; empty: the file's)",
+                                                   placeholder="e.g. 2026-12-01T17:00", width=260,
+                                                   css_classes=["eha-dash-deadline"])
+        self.deadline_button = pn.widgets.Button(label="Set the deadline", width=150, align="end",
+                                                 css_classes=["eha-dash-set-deadline"])
+        self.deadline_message = pn.pane.HTML("", css_classes=["eha-error", "eha-error-deadline"], width=420,
+                                             styles={"color": "#b00020", "font-size": "12px"})
+        self.reveal_button = pn.widgets.Button(label="Reveal the verdicts to the students", width=270,
+                                               css_classes=["eha-dash-reveal"])
+        self.reveal_message = pn.pane.HTML("", css_classes=["eha-dash-reveal-message"], width=420,
+                                           styles={"font-size": "12px"})
+        self.note = pn.pane.HTML("", css_classes=["eha-dash-note"], styles={"font-size": "12px"},
+                                 sizing_mode="stretch_width")
+        self.csv = pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.csv_bytes()), filename="results.csv",
+                                           label="Download the results (CSV)", width=230,
+                                           css_classes=["eha-dash-csv"])
+        self.slips = pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.slips_bytes()),
+                                             filename="join-codes.html", label="Join-code slips to print",
+                                             width=230, visible=exercise.has_roster, css_classes=["eha-dash-slips"])
+        on_click(self.open_button, lambda _e: self.toggle_open())
+        on_click(self.deadline_button, lambda _e: self.set_deadline())
+        on_click(self.reveal_button, lambda _e: self.reveal())
+        watch(self.who, lambda _e: self._draw_history(), "value")
+        actions = pn.Column(
+            pn.pane.HTML("<h3 style='margin:4px 0'>Switches</h3>"),
+            pn.Row(self.open_button, self.reveal_button), self.reveal_message,
+            pn.Row(self.deadline_input, self.deadline_button), self.deadline_message,
+            pn.Row(self.csv, self.slips), self.note, width=560, css_classes=["eha-dash-actions"])
+        self.layout = pn.Column(
+            pn.Row(self.rules, actions, sizing_mode="stretch_width"),
+            self.summary, self.roster,
+            pn.Row(pn.pane.HTML("<h3 style='margin:8px 0 0'>Every hand-in, newest first</h3>"), self.who),
+            self.history, sizing_mode="stretch_width", margin=(0, 12), css_classes=["eha-dash"])
+        self.poll()
+
+    # -- reading and drawing --------------------------------------------------------------------------
+    def _passed(self, control: dict | None = None) -> bool:
+        due = self.exercise.deadline_at((control if control is not None else self.control).get("deadline") or None)
+        return due is not None and self.clock() > due
+
+    def _key_now(self) -> tuple:
+        return self.store.version(), self._passed()
+
+    def _read(self) -> tuple:
+        control = self.store.control()
+        return (self.store.version(), self._passed(control)), control, class_rows(self.exercise, self.store), \
+            self.store.all()
+
+    def poll(self) -> bool:
+        """Read the database now and draw what changed (True: something did). The page's periodic
+        callback does the same off the event loop (:meth:`tick`)."""
+        try:
+            if self._key is not None and self._key_now() == self._key:
+                return False
+            self._show(self._read())
+        except StoreError as exc:
+            self._failed(exc)
+        return True
+
+    async def tick(self) -> None:
+        """The periodic callback: the database read in a thread, the drawing under the page's lock."""
+        if self._busy:
+            return
+        self._busy = True
+        try:
+            key = await asyncio.to_thread(self._key_now)
+            if key != self._key:
+                self._show(await asyncio.to_thread(self._read))
+        except StoreError as exc:
+            self._failed(exc)
+        finally:
+            self._busy = False
+
+    def _failed(self, exc: Exception) -> None:
+        self.note.object = f"<span style='color:#b00020'>{_esc(exc)}</span>"
+
+    def _show(self, data: tuple) -> None:
+        self._key, self.control, self.rows, self.handins = data
+        with held():
+            self._draw_rules()
+            self._draw_roster()
+            options = [EVERYONE] + [r.id for r in self.rows if r.count]
+            if self.who.options != options:
+                self.who.options = options
+                if self.who.value not in options:
+                    self.who.value = EVERYONE
+            self._draw_history()
+
+    @property
+    def is_open(self) -> bool:
+        return self.control.get("open", "1") != "0"
+
+    @property
+    def revealed(self) -> bool:
+        return self.control.get("revealed", "0") == "1"
+
+    def _deadline_text(self) -> str:
+        ex, override = self.exercise, self.control.get("deadline", "")
+        if not (override or ex.deadline):
+            return "none"
+        text = _esc(override or ex.deadline)
+        if override and override != ex.deadline:
+            text += f" <span class='small'>(moved by you; the file's: {_esc(ex.deadline or 'none')})</span>"
+        return text + (" <span class='no'>— passed</span>" if self._passed() else "")
+
+    def _draw_rules(self) -> None:
+        ex = self.exercise
+        hidden = ", ".join(f"{SYMBOLS_HTML.get(n, _esc(n))} ±{100 * ex.tolerance_of(n):g} %" for n in ex.hide)
+        students = (f"a roster of {len(ex.roster)}, each with a join code" if ex.has_roster
+                    else "an open exercise: any id typed is taken as given")
+        status = ("<span class='badge open'>open</span>" if self.is_open
+                  else "<span class='badge closed'>closed</span>")
+        if self._passed():
+            status += " <span class='small'>(the deadline has passed: no hand-in is taken)</span>"
+        self.rules.object = (
+            f"<h2 style='margin:4px 0'>{_esc(ex.title)} <span class='small'>teacher's dashboard</span></h2><dl>"
+            f"<dt>Hidden (tolerance)</dt><dd>{hidden}; each student's within ±{100 * ex.vary:g} % of the paper's</dd>"
+            f"<dt>Conditions</dt><dd>{_esc(ex.conditions.describe())}</dd>"
+            f"<dt>Deadline</dt><dd>{self._deadline_text()}</dd>"
+            f"<dt>Hand-ins allowed</dt><dd>{ex.attempts or 'no limit'}</dd>"
+            f"<dt>Feedback</dt><dd>{_esc(FEEDBACK.get(ex.feedback, ex.feedback))}</dd>"
+            f"<dt>Score</dt><dd>the {_esc(ex.score_rule)} hand-in's share within tolerance</dd>"
+            f"<dt>Students</dt><dd>{students}</dd>"
+            f"<dt>Hand-ins</dt><dd>{status}</dd>"
+            f"<dt>Verdicts revealed</dt><dd>{'yes' if self.revealed else 'no'}</dd></dl>")
+        self.open_button.label = "Close hand-ins" if self.is_open else "Open hand-ins"
+        self.open_button.color = "danger" if self.is_open else "success"
+        self.reveal_button.disabled = self.revealed
+        self.reveal_button.label = ("Verdicts revealed" if self.revealed else "Reveal the verdicts to the students")
+
+    def _draw_roster(self) -> None:
+        ex, rows = self.exercise, self.rows
+        today = time.strftime("%Y-%m-%d")
+        joined = sum(1 for r in rows if r.joined)
+        handed = sum(1 for r in rows if r.count)
+        of = f" of {len(ex.roster)}" if ex.has_roster else ""
+        self.summary.object = (f"<h3 style='margin:8px 0 2px'>The class</h3><span class='small'>{joined}{of} joined, "
+                               f"{handed} handed in, {sum(r.count for r in rows)} hand-ins in all; updated "
+                               f"{time.strftime('%H:%M:%S')}</span>")
+        head = ("<tr><th>id</th><th>name</th><th>joined</th><th>last seen</th><th>hand-ins</th><th>last</th>"
+                "<th>method</th>" + "".join(f"<th>{_param_head(ex, n)}</th>" for n in ex.hide)
+                + f"<th>score ({_esc(ex.score_rule)})</th><th>conditions</th></tr>")
+        body = []
+        for r in rows:
+            cells = "".join(_param_cell(r.estimates.get(n), r.errors.get(n), r.verdicts.get(n), r.count)
+                            for n in ex.hide)
+            score = f"{r.score:.2f}" if r.count else "<span class='dim'>—</span>"
+            body.append(f"<tr><td>{_esc(r.id)}</td><td>{_esc(r.name)}</td><td>{_when(r.joined, today)}</td>"
+                        f"<td>{_when(r.last_seen, today)}</td><td class='num'>{r.count}</td>"
+                        f"<td>{_when(r.last_time, today)}</td><td>{_method(r.method)}</td>{cells}"
+                        f"<td class='num'>{score}</td><td>{_conditions(r.conditions)}</td></tr>")
+        if not body:
+            body.append(f"<tr><td colspan='{9 + len(ex.hide)}' class='dim'>Nobody has joined yet.</td></tr>")
+        self.roster.object = f"<div class='scroll'><table>{head}{''.join(body)}</table></div>"
+
+    def _draw_history(self) -> None:
+        ex = self.exercise
+        names = {e.id: e.name for e in ex.roster}
+        who = self.who.value
+        handins = [h for h in reversed(self.handins) if who in (EVERYONE, None) or h.student == who]
+        today = time.strftime("%Y-%m-%d")
+        counts: dict[str, int] = {}
+        numbers: dict[int, int] = {}            # a hand-in's row id -> its number among its student's
+        for h in self.handins:
+            counts[h.student] = numbers[h.id] = counts.get(h.student, 0) + 1
+        head = ("<tr><th>time</th><th>id</th><th>name</th><th>n°</th><th>method</th>"
+                + "".join(f"<th>{_param_head(ex, n)}</th>" for n in ex.hide) + "<th>score</th><th>conditions</th></tr>")
+        body = []
+        for h in handins:
+            errors = h.errors or ex.errors(h.student, h.estimates)
+            cells = "".join(_param_cell(h.estimates.get(n), errors.get(n), h.verdicts.get(n), 1) for n in ex.hide)
+            body.append(f"<tr><td>{_when(h.time, today)}</td><td>{_esc(h.student)}</td>"
+                        f"<td>{_esc(names.get(h.student, ''))}</td><td class='num'>{numbers[h.id]}</td>"
+                        f"<td>{_method(h.method)}</td>{cells}<td class='num'>{h.score:.2f}</td>"
+                        f"<td>{_conditions(h.conditions)}</td></tr>")
+        if not body:
+            body.append(f"<tr><td colspan='{7 + len(ex.hide)}' class='dim'>No hand-in yet.</td></tr>")
+        self.history.object = f"<div class='scroll'><table>{head}{''.join(body)}</table></div>"
+
+    # -- the teacher's switches -------------------------------------------------------------------------
+    def _switch(self, key: str, value: str, done: str) -> bool:
+        try:
+            self.store.set_control(key, value)
+        except StoreError as exc:
+            self._failed(exc)
+            return False
+        self.note.object = f"<span style='color:#11703a'>{_esc(done)} ({time.strftime('%H:%M:%S')})</span>"
+        self.poll()
+        return True
+
+    def toggle_open(self) -> None:
+        """Close hand-ins if they are open, else open them."""
+        if self.is_open:
+            self._switch("open", "0", "Hand-ins closed: students are told so when they hand in")
+        else:
+            self._switch("open", "1", "Hand-ins open")
+
+    def set_deadline(self, text: str | None = None) -> None:
+        """Move the deadline to ``text`` (by default the field's), an ISO-8601 date and time; empty: back to
+        the exercise file's. A bad one is refused with its message beside the field."""
+        if text is None:
+            text = self.deadline_input.value_input or self.deadline_input.value or ""
+        text = text.strip()
+        if text:
+            try:
+                text = parse_deadline(text)
+            except ValueError as exc:
+                self.deadline_message.object = _esc(" ".join(str(exc).split()))
+                return
+        self.deadline_message.object = ""
+        self._switch("deadline", text, f"Deadline set to {text}" if text else "Deadline back to the exercise file's")
+
+    def reveal(self) -> None:
+        """Show every student their verdicts: only once the deadline has passed."""
+        due = self.exercise.deadline_at(self.control.get("deadline") or None)
+        if due is None:
+            why = ("This exercise has no deadline: set one (it may be now) before revealing, so that nobody "
+                   "hands in after seeing the verdicts.")
+        elif self.clock() <= due:
+            why = (f"The deadline ({_esc(self.control.get('deadline') or self.exercise.deadline)}) has not passed: "
+                   "students could still hand in after seeing the verdicts. Reveal after it, or move it to now.")
+        else:
+            why = ""
+        if why:
+            self.reveal_message.object = f"<span style='color:#b00020'>{why}</span>"
+            return
+        if self._switch("revealed", "1", "Verdicts revealed to the students"):
+            self.reveal_message.object = ""
+
+    def csv_bytes(self) -> bytes:
+        """The results as ``eha exercise results --csv`` writes them (formula-like cells neutralised)."""
+        return results_csv(self.exercise, class_rows(self.exercise, self.store)).encode("utf-8")
+
+    def slips_bytes(self) -> bytes:
+        return join_slips_html(self.exercise, self.student_url).encode("utf-8")
+
+    def __panel__(self):
+        return self.layout
+
+
+def _student_url() -> str:
+    """The app's address as the teacher's browser reached this server (behind nginx: nginx's)."""
+    doc = pn.state.curdoc
+    request = getattr(getattr(doc, "session_context", None), "request", None)
+    headers = getattr(request, "headers", None) or {}
+    host = headers.get("Host", "") or "localhost"
+    proto = headers.get("X-Forwarded-Proto", "") or "http"
+    return f"{proto}://{host}/eha"
+
+
+def serve_dashboard() -> None:
+    """Make this session's dashboard (the server runs :mod:`eha_app.teacher` for every teacher's page)."""
+    from .app import _log_to_stderr, current_exercise
+    from .runtime.connection import ConnectionWatch
+    from .runtime.patches import strict_mode_on, strict_page_changes
+    from .runtime.redaction import redact_server_logs
+    from .runtime.serving import quiet_closed_websockets, use_local_resources
+    from .runtime.tasks import note_loop_thread
+
+    _log_to_stderr()
+    redact_server_logs()
+    note_loop_thread()
+    if strict_mode_on():
+        strict_page_changes()
+    quiet_closed_websockets()
+    use_local_resources(pn.state.curdoc)
+    pn.config.browser_info = False
+    found = current_exercise()
+    if found is None:           # not reached: /teacher answers 404 without an exercise
+        pn.pane.HTML("<p>No exercise is running.</p>").servable(title="EHA: teacher")
+        return
+    exercise, store = found
+    dashboard = Dashboard(exercise, store, student_url=_student_url())
+    # only a page a browser shows follows the class (not the session Panel prepares for the next page)
+    pn.state.onload(lambda: pn.state.add_periodic_callback(dashboard.tick, period=POLL_MS))
+    pn.Column(ConnectionWatch(tabs_class="eha-none"), dashboard, sizing_mode="stretch_width").servable(
+        title=f"EHA teacher: {exercise.title}", location=False)
