@@ -1932,7 +1932,11 @@ class Walker:
             if self.o.exercise_hidden:
                 view = s.one(css="eha-view-lse")
                 has = view is not None and "eha-empty" not in view.css
-                out[HANDIN] = (has, "the least squares ran" if has else "no least-squares result yet")
+                # a hand-in comes from the student's actuator, not from a file of theirs
+                table = s.one(css="eha-lse-table")
+                own = has and table is not None and "Your data (" in table.text()
+                out[HANDIN] = (has and not own, "the least squares ran on your own file" if own else
+                               "the least squares ran" if has else "no least-squares result yet")
         freq = self._form_errors(FREQ_FORM)
         if freq is not None:
             pane = s.one(css="eha-error-freq")

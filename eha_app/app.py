@@ -11,17 +11,19 @@ from __future__ import annotations
 import html
 import io
 import logging
-import os
 import time
 from collections.abc import Callable
-from functools import lru_cache, partial
+from functools import partial
 
 import panel as pn
+
+from eha_core.errors import not_allowed
 
 from . import sections as _sections  # noqa: F401 - registers the page's sections
 from .render.layout import WRAP_TAB_HEADERS
 from .render.tables import CSS, SYMBOLS_HTML
 from .runtime.connection import ConnectionWatch
+from .runtime.exercise_file import current_exercise
 from .runtime.tasks import (
     SessionRunner,
     apply_locked,
@@ -125,28 +127,6 @@ class SubTabs(pn.viewable.Viewer):
         return self.lazy.tabs
 
 
-@lru_cache(maxsize=4)
-def _exercise_at(path: str, mtime: float):
-    from eha_core.exercise import Exercise
-
-    from .runtime.handins import HandIns
-    from .runtime.redaction import keep_out_of_logs
-
-    exercise = Exercise.load(path)
-    keep_out_of_logs(exercise.secret)
-    return exercise, HandIns(path)
-
-
-def current_exercise():
-    """The exercise this server runs (``eha serve --exercise FILE`` sets EHA_EXERCISE), as
-    ``(Exercise, HandIns)``, or None. Read by the server only: nothing of it goes to a page
-    but its title and the names of the hidden parameters."""
-    path = os.environ.get("EHA_EXERCISE", "").strip()
-    if not path:
-        return None
-    return _exercise_at(path, os.path.getmtime(path))
-
-
 def signed_in_user() -> str | None:
     """The user an identity provider signed in (``eha serve --oauth-provider ...``: Panel's OAuth),
     or None. Only a server with a provider has one: Panel's ``is_guest`` cookie, which any page can
@@ -231,9 +211,10 @@ class ExerciseGate:
                 self.wrong += 1
                 if self.wrong >= self.FREE_TRIES:
                     self.blocked_until = now + self.WAIT_S
-                shown = html.escape(" ".join(str(typed).split())[:40]) or "(empty)"
-                self.message.object = (f"join code = {shown} is not allowed: it is no code of this exercise; type "
-                                       "the ten characters on your slip (dashes and case do not matter)")
+                shown = " ".join(str(typed).split())[:40] or "(empty)"
+                self.message.object = html.escape(str(not_allowed(
+                    "join code", shown, "it is no code of this exercise; type the ten characters on your slip "
+                                        "(dashes and case do not matter)")))
                 return
             student, name = entry.id, entry.name
         else:

@@ -33,7 +33,7 @@ import panel as pn
 from eha_core.exercise import FEEDBACK, METHODS, parse_deadline
 
 from .render.tables import SYMBOLS_HTML, UNITS
-from .runtime.classbook import class_rows, results_csv
+from .runtime.classbook import class_rows, describe_conditions, results_csv
 from .runtime.handins import StoreError
 from .runtime.tasks import held, on_click, watch
 
@@ -94,7 +94,7 @@ def _method(method: str) -> str:
 def _conditions(conditions: dict) -> str:
     if not conditions:
         return ""
-    text = "; ".join(f"{k} = {v}" for k, v in conditions.items())
+    text = describe_conditions(conditions)
     cut = text if len(text) <= 80 else text[:79] + "…"
     return f"<span class='small' title='{_esc(text)}'>{_esc(cut)}</span>"
 

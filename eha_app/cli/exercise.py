@@ -162,8 +162,8 @@ def run_new(args) -> int:
 
         try:
             parse_signal(args.disturbance, name="--disturbance", hold_s=1e-3)
-        except (ValueError, SignalSpecError) as exc:
-            raise refused("--disturbance", args.disturbance, str(exc).split(": ", 1)[-1]) from None
+        except SignalSpecError as exc:
+            raise refused("--disturbance", args.disturbance, exc.what) from None
         conditions = Conditions(noise=_noise(args.noise), disturbance=args.disturbance,
                                 measured=_names("--measured", args.measured),
                                 methods=_names("--methods", args.methods), max_record_s=max_record)

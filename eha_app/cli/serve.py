@@ -37,9 +37,31 @@ def add_parser(sub) -> None:
                          "nginx listening on PORT, with the commands that start them, and exit")
     sv.add_argument("--exercise", metavar="FILE", help="run a class exercise (made by `eha exercise new`): each "
                     "student enters an id and gets an actuator of their own, with the exercise's parameters hidden")
+    for flag, what in _OAUTH.items():
+        sv.add_argument(flag, default=None, metavar="VALUE", help=what)
     sv.add_argument("--show", action="store_true", help="open the app in a browser")
     sv.add_argument("--share-port", action="store_true", help=argparse.SUPPRESS)
     sv.set_defaults(handler=run)
+
+
+#: Panel's OAuth, passed on as given: with a provider, a student signed in by the institution joins an
+#: exercise as the roster entry whose id is their user name (no join code).
+_OAUTH = {"--oauth-provider": "an identity provider of Panel's OAuth (e.g. azure, github, generic): students sign "
+                              "in with it and join an exercise as the roster id of their user name",
+          "--oauth-key": "the provider's client id", "--oauth-secret": "the provider's client secret",
+          "--oauth-redirect-uri": "this server's address as registered with the provider",
+          "--oauth-extra-params": "the provider's extra settings (JSON, see Panel's documentation)",
+          "--cookie-secret": "a long random text that signs the login cookie",
+          "--oauth-encryption-key": "a key that encrypts the provider's tokens in the cookie"}
+
+
+def _oauth_argv(args) -> list[str]:
+    out = []
+    for flag in _OAUTH:
+        value = getattr(args, flag[2:].replace("-", "_"))
+        if value is not None:
+            out += [flag, value]
+    return out
 
 
 def _cores() -> int:
@@ -161,6 +183,7 @@ def run(args) -> int:
             child.append("--behind-proxy")
         if args.exercise:
             child += ["--exercise", os.environ["EHA_EXERCISE"]]
+        child += _oauth_argv(args)
         if args.show:
             import webbrowser
 
@@ -177,7 +200,7 @@ def run(args) -> int:
 
     refuse_foreign_components()
     guard_paths(route)          # /teacher answers the teacher only (and 404 without an exercise)
-    sys.argv = argv
+    sys.argv = argv + _oauth_argv(args)
     panel_main()
     return 0
 

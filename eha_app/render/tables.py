@@ -11,6 +11,7 @@ from eha_core.experiments import PAPER_EQ25, PAPER_EQ26, PAPER_FIT_PERCENT, PAPE
 from eha_core.identify.backout import open_loop_instability
 from eha_core.identify.lse_reading import read_all
 from eha_core.linear import linearize
+from eha_core.param_table import FIELD_INFO
 from eha_core.params import ActuatorParams
 
 from .formatting import num_html, pct_text, poles_html, table_html, tf_html
@@ -537,10 +538,6 @@ def backout_html(fi, hidden=()) -> str:
         return "<p>The back-out needs a model with 3 poles and no zero.</p>"
     ci = b.ci95()
     rel = b.rel_errors()
-    if "M" in hidden:   # eq. 27 multiplies by M: with the true M the result would give it away
-        return ("<p class='eha-note'>The back-out (eq. 27) multiplies by M, which is hidden in this exercise: "
-                "use your least-squares estimate of M with λ̂<sub>1</sub>, λ̂<sub>2</sub> of Ĥ(s) by hand.</p>"
-                + hidden_note(hidden))
     if hidden:        # an exercise: the backed-out values and intervals, nothing about the truth
         rows = []
         for name, key, unit in (("B + 2k<sub>f</sub>A<sub>f</sub>/π = λ̂<sub>1</sub> M (eq. 27a)", "damping", "N s/m"),
@@ -548,7 +545,17 @@ def backout_html(fi, hidden=()) -> str:
                                 ("β<sub>e</sub> from the s coefficient (eq. 27b-d)", "beta_e_from_stiffness", "Pa")):
             lo, hi = ci[key]
             rows.append([name, _num(getattr(b, key)), "" if math.isnan(lo) else f"[{_num(lo)}, {_num(hi)}]", unit])
-        return table_html(["quantity", "backed out", "95 % interval", "unit"], rows) + hidden_note(hidden)
+        # the back-out of an exercise is computed with the student's own values of what eq. 27 takes as
+        # measured (the section replaces it): say which, with the values used
+        taken = [n for n in ("M", "L0", "Kq1", "Kq2") if n in hidden and n in b.known]
+        used = ""
+        if taken:
+            used = ("<p class='eha-note eha-backout-assumed'>Computed with your values of what eq. 27 takes as "
+                    "measured, not the hidden ones: " + ", ".join(
+                        f"{_NAMES.get(n, n)} = {_num(b.known[n])} {FIELD_INFO[n].unit}" for n in taken)
+                    + " (a hidden M is your least-squares estimate, else the paper's value).</p>")
+        return (table_html(["quantity", "backed out", "95 % interval", "unit"], rows) + used
+                + hidden_note(hidden))
 
     def row(name, key, unit):
         v, nom = getattr(b, key), (b.damping_nominal if key == "damping" else b.beta_e_nominal)

@@ -28,7 +28,7 @@ from eha_core.exercise import METHODS
 
 from .handins import HandIn, HandIns
 
-__all__ = ["ClassRow", "class_rows", "results_header", "results_cells", "results_csv"]
+__all__ = ["describe_conditions", "ClassRow", "class_rows", "results_header", "results_cells", "results_csv"]
 
 
 @dataclass(frozen=True)
@@ -81,11 +81,38 @@ def _errors(exercise, sid: str, last: HandIn | None) -> dict:
         return {}
 
 
+_NOISE_SHOWN = {"x": ("mm", 1e-3), "v": ("mm/s", 1e-3), "p1": ("MPa", 1e6), "p2": ("MPa", 1e6)}
+
+
+def describe_conditions(conditions: dict) -> str:
+    """A hand-in's data conditions in a few words: the sensors' σ as used (display units), the load
+    disturbance applied, where v came from (the dashboard's and the CSV's column).
+
+    >>> describe_conditions({"noise": {"x": 1e-5, "v": 0.001, "p1": 5e4, "p2": 5e4}, "v": "measured",
+    ...                      "disturbance_applied": "none"})
+    'σ x 0.01 mm, v 1 mm/s, p1 0.05 MPa, p2 0.05 MPa; d(t) none'
+    """
+    if not conditions:
+        return ""
+    parts = []
+    noise = conditions.get("noise") or {}
+    if isinstance(noise, dict):
+        shown = [f"{k} {v / _NOISE_SHOWN[k][1]:g} {_NOISE_SHOWN[k][0]}" for k, v in noise.items()
+                 if k in _NOISE_SHOWN and isinstance(v, (int, float)) and v > 0]
+        parts.append("σ " + ", ".join(shown) if shown else "no sensor noise")
+    d = conditions.get("disturbance_applied", conditions.get("disturbance"))
+    if d:
+        parts.append(f"d(t) {d}")
+    if conditions.get("v") and conditions["v"] != "measured":
+        parts.append(f"v = {conditions['v']}")
+    return "; ".join(parts)
+
+
 def results_header(exercise) -> list[str]:
     cols = ["id", "name", "joined", "last seen", "hand-ins", "last hand-in", "method"]
     for n in exercise.hide:
         cols += [n, f"{n} error %", f"{n} ok"]
-    return cols + [f"score ({exercise.score_rule})"]
+    return cols + [f"score ({exercise.score_rule})", "conditions"]
 
 
 def results_cells(exercise, row: ClassRow) -> list[str]:
@@ -97,7 +124,7 @@ def results_cells(exercise, row: ClassRow) -> list[str]:
         cells += [f"{v:.6g}" if isinstance(v, (int, float)) else "",
                   f"{100 * e:.2f}" if isinstance(e, (int, float)) else "",
                   ("yes" if row.verdicts.get(n) else "no") if row.count else ""]
-    return cells + [f"{row.score:.2f}" if row.count else ""]
+    return cells + [f"{row.score:.2f}" if row.count else "", describe_conditions(row.conditions)]
 
 
 def results_csv(exercise, rows: list[ClassRow]) -> str:

@@ -102,7 +102,7 @@ class _Login(RequestHandler):
 
 def _teacher_token() -> str | None:
     """The running exercise's teacher token (None without an exercise)."""
-    from ..app import current_exercise
+    from .exercise_file import current_exercise
 
     try:
         found = current_exercise()

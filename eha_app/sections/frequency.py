@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from functools import partial
 
@@ -9,7 +10,7 @@ import numpy as np
 import panel as pn
 
 from eha_core.board import BoardModel
-from eha_core.errors import FieldError
+from eha_core.errors import FieldError, not_allowed
 from eha_core.experiments import (
     FrequencyExperiment,
     run_frequency_identification,
@@ -429,8 +430,8 @@ class FrequencyPanel(Section):
             self._fail("this exercise does not use the frequency domain")
             return None
         if c is not None and cfg.n_samples * cfg.ts > c.max_record_s:
-            self._fail(f"samples N × Ts = {cfg.n_samples * cfg.ts:g} s is not allowed: this exercise's records are "
-                       f"at most {c.max_record_s:g} s")
+            self._fail(str(not_allowed("samples N × Ts", f"{cfg.n_samples * cfg.ts:g} s",
+                                       f"this exercise's records are at most {c.max_record_s:g} s")))
             return None
         params = self.state.params
         run_key = (params, cfg)
@@ -443,6 +444,10 @@ class FrequencyPanel(Section):
 
         def show(out, job):
             fi, view = out
+            if hidden and fi.open_loop is not None:
+                # an exercise: the back-out with the student's own values of what eq. 27 takes as measured
+                # (the true M, L0, Kq of a hidden one would give the hidden values away), everywhere it shows
+                fi = dataclasses.replace(fi, backout=self._assumed_backout(fi))
             self.result = fi
             self.view = view
             self._handin_tip()
@@ -496,16 +501,19 @@ class FrequencyPanel(Section):
             return state.params.replace(**{n: getattr(paper, n) for n in values}), {n: "the paper's value"
                                                                                     for n in values}
 
-    def _backout_for_handin(self):
+    def _assumed_backout(self, fi):
         from eha_core.identify.backout import backout
         from eha_core.linear import operating_point
 
+        assumed, _ = self.assumed_params()
+        return backout(*fi.open_loop, assumed, operating_point(assumed), std_h=fi.estimate.param_std, kp=fi.config.kp)
+
+    def _backout_for_handin(self):
         fi = self.result
         if fi is None or fi.open_loop is None:
             return None
         assumed, sources = self.assumed_params()
-        b = backout(*fi.open_loop, assumed, operating_point(assumed), std_h=fi.estimate.param_std, kp=fi.config.kp)
-        return b, assumed, sources
+        return self._assumed_backout(fi), assumed, sources
 
     def _handin_estimates(self):
         """β_e backed out of the last run with the student's own values (see assumed_params)."""

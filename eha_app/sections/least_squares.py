@@ -15,7 +15,7 @@ import numpy as np
 import panel as pn
 
 from eha_core.board import lse_model
-from eha_core.errors import ComputationError, FieldError
+from eha_core.errors import ComputationError, FieldError, not_allowed
 from eha_core.experiments import (
     LSE_INPUT,
     LSE_INPUT_RICH,
@@ -296,8 +296,8 @@ class LeastSquaresPanel(Section):
         if why:
             return why
         if req.input_signal()[1] > c.max_record_s:
-            return (f"excitation = {EXCITATIONS[req.excitation]} is not allowed: this exercise's records are at most "
-                    f"{c.max_record_s:g} s")
+            return str(not_allowed("excitation", EXCITATIONS[req.excitation],
+                                   f"this exercise's records are at most {c.max_record_s:g} s"))
         return None
 
     def _disturbance(self, req):

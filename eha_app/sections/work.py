@@ -19,6 +19,7 @@ be used is said once on the page and in the server's log; the page goes on witho
 
 from __future__ import annotations
 
+import dataclasses
 import html
 import json
 import logging
@@ -162,13 +163,31 @@ class WorkKeeper:
             self._done()
             return
         session = self.session
+        # The page's address wins over the kept settings: a reload keeps the fields as last typed,
+        # which the kept ones (saved a couple of seconds after a change) may not have caught up with.
+        # A section whose kept fields the address contradicts is not run again (its result was of
+        # other inputs); a contradicted tab 1 changes every result: none is run again.
         try:
-            session.load_settings(work.settings, _SAVED)
+            settings = json.loads(work.settings)
+        except ValueError:
+            settings = {}
+        address = {k: str(v) for k, v in session.query.items() if k != "tab"}
+        contradicted = set()
+        for key, texts in settings.items():
+            if isinstance(texts, dict):
+                clash = {k for k, v in texts.items() if k in address and address[k] != str(v)}
+                if clash:
+                    contradicted.add(key)
+                settings[key] = {k: v for k, v in texts.items() if k not in address}
+        try:
+            session.load_settings(json.dumps(settings), _SAVED)
         except SettingsError as exc:
             log.warning("a student's saved settings could not be loaded: %s", exc)
             self._done()
             return
-        settings = json.loads(work.settings)
+        if "parameters" in contradicted:
+            contradicted |= {p.key for p in session.registry}
+        work = dataclasses.replace(work, runs={k: v for k, v in work.runs.items() if k not in contradicted})
         changed = [p.cls.title for p in session.registry
                    if any(str(v) != str(p.cls.defaults.get(k, v)) for k, v in (settings.get(p.key) or {}).items())]
         steps = self._steps(work, settings)

@@ -7,6 +7,7 @@
     eha_app.sections                 the tabs and panels (registered in eha_app/sections/__init__.py)
     eha_app.app, eha_app.eha         the page: the sections' tabs, the gate of an exercise
     eha_app.guide                    the page: the start card and the guide line through the steps
+    eha_app.dashboard, .teacher      the teacher's page of an exercise (at /teacher)
     eha_app.cli                      the ``eha`` command: an interface beside the page
 
 Every import counts, lazy ones inside functions included.
@@ -45,7 +46,7 @@ def layer_of(module: str) -> str | None:
         return None
     if len(parts) == 1:
         return "app"
-    return {"eha": "app", "app": "app", "guide": "app"}.get(parts[1], parts[1])
+    return {"eha": "app", "app": "app", "guide": "app", "dashboard": "app", "teacher": "app"}.get(parts[1], parts[1])
 
 
 def imports_of(path: Path) -> list[tuple[int, str]]:

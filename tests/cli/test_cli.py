@@ -344,3 +344,29 @@ def test_a_roster_gives_every_student_a_code_and_reveal_knows_only_the_roster(ca
         assert main(["exercise", "new", *bad, "--out", str(tmp_path / "x.json")]) == 2
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_serve_passes_panels_oauth_settings_on():
+    from eha_app.cli import build_parser
+    from eha_app.cli.serve import _oauth_argv
+
+    args = build_parser().parse_args(["serve", "--oauth-provider", "generic", "--oauth-key", "eha-lab",
+                                      "--cookie-secret", "x" * 40])
+    assert _oauth_argv(args) == ["--oauth-provider", "generic", "--oauth-key", "eha-lab", "--cookie-secret", "x" * 40]
+    assert _oauth_argv(build_parser().parse_args(["serve"])) == []
+
+
+def test_serve_refuses_an_exercise_in_a_folder_it_cannot_write_to(tmp_path, capsys, monkeypatch):
+    import os
+
+    from eha_core.exercise import Exercise
+
+    path = tmp_path / "lab.json"
+    Exercise.new(hide=("M",)).save(path)
+    real = os.access
+    # (as root a read-only folder stays writable: the check is what is tested)
+    monkeypatch.setattr(os, "access", lambda p, mode: False if str(p) == str(tmp_path) and mode == os.W_OK
+                        else real(p, mode))
+    assert main(["serve", "--exercise", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "is read-only; the server could not store a single hand-in" in err and len(err.strip().splitlines()) == 1

@@ -1,0 +1,31 @@
+"""The exercise this server runs (``eha serve --exercise FILE`` sets EHA_EXERCISE): read by the server
+only, once per change of the file, with its secret registered to be kept out of every log line."""
+
+from __future__ import annotations
+
+import os
+from functools import lru_cache
+
+__all__ = ["current_exercise"]
+
+
+@lru_cache(maxsize=4)
+def _exercise_at(path: str, mtime: float):
+    from eha_core.exercise import Exercise
+
+    from .handins import HandIns
+    from .redaction import keep_out_of_logs
+
+    exercise = Exercise.load(path)
+    keep_out_of_logs(exercise.secret)
+    return exercise, HandIns(path)
+
+
+def current_exercise():
+    """The exercise this server runs (``eha serve --exercise FILE`` sets EHA_EXERCISE), as
+    ``(Exercise, HandIns)``, or None. Read by the server only: nothing of it goes to a page
+    but its title and the names of the hidden parameters."""
+    path = os.environ.get("EHA_EXERCISE", "").strip()
+    if not path:
+        return None
+    return _exercise_at(path, os.path.getmtime(path))
