@@ -1130,7 +1130,21 @@ class Walker:
             if self._app_shown():
                 self.in_gate = False
                 self._apply_query()
+                if not any(k != "tab" for k in self.query):
+                    # an address without fields gives the student their kept work back (the app types
+                    # their last settings in): tab 1 is what the page now shows
+                    await s.settle(self.o.run_quiet_s, self.o.settle_cap_s)
+                    self._shadow_from_page()
         return Action("gate-start", "press Start", start, settle="quiet", spec={"do": "gate-start"})
+
+    def _shadow_from_page(self) -> None:
+        from eha_core.params import PARAM_NAMES
+
+        form = self.s.form_model(PARAM_FORM)
+        values = (form.attributes.get("values") or {}) if form is not None else {}
+        for name in (*PARAM_NAMES, "kp"):
+            if name in values and str(values[name]) != self._tab1_texts().get(name):
+                self._shadow_type(name, str(values[name]))
 
     def _gate_id(self, text: str) -> Action | None:
         s = self.s

@@ -332,6 +332,7 @@ class FrequencyExperiment:
     input_offset: str = "estimate"
     input_delay: float | str = 0.0
     noise_x: float = 0.0
+    disturbance: str = "none"
 
     def __post_init__(self):
         def bad(name, allowed):
@@ -363,6 +364,7 @@ class FrequencyExperiment:
                                      "record), or estimate")
         if not (isinstance(self.noise_x, (int, float)) and math.isfinite(self.noise_x) and 0 <= self.noise_x <= 0.01):
             raise bad("noise_x", "must be a σ in [0, 0.01] m")
+        parse_signal(self.disturbance, name="disturbance", hold_s=self.ts)     # refused now, not mid-run
 
     def excitation(self, seed: int | None = None):
         """The reference signal (an :class:`~eha_core.excitation.Excitation`)."""
@@ -376,8 +378,11 @@ class FrequencyExperiment:
         """Run the loop on ``excitation.u`` and record r, u, x at Ts."""
         from .simulate import simulate_closed_loop
 
+        # a load force d(t) on the piston (eq. 1), e.g. an exercise's, drawn from the excitation's seed
+        d = (None if self.disturbance.strip().lower() in ("", "none") else
+             parse_signal(self.disturbance, name="disturbance", seed=int(excitation.seed), hold_s=self.ts))
         res = simulate_closed_loop(params, excitation.u, kp=self.kp, ts=self.ts,
-                                   controller=self.controller, model=self.model,
+                                   controller=self.controller, model=self.model, d=d,
                                    label=f"closed loop, seed {excitation.seed}", cancel=cancel)
         if self.noise_x > 0 and res.success:
             # the position sensor's white noise on the record (the controller is fed the true position:

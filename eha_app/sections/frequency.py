@@ -270,7 +270,11 @@ class FrequencyPanel(Section):
 
     def config(self):
         """The experiment the form and tab 1's Kp describe (None if invalid), and the messages."""
-        return parse_freq(self.form.values, self.state.kp, self.fields)
+        cfg, errors = parse_freq(self.form.values, self.state.kp, self.fields)
+        extra = self.conditions.disturbance.strip() if self.conditions is not None else "none"
+        if cfg is not None and extra.lower() not in ("", "none"):
+            cfg = dataclasses.replace(cfg, disturbance=extra)        # the exercise's load always acts
+        return cfg, errors
 
     def run_key(self, cfg=None):
         """What the experiment's results are computed from (None if the inputs are not valid)."""

@@ -178,13 +178,30 @@ def build_inputs(req: SimulationRequest):
     return [label], [u], [d], t_end
 
 
-def compute_runs(params, req: SimulationRequest, model: str, cancel=None):
-    """The runs for a request (in a worker thread in the app), with the sensors' noise if asked."""
+def compute_runs(params, req: SimulationRequest, model: str, cancel=None, measured=None):
+    """The runs for a request (in a worker thread in the app), with the sensors' noise if asked, as the
+    ``measured`` signals give them (an exercise's; None: all four)."""
     labels, us, ds, t_end = build_inputs(req)
     results = []
     for m in MODEL_CHOICES[model]:
         results += simulate_many(params, us, ds, t_end=t_end, dt=DT, model=m, labels=labels, cancel=cancel)
-    return with_sensor_noise(results, req) if any(req.sensor_noise) else results
+    return as_measured(with_sensor_noise(results, req) if any(req.sensor_noise) else results, measured)
+
+
+def as_measured(results, measured):
+    """The runs as an exercise's sensors give them: without a velocity sensor v is dx/dt of the
+    measured x (central differences), an unmeasured pressure is not a number (no curve, "nan" in
+    the downloads)."""
+    import numpy as np
+
+    if measured is None or set(measured) >= {"x", "v", "p1", "p2"}:
+        return results
+    out = []
+    for r in results:
+        changes = {} if "v" in measured else {"v": np.gradient(r.x, r.t)}
+        changes.update({p: np.full(r.t.size, np.nan) for p in ("p1", "p2") if p not in measured})
+        out.append(replace(r, label=f"{r.label} ({', '.join(measured)} measured)", **changes))
+    return out
 
 
 def with_sensor_noise(results, req: SimulationRequest):
@@ -294,6 +311,7 @@ class SimulationTab(Section):
                                        styles={"color": "#555", "font-size": "12px"})
         ex = state.exercise if state.hidden else None
         self.fields = exercise_fields(ex.conditions if ex is not None else None)
+        self.measured = ex.conditions.measured if ex is not None else None
         texts = self.initial_texts()
         restored = {k: v for k, v in texts.items() if v != DEFAULT_TEXTS.get(k)}
         texts = raised_to_bounds(texts, self.fields, _SENSOR_FIELDS)
@@ -358,7 +376,7 @@ class SimulationTab(Section):
         if self.state.hidden and self.preset == "all" and any(req.sensor_noise):
             # an exercise: the student's actuator is seen through its noisy sensors from the first draw
             # (noise-free curves of it would reach the browser's data, and the hidden values with them)
-            self._show(with_sensor_noise(runs, req), None)
+            self._show(as_measured(with_sensor_noise(runs, req), self.measured), None)
             self.view.shown(self.run_key("nonlinear"))
         else:
             self._show(runs, None)
@@ -483,7 +501,7 @@ class SimulationTab(Section):
         req, errors = self.request()
         if errors:
             raise ValueError(next(iter(errors.values())))         # the form's message, as rendered
-        return compute_runs(self.state.params, req, model, cancel)
+        return compute_runs(self.state.params, req, model, cancel, self.measured)
 
     def run(self, model: str, *, auto: bool = False):
         """Queue a run of ``model`` ('nonlinear', 'linear' or 'both'); returns the job.
@@ -504,7 +522,7 @@ class SimulationTab(Section):
             self.alert.object = str(exc)
             self.alert.visible = True
             return None
-        params = self.state.params
+        params, measured = self.state.params, self.measured
 
         def fail(message):
             self._pending_key = None
@@ -521,7 +539,7 @@ class SimulationTab(Section):
         if not auto:
             self.view.inputs_changed(key, updating=True)
         self._pending_key = key
-        return self.runner.run(f"simulation ({model})", lambda token: compute_runs(params, req, model, token),
+        return self.runner.run(f"simulation ({model})", lambda token: compute_runs(params, req, model, token, measured),
                                show, fail=fail, busy=[] if auto else [self.plot_area],
                                note=(lambda _text: None) if auto else self._note)
 

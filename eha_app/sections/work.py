@@ -163,28 +163,30 @@ class WorkKeeper:
             self._done()
             return
         session = self.session
-        # The page's address wins over the kept settings: a reload keeps the fields as last typed,
-        # which the kept ones (saved a couple of seconds after a change) may not have caught up with.
-        # A section whose kept fields the address contradicts is not run again (its result was of
-        # other inputs); a contradicted tab 1 changes every result: none is run again.
+        # A page opened with fields in its address (a reload keeps every field that differs from its
+        # default, and a missing one means the default) shows those: the kept settings, saved a couple
+        # of seconds after a change, may lag what the student last typed. The kept ones come back on an
+        # address without fields (the class's plain link, another computer, after a restart). Either
+        # way a section's result is run again only if its fields are those it was computed with, and
+        # none if tab 1's are not.
         try:
             settings = json.loads(work.settings)
         except ValueError:
             settings = {}
-        address = {k: str(v) for k, v in session.query.items() if k != "tab"}
-        contradicted = set()
-        for key, texts in settings.items():
-            if isinstance(texts, dict):
-                clash = {k for k, v in texts.items() if k in address and address[k] != str(v)}
-                if clash:
-                    contradicted.add(key)
-                settings[key] = {k: v for k, v in texts.items() if k not in address}
-        try:
-            session.load_settings(json.dumps(settings), _SAVED)
-        except SettingsError as exc:
-            log.warning("a student's saved settings could not be loaded: %s", exc)
-            self._done()
-            return
+        if any(k != "tab" for k in session.query):
+            current = session.settings()
+            contradicted = {key for key, texts in settings.items()
+                            if isinstance(texts, dict) and {k: str(v) for k, v in texts.items()}
+                            != {k: str(v) for k, v in (current.get(key) or {}).items() if k in texts}}
+            settings = {}
+        else:
+            contradicted = set()
+            try:
+                session.load_settings(json.dumps(settings), _SAVED)
+            except SettingsError as exc:
+                log.warning("a student's saved settings could not be loaded: %s", exc)
+                self._done()
+                return
         if "parameters" in contradicted:
             contradicted |= {p.key for p in session.registry}
         work = dataclasses.replace(work, runs={k: v for k, v in work.runs.items() if k not in contradicted})

@@ -2,6 +2,7 @@
 
 import threading
 
+import numpy as np
 import pytest
 
 from eha_app.app import ExerciseGate, create_app
@@ -368,3 +369,37 @@ def test_a_user_signed_in_by_an_identity_provider_gets_their_roster_actuator(tmp
     monkeypatch.setattr(type(pn.state), "user", property(lambda self: "ada@uni.example"))
     page = create_app(AppState())
     assert not page.session.student and not page.gate.button.disabled
+
+
+def test_signals_an_exercise_does_not_measure_are_not_in_a_students_records(tmp_path, monkeypatch):
+    from eha_core.exercise import Conditions
+
+    ex = Exercise.new(hide=("M", "B"), conditions=Conditions(measured=("x", "p1", "p2"), disturbance="sine:300:1"),
+                      secret="99" * 32)
+    path = tmp_path / "class.json"
+    ex.save(path)
+    monkeypatch.setenv("EHA_EXERCISE", str(path))
+    page = create_app(AppState())
+    page.gate.student_id.value = "ada"
+    page.gate.start()
+    sim = page.session.build("simulation")
+    sim._build_plots()
+    r = sim.results[0]
+    assert np.allclose(r.v, np.gradient(r.x, r.t)) and "(x, p1, p2 measured)" in r.label
+    lse = page.session.build("least_squares")
+    lse.run()
+    assert lse.last_data.source.endswith("v from dx/dt") and lse.last_conditions["v"] == "dx/dt of the measured x"
+    assert "sine:300:1 (the exercise's)" in lse.last_conditions["disturbance_applied"]
+    freq = page.session.build("frequency")
+    assert freq.config()[0].disturbance == "sine:300:1"
+    ex2 = ex.replace(conditions=Conditions(measured=("x", "v")))
+    ex2.save(path)
+    page = create_app(AppState())
+    page.gate.student_id.value = "bob"
+    page.gate.start()
+    sim = page.session.build("simulation")
+    sim._build_plots()
+    assert np.isnan(sim.results[0].p1).all()
+    lse = page.session.build("least_squares")
+    lse.run()
+    assert "the least squares need p1 and p2, which this exercise does not measure" in lse.alert.object
