@@ -596,8 +596,9 @@ class FrequencyPanel(Section):
 
     def __panel__(self):
         inner = self.inner()
-        config = pn.Column(self.form, self.error, self.button, self.handin_source, self.handin_button, self.verdict,
-                           self.kp_note,
+        # the hand-in's widgets only in an exercise: a page without one sends three models fewer
+        handin = [self.handin_source, self.handin_button, self.verdict] if self.handin_button.visible else []
+        config = pn.Column(self.form, self.error, self.button, *handin, self.kp_note,
                            pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"),
                            *[c for s in inner for c in s.controls()], self.queue_note, width=280)
         results = pn.Column(self.alert, self.figure_tabs, self.views["summary"].banner, self.area,

@@ -15,7 +15,7 @@ import subprocess
 from eha_app.runtime.handins import HandIns
 from eha_core.exercise import Exercise
 from tests.serve.conftest import EHA, EhaServer
-from tests.ui.browser_helpers import text_of
+from tests.ui.browser_helpers import JS_TEXT, text_of
 
 ROSTER = "id,name,email\ns1,Ada Lovelace,ada@uni.example\ns2,Alan Turing,alan@uni.example\ns3,Grace Hopper,g@x\n"
 
@@ -36,7 +36,7 @@ def hand_in_lse(page) -> str:
     page.get_by_role("button", name="Hand in these estimates").click()
     box = page.locator(".eha-verdict", has_text="least squares")
     box.wait_for(timeout=60_000)
-    return box.inner_text()
+    return box.first.evaluate(JS_TEXT)
 
 
 def test_a_lab_from_the_roster_to_the_reveal(browser, tmp_path):
@@ -118,7 +118,7 @@ def test_a_lab_from_the_roster_to_the_reveal(browser, tmp_path):
         for sid, page in students.items():
             shown = page.locator(".eha-student-result", has_text="revealed your actuator")
             shown.wait_for(timeout=30_000)
-            text = shown.inner_text()
+            text = shown.first.evaluate(JS_TEXT)
             assert f"M = {truths[sid].M:.5g} kg" in text, text
             assert not any(f"{truths[o].M:.5g}" in text for o in truths if o != sid)
         assert "Traceback" not in server.log_text()
