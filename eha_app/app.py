@@ -137,6 +137,11 @@ def signed_in_user() -> str | None:
     return user if user and user != "guest" else None
 
 
+def _sentence(text: str) -> str:
+    """``text`` with a capital first letter and the rest as written (str.capitalize lowers a deadline's T)."""
+    return text[:1].upper() + text[1:]
+
+
 class ExerciseGate:
     """The first screen of an exercise: the student's join code (with a roster) or their id (without
     one), then their actuator. A wrong code is refused without saying whether anyone has it; after
@@ -170,7 +175,7 @@ class ExerciseGate:
             f"<h3>{html.escape(exercise.title)}</h3><p>Your actuator is your own: its {hidden} are hidden and "
             f"differ from the paper's by up to ±{100 * exercise.vary:g} %. Simulate it, identify it (tab 3) and hand "
             f"in your estimates; an estimate counts within {tol}. "
-            f"Conditions: {html.escape(exercise.conditions.describe())}. {'; '.join(rules).capitalize()}.</p>"
+            f"Conditions: {html.escape(exercise.conditions.describe())}. {_sentence('; '.join(rules))}.</p>"
             f"<p>{who}</p>", sizing_mode="stretch_width", css_classes=["eha-gate-intro"])
         if exercise.has_roster:
             self.student_id = pn.widgets.TextInput(label="Your join code", placeholder="e.g. K7M2P-Q9RST", width=300,

@@ -72,9 +72,9 @@ MAX_ID_LENGTH = 64
 MAX_ROSTER = 2000
 #: The measured signals (SI units) an exercise may put a noise floor on or leave out.
 SIGNALS = {"x": "m", "v": "m/s", "p1": "Pa", "p2": "Pa"}
-#: The routes a student can hand in from.
+#: The routes a student can hand in from (grey-box identification joins them when it exists).
 METHODS = {"lse": "least squares (tab 3, time domain)", "frequency": "transfer function and back-out (tab 3, "
-           "frequency domain)", "greybox": "grey-box identification (tab 3)"}
+           "frequency domain)"}
 FEEDBACK = {"verdict": "within tolerance or not, after every hand-in",
             "none": "only that the hand-in was stored",
             "after-deadline": "the verdicts once the deadline has passed"}
@@ -213,7 +213,7 @@ class Conditions:
     measured: tuple[str, ...] = ("x", "v", "p1", "p2")
     max_record_s: float = 60.0
     min_ts_s: float = 1e-3
-    methods: tuple[str, ...] = ("lse", "frequency", "greybox")
+    methods: tuple[str, ...] = tuple(METHODS)
 
     def __post_init__(self):
         for k, s in dict(self.noise).items():

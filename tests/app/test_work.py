@@ -17,7 +17,7 @@ HIDE = ("M", "B", "Af", "beta_e")
 
 @pytest.fixture
 def exercise(tmp_path, monkeypatch):
-    ex = Exercise.new(hide=HIDE, roster=[("s1", "Ada"), ("s2", "Alan")], title="Lab 3")
+    ex = Exercise.new(hide=HIDE, roster=[("s1", "Ada"), ("s2", "Alan")], title="Lab 3", secret="5a" * 32)
     path = tmp_path / "class.json"
     ex.save(path)
     monkeypatch.setenv("EHA_EXERCISE", str(path))
@@ -66,8 +66,10 @@ def test_settings_and_results_come_back_for_the_same_student_only(exercise):
     note = again.settings_note.object
     assert "Your work was restored" in note and "results of Least squares, Transfer function" in note
     assert "settings of Parameters" in note and "computing again" not in note
-    # the board was sent the restored estimates, as by a click
-    assert [m.name for m in again.session.mail("board")] == ["LS", "H"]
+    # the board was sent the restored estimates, as by a click (an unphysical least-squares estimate,
+    # which the exercise's noise can give, is not a model: then the first page had no LS either)
+    assert [m.name for m in again.session.mail("board")] == [m.name for m in session.mail("board")]
+    assert "H" in [m.name for m in session.mail("board")]
 
     other = join("s2")              # nothing of s1's
     assert other.session.section("least_squares") is None and other.session.section("frequency") is None
