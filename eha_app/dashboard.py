@@ -33,7 +33,7 @@ import panel as pn
 from eha_core.exercise import FEEDBACK, METHODS, parse_deadline
 
 from .render.tables import SYMBOLS_HTML, UNITS
-from .runtime.classbook import class_rows, describe_conditions, results_csv
+from .runtime.classbook import class_rows, describe_conditions, handin_errors, results_csv
 from .runtime.handins import StoreError
 from .runtime.tasks import held, on_click, watch
 
@@ -311,7 +311,7 @@ class Dashboard(pn.viewable.Viewer):
                 + "".join(f"<th>{_param_head(ex, n)}</th>" for n in ex.hide) + "<th>score</th><th>conditions</th></tr>")
         body = []
         for h in handins:
-            errors = h.errors or ex.errors(h.student, h.estimates)
+            errors = h.errors or handin_errors(ex, h.student, h)
             cells = "".join(_param_cell(h.estimates.get(n), errors.get(n), h.verdicts.get(n), 1) for n in ex.hide)
             body.append(f"<tr><td>{_when(h.time, today)}</td><td>{_esc(h.student)}</td>"
                         f"<td>{_esc(names.get(h.student, ''))}</td><td class='num'>{numbers[h.id]}</td>"

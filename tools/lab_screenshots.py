@@ -14,13 +14,12 @@ import subprocess
 import sys
 import tempfile
 import time
-import urllib.request
 from pathlib import Path
 
 from playwright.sync_api import sync_playwright
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from screenshots import ARGS, ROOT, free_port  # noqa: E402
+from screenshots import ARGS, ROOT, free_port, wait_served  # noqa: E402
 
 ROSTER = ("id,name\ns1234567,Ada Lovelace\ns2345678,Alan Turing\ns3456789,Grace Hopper\n"
           "s4567890,Edsger Dijkstra\n")
@@ -48,12 +47,7 @@ def main(argv=None):
                               stderr=subprocess.STDOUT)
     url = f"http://127.0.0.1:{port}/eha"
     try:
-        for _ in range(240):
-            try:
-                urllib.request.urlopen(url, timeout=5)
-                break
-            except OSError:
-                time.sleep(0.5)
+        wait_served(url)
         token = re.search(r"/teacher\?token=([0-9a-f]+)", (work / "server.log").read_text()).group(1)
         with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=args.chromium, args=ARGS)

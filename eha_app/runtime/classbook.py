@@ -28,7 +28,8 @@ from eha_core.exercise import METHODS
 
 from .handins import HandIn, HandIns
 
-__all__ = ["describe_conditions", "ClassRow", "class_rows", "results_header", "results_cells", "results_csv"]
+__all__ = ["describe_conditions", "handin_errors", "ClassRow", "class_rows", "results_header", "results_cells",
+           "results_csv"]
 
 
 @dataclass(frozen=True)
@@ -65,13 +66,13 @@ def class_rows(exercise, store: HandIns) -> list[ClassRow]:
             id=sid, name=names.get(sid, ""), joined=joined, last_seen=seen, count=len(hs),
             last_time=last.time if last else "", method=last.method if last else "",
             estimates=last.estimates if last else {},
-            errors=last.errors if last and last.errors else _errors(exercise, sid, last),
+            errors=last.errors if last and last.errors else handin_errors(exercise, sid, last),
             verdicts=last.verdicts if last else {}, score=exercise.score([h.verdicts for h in hs]),
             conditions=last.conditions if last else {}, settings=last.settings if last else {}))
     return rows
 
 
-def _errors(exercise, sid: str, last: HandIn | None) -> dict:
+def handin_errors(exercise, sid: str, last: HandIn | None) -> dict:
     """The errors of a hand-in stored before they were kept (none for an id the app now refuses)."""
     if last is None:
         return {}
