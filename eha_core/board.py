@@ -120,8 +120,9 @@ def model_views(model: BoardModel, *, w=BOARD_W, step_t=STEP_T, level: float = 0
 
 def validation_record(params: ActuatorParams | None = None, *, kp: float = 10.0, seed: int = 1,
                       n_samples: int = 1000, ts: float = 0.01, model: str = "nonlinear",
-                      cancel: CancelToken | None = None):
-    """A fresh closed-loop experiment (the paper's idinput sine excitation, ``seed``) to compare models on.
+                      noise_x: float = 0.0, disturbance: str = "none", cancel: CancelToken | None = None):
+    """A fresh closed-loop experiment (the paper's idinput sine excitation, ``seed``) to compare models on;
+    ``noise_x`` and ``disturbance`` as in :class:`~eha_core.experiments.FrequencyExperiment`.
 
     Returns the :class:`~eha_core.simulate.SimulationResult` (``t``, ``r``, ``x``, ...).
     """
@@ -129,7 +130,8 @@ def validation_record(params: ActuatorParams | None = None, *, kp: float = 10.0,
 
     if not isinstance(seed, (int, np.integer)) or not 0 <= seed <= 10**6:
         raise not_allowed("seed", seed, "must be a whole number in [0, 1000000]")
-    cfg = FrequencyExperiment(n_samples=n_samples, ts=ts, seed=int(seed), kp=kp, model=model)
+    cfg = FrequencyExperiment(n_samples=n_samples, ts=ts, seed=int(seed), kp=kp, model=model, noise_x=noise_x,
+                              disturbance=disturbance)
     data = cfg.closed_loop(params if params is not None else ActuatorParams(), cfg.excitation(), cancel)
     if not data.success:
         raise ComputationError(f"the validation experiment failed: {data.message}")
@@ -184,10 +186,19 @@ def lse_model(result, params: ActuatorParams, kp: float, name: str, description:
                       ts=float(result.ts), kp=float(kp), params=params)
 
 
-def nonlinear_step(params: ActuatorParams, kp: float, amplitude_m: float, *, cancel: CancelToken | None = None):
-    """The nonlinear plant's step response under the same controller, on :data:`STEP_T`'s horizon."""
-    from .identify.step import nonlinear_step_response
+def nonlinear_step(params: ActuatorParams, kp: float, amplitude_m: float, *, noise_x: float = 0.0, seed: int = 0,
+                   cancel: CancelToken | None = None):
+    """The nonlinear plant's step response under the same controller, on :data:`STEP_T`'s horizon; with
+    ``noise_x`` (σ, m) as a position sensor would record it, its characteristics read from that record."""
+    import dataclasses
+
+    from .identify.step import nonlinear_step_response, step_info
 
     check(cancel)
-    return nonlinear_step_response(params, amplitude_m=amplitude_m, t_end_s=float(STEP_T[-1]), dt_s=0.01, kp=kp,
-                                   ts=0.01, cancel=cancel)
+    out = nonlinear_step_response(params, amplitude_m=amplitude_m, t_end_s=float(STEP_T[-1]), dt_s=0.01, kp=kp,
+                                  ts=0.01, cancel=cancel)
+    if noise_x > 0 and out.message == "ok":
+        y = out.y + noise_x * np.random.default_rng([seed, 0x57E9]).standard_normal(out.y.shape)
+        out = dataclasses.replace(out, y=y, info=step_info(out.t, y / out.amplitude),
+                                  source="nonlinear simulation, measured")
+    return out

@@ -322,9 +322,11 @@ class ModelBoard(Section):
     def _run_record(self, key) -> None:
         params, kp, seed = key
         models = [(e, e.model) for e in self.entries if e.key in self.views]
+        noise_x, disturbance = self._measured()
 
         def compute(token):
-            record = validation_record(params, kp=kp, seed=seed, cancel=token)
+            record = validation_record(params, kp=kp, seed=seed, noise_x=noise_x, disturbance=disturbance,
+                                       cancel=token)
             fits = {}
             for entry, model in models:
                 try:
@@ -350,11 +352,18 @@ class ModelBoard(Section):
 
         self.record_runner.run("board: validation record", compute, show, fail=fail)
 
+    def _measured(self) -> tuple[float, str]:
+        """The position sensor's σ and the load of an exercise (the student's actuator is only ever seen
+        through its sensors), none outside one."""
+        ex = self.state.exercise if self.state.hidden else None
+        return (ex.conditions.noise_floor("x"), ex.conditions.disturbance) if ex is not None else (0.0, "none")
+
     def _run_plant(self, key) -> None:
         params, kp, amplitude = key
+        noise_x, _ = self._measured()
 
         def compute(token):
-            return nonlinear_step(params, kp, amplitude, cancel=token)
+            return nonlinear_step(params, kp, amplitude, noise_x=noise_x, cancel=token)
 
         def show(plant, _job):
             keys = self.record_inputs()

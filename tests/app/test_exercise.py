@@ -403,3 +403,20 @@ def test_signals_an_exercise_does_not_measure_are_not_in_a_students_records(tmp_
     lse = page.session.build("least_squares")
     lse.run()
     assert "the least squares need p1 and p2, which this exercise does not measure" in lse.alert.object
+
+
+def test_the_boards_record_and_plant_step_are_measured_through_the_exercises_sensors(exercise):
+    from eha_core.board import nonlinear_step, validation_record
+
+    ex, _ = exercise
+    page = create_app(AppState())
+    page.gate.student_id.value = "ada"
+    page.gate.start()
+    board = page.session.build("board")
+    assert board._measured() == (1e-5, "none")
+    truth = ex.student_params("ada")
+    clean = validation_record(truth, seed=1)
+    noisy = validation_record(truth, seed=1, noise_x=1e-5)
+    assert 0.8e-5 < np.std(noisy.x - clean.x) < 1.2e-5
+    step = nonlinear_step(truth, 10.0, 0.01, noise_x=1e-5)
+    assert step.source.endswith("measured") and 0.8e-5 < np.std(step.y - nonlinear_step(truth, 10.0, 0.01).y) < 1.2e-5
