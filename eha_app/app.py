@@ -375,7 +375,9 @@ class Page(pn.viewable.Viewer):
             sizing_mode="stretch_width")
         self.result_pane = pn.pane.HTML("", visible=False, sizing_mode="stretch_width",
                                         css_classes=["eha-student-result"])
-        self.layout.objects = [self.connection, header, self.result_pane, self._settings_row(), self.guide.start,
+        # the result pane only in an exercise: a page without one sends one model fewer
+        shown = [self.result_pane] if session.student else []
+        self.layout.objects = [self.connection, header, *shown, self._settings_row(), self.guide.start,
                                self.guide.line, self.tabs.tabs]
         self._guide_follows()
         if session.student:
