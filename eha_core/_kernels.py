@@ -157,3 +157,127 @@ def integrate_batch(y0s, h, n_steps, sub, prms, mode, lin, u_sts, d_sts,
     for j in prange(y0s.shape[0]):
         status[j] = integrate(y0s[j], h, n_steps, sub, prms[j], mode, lin[j], u_sts[j], d_sts[j],
                               ctrl, kp, r_sts[j], ctrl_every, u_limit, outs[j], y_ends[j])
+
+
+# -- forward sensitivities (grey-box identification) -----------------------------------------------------
+#
+# The sensitivities S = dy/dz of the states to P parameters z (a packed parameter's logarithm or a
+# multiple of it, an initial state) obey the variational equation dS_j/dt = (df/dy) S_j + df/dz_j.
+# Its right-hand side is the derivative of f along the direction (S_j, du_j, dprm_j): computed here
+# by a forward difference of the one dynamics implementation (derivatives) at every RK4 stage, from
+# the stage's own evaluation, so the sensitivities are integrated with the states, step by step, by
+# the same scheme, at one more evaluation of f per parameter. The step of the difference is 1e-7 of
+# the direction in each quantity's own scale (position x_max, velocity 1 m/s, pressures ps, command
+# 1 V, each parameter its own value): ~1e-7 relative, checked against differences of whole runs in
+# tests/core/test_greybox.py; Levenberg-Marquardt needs far less.
+
+@njit(cache=True, nogil=True)
+def _along(x, v, p1, p2, u, d, prm, f0, sx, sv, s1, s2, su, dprm, work):
+    """Derivative of f(y, u, prm) along (S, su, dprm), by a forward difference from ``f0`` = f(y, u, prm)."""
+    n = max(abs(sx) / prm[12], abs(sv), abs(s1) / prm[9], abs(s2) / prm[9], abs(su))
+    for i in range(prm.shape[0]):
+        if dprm[i] != 0.0:      # a parameter at 0 (d0) in the direction's own scale
+            n = max(n, abs(dprm[i]) / max(abs(prm[i]), abs(dprm[i])))
+    if n == 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    e = 1e-7 / n
+    for i in range(prm.shape[0]):
+        work[i] = prm[i] + e * dprm[i]
+    a0, a1, a2, a3 = derivatives(x + e * sx, v + e * sv, p1 + e * s1, p2 + e * s2, u + e * su, d, work)
+    k = 1.0 / e
+    return (a0 - f0[0]) * k, (a1 - f0[1]) * k, (a2 - f0[2]) * k, (a3 - f0[3]) * k
+
+
+@njit(cache=True, nogil=True)
+def _stage_sensitivities(K, S, Kprev, c, x, v, p1, p2, u, d, prm, f0, su, dprm, work):
+    """One RK4 stage of the sensitivities: K[:, j] = df/dy (S + c Kprev)[:, j] + df/dz_j."""
+    for j in range(S.shape[1]):
+        K[0, j], K[1, j], K[2, j], K[3, j] = _along(
+            x, v, p1, p2, u, d, prm, f0, S[0, j] + c * Kprev[0, j], S[1, j] + c * Kprev[1, j],
+            S[2, j] + c * Kprev[2, j], S[3, j] + c * Kprev[3, j], su[j], dprm[j], work)
+
+
+@njit(cache=True, nogil=True)
+def _store_sensitivities(out, sout, k, x, v, p1, p2, S):
+    out[k, 0] = x
+    out[k, 1] = v
+    out[k, 2] = p1
+    out[k, 3] = p2
+    for r in range(4):
+        for j in range(S.shape[1]):
+            sout[k, r, j] = S[r, j]
+
+
+@njit(cache=True, nogil=True)
+def _held_at_bounds(S, before, after):
+    """A state the bounds held does not move with the parameters: its sensitivities are zero."""
+    for r in range(4):
+        if before[r] != after[r]:
+            for j in range(S.shape[1]):
+                S[r, j] = 0.0
+
+
+@njit(cache=True, nogil=True)
+def integrate_sensitivities(y0, s0, h, n_steps, sub, prm, dprm, u_st, d_st, ctrl, kp, r_st, ctrl_every, u_limit,
+                            out, sout):
+    """The nonlinear model's states and their sensitivities to P parameters, on the grid of
+    :func:`integrate` (RK4, bounds after every step, open loop or a sampled P controller).
+
+    ``s0`` (4 x P): the sensitivities of the initial state; ``dprm`` (P x n_prm): each parameter's
+    direction in the packed parameters. Fills ``out`` (n_out x 4) and ``sout`` (n_out x 4 x P) at the
+    output samples; returns -1, or the step at which the state stopped being finite.
+    """
+    P = dprm.shape[0]
+    x, v, p1, p2 = y0[0], y0[1], y0[2], y0[3]
+    S = s0.copy()
+    Z = np.zeros((4, P))
+    K1, K2, K3, K4 = np.empty((4, P)), np.empty((4, P)), np.empty((4, P)), np.empty((4, P))
+    work = np.empty(prm.shape[0])
+    f0 = np.empty(4)
+    su = np.zeros(P)                    # the command's sensitivity: -Kp S_x, held with the command
+    before, after = np.empty(4), np.empty(4)
+    u_hold = 0.0
+    half = 0.5 * h
+    k_out = 0
+    for i in range(n_steps):
+        if ctrl == ZOH and i % ctrl_every == 0:
+            u_hold = _control(kp, r_st[i, 0], x, u_limit)
+            free = u_limit <= 0.0 or abs(u_hold) < u_limit
+            for j in range(P):
+                su[j] = -kp * S[0, j] if free else 0.0
+        if ctrl == ZOH:
+            ua = ub = uc = u_hold
+        else:
+            ua, ub, uc = u_st[i, 0], u_st[i, 1], u_st[i, 2]
+        if i % sub == 0:
+            _store_sensitivities(out, sout, k_out, x, v, p1, p2, S)
+            k_out += 1
+        da, db, dc = d_st[i, 0], d_st[i, 1], d_st[i, 2]
+        f0[0], f0[1], f0[2], f0[3] = derivatives(x, v, p1, p2, ua, da, prm)
+        k1x, k1v, k1p, k1q = f0[0], f0[1], f0[2], f0[3]
+        _stage_sensitivities(K1, S, Z, 0.0, x, v, p1, p2, ua, da, prm, f0, su, dprm, work)
+        x2, v2, q2, w2 = x + half * k1x, v + half * k1v, p1 + half * k1p, p2 + half * k1q
+        f0[0], f0[1], f0[2], f0[3] = derivatives(x2, v2, q2, w2, ub, db, prm)
+        k2x, k2v, k2p, k2q = f0[0], f0[1], f0[2], f0[3]
+        _stage_sensitivities(K2, S, K1, half, x2, v2, q2, w2, ub, db, prm, f0, su, dprm, work)
+        x3, v3, q3, w3 = x + half * k2x, v + half * k2v, p1 + half * k2p, p2 + half * k2q
+        f0[0], f0[1], f0[2], f0[3] = derivatives(x3, v3, q3, w3, ub, db, prm)
+        k3x, k3v, k3p, k3q = f0[0], f0[1], f0[2], f0[3]
+        _stage_sensitivities(K3, S, K2, half, x3, v3, q3, w3, ub, db, prm, f0, su, dprm, work)
+        x4, v4, q4, w4 = x + h * k3x, v + h * k3v, p1 + h * k3p, p2 + h * k3q
+        f0[0], f0[1], f0[2], f0[3] = derivatives(x4, v4, q4, w4, uc, dc, prm)
+        k4x, k4v, k4p, k4q = f0[0], f0[1], f0[2], f0[3]
+        _stage_sensitivities(K4, S, K3, h, x4, v4, q4, w4, uc, dc, prm, f0, su, dprm, work)
+        before[0] = x + h / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
+        before[1] = v + h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+        before[2] = p1 + h / 6.0 * (k1p + 2.0 * k2p + 2.0 * k3p + k4p)
+        before[3] = p2 + h / 6.0 * (k1q + 2.0 * k2q + 2.0 * k3q + k4q)
+        S += h / 6.0 * (K1 + 2.0 * K2 + 2.0 * K3 + K4)
+        x, v, p1, p2 = project_state(before[0], before[1], before[2], before[3], prm)
+        after[0], after[1], after[2], after[3] = x, v, p1, p2
+        _held_at_bounds(S, before, after)
+        if not (np.isfinite(x) and np.isfinite(v) and np.isfinite(p1) and np.isfinite(p2)):
+            return i
+    if k_out < out.shape[0]:
+        _store_sensitivities(out, sout, k_out, x, v, p1, p2, S)
+    return -1

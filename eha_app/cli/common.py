@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 from pathlib import Path
 
 from eha_core.errors import FieldError
@@ -147,3 +148,32 @@ def _poly_text(coeffs) -> str:
 def tf_text(num, den, name: str) -> str:
     """``name = (num) / (den)`` in plain text."""
     return f"{name} = ({_poly_text(num)}) / ({_poly_text(den)})"
+
+
+_NOISE_UNITS = {"x": {"m": 1.0, "mm": 1e-3, "um": 1e-6}, "v": {"m/s": 1.0, "mm/s": 1e-3},
+                "p": {"pa": 1.0, "kpa": 1e3, "mpa": 1e6, "bar": 1e5}}
+
+
+def parse_noise(text: str, option: str = "--noise") -> dict:
+    """``x=0.01mm,v=1mm/s,p=0.05MPa`` -> σ per signal in SI (p: both pressures)."""
+    if text.strip().lower() in ("none", "0", ""):
+        return {}
+    out = {}
+    for part in text.split(","):
+        name, _, value = part.partition("=")
+        name, value = name.strip().lower(), value.strip().replace(" ", "")
+        signals = ("p1", "p2") if name == "p" else (name,)
+        kind = "p" if name in ("p", "p1", "p2") else name
+        if kind not in _NOISE_UNITS:
+            raise refused(option, text, f"{name or '(blank)'} is not a signal; use x, v, p (or p1, p2)")
+        m = re.fullmatch(r"([-+0-9.eE]*?)([a-zA-Z/]*)", value)
+        number, unit = (m.group(1), m.group(2).lower()) if m else (value, "")
+        scale = _NOISE_UNITS[kind].get(unit) if unit else next(iter(_NOISE_UNITS[kind].values()))
+        try:
+            sigma = float(number) * scale
+        except (TypeError, ValueError):
+            raise refused(option, text, f"σ of {name} as a number with a unit of "
+                                           f"{', '.join(_NOISE_UNITS[kind])}, e.g. x=0.01mm") from None
+        for sig in signals:
+            out[sig] = sigma
+    return out

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import csv
 import io
-import re
 import sys
 from pathlib import Path
 
@@ -16,6 +15,7 @@ from .common import (
     as_option,
     check_input_file,
     check_output_file,
+    parse_noise,
     refused,
     refused_file,
     terminal_text,
@@ -97,35 +97,6 @@ def _tolerances(text: str):
     return out
 
 
-_NOISE_UNITS = {"x": {"m": 1.0, "mm": 1e-3, "um": 1e-6}, "v": {"m/s": 1.0, "mm/s": 1e-3},
-                "p": {"pa": 1.0, "kpa": 1e3, "mpa": 1e6, "bar": 1e5}}
-
-
-def _noise(text: str) -> dict:
-    """``x=0.01mm,v=1mm/s,p=0.05MPa`` -> σ per signal in SI (p: both pressures)."""
-    if text.strip().lower() in ("none", "0", ""):
-        return {}
-    out = {}
-    for part in text.split(","):
-        name, _, value = part.partition("=")
-        name, value = name.strip().lower(), value.strip().replace(" ", "")
-        signals = ("p1", "p2") if name == "p" else (name,)
-        kind = "p" if name in ("p", "p1", "p2") else name
-        if kind not in _NOISE_UNITS:
-            raise refused("--noise", text, f"{name or '(blank)'} is not a signal; use x, v, p (or p1, p2)")
-        m = re.fullmatch(r"([-+0-9.eE]*?)([a-zA-Z/]*)", value)
-        number, unit = (m.group(1), m.group(2).lower()) if m else (value, "")
-        scale = _NOISE_UNITS[kind].get(unit) if unit else next(iter(_NOISE_UNITS[kind].values()))
-        try:
-            sigma = float(number) * scale
-        except (TypeError, ValueError):
-            raise refused("--noise", text, f"σ of {name} as a number with a unit of "
-                                           f"{', '.join(_NOISE_UNITS[kind])}, e.g. x=0.01mm") from None
-        for sig in signals:
-            out[sig] = sigma
-    return out
-
-
 def _names(option: str, text: str) -> tuple[str, ...]:
     return tuple(n.strip() for n in str(text).split(",") if n.strip())
 
@@ -165,7 +136,7 @@ def run_new(args) -> int:
             parse_signal(args.disturbance, name="--disturbance", hold_s=1e-3)
         except SignalSpecError as exc:
             raise refused("--disturbance", args.disturbance, exc.what) from None
-        conditions = Conditions(noise=_noise(args.noise), disturbance=args.disturbance,
+        conditions = Conditions(noise=parse_noise(args.noise), disturbance=args.disturbance,
                                 measured=_names("--measured", args.measured),
                                 methods=_names("--methods", args.methods), max_record_s=max_record)
         ex = Exercise.new(hide=hide, vary=vary, tolerance=tolerance, title=args.title, roster=roster,

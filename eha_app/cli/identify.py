@@ -32,7 +32,8 @@ MAX_LSE_T_END = 600.0
 def add_parser(sub) -> None:
     from eha_core.signals import SIGNAL_GRAMMAR
 
-    idf = sub.add_parser("identify", help="identification: least squares (lse) or transfer function (tf)")
+    idf = sub.add_parser("identify", help="identification: least squares (lse), transfer function (tf) or grey-box "
+                                          "(greybox)")
     idsub = idf.add_subparsers(dest="method", metavar="METHOD", parser_class=Parser)
     idf.set_defaults(handler=_missing_method)
     le = idsub.add_parser("lse", help="least squares for M, B, Af, d0, beta_e (eqs. 15-18)",
@@ -89,11 +90,14 @@ def add_parser(sub) -> None:
                          "controller's output), or foh, linear (a smooth signal sampled), with --data only")
     tf.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help=PARAM_HELP)
     tf.add_argument("--json", action="store_true", help="print JSON (default: a summary)")
+    from .greybox import add_parser as add_greybox
+
+    add_greybox(idsub)
     tf.set_defaults(handler=run_tf)
 
 
 def _missing_method(args) -> int:
-    raise UsageError("identify needs a METHOD: lse or tf (eha identify --help tells more)")
+    raise UsageError("identify needs a METHOD: lse, tf or greybox (eha identify --help tells more)")
 
 
 def _positive(option: str, value: float, unit: str) -> None:

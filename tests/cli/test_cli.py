@@ -370,3 +370,20 @@ def test_serve_refuses_an_exercise_in_a_folder_it_cannot_write_to(tmp_path, caps
     assert main(["serve", "--exercise", str(path)]) == 2
     err = capsys.readouterr().err
     assert "is read-only; the server could not store a single hand-in" in err and len(err.strip().splitlines()) == 1
+
+
+def test_identify_greybox_gives_the_issues_json_and_refuses_bad_names(capsys):
+    import json
+
+    code = main(["identify", "greybox", "--param", "M=5200", "--t-end", "3", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and {"estimates", "std_errors", "ci95", "correlation", "fit", "success", "message", "nfev",
+                          "time_s"} <= set(out)
+    assert abs(out["estimates"]["M"] - 5200) < 4 * out["std_errors"]["M"] and out["true"]["M"] == 5200
+    assert out["ci95"]["M"][0] < out["estimates"]["M"] < out["ci95"]["M"][1] and set(out["fit"]) == {"x", "p1", "p2"}
+    for argv, message in ((["--params", "M,Q"], "--params = M,Q is not allowed: Q is not one of"),
+                          (["--measured", "x,y"], "--measured = x,y is not allowed: y is not one of"),
+                          (["--t-end", "0"], "--t-end = 0"), (["--noise", "q=1"], "--noise = q=1 is not allowed")):
+        assert main(["identify", "greybox", *argv]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err

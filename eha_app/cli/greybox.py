@@ -1,0 +1,134 @@
+"""``eha identify greybox``: grey-box identification of the nonlinear model's physical parameters.
+
+The arguments are checked before anything is simulated: a typo is refused at once.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+from eha_core.errors import FieldError
+
+from .common import as_option, check_input_file, json_text, parse_noise, parse_params, refused
+
+#: The longest simulated record [s].
+MAX_GREYBOX_T_END = 120.0
+
+
+def add_parser(idsub) -> None:
+    from eha_core.identify.greybox import GREYBOX_PARAMS, GREYBOX_SIGNALS
+    from eha_core.signals import SIGNAL_GRAMMAR
+
+    gb = idsub.add_parser(
+        "greybox", help="grey-box: the nonlinear model's physical parameters by output error (like nlgreyest)",
+        description="Grey-box identification: simulate the nonlinear model with candidate parameters, compare with "
+                    "the measured signals, minimise (Levenberg-Marquardt with the model's sensitivities). Without "
+                    "--data the nonlinear plant is simulated with --u (default sine:6:2) for --t-end s at 1 kHz, its "
+                    "true values set by --param; the estimate starts from the paper's values.",
+        epilog=SIGNAL_GRAMMAR)
+    gb.add_argument("--params", default="M,B,Af,beta_e", metavar="NAMES",
+                    help=f"the parameters to estimate, of {', '.join(GREYBOX_PARAMS)} (default M,B,Af,beta_e)")
+    gb.add_argument("--measured", default="x,p1,p2", metavar="SIGNALS",
+                    help=f"the signals compared, of {', '.join(GREYBOX_SIGNALS)} (default x,p1,p2; x alone works)")
+    gb.add_argument("--data", help="a CSV with t, u and the measured columns (SI, or units in the header such as "
+                                   "p1[MPa]); the values not estimated are the paper's or --param's")
+    gb.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                    help="without --data: the simulated plant's true values; with --data: the values held")
+    gb.add_argument("--u", help="the valve command as signal text (default sine:6:2, the paper's)")
+    gb.add_argument("--disturbance", default="none", help="a load force d(t) known to the model (signal text, "
+                                                          "e.g. sine:5000:1; default none)")
+    gb.add_argument("--noise", default="x=0.01mm,p=0.05MPa", help="without --data: the sensors' white noise, e.g. "
+                    "x=0.01mm,v=1mm/s,p=0.05MPa (default x=0.01mm,p=0.05MPa; none for noise-free)")
+    gb.add_argument("--t-end", type=float, default=10.0, help=f"simulated record length [s] (default 10, at most "
+                                                              f"{MAX_GREYBOX_T_END:g})")
+    gb.add_argument("--intersample", default="foh", help="how u moves between samples: foh (linearly, default) or "
+                                                         "zoh (held, a DAC's output)")
+    gb.add_argument("--seed", type=int, default=0, help="seed of the noise (default 0)")
+    gb.add_argument("--json", action="store_true", help="print JSON (default: a table)")
+    gb.set_defaults(handler=run_greybox)
+
+
+def _names(option: str, text: str, allowed) -> tuple[str, ...]:
+    names = tuple(n.strip() for n in str(text).split(",") if n.strip())
+    for n in names:
+        if n not in allowed:
+            raise refused(option, text, f"{n} is not one of {', '.join(allowed)}")
+    if not names:
+        raise refused(option, text, f"name at least one of {', '.join(allowed)}")
+    return names
+
+
+def _record(args, names, measured, truth):
+    """The record: the CSV of --data, or the simulated plant."""
+    import numpy as np
+
+    from eha_core.identify.greybox import GreyBoxData, greybox_data
+    from eha_core.signals import parse_signal
+
+    d = parse_signal(args.disturbance, name="--disturbance", seed=args.seed)
+    if args.data:
+        from eha_core.data import read_columns, sample_time
+
+        cols = read_columns(args.data, ("t", "u", *measured), name="--data", min_rows=10)
+        sample_time(cols["t"], name="--data", path=args.data)
+        t = cols["t"]
+        dvals = None if args.disturbance == "none" else np.asarray(d(t - t[0]), dtype=float)
+        return GreyBoxData(t=t, u=cols["u"], d=dvals, signals={s: cols[s] for s in measured},
+                           intersample=args.intersample, source=args.data)
+    u = parse_signal(args.u, name="--u") if args.u else None
+    from eha_core.experiments import LSE_INPUT
+
+    noise = parse_noise(args.noise)
+    return greybox_data(truth, u or LSE_INPUT, t_end=args.t_end, d=d, noise=noise, seed=args.seed,
+                        measured=measured)
+
+
+def run_greybox(args) -> int:
+    from eha_core.identify.greybox import GREYBOX_PARAMS, GREYBOX_SIGNALS
+    from eha_core.params import ActuatorParams
+
+    names = _names("--params", args.params, GREYBOX_PARAMS)
+    measured = _names("--measured", args.measured, GREYBOX_SIGNALS)
+    if args.seed < 0:
+        raise refused("--seed", args.seed, "use a whole number >= 0")
+    if not (math.isfinite(args.t_end) and 0 < args.t_end <= MAX_GREYBOX_T_END):
+        raise refused("--t-end", args.t_end, f"use a record length in (0, {MAX_GREYBOX_T_END:g}] s")
+    if args.intersample not in ("foh", "zoh"):
+        raise refused("--intersample", args.intersample, "use foh or zoh")
+    check_input_file("--data", args.data)
+    given = parse_params(args.param)
+    # without data the --param values are the plant's truth and the estimate starts from the paper's;
+    # with data they are what is known of the rig
+    truth, guess = (given, ActuatorParams()) if not args.data else (None, given)
+    data = _record(args, names, measured, truth)
+
+    from eha_core.identify.greybox import identify_greybox
+
+    try:
+        res = identify_greybox(data, names, measured=measured, guess=guess)
+    except FieldError as exc:
+        raise as_option(exc, {"params": "--params", "measured": "--measured", "record": "--t-end"}) from None
+    out = res.to_dict()
+    out["source"] = data.source
+    if truth is not None:
+        out["true"] = {n: float(getattr(truth, n)) for n in names if hasattr(truth, n)}
+    if args.json:
+        print(json_text(out))
+        return 0 if res.success else 1
+    print(f"grey-box (output error) from {', '.join(measured)} of {data.source}: {res.nfev} simulations with "
+          f"sensitivities, {res.time_s:.2f} s")
+    head = f"{'':8s}{'estimate':>14s}{'std error':>12s}   95 % interval" + ("       true" if truth else "")
+    print(head)
+    for n in names:
+        lo, hi = res.ci95[n]
+        true = f"{getattr(truth, n):>14.6g}" if truth is not None and hasattr(truth, n) else ""
+        print(f"{n:8s}{res.estimates[n]:14.6g}{res.std_errors[n]:12.4g}   [{lo:.6g}, {hi:.6g}]{true}")
+    print("fit: " + ", ".join(f"{s} {v:.2f} %" for s, v in res.fit.items()))
+    for _, sentence in res.identifiability:
+        print(f"identifiability: {sentence}")
+    if res.held:
+        print(f"held at the initial value: {', '.join(res.held)}")
+    if not res.success:
+        print(f"eha identify greybox: warning: {res.message}", file=sys.stderr)
+    return 0 if res.success else 1
