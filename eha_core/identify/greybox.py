@@ -25,9 +25,15 @@ What it gives
     (:func:`identifiability`); a parameter the data do not determine at the initial guess is held
     there, and the result says so.
 
+Multiple shooting (``shooting="multiple"``) cuts the record into segments whose initial states are
+estimated with the parameters and joined by continuity, then polishes by output error. Measured on
+the paper's experiment (tests and the notes): output error alone already converged from 50 % off in
+12 of 12 random starts from x, p1, p2 and 11 of 12 from x alone; multiple shooting 12 and 10, at
+six times the cost. It is there for long records and worse guesses, not the default.
+
 Its limits: one record, output error only (no process-noise model: a disturbance the model does
-not know biases the estimate; a known d(t) is an input), no multiple shooting yet (a poor initial
-guess on a long record can end in a local minimum), the valve's switching and the end stops are
+not know biases the estimate; a known d(t) is an input), local minima from poor guesses (the x-only
+problem of M and βe has one at 0.6 M from 23 % off), the valve's switching and the end stops are
 kinks the Gauss-Newton steps see only through their averages.
 
 Examples
@@ -69,6 +75,9 @@ _SIGNAL_INDEX = {"x": 0, "v": 1, "p1": 2, "p2": 3}
 #: A parameter that may be 0 or negative is estimated as a multiple of this scale (SI).
 _LINEAR_SCALE = {"d0": 1000.0, "x0": 0.01, "v0": 0.01}
 Z95 = 1.959963984540054
+#: The states' scales in multiple shooting (x, v, p1, p2 in SI): a segment's initial state is
+#: estimated in these units.
+STATE_SCALE = np.array([0.01, 0.01, 1e6, 1e6])
 H_MAX = 2e-4        # the simulator's step bound (eha_core.simulate.DEFAULT_H_MAX)
 
 
@@ -177,9 +186,13 @@ def _value(params: ActuatorParams, name: str) -> float:
 
 
 def simulate_with_sensitivities(params: ActuatorParams, names, data: GreyBoxData, *, log=None,
+                                initial: np.ndarray | None = None,
                                 cancel: CancelToken | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The states (N x 4: x, v, p1, p2) at ``data.t`` and their sensitivities (N x 4 x P) to the
-    parameters ``names``: d/d log(θ) for the positive ones (``log``), d/d(θ / scale) for the others."""
+    parameters ``names``: d/d log(θ) for the positive ones (``log``), d/d(θ / scale) for the others.
+
+    ``initial``: a segment's own initial state (multiple shooting): the parameters then do not move it,
+    and four more columns hold the sensitivities to it, in :data:`STATE_SCALE` units."""
     from .. import _kernels as K
     from ..simulate import _as_signal, _grid, _stage_samples
 
@@ -191,14 +204,18 @@ def simulate_with_sensitivities(params: ActuatorParams, names, data: GreyBoxData
     t0 = t - t[0]
     n_out = min(n_out, t.size)
     prm = pack_params(params)
-    P = len(names)
+    P = len(names) + (4 if initial is not None else 0)
     dprm = np.zeros((P, prm.size))
     s0 = np.zeros((4, P))
-    y0 = params.initial_state
+    y0 = params.initial_state if initial is None else np.asarray(initial, dtype=float)
+    if initial is not None:
+        s0[:, len(names):] = np.diag(STATE_SCALE)
     for j, (n, lg) in enumerate(zip(names, log, strict=True)):
         scale = _value(params, n) if lg else _LINEAR_SCALE[n]
         if n in PARAM_INDEX and n not in _STATE_INDEX:
             dprm[j, PARAM_INDEX[n]] = scale
+        if initial is not None:
+            continue
         # the initial state's sensitivity: directly for x0, v0, p1(0), p2(0); through the force balance
         # of a blank p2(0) for the parameters it depends on (d0, p1(0), ...), by a difference (it is linear)
         eps = 1e-6
@@ -347,12 +364,16 @@ def _check_request(data, names, measured, guess):
 
 
 def identify_greybox(data: GreyBoxData, params=("M", "B", "Af", "beta_e"), *, measured=None,
-                     guess: ActuatorParams | None = None, max_nfev: int = 60, hold_unidentifiable: bool = True,
+                     guess: ActuatorParams | None = None, shooting: str = "single", segments: int | None = None,
+                     max_nfev: int = 60, hold_unidentifiable: bool = True,
                      cancel: CancelToken | None = None) -> GreyBoxResult:
     """Estimate ``params`` of the nonlinear model from ``data`` (output error; see the module).
 
     ``measured``: the signals compared (default: every signal of the record); ``guess``: the initial
-    values and the values of everything not estimated (default: the paper's)."""
+    values and the values of everything not estimated (default: the paper's). ``shooting="multiple"``:
+    first multiple shooting over ``segments`` pieces of the record (default: one per second, at least
+    2), for a poor initial guess or a long record, then output error from where it ended (the
+    estimate and its statistics are output error's)."""
     t_start = time.perf_counter()
     names = tuple(params)
     measured = tuple(measured) if measured is not None else tuple(s for s in GREYBOX_SIGNALS if s in data.signals)
@@ -368,7 +389,17 @@ def identify_greybox(data: GreyBoxData, params=("M", "B", "Af", "beta_e"), *, me
         raise ComputationError("the data determine none of the parameters asked: "
                                + "; ".join(s for _, s in sentences))
     setup = _Setup(free, tuple(n not in _LINEAR_SCALE for n in free), guess, data)
+    if shooting not in ("single", "multiple"):
+        raise not_allowed("shooting", shooting, "use single or multiple")
+    ms_nfev = 0
+    if shooting == "multiple":
+        n_seg = segments if segments is not None else max(2, round(float(data.t[-1] - data.t[0])))
+        if not (isinstance(n_seg, int) and 2 <= n_seg <= data.t.size // 20):
+            raise not_allowed("segments", n_seg, f"a whole number in [2, {data.t.size // 20}] (20 samples each)")
+        z_ms, ms_nfev = _multiple_shooting(setup, data, measured, rows, y_meas, sigma, n_seg, max_nfev, cancel)
+        setup = _Setup(free, setup.log, setup.params_at(z_ms), data)
     z, sigma, sol, nfev, njev, out, sout = _fit(setup, data, rows, y_meas, sigma, max_nfev, cancel)
+    nfev += ms_nfev
     est_params = setup.params_at(z)
     J = _weighted_jacobian(sout, rows, sigma)
     estimates, std_errors, ci95, corr = _statistics(J, setup, est_params, names, held, guess)
@@ -464,6 +495,117 @@ def _fit(setup, data, rows, y_meas, sigma, max_nfev, cancel):
     if out is None:
         raise ComputationError("the model cannot be simulated at the estimate")
     return z, sigma, sol, nfev, njev, out, sout
+
+
+def _segment(data: GreyBoxData, a: int, b: int) -> GreyBoxData:
+    """Samples ``a..b`` (both included) of a record."""
+    def cut(x):
+        return None if x is None else np.asarray(x)[a:b + 1]
+    return GreyBoxData(t=data.t[a:b + 1], u=cut(data.u), r=cut(data.r), kp=data.kp, d=cut(data.d),
+                       signals={k: v[a:b + 1] for k, v in data.signals.items()}, intersample=data.intersample,
+                       source=data.source)
+
+
+def _shooting_start(setup, data, bounds, measured, cancel) -> np.ndarray:
+    """Each later segment's initial state: the measured signals where they are measured (velocity from
+    the measured position's slope without a velocity sensor), the initial guess's simulation elsewhere."""
+    guess_run, _ = simulate_with_sensitivities(setup.base, (), data, cancel=cancel)
+    starts = []
+    for a in bounds[1:-1]:
+        y = guess_run[a].copy()
+        for k, name in enumerate(GREYBOX_SIGNALS):
+            if name in measured:
+                y[k] = data.signals[name][a]
+        if "v" not in measured and "x" in measured:
+            lo, hi = max(a - 5, 0), min(a + 5, data.t.size - 1)
+            y[1] = (data.signals["x"][hi] - data.signals["x"][lo]) / (data.t[hi] - data.t[lo])
+        starts.append(y / STATE_SCALE)
+    return np.concatenate(starts) if starts else np.zeros(0)
+
+
+def _shooting_jacobian(runs, bounds, rows, sigma, weight, P, n_rows, n_free) -> np.ndarray:
+    """Multiple shooting's Jacobian: each segment's residuals against the parameters and its own initial
+    state; each continuity defect against the parameters, the segment's initial state and the next's."""
+    segments = len(runs)
+    J = np.zeros((n_rows, n_free))
+    r0 = 0
+    for i, (_, sout) in enumerate(runs):
+        a, b = bounds[i], bounds[i + 1] + (1 if i == segments - 1 else 0)
+        block = (sout[:b - a][:, rows, :] / sigma[None, :, None]).reshape(-1, sout.shape[2])
+        J[r0:r0 + block.shape[0], :P] = block[:, :P]
+        if i > 0:
+            J[r0:r0 + block.shape[0], P + 4 * (i - 1):P + 4 * i] = block[:, P:]
+        r0 += block.shape[0]
+    for i in range(segments - 1):
+        end = runs[i][1][-1] / STATE_SCALE[:, None] * weight[:, None]         # 4 x (P [+ 4])
+        J[r0:r0 + 4, :P] = end[:, :P]
+        if i > 0:
+            J[r0:r0 + 4, P + 4 * (i - 1):P + 4 * i] = end[:, P:]
+        J[r0:r0 + 4, P + 4 * i:P + 4 * i + 4] = -np.diag(weight)
+        r0 += 4
+    return J
+
+
+def _multiple_shooting(setup, data, measured, rows, y_meas, sigma, segments, max_nfev, cancel):
+    """The parameters by multiple shooting: the record cut into ``segments``, each simulated from an
+    initial state of its own (estimated with the parameters), the segments joined by continuity
+    (a defect costs as much as a residual of a tenth of the state's noise, or of 1e-4 of its scale
+    when it is not measured). A wrong initial guess then leaves each segment near its data instead of
+    drifting off over the whole record: the basin is wider. Returns the parameters (scaled)."""
+    from scipy.optimize import least_squares
+
+    n = data.t.size
+    bounds = [round(i * (n - 1) / segments) for i in range(segments + 1)]
+    parts = [_segment(data, bounds[i], bounds[i + 1]) for i in range(segments)]
+    P = len(setup.names)
+    state_sigma = np.array([sigma[measured.index(s)] if s in measured else 1e-4 * STATE_SCALE[k]
+                            for k, s in enumerate(GREYBOX_SIGNALS)])
+    weight = STATE_SCALE / (0.1 * state_sigma)          # per scaled unit of defect
+    cache = {}
+
+    def run(w):
+        key = w.tobytes()
+        if key not in cache:
+            cache.clear()
+            check(cancel)
+            p = setup.params_at(w[:P])
+            runs = []
+            try:
+                for i, part in enumerate(parts):
+                    start = None if i == 0 else w[P + 4 * (i - 1):P + 4 * i] * STATE_SCALE
+                    runs.append(simulate_with_sensitivities(p, setup.names, part, log=setup.log, initial=start,
+                                                            cancel=cancel))
+            except (ComputationError, ValueError):
+                runs = None
+            cache[key] = runs
+        return cache[key]
+
+    n_free = P + 4 * (segments - 1)
+    n_rows = y_meas.size + 4 * (segments - 1)
+
+    def fun(w):
+        runs = run(w)
+        if runs is None:
+            return np.full(n_rows, 1e6)
+        res = []
+        for i, (out, _) in enumerate(runs):
+            a, b = bounds[i], bounds[i + 1] + (1 if i == segments - 1 else 0)
+            res.append(((out[:b - a, rows] - y_meas[a:b]) / sigma).ravel())
+        for i in range(segments - 1):
+            end = runs[i][0][-1]
+            res.append((end / STATE_SCALE - w[P + 4 * i:P + 4 * i + 4]) * weight)
+        return np.concatenate(res)
+
+    def jac(w):
+        runs = run(w)
+        return (np.zeros((n_rows, n_free)) if runs is None else
+                _shooting_jacobian(runs, bounds, rows, sigma, weight, P, n_rows, n_free))
+
+    w0 = np.concatenate([setup.z_of(setup.base), _shooting_start(setup, data, bounds, measured, cancel)])
+    if max_nfev == 0:                       # the problem itself, for a check of its Jacobian
+        return fun, jac, w0
+    sol = least_squares(fun, w0, jac=jac, method="lm", max_nfev=max_nfev, xtol=1e-8, ftol=1e-8)
+    return sol.x[:P], sol.nfev
 
 
 def _statistics(J, setup, est_params, names, held, guess):

@@ -107,3 +107,25 @@ def test_bad_requests_are_refused_before_any_computation():
         identify_greybox(short, ("M", "B", "Af", "beta_e"))
     with pytest.raises(ValueError, match="give the command u .open loop. or the reference r"):
         GreyBoxData(t=np.arange(5.0), u=None, signals={"x": np.zeros(5)})
+
+
+def test_multiple_shooting_has_the_right_jacobian_and_ends_where_output_error_does():
+    from eha_core.identify import greybox as G
+
+    data = greybox_data(TRUTH, LSE_INPUT, t_end=2.0, noise={"x": 1e-5, "p1": 5e4, "p2": 5e4}, seed=11,
+                        measured=("x", "p1", "p2"))
+    setup = G._Setup(("M", "beta_e"), (True, True), TRUTH.replace(M=4500.0), data)
+    y = np.stack([data.signals["x"], data.signals["p1"]], axis=1)
+    fun, jac, w0 = G._multiple_shooting(setup, data, ("x", "p1"), [0, 2], y, np.array([1e-5, 5e4]), 3, 0, None)
+    J = jac(w0)
+    for j in range(w0.size):       # the parameters', the segments' initial states' and the continuity's columns
+        e = 1e-6
+        fd = (fun(w0 + e * np.eye(w0.size)[j]) - fun(w0 - e * np.eye(w0.size)[j])) / (2 * e)
+        assert np.linalg.norm(J[:, j] - fd) / np.linalg.norm(fd) < 1e-4, j
+    guess = TRUTH.replace(M=4000.0, B=1500.0, Af=3000.0, beta_e=1.1e9)
+    single = identify_greybox(data, ("M", "B", "Af", "beta_e"), guess=guess)
+    multiple = identify_greybox(data, ("M", "B", "Af", "beta_e"), guess=guess, shooting="multiple", segments=2)
+    for n in single.names:
+        assert multiple.estimates[n] == pytest.approx(single.estimates[n], rel=1e-3 * (1 + 50 * (n == "B"))), n
+    with pytest.raises(ValueError, match="segments = 1 is not allowed"):
+        identify_greybox(data, ("M",), shooting="multiple", segments=1)
