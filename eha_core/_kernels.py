@@ -172,29 +172,31 @@ def integrate_batch(y0s, h, n_steps, sub, prms, mode, lin, u_sts, d_sts,
 # tests/core/test_greybox.py; Levenberg-Marquardt needs far less.
 
 @njit(cache=True, nogil=True)
-def _along(x, v, p1, p2, u, d, prm, f0, sx, sv, s1, s2, su, dprm, work):
-    """Derivative of f(y, u, prm) along (S, su, dprm), by a forward difference from ``f0`` = f(y, u, prm)."""
+def _along(x, v, p1, p2, u, d, prm, f0, sx, sv, s1, s2, su, pi, ps_, work):
+    """Derivative of f(y, u, prm) along (S, su, ps_ on the packed parameter ``pi``; pi < 0: none), by a
+    forward difference from ``f0`` = f(y, u, prm). ``work`` is a copy of ``prm``, left as it was found."""
     n = max(abs(sx) / prm[12], abs(sv), abs(s1) / prm[9], abs(s2) / prm[9], abs(su))
-    for i in range(prm.shape[0]):
-        if dprm[i] != 0.0:      # a parameter at 0 (d0) in the direction's own scale
-            n = max(n, abs(dprm[i]) / max(abs(prm[i]), abs(dprm[i])))
+    if pi >= 0:                 # a parameter at 0 (d0) in the direction's own scale
+        n = max(n, abs(ps_) / max(abs(prm[pi]), abs(ps_)))
     if n == 0.0:
         return 0.0, 0.0, 0.0, 0.0
     e = 1e-7 / n
-    for i in range(prm.shape[0]):
-        work[i] = prm[i] + e * dprm[i]
+    if pi >= 0:
+        work[pi] = prm[pi] + e * ps_
     a0, a1, a2, a3 = derivatives(x + e * sx, v + e * sv, p1 + e * s1, p2 + e * s2, u + e * su, d, work)
+    if pi >= 0:
+        work[pi] = prm[pi]
     k = 1.0 / e
     return (a0 - f0[0]) * k, (a1 - f0[1]) * k, (a2 - f0[2]) * k, (a3 - f0[3]) * k
 
 
 @njit(cache=True, nogil=True)
-def _stage_sensitivities(K, S, Kprev, c, x, v, p1, p2, u, d, prm, f0, su, dprm, work):
+def _stage_sensitivities(K, S, Kprev, c, x, v, p1, p2, u, d, prm, f0, su, pidx, pstep, work):
     """One RK4 stage of the sensitivities: K[:, j] = df/dy (S + c Kprev)[:, j] + df/dz_j."""
     for j in range(S.shape[1]):
         K[0, j], K[1, j], K[2, j], K[3, j] = _along(
             x, v, p1, p2, u, d, prm, f0, S[0, j] + c * Kprev[0, j], S[1, j] + c * Kprev[1, j],
-            S[2, j] + c * Kprev[2, j], S[3, j] + c * Kprev[3, j], su[j], dprm[j], work)
+            S[2, j] + c * Kprev[2, j], S[3, j] + c * Kprev[3, j], su[j], pidx[j], pstep[j], work)
 
 
 @njit(cache=True, nogil=True)
@@ -218,21 +220,22 @@ def _held_at_bounds(S, before, after):
 
 
 @njit(cache=True, nogil=True)
-def integrate_sensitivities(y0, s0, h, n_steps, sub, prm, dprm, u_st, d_st, ctrl, kp, r_st, ctrl_every, u_limit,
-                            out, sout):
+def integrate_sensitivities(y0, s0, h, n_steps, sub, prm, pidx, pstep, u_st, d_st, ctrl, kp, r_st, ctrl_every,
+                            u_limit, out, sout):
     """The nonlinear model's states and their sensitivities to P parameters, on the grid of
     :func:`integrate` (RK4, bounds after every step, open loop or a sampled P controller).
 
-    ``s0`` (4 x P): the sensitivities of the initial state; ``dprm`` (P x n_prm): each parameter's
-    direction in the packed parameters. Fills ``out`` (n_out x 4) and ``sout`` (n_out x 4 x P) at the
-    output samples; returns -1, or the step at which the state stopped being finite.
+    ``s0`` (4 x P): the sensitivities of the initial state; parameter j moves the packed parameter
+    ``pidx[j]`` by ``pstep[j]`` per unit (``pidx[j] < 0``: none, an initial state). Fills ``out``
+    (n_out x 4) and ``sout`` (n_out x 4 x P) at the output samples; returns -1, or the step at which
+    the state stopped being finite.
     """
-    P = dprm.shape[0]
+    P = pidx.shape[0]
     x, v, p1, p2 = y0[0], y0[1], y0[2], y0[3]
     S = s0.copy()
     Z = np.zeros((4, P))
     K1, K2, K3, K4 = np.empty((4, P)), np.empty((4, P)), np.empty((4, P)), np.empty((4, P))
-    work = np.empty(prm.shape[0])
+    work = prm.copy()
     f0 = np.empty(4)
     su = np.zeros(P)                    # the command's sensitivity: -Kp S_x, held with the command
     before, after = np.empty(4), np.empty(4)
@@ -255,19 +258,19 @@ def integrate_sensitivities(y0, s0, h, n_steps, sub, prm, dprm, u_st, d_st, ctrl
         da, db, dc = d_st[i, 0], d_st[i, 1], d_st[i, 2]
         f0[0], f0[1], f0[2], f0[3] = derivatives(x, v, p1, p2, ua, da, prm)
         k1x, k1v, k1p, k1q = f0[0], f0[1], f0[2], f0[3]
-        _stage_sensitivities(K1, S, Z, 0.0, x, v, p1, p2, ua, da, prm, f0, su, dprm, work)
+        _stage_sensitivities(K1, S, Z, 0.0, x, v, p1, p2, ua, da, prm, f0, su, pidx, pstep, work)
         x2, v2, q2, w2 = x + half * k1x, v + half * k1v, p1 + half * k1p, p2 + half * k1q
         f0[0], f0[1], f0[2], f0[3] = derivatives(x2, v2, q2, w2, ub, db, prm)
         k2x, k2v, k2p, k2q = f0[0], f0[1], f0[2], f0[3]
-        _stage_sensitivities(K2, S, K1, half, x2, v2, q2, w2, ub, db, prm, f0, su, dprm, work)
+        _stage_sensitivities(K2, S, K1, half, x2, v2, q2, w2, ub, db, prm, f0, su, pidx, pstep, work)
         x3, v3, q3, w3 = x + half * k2x, v + half * k2v, p1 + half * k2p, p2 + half * k2q
         f0[0], f0[1], f0[2], f0[3] = derivatives(x3, v3, q3, w3, ub, db, prm)
         k3x, k3v, k3p, k3q = f0[0], f0[1], f0[2], f0[3]
-        _stage_sensitivities(K3, S, K2, half, x3, v3, q3, w3, ub, db, prm, f0, su, dprm, work)
+        _stage_sensitivities(K3, S, K2, half, x3, v3, q3, w3, ub, db, prm, f0, su, pidx, pstep, work)
         x4, v4, q4, w4 = x + h * k3x, v + h * k3v, p1 + h * k3p, p2 + h * k3q
         f0[0], f0[1], f0[2], f0[3] = derivatives(x4, v4, q4, w4, uc, dc, prm)
         k4x, k4v, k4p, k4q = f0[0], f0[1], f0[2], f0[3]
-        _stage_sensitivities(K4, S, K3, h, x4, v4, q4, w4, uc, dc, prm, f0, su, dprm, work)
+        _stage_sensitivities(K4, S, K3, h, x4, v4, q4, w4, uc, dc, prm, f0, su, pidx, pstep, work)
         before[0] = x + h / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
         before[1] = v + h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
         before[2] = p1 + h / 6.0 * (k1p + 2.0 * k2p + 2.0 * k3p + k4p)

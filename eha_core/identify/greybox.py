@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import math
 import time
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -78,7 +79,6 @@ Z95 = 1.959963984540054
 #: The states' scales in multiple shooting (x, v, p1, p2 in SI): a segment's initial state is
 #: estimated in these units.
 STATE_SCALE = np.array([0.01, 0.01, 1e6, 1e6])
-H_MAX = 2e-4        # the simulator's step bound (eha_core.simulate.DEFAULT_H_MAX)
 
 
 @dataclass(frozen=True, eq=False)
@@ -194,18 +194,14 @@ def simulate_with_sensitivities(params: ActuatorParams, names, data: GreyBoxData
     ``initial``: a segment's own initial state (multiple shooting): the parameters then do not move it,
     and four more columns hold the sensitivities to it, in :data:`STATE_SCALE` units."""
     from .. import _kernels as K
-    from ..simulate import _as_signal, _grid, _stage_samples
 
     names = tuple(names)
     log = tuple(log) if log is not None else tuple(n not in _LINEAR_SCALE for n in names)
-    t = data.t
-    ts = data.ts
-    h, sub, ctrl_every, n_steps, n_out = _grid(t[-1] - t[0], ts, H_MAX, ts if data.r is not None else None)
-    t0 = t - t[0]
-    n_out = min(n_out, t.size)
+    h, sub, ctrl_every, n_steps, n_out, u_st, d_st, r_st, ctrl, kp = _inputs(data)
     prm = pack_params(params)
     P = len(names) + (4 if initial is not None else 0)
-    dprm = np.zeros((P, prm.size))
+    pidx = np.full(P, -1, dtype=np.int64)
+    pstep = np.zeros(P)
     s0 = np.zeros((4, P))
     y0 = params.initial_state if initial is None else np.asarray(initial, dtype=float)
     if initial is not None:
@@ -213,7 +209,7 @@ def simulate_with_sensitivities(params: ActuatorParams, names, data: GreyBoxData
     for j, (n, lg) in enumerate(zip(names, log, strict=True)):
         scale = _value(params, n) if lg else _LINEAR_SCALE[n]
         if n in PARAM_INDEX and n not in _STATE_INDEX:
-            dprm[j, PARAM_INDEX[n]] = scale
+            pidx[j], pstep[j] = PARAM_INDEX[n], scale
         if initial is not None:
             continue
         # the initial state's sensitivity: directly for x0, v0, p1(0), p2(0); through the force balance
@@ -222,23 +218,44 @@ def simulate_with_sensitivities(params: ActuatorParams, names, data: GreyBoxData
         up = params.replace(**{n: _value(params, n) + eps * scale})
         dn = params.replace(**{n: _value(params, n) - eps * scale})
         s0[:, j] = (up.initial_state - dn.initial_state) / (2 * eps)
-    hold = "linear" if data.intersample == "foh" else "zoh"
-    d_sig = _as_signal(data.d, "d", t0, hold=hold) if data.d is not None else ZERO
-    if data.r is not None:
-        r_sig = _as_signal(data.r, "r", t0, hold="zoh")
-        u_st, r_st, ctrl, kp = np.zeros((1, 3)), _stage_samples(r_sig, "r", h, n_steps), K.ZOH, float(data.kp)
-    else:
-        u_sig = _as_signal(data.u, "u", t0, hold=hold)
-        u_st, r_st, ctrl, kp = _stage_samples(u_sig, "u", h, n_steps), np.zeros((1, 3)), K.OPEN_LOOP, 0.0
-    d_st = _stage_samples(d_sig, "d", h, n_steps)
     check(cancel)
     out = np.zeros((n_out, 4))
     sout = np.zeros((n_out, 4, P))
-    status = K.integrate_sensitivities(y0, s0, h, n_steps, sub, prm, dprm, u_st, d_st, ctrl, kp, r_st, ctrl_every,
-                                       0.0, out, sout)
+    status = K.integrate_sensitivities(y0, s0, h, n_steps, sub, prm, pidx, pstep, u_st, d_st, ctrl, kp, r_st,
+                                       ctrl_every, 0.0, out, sout)
     if status >= 0:
         raise ComputationError(f"the model's simulation stopped being finite at t = {status * h:.4g} s")
     return out, sout
+
+
+_INPUTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _inputs(data: GreyBoxData):
+    """The step grid and the inputs sampled at every RK4 stage: the record's alone, so computed once per
+    record (an estimate simulates it some twenty times)."""
+    from .. import _kernels as K
+    from ..simulate import DEFAULT_H_MAX, _as_signal, _grid, _stage_samples
+
+    if data not in _INPUTS:
+        t = data.t
+        ts = data.ts
+        # the simulator's own step bound: the model is the simulator's, step for step
+        h, sub, ctrl_every, n_steps, n_out = _grid(t[-1] - t[0], ts, DEFAULT_H_MAX,
+                                                   ts if data.r is not None else None)
+        t0 = t - t[0]
+        n_out = min(n_out, t.size)
+        hold = "linear" if data.intersample == "foh" else "zoh"
+        d_sig = _as_signal(data.d, "d", t0, hold=hold) if data.d is not None else ZERO
+        if data.r is not None:
+            r_sig = _as_signal(data.r, "r", t0, hold="zoh")
+            u_st, r_st, ctrl, kp = np.zeros((1, 3)), _stage_samples(r_sig, "r", h, n_steps), K.ZOH, float(data.kp)
+        else:
+            u_sig = _as_signal(data.u, "u", t0, hold=hold)
+            u_st, r_st, ctrl, kp = _stage_samples(u_sig, "u", h, n_steps), np.zeros((1, 3)), K.OPEN_LOOP, 0.0
+        _INPUTS[data] = (h, sub, ctrl_every, n_steps, n_out, u_st, _stage_samples(d_sig, "d", h, n_steps), r_st,
+                         ctrl, kp)
+    return _INPUTS[data]
 
 
 def _noise_guess(y: np.ndarray) -> float:
@@ -480,7 +497,7 @@ def _fit(setup, data, rows, y_meas, sigma, max_nfev, cancel):
     z = setup.z_of(setup.base)
     nfev = njev = 0
     for _ in range(2):
-        sol = least_squares(fun, z, jac=jac, args=(sigma,), method="lm", max_nfev=max_nfev, xtol=1e-10, ftol=1e-10)
+        sol = least_squares(fun, z, jac=jac, args=(sigma,), method="lm", max_nfev=max_nfev, xtol=1e-8, ftol=1e-8)
         z, nfev, njev = sol.x, nfev + sol.nfev, njev + (sol.njev or 0)
         out, _ = model(z, False)
         if out is None:
