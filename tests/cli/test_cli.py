@@ -387,3 +387,27 @@ def test_identify_greybox_gives_the_issues_json_and_refuses_bad_names(capsys):
         assert main(["identify", "greybox", *argv]) == 2
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_identify_greybox_reads_a_record_from_a_file(capsys, tmp_path):
+    import json
+
+    import numpy as np
+
+    from eha_core.experiments import LSE_INPUT
+    from eha_core.identify.greybox import greybox_data
+    from eha_core.params import ActuatorParams
+
+    truth = ActuatorParams(M=4800.0, beta_e=1.0e9)
+    data = greybox_data(truth, LSE_INPUT, t_end=3.0, noise={"x": 1e-5, "p1": 5e4, "p2": 5e4}, seed=4,
+                        measured=("x", "p1", "p2"))
+    rows = np.column_stack([data.t, data.u, data.signals["x"], data.signals["p1"] / 1e6, data.signals["p2"] / 1e6])
+    path = tmp_path / "rig.csv"
+    np.savetxt(path, rows, delimiter=",", header="t[s],u[V],x[m],p1[MPa],p2[MPa]", comments="")
+    assert main(["identify", "greybox", "--data", str(path), "--params", "M,beta_e", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    for n, v in (("M", 4800.0), ("beta_e", 1.0e9)):
+        assert abs(out["estimates"][n] - v) < 4 * out["std_errors"][n], n
+    assert out["source"] == str(path) and "true" not in out
+    assert main(["identify", "greybox", "--data", str(path), "--measured", "x,v"]) == 2
+    assert "is not allowed: no column v: the file has t[s], u[V], x[m], p1[MPa], p2[MPa]" in capsys.readouterr().err
