@@ -45,6 +45,8 @@ GUESS_PARAMS = ("M", "B", "Af", "beta_e", "Kq1", "Kq2", "L0", "k_f", "d0")
 _ALIASES = {**{n.lower(): n for n in GREYBOX_PARAMS}, "a_f": "Af", "βe": "beta_e", "β_e": "beta_e", "beta": "beta_e",
             "kf": "k_f", "d_0": "d0", "l_0": "L0", "p1(0)": "p1_0", "p2(0)": "p2_0", "x(0)": "x0", "v(0)": "v0"}
 _PAPER = ActuatorParams()
+#: The other routes the side-by-side table reads.
+_ROUTES = ("least_squares", "frequency")
 
 
 def _guess_field(n: str) -> Field:
@@ -64,7 +66,12 @@ GB_FORM = (Group("Grey-box estimation", (
           tip=f"comma-separated, of {', '.join(GREYBOX_PARAMS)} (the rest are held at tab 1's values)"),
     Field("gb_measured", "signals measured", "text", short="measured",
           tip="comma-separated, of x, v, p1, p2: what the model's simulation is compared with (x alone works)"),
-    Field("gb_excitation", "excitation", "select", options=tuple(EXCITATIONS.items()), short="excitation"),
+    Field("gb_excitation", "excitation", "select", options=(*EXCITATIONS.items(), ("custom", "custom u(t)")),
+          short="excitation"),
+    Field("gb_u", "custom u(t)", "text", unit="V", short="custom u(t)",
+          tip="the valve command in the signal grammar, e.g. sine:6:2 or step:2+sine:1:5; a small one "
+              "(sine:0.01:2) shows what the data cannot determine"),
+    Field("gb_t_end", "record length", "number", unit="s", lo=1.0, hi=60.0, short="record length"),
     Field("gb_scenario", "disturbance", "select", options=tuple(SCENARIOS.items()), short="disturbance",
           tip="a load force on the plant, known to the model (an input of the record)"),
     Field("gb_custom", "custom d(t)", "text", short="custom d(t)",
@@ -80,6 +87,7 @@ GB_FORM = (Group("Grey-box estimation", (
 ), collapsible=True, collapsed=True), Group("Initial guess", tuple(_guess_field(n) for n in GUESS_PARAMS),
                                             collapsible=True, collapsed=True))
 GB_DEFAULTS = {"gb_params": "M, B, Af, beta_e", "gb_measured": "x, p1, p2", "gb_excitation": "paper",
+               "gb_u": "sine:6:2", "gb_t_end": "5",
                "gb_scenario": "none", "gb_custom": "sine:1000:3", "gb_seed": "0", "gb_noise_x": "0.01",
                "gb_noise_v": "0", "gb_noise_p": "0.05",
                **{f"gb_guess_{n}": _display(n, getattr(_PAPER, n)) for n in GUESS_PARAMS}}
@@ -100,6 +108,8 @@ class GreyBoxRequest:
     seed: int = 0
     noise: tuple[float, float, float] = (0.01, 0.0, 0.05)     # σ of x [mm], v [mm/s], p1 and p2 [MPa]
     guess: tuple[tuple[str, float], ...] = ()                 # SI, of GUESS_PARAMS
+    u_text: str = "sine:6:2"
+    t_end: float = 5.0
 
     def measurement_noise(self) -> dict[str, float]:
         sx, sv, sp = self.noise
@@ -109,6 +119,9 @@ class GreyBoxRequest:
         return self.custom if self.scenario == "custom" else LSE_SCENARIOS[self.scenario]
 
     def input_signal(self):
+        """(u(t), the record's length [s])."""
+        if self.excitation == "custom":
+            return parse_signal(self.u_text, name="custom u(t)"), self.t_end
         return (LSE_INPUT, 5.0) if self.excitation == "paper" else (LSE_INPUT_RICH, LSE_INPUT_RICH_T_END)
 
 
@@ -131,7 +144,8 @@ def _names(text: str, allowed, aliases, label: str, field_name: str) -> tuple[tu
 
 
 def gb_hidden(texts: dict) -> list[str]:
-    return [] if texts.get("gb_scenario") == "custom" else ["gb_custom"]
+    hidden = [] if texts.get("gb_scenario") == "custom" else ["gb_custom"]
+    return hidden + ([] if texts.get("gb_excitation") == "custom" else ["gb_u", "gb_t_end"])
 
 
 def parse_greybox(texts: dict, fields: dict | None = None, *, measurable=GREYBOX_SIGNALS) -> tuple[GreyBoxRequest,
@@ -157,12 +171,18 @@ def parse_greybox(texts: dict, fields: dict | None = None, *, measurable=GREYBOX
     req = GreyBoxRequest(names=names or GreyBoxRequest.names, measured=measured or GreyBoxRequest.measured,
                          excitation=values.get("gb_excitation", "paper"), scenario=values.get("gb_scenario", "none"),
                          custom=texts.get("gb_custom", ""), seed=values.get("gb_seed", 0),
-                         noise=tuple(float(values.get(k, 0.0)) for k in _NOISE_FIELDS), guess=guess)
+                         noise=tuple(float(values.get(k, 0.0)) for k in _NOISE_FIELDS), guess=guess,
+                         u_text=texts.get("gb_u", ""), t_end=float(values.get("gb_t_end", 5.0)))
     if "gb_custom" not in hidden and not errors.get("gb_custom"):
         try:
             parse_signal(req.disturbance_spec(), name="custom d(t)", seed=req.seed, hold_s=1e-3)
         except (ValueError, SignalSpecError) as exc:
             errors["gb_custom"] = " ".join(str(exc).split())
+    if "gb_u" not in hidden and not errors.get("gb_u"):
+        try:
+            req.input_signal()
+        except (ValueError, SignalSpecError) as exc:
+            errors["gb_u"] = " ".join(str(exc).split())
     return req, errors
 
 
@@ -205,9 +225,6 @@ class GreyBoxPanel(Section):
         self.area = pn.Column(self.table, self.plot, self.details, sizing_mode="stretch_width")
         self.view = ResultView("gb", self.area, run_hint="Press “Run grey-box estimation” to update it.")
         self.routes = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-routes-pane"])
-        self.routes_button = pn.widgets.Button(label="Refresh the comparison of the three routes", width=300,
-                                               css_classes=["eha-routes-refresh"])
-        on_click(self.routes_button, lambda _e: self.show_routes())
         self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
                                    css_classes=["eha-gb-alert"])
         self.notice = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-gb-notice"])
@@ -236,7 +253,16 @@ class GreyBoxPanel(Section):
         state.param.watch(self._update_enabled, "valid")
         state.param.watch(self._inputs_changed, ["params", "valid"])
         self._update_enabled()
+        # the side-by-side table follows the other routes' runs, whichever sub-tab the student is on
+        for key in _ROUTES:
+            if session.section(key) is not None:
+                self._follow(session.section(key))
+        session.when_built(self._follow)
         self.show_routes()
+
+    def _follow(self, section) -> None:
+        if section.key in _ROUTES:
+            section.param.watch(lambda _e: self.show_routes(), "result")
 
     # -- the request ---------------------------------------------------------------------------------
     def measurable(self) -> tuple[str, ...]:
@@ -274,7 +300,7 @@ class GreyBoxPanel(Section):
         if "greybox" not in c.methods:
             return "this exercise does not use grey-box identification"
         if req.input_signal()[1] > c.max_record_s:
-            return str(not_allowed("excitation", EXCITATIONS[req.excitation],
+            return str(not_allowed("excitation", dict(EXCITATIONS).get(req.excitation, f"{req.t_end:g} s"),
                                    f"this exercise's records are at most {c.max_record_s:g} s"))
         return None
 
@@ -553,7 +579,7 @@ class GreyBoxPanel(Section):
             "Levenberg-Marquardt minimises the noise-weighted squared differences. It needs only what is "
             "measured (x alone works), not every state as the least squares do. The plant is tab 1's actuator; "
             "the parameters not estimated are held at tab 1's values.</p>", sizing_mode="stretch_width")
-        results = pn.Column(explain, self.alert, self.view.banner, self.area, self.routes, self.routes_button,
+        results = pn.Column(explain, self.alert, self.view.banner, self.area, self.routes,
                             sizing_mode="stretch_width", min_width=440)
         return side_by_side(controls, results)
 
