@@ -216,14 +216,16 @@ def routes_html(params, lse=None, backout=None, greybox=None, *, hidden=()) -> s
             "<p class='eha-note'>Each route's last run in this session: the estimate, its 95 % interval and its "
             "difference from tab 1's value. The transfer function sees the linearised model only: it takes M as "
             "measured and determines B and A<sub>f</sub> only as the damping B + 2k<sub>f</sub>A<sub>f</sub>/π; "
-            "least squares need every state measured; grey-box estimation simulates the nonlinear model and "
-            "needs only what is measured, at the price of an iterative fit from an initial guess.</p>")
+            "least squares need both pressures and the velocity (or dx/dt) measured; grey-box estimation "
+            "simulates the nonlinear model and needs only what is measured, at the price of an iterative fit "
+            "from an initial guess.</p>")
 
 
 # -- the figure ------------------------------------------------------------------------------------------
 
 class GreyBoxFigure:
-    """One plot per measured signal: the record (grey) against the model simulated with the estimates."""
+    """One plot per measured signal: the record (grey) against the model simulated with the estimates
+    (the legend says only "simulated": a longer label overflowed a plot's width at 800 px)."""
 
     def __init__(self, t, measured: dict, simulated, *, height: int = 220, width: int = FIGURE_WIDTH):
         figs = []
@@ -242,7 +244,7 @@ class GreyBoxFigure:
             r = fig.line("t", "s", source=src, color=CASE_COLORS[1], line_dash="dashed", line_width=2)
             if k == 0:
                 _legend_above(fig, [LegendItem(label="measured", renderers=[m]),
-                                    LegendItem(label="simulated with the estimates", renderers=[r])], ncols=2)
+                                    LegendItem(label="simulated", renderers=[r])], ncols=2)
             _lean(fig)
             figs.append(fig)
         self.figures = figs
