@@ -117,6 +117,11 @@ def test_the_three_routes_side_by_side_and_in_the_report():
     assert num_html(lse.estimates["M"], 5) in routes and num_html(gb.result.estimates["M"], 5) in routes
     part = type(gb).report(gb.snapshot())
     assert "three routes side by side" in part.html and "{{greybox}}" in part.html and "greybox" in part.figures
+    from eha_app.render.report import session_report
+
+    text = session_report(session, session.snapshot()).decode()
+    assert "Grey-box identification (the nonlinear model)" in text and "gb_params" in text
+    assert num_html(gb.result.estimates["Af"], 5) in text
 
 
 @pytest.fixture
@@ -155,3 +160,9 @@ def test_the_hand_in_in_an_exercise_stores_method_greybox(exercise):
     assert row.conditions["noise"]["x"] == pytest.approx(1e-5) and row.settings["gb_seed"] == "0"
     assert row.estimates["M"] == pytest.approx(truth.M, rel=0.02)
     assert "from the grey-box identification" in gb.verdict.object
+    from eha_app.render.report import session_report
+
+    text = session_report(page.session, page.session.snapshot()).decode()
+    assert "Grey-box identification" in text
+    for n in ("M", "B", "Af", "beta_e"):
+        assert num_html(getattr(truth, n), 5) not in text
