@@ -35,7 +35,7 @@ from ..session.freshness import ResultView
 from ..session.state import FIELD_LABELS
 from .handin import HandInBox
 from .least_squares import EXCITATIONS
-from .uploads import ColumnMapping, FileUpload, check_size, upload_name
+from .uploads import ColumnMapping, FileUpload, check_size, download, upload_name
 
 __all__ = ["GreyBoxPanel", "GreyBoxRequest", "GB_FORM", "GB_DEFAULTS", "parse_greybox"]
 
@@ -250,6 +250,10 @@ class GreyBoxPanel(Section):
         self.simulated_button = pn.widgets.Button(label="Back to simulated data", width=260, visible=False,
                                                   css_classes=["eha-gb-simulated"])
         on_click(self.simulated_button, lambda _e: self.use_simulated())
+        self.downloads = [
+            download(self.data_bytes, "eha_greybox_data.csv", "Data (CSV)", "eha-dl-gb-data"),
+            download(self.estimates_bytes, "eha_greybox_estimates.json", "Estimates (JSON)", "eha-dl-gb-est"),
+        ]
         state.param.watch(self._update_enabled, "valid")
         state.param.watch(self._inputs_changed, ["params", "valid"])
         self._update_enabled()
@@ -429,6 +433,8 @@ class GreyBoxPanel(Section):
             fig = GreyBoxFigure(data.t, data.signals, res.simulated)
             self.plot.objects = [pn.pane.Bokeh(fig.layout, sizing_mode="stretch_width")]
             self.details.object = self._details_html()
+            for d in self.downloads:
+                d.disabled = False
             self.view.shown(key)
             self.show_routes()
             self._inputs_changed()
@@ -527,6 +533,27 @@ class GreyBoxPanel(Section):
         self.upload_note.object = "<span class='eha-note'>Using the simulated sensors again.</span>"
         self._update_enabled()
 
+    # -- downloads --------------------------------------------------------------------------------------------
+    def data_bytes(self) -> bytes:
+        """The record behind the table (t, u or r, the measured signals) and the model simulated with the
+        estimates beside them (``x_sim``, ...), SI: the upload reads it back."""
+        from eha_core.data import write_data
+
+        d, res = self.last_data, self.result
+        cols = {"t": d.t, "u": d.u if d.u is not None else d.r}
+        cols.update(d.signals)
+        for s in d.signals:
+            cols[f"{s}_sim"] = res.simulated[:, ("x", "v", "p1", "p2").index(s)]
+        return write_data(cols, "csv", units="si")
+
+    def estimates_bytes(self) -> bytes:
+        """The estimates, intervals, correlations, fits and sentences (no hidden value: the core's own dict)."""
+        import json
+
+        out = self.result.to_dict()
+        out["source"] = self.last_data.source if self.last_data is not None else ""
+        return json.dumps(out, indent=1).encode()
+
     # -- the hand-in ----------------------------------------------------------------------------------------
     def _handin_estimates(self):
         """The hidden parameters the last run estimated (not those it held), with its settings."""
@@ -572,7 +599,8 @@ class GreyBoxPanel(Section):
 
     def __panel__(self):
         controls = pn.Column(self.form, self.notice, self.button, self.handin_button, self.verdict, self.upload_note,
-                             self.upload, self.mapping, self.simulated_button, self.queue_note, width=280)
+                             self.upload, self.mapping, self.simulated_button,
+                             pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"), self.queue_note, width=280)
         explain = pn.pane.HTML(
             "<p class='eha-note'>Grey-box identification (output error, as MATLAB's nlgreyest): the nonlinear model "
             "of eqs. 1-4 is simulated with candidate parameters and compared with the measured signals; "

@@ -42,6 +42,13 @@ def test_the_run_recovers_tab_1s_values_within_the_intervals(ran):
     assert "determine every estimated parameter" in gb.details.object
     assert "eha-gb-corr" in gb.details.object and "Residuals of x" in gb.details.object
     assert gb.view.status == "current"
+    # the downloads: the record with the simulation beside it, the estimates as JSON
+    assert not any(d.disabled for d in gb.downloads)
+    head = gb.data_bytes().decode().splitlines()[0]
+    assert "x_sim" in head and "p2" in head
+    import json
+
+    assert json.loads(gb.estimates_bytes())["estimates"]["M"] == pytest.approx(res.estimates["M"])
     # the board receives eq. 24's H(s) at the estimate
     (model,) = session.mail("board")
     assert model.name == "GB" and model.kind == "greybox" and model.kp == 10.0
