@@ -46,6 +46,9 @@ STEPS = (
     Step("frequency", "3. Transfer function",
          "Step 3, frequency domain: excite the closed loop, estimate Ĥ(s) (Figs. 8-13) and back out the "
          "parameters (eqs. 26-27).", "3. Identification: transfer function"),
+    Step("greybox", "3. Grey-box",
+         "Step 3, the nonlinear model: estimate the physical parameters from what is measured (output error, "
+         "as nlgreyest) and compare the three routes side by side.", "3. Identification: grey-box"),
     Step("board", "3. Model board",
          "Step 3, comparison: every model you made, on one validation record.", "the model board"),
     Step("study", "3. Study",

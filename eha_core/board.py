@@ -47,8 +47,9 @@ class BoardModel:
 
     ``kind``: ``"tf"`` (estimated from the frequency experiment), ``"record"``
     (from a student's file), ``"lse"`` (eq. 24 with a least-squares run's
-    estimates), ``"reference"``. ``params``: the actuator whose data it was
-    estimated from (None when unknown). ``estimate`` (a
+    estimates), ``"greybox"`` (eq. 24 linearised at a grey-box estimate),
+    ``"reference"``. ``params``: the actuator whose data it was estimated
+    from (None when unknown). ``estimate`` (a
     :class:`~eha_core.identify.tfest.TFEstimate`) gives the covariance behind
     the regions and bands; None for a model without one.
     """

@@ -72,9 +72,9 @@ MAX_ID_LENGTH = 64
 MAX_ROSTER = 2000
 #: The measured signals (SI units) an exercise may put a noise floor on or leave out.
 SIGNALS = {"x": "m", "v": "m/s", "p1": "Pa", "p2": "Pa"}
-#: The routes a student can hand in from (grey-box identification joins them when it exists).
+#: The routes a student can hand in from.
 METHODS = {"lse": "least squares (tab 3, time domain)", "frequency": "transfer function and back-out (tab 3, "
-           "frequency domain)"}
+           "frequency domain)", "greybox": "grey-box identification (tab 3)"}
 FEEDBACK = {"verdict": "within tolerance or not, after every hand-in",
             "none": "only that the hand-in was stored",
             "after-deadline": "the verdicts once the deadline has passed"}

@@ -7,6 +7,7 @@ settings files, in the page's address and in the session report.
 from ..session import SECTIONS
 from .board import ModelBoard
 from .frequency import FrequencyPanel
+from .greybox import GreyBoxPanel
 from .least_squares import LeastSquaresPanel
 from .parameters import ParametersTab
 from .record import RecordPanel
@@ -20,5 +21,6 @@ SECTIONS.register(SimulationTab, tab="2. Simulation")
 SECTIONS.register(LeastSquaresPanel, tab="3. Identification", subtab="Time domain: least squares")
 SECTIONS.register(FrequencyPanel, tab="3. Identification", subtab="Frequency domain: transfer function")
 SECTIONS.register(RecordPanel, within="frequency")
+SECTIONS.register(GreyBoxPanel, tab="3. Identification", subtab="Grey-box (nonlinear)")
 SECTIONS.register(ModelBoard, tab="3. Identification", subtab="Model board")
 SECTIONS.register(StudyPanel, tab="3. Identification", subtab="Study over seeds")

@@ -29,7 +29,8 @@ def test_start_card_then_next_reaches_the_frequency_identification():
                     ("3. Identification", "frequency")]
     sub = page.tabs.built["3. Identification"]
     assert sub.lazy.active_name == "Frequency domain: transfer function"
-    assert "Step 3, frequency domain" in guide.where.object and guide.next.label == "Next: the model board →"
+    assert "Step 3, frequency domain" in guide.where.object
+    assert guide.next.label == "Next: 3. Identification: grey-box →"
 
 
 def test_the_guide_follows_any_order():
@@ -43,6 +44,8 @@ def test_the_guide_follows_any_order():
     assert guide.current == "study"
     sub = page.tabs.built["3. Identification"]
     sub.lazy.tabs.active = 2
+    assert guide.current == "greybox" and guide.next.label == "Next: the model board →"
+    sub.lazy.tabs.active = 3
     assert guide.current == "board" and guide.next.label == "Next: the study over seeds →"
     assert [s.key for s in guide.steps] == [s.key for s in STEPS]
 
