@@ -56,7 +56,8 @@ STATES = (("x", "mm", 1e3), ("v", "mm/s", 1e3), ("p1", "MPa", 1e-6), ("p2", "MPa
 #: The steps :func:`reproduce` reports progress for, in order.
 REPRODUCTION_STEPS = ("parameters (Tables 1-2)", "open-loop simulations (Figs. 2-7)",
                       "least squares (Tables 3-4, both disturbance models)",
-                      "closed-loop experiment and transfer-function estimation (Figs. 8-13)")
+                      "closed-loop experiment and transfer-function estimation (Figs. 8-13)",
+                      "grey-box identification (the three routes side by side)")
 #: The chamber lengths tried when inferring L0 from eq. 23 (the paper does not print it).
 L0_TRIED = (0.2, 0.25, 0.3, 0.35, 0.4)
 
@@ -122,6 +123,7 @@ class Reproduction:
     frequency_plain: TFEstimate
     frequency_linear_model: FrequencyIdentification
     paper_eq26_from_eq25: tuple[np.ndarray, np.ndarray]
+    greybox: object = None          # GreyBoxResult on Table 3's record (x, p1, p2), from the paper's values
 
     def table_rows(self) -> list[dict]:
         """Tables 3-4 as rows: model, scenario, parameter, nominal, estimate, interval, paper."""
@@ -242,10 +244,18 @@ def reproduce(params: ActuatorParams | None = None, *, seed: int = 0,
     plain = tfest(fi.data.r, fi.data.x, cfg.ts, 3, 0, initial_condition="zero", input_offset="zero",
                   init=fi.theoretical, cancel=cancel)
     lin_fi = run_frequency_identification(p, dataclasses.replace(cfg, model="linear"), cancel=cancel)
+
+    step(REPRODUCTION_STEPS[4])
+    from .identify.greybox import GreyBoxData, identify_greybox
+
+    # the third route on Table 3's own record: the least squares' sensors, x, p1 and p2 of them
+    gb_data = GreyBoxData(t=data_none.t, u=data_none.u, signals={s: getattr(data_none, s) for s in ("x", "p1", "p2")},
+                          source="Table 3's record (d = 0)")
+    greybox = identify_greybox(gb_data, ("M", "B", "Af", "beta_e"), guess=ActuatorParams(), cancel=cancel)
     return Reproduction(
         settings=settings, params=p, linear=lin, l0_inference=tuple(l0_rows), cases_nonlinear=nl, cases_linear=li,
         case_differences=_case_differences(nl, li), lse=by_model, lse_rich=rich,
         lse_linear_interpolation=classical, lse_peak_viscous_force=float(p.B * np.abs(data_none.v).max()),
         frequency=fi, frequency_plain=plain, frequency_linear_model=lin_fi,
-        paper_eq26_from_eq25=open_loop_from_closed(*PAPER_EQ25, kp=cfg.kp),
+        paper_eq26_from_eq25=open_loop_from_closed(*PAPER_EQ25, kp=cfg.kp), greybox=greybox,
     )

@@ -47,7 +47,7 @@ __all__ = ["ReportResult", "build_report", "differences_from_paper", "SECTIONS"]
 #: The paper's own values (Tables 1 and 3), which its printed errors refer to.
 PAPER_PARAMS = ActuatorParams()
 #: Section ids, in the paper's order (the test checks each is present).
-SECTIONS = ("parameters", "fig2", "fig3", "figs4-7", "tables3-4", "figs8-13", "differences", "versions")
+SECTIONS = ("parameters", "fig2", "fig3", "figs4-7", "tables3-4", "figs8-13", "routes", "differences", "versions")
 PACKAGES = ("eha", "numpy", "scipy", "control", "numba", "pandas", "bokeh", "panel")
 
 
@@ -261,6 +261,9 @@ def build_report(out_dir: str | Path, *, seed: int = 0,
         fig.update(view)
         figures[key] = fig.layout
     freq_html = freq_summary_html(fi) + "<h3>Backed-out parameters (eq. 27)</h3>" + backout_html(fi)
+    from .greybox import routes_html
+
+    routes = routes_html(r.params, lse=r.lse["constant"]["none"], backout=fi.backout, greybox=r.greybox)
 
     step("where we differ from the paper")
     diff_items = differences_from_paper(numbers)
@@ -269,7 +272,7 @@ def build_report(out_dir: str | Path, *, seed: int = 0,
     step("writing report.html")
     script, divs = components_alone(figures)
     page = _page(r, numbers, params_html, lse_html, freq_html, _differences_html(r.case_differences), diff_items,
-                 divs, script, _bokeh_js())
+                 divs, script, _bokeh_js(), routes)
     path = out / "report.html"
     path.write_text(page, encoding="utf-8")
     (data_dir / "results.json").write_text(json.dumps(numbers, indent=2, default=json_default), encoding="utf-8")
@@ -346,6 +349,10 @@ _INTRO = {
                 "sampled at 0.01 s around the nonlinear plant (Fig. 9), a 3-pole transfer function estimated like "
                 "MATLAB's tfest (Fig. 11), its Bode diagram against eq. 24 and the data's empirical transfer "
                 "function (Fig. 12), validation on a fresh excitation (Fig. 13), residual checks, and eqs. 25-27.",
+    "routes": "Not in the paper: what each route gives for each physical parameter. The least squares (Table 3's "
+              "record, d = 0), the transfer function with its back-out (eq. 27: only the damping B + 2 kf Af/π "
+              "and βe), and grey-box identification (output error on the nonlinear model, from x, p1 and p2 of "
+              "Table 3's record, started from the paper's values).",
     "differences": "Every statement below is filled in from the numbers computed above.",
     "versions": "What produced this report; with the same versions and seed the numbers are the same.",
 }
@@ -355,7 +362,8 @@ def _section(sid: str, title: str, body: str) -> str:
     return f'<section id="{sid}"><h2>{title}</h2><p class="intro">{_INTRO[sid]}</p>{body}</section>'
 
 
-def _page(r, numbers, params_html, lse_html, freq_html, diff_table, diff_items, divs, script, resources) -> str:
+def _page(r, numbers, params_html, lse_html, freq_html, diff_table, diff_items, divs, script, resources,
+          routes_html: str = "") -> str:
     settings = r.settings
 
     def figs(*names):
@@ -367,7 +375,8 @@ def _page(r, numbers, params_html, lse_html, freq_html, diff_table, diff_items, 
     version_rows = [[k, html.escape(v)] for k, v in vers.items()]
     toc = "".join(f'<a href="#{sid}">{t}</a>' for sid, t in (
         ("parameters", "Parameters"), ("fig2", "Fig. 2"), ("fig3", "Fig. 3"), ("figs4-7", "Figs. 4-7"),
-        ("tables3-4", "Tables 3-4"), ("figs8-13", "Figs. 8-13"), ("differences", "Differences"),
+        ("tables3-4", "Tables 3-4"), ("figs8-13", "Figs. 8-13"), ("routes", "Three routes"),
+        ("differences", "Differences"),
         ("versions", "Versions")))
     body = "".join([
         _section("parameters", "Parameters (Tables 1-2)", params_html),
@@ -380,6 +389,7 @@ def _page(r, numbers, params_html, lse_html, freq_html, diff_table, diff_items, 
             ("fig11", "Fig. 11: measured and simulated output"), ("fig12", "Fig. 12: Bode diagram"),
             ("fig13", "Fig. 13: validation on a fresh excitation"), ("residuals", "Residual checks (99 % bands)"))
             + "<h3>eqs. 24-27: ours beside the paper's</h3>" + freq_html),
+        _section("routes", "Three routes to the physical parameters, side by side", routes_html),
         _section("differences", "Where we differ from the paper, and why",
                  "<ol>" + "".join(f"<li>{item}</li>" for item in diff_items) + "</ol>"),
         _section("versions", "Software versions and settings",

@@ -77,6 +77,10 @@ GB_FORM = (Group("Grey-box estimation", (
     Field("gb_custom", "custom d(t)", "text", short="custom d(t)",
           tip="none, sine:AMP[:FREQ_HZ], white:SIGMA, or any signal of the simulation, e.g. sine:500:2+noise:100:1"),
     Field("gb_seed", "noise seed", "integer", lo=0, hi=10**6, short="noise seed"),
+    Field("gb_shooting", "simulation", "select", short="simulation",
+          options=(("single", "the whole record (output error)"), ("multiple", "multiple shooting, then the whole")),
+          tip="multiple shooting cuts the record into 1 s segments whose initial states are estimated too, joined "
+              "by continuity: a wider basin for a poor initial guess, at several times the cost"),
 )), Group("Sensor noise (simulated measurements)", (
     Field("gb_noise_x", "σ of x", "number", unit="mm", lo=0.0, hi=10.0, short="σ x",
           tip="white Gaussian noise added to the position sensor, drawn from the noise seed"),
@@ -88,7 +92,8 @@ GB_FORM = (Group("Grey-box estimation", (
                                             collapsible=True, collapsed=True))
 GB_DEFAULTS = {"gb_params": "M, B, Af, beta_e", "gb_measured": "x, p1, p2", "gb_excitation": "paper",
                "gb_u": "sine:6:2", "gb_t_end": "5",
-               "gb_scenario": "none", "gb_custom": "sine:1000:3", "gb_seed": "0", "gb_noise_x": "0.01",
+               "gb_scenario": "none", "gb_custom": "sine:1000:3", "gb_seed": "0", "gb_shooting": "single",
+               "gb_noise_x": "0.01",
                "gb_noise_v": "0", "gb_noise_p": "0.05",
                **{f"gb_guess_{n}": _display(n, getattr(_PAPER, n)) for n in GUESS_PARAMS}}
 _GB_FIELDS = {f.name: f for g in GB_FORM for f in g.fields}
@@ -110,6 +115,7 @@ class GreyBoxRequest:
     guess: tuple[tuple[str, float], ...] = ()                 # SI, of GUESS_PARAMS
     u_text: str = "sine:6:2"
     t_end: float = 5.0
+    shooting: str = "single"
 
     def measurement_noise(self) -> dict[str, float]:
         sx, sv, sp = self.noise
@@ -172,7 +178,8 @@ def parse_greybox(texts: dict, fields: dict | None = None, *, measurable=GREYBOX
                          excitation=values.get("gb_excitation", "paper"), scenario=values.get("gb_scenario", "none"),
                          custom=texts.get("gb_custom", ""), seed=values.get("gb_seed", 0),
                          noise=tuple(float(values.get(k, 0.0)) for k in _NOISE_FIELDS), guess=guess,
-                         u_text=texts.get("gb_u", ""), t_end=float(values.get("gb_t_end", 5.0)))
+                         u_text=texts.get("gb_u", ""), t_end=float(values.get("gb_t_end", 5.0)),
+                         shooting=values.get("gb_shooting", "single"))
     if "gb_custom" not in hidden and not errors.get("gb_custom"):
         try:
             parse_signal(req.disturbance_spec(), name="custom d(t)", seed=req.seed, hold_s=1e-3)
@@ -233,7 +240,7 @@ class GreyBoxPanel(Section):
         self.button = pn.widgets.Button(label="Run grey-box estimation", color="primary", width=260,
                                         css_classes=["eha-run-gb"])
         on_click(self.button, lambda _e: self.run())
-        self.handin = HandInBox(self, "greybox", self._handin_estimates)
+        self.handin = HandInBox(self, "greybox", self._handin_estimates, label="Hand in the grey-box estimates")
         self.handin_button, self.verdict = self.handin.button, self.handin.verdict
         # the student's own record (CSV or .mat): t, u and the measured signals
         self.own_data = None
@@ -404,7 +411,8 @@ class GreyBoxPanel(Section):
                 d = parse_signal(d_text, name="custom d(t)", seed=req.seed, hold_s=1e-3)
                 noise = {s: v for s, v in req.measurement_noise().items() if s in req.measured}
                 data = greybox_data(params, u, t_end=t_end, d=d, noise=noise, seed=req.seed, measured=req.measured)
-            res = identify_greybox(data, req.names, measured=req.measured, guess=guess, cancel=token)
+            res = identify_greybox(data, req.names, measured=req.measured, guess=guess, shooting=req.shooting,
+                                   cancel=token)
             model = None
             if res.success:
                 # the board compares transfer functions: the estimate enters as eq. 24's H(s) linearised at

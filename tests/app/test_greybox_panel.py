@@ -173,3 +173,15 @@ def test_the_hand_in_in_an_exercise_stores_method_greybox(exercise):
     assert "Grey-box identification" in text
     for n in ("M", "B", "Af", "beta_e"):
         assert num_html(getattr(truth, n), 5) not in text
+
+
+def test_multiple_shooting_from_the_form_ends_where_output_error_does(ran):
+    session, gb = ran
+    single = dict(gb.result.estimates)
+    type_into(gb.form, gb_shooting="multiple")
+    assert gb.view.status == "stale"
+    job = gb.run()
+    assert job.state == "done" and gb.result.success
+    for n, v in single.items():
+        assert gb.result.estimates[n] == pytest.approx(v, rel=2e-3 if n != "B" else 5e-2), n
+    type_into(gb.form, gb_shooting="single")

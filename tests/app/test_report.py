@@ -33,10 +33,14 @@ def test_every_section_is_present(report):
     assert page.count('class="fig"') >= 12                      # Figs. 2, 3, 4-7, 8, 9, 11, 12, 13, residuals
     # self-contained: no script or stylesheet loaded from anywhere else
     assert "<script src=" not in page and "<link " not in page
-    assert "[7/7] writing report.html" in progress and "report written in" in progress
+    assert "[8/8] writing report.html" in progress and "report written in" in progress
     for name in ("numpy", "scipy", "control", "numba", "bokeh", "panel"):
         assert f"<td>{name}</td>" in page
     assert "Seed 3" in page
+    # the three routes side by side: the least squares' and grey-box's M on Table 3's record, eq. 27's damping
+    routes = page.split('<section id="routes">')[1].split("</section>")[0]
+    assert num_html(result.reproduction.greybox.estimates["M"], 5) in routes and "not run" not in routes
+    assert abs(result.reproduction.greybox.estimates["M"] / 4000.0 - 1) < 1e-3
 
 
 def test_table_numbers_equal_the_core_functions(report):
