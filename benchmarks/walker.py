@@ -88,17 +88,18 @@ ROOT = Path(__file__).resolve().parents[1]
 MAIN_TABS, IDENT_TABS = "eha-main-tabs", "eha-ident-tabs"
 FREQ_FIGURES, BOARD_VIEWS = "eha-freq-figures", "eha-board-views"
 PARAM_FORM, SIM_FORM, LSE_FORM, FREQ_FORM = "eha-param-form", "eha-sim-form", "eha-lse-form", "eha-freq-form"
-BOARD_FORM, STUDY_FORM = "eha-board-form", "eha-study-form"
+BOARD_FORM, STUDY_FORM, GB_FORM = "eha-board-form", "eha-study-form", "eha-gb-form"
 LSE_WINDOW, RECORD_WINDOW = "eha-lse-window", "eha-freq-record-window"
 #: what shows that a tab (or a sub-tab of tab 3) has been built
 TAB_READY = {0: PARAM_FORM, 1: "eha-sim-info", 2: "eha-lse-table"}
-SUBTAB_READY = {0: "eha-lse-table", 1: "eha-freq-summary", 2: BOARD_FORM, 3: STUDY_FORM}
+SUBTAB_READY = {0: "eha-lse-table", 1: "eha-freq-summary", 2: GB_FORM, 3: BOARD_FORM, 4: STUDY_FORM}
 STATUS_CLASSES = {"eha-empty": "empty", "eha-current": "current", "eha-updating": "updating",
                   "eha-out-of-date": "stale"}
 SIM_BUTTONS = ("Case 1", "Case 2", "Case 3", "Case 4", "All four cases", "Run nonlinear", "Run linearised",
                "Compare both")
 LSE_RUN, TABLE4_RUN, HANDIN = "Run least squares", "Run all four scenarios (Table 4)", "Hand in these estimates"
 FREQ_RUN, RECORD_RUN = "Run experiment and estimate", "Estimate from your record"
+GB_RUN = "Run grey-box estimation"
 STUDY_RUN, STUDY_CANCEL = "Run the study", "Cancel"
 RESET, REPORT, BACK_TO_SIMULATED, USE_COLUMNS = ("Reset to paper defaults", "Report of this session",
                                                   "Back to simulated data", "Use these columns")
@@ -110,8 +111,10 @@ ORDER_FIELDS = ("n_poles", "n_zeros", "initial_condition", "input_offset", "inpu
 FREQ_VIEWS = ("freq-data", "freq-fit", "freq-bode", "freq-validation", "freq-residuals", "freq-summary")
 #: views that re-run by themselves (the others wait for their button)
 AUTO_VIEWS = ("simulation", "freq-excitation", "board-record")
+#: Views whose inputs are tab 1's (with Kp or not) and one form's.
+_FORM_VIEWS = {"simulation": (SIM_FORM, False), "gb": (GB_FORM, False), "board-record": (BOARD_FORM, True)}
 #: the run button (label) whose press computes each manual view
-VIEW_BUTTON = {"lse": LSE_RUN, "table4": TABLE4_RUN, "freq-record": RECORD_RUN,
+VIEW_BUTTON = {"lse": LSE_RUN, "table4": TABLE4_RUN, "freq-record": RECORD_RUN, "gb": GB_RUN,
                **{v: FREQ_RUN for v in FREQ_VIEWS}}
 
 _LOG_LINE = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) (DEBUG|INFO|WARNING|ERROR|CRITICAL) (.*)$")
@@ -1015,20 +1018,22 @@ class Walker:
         "lse-mapping": 1.2, "handin": 1.5,
         "type-freq": 5, "freq-run": 2.2, "record-upload": 2, "record-window": 1.5, "detrend": 1,
         "record-run": 1.5, "record-mapping": 1.2,
+        "type-gb": 3, "gb-run": 1.5,
         "type-board": 2, "board-tick": 3, "board-rename": 1.5, "board-delete": 0.7, "board-bands": 0.5,
         "type-study": 2, "study-run": 1, "study-cancel": 1.5,
         "download": 0.8, "any-button": 2, "settings": 1.5, "report": 0.6, "reload": 1.3,
     }
     #: the kinds that press a run button
-    RUNS = ("sim-button", "lse-run", "table4", "freq-run", "record-run", "study-run", "handin")
+    RUNS = ("sim-button", "lse-run", "table4", "freq-run", "record-run", "gb-run", "study-run", "handin")
     #: where each kind acts: (main tab, tab 3's sub-tab) or None (anywhere: the settings row, the address)
     WHERE = {"type-tab1": (0, None), "reset-tab1": (0, None), "type-sim": (1, None), "sim-button": (1, None),
              **{k: (2, 0) for k in ("type-lse", "lse-run", "table4", "lse-upload", "lse-window", "lse-back",
                                     "lse-mapping", "handin")},
              **{k: (2, 1) for k in ("type-freq", "freq-run", "record-upload", "record-window", "detrend",
                                     "record-run", "record-mapping")},
-             **{k: (2, 2) for k in ("type-board", "board-tick", "board-rename", "board-delete", "board-bands")},
-             **{k: (2, 3) for k in ("type-study", "study-run", "study-cancel")}}
+             **{k: (2, 2) for k in ("type-gb", "gb-run")},
+             **{k: (2, 3) for k in ("type-board", "board-tick", "board-rename", "board-delete", "board-bands")},
+             **{k: (2, 4) for k in ("type-study", "study-run", "study-cancel")}}
 
     def _kinds(self) -> list[str]:
         kinds = [k for k in self.WEIGHTS if (not self.o.only or k in self.o.only) and k not in self.o.exclude]
@@ -1177,9 +1182,9 @@ class Walker:
 
     def _make_subtab(self, index: int | None = None) -> Action | None:
         if index is None:
-            index = self.rng.randrange(4)
+            index = self.rng.randrange(5)
         s = self.s
-        names = ("least squares", "frequency domain", "model board", "study")
+        names = ("least squares", "frequency domain", "grey-box", "model board", "study")
 
         async def show():
             ident = s.one("Tabs", css=IDENT_TABS)
@@ -1195,10 +1200,10 @@ class Walker:
         options = []
         if self._at((2, 1)):
             options.append((FREQ_FIGURES, 6))
-        if self._at((2, 2)):
+        if self._at((2, 3)):
             options.append((BOARD_VIEWS, 4))
         if not options:
-            return self._make_subtab(self.rng.choice([1, 2]))
+            return self._make_subtab(self.rng.choice([1, 3]))
         css, n = self.rng.choice(options)
         return self._figure_tab(css, self.rng.randrange(n))
 
@@ -1377,6 +1382,12 @@ class Walker:
 
     def _make_type_board(self):
         return self._type_in(BOARD_FORM, "type-board", "board")
+
+    def _make_type_gb(self):
+        return self._type_in(GB_FORM, "type-gb", "grey-box")
+
+    def _make_gb_run(self):
+        return self._press(GB_RUN, "gb-run")
 
     def _make_type_study(self):
         return self._type_in(STUDY_FORM, "type-study", "study")
@@ -2034,9 +2045,12 @@ class Walker:
 
     def signature(self, view: str):
         """The inputs ``view`` depends on now, as the app compares them; None when they are not valid."""
-        if view == "simulation":
-            tab1, values = self._tab1_key(False), self._values(SIM_FORM)
-            if tab1 is None or values is None or self._form_errors(SIM_FORM):
+        if view in _FORM_VIEWS:
+            # tab 1 (with Kp or not) and one form: tab 2's runs, the grey-box estimate (a file of the
+            # student's is not chosen by the walk), the board's record
+            form, with_kp = _FORM_VIEWS[view]
+            tab1, values = self._tab1_key(with_kp), self._values(form)
+            if tab1 is None or values is None or self._form_errors(form):
                 return None
             return tab1, tuple(values.items())
         if view == "lse":
@@ -2068,11 +2082,6 @@ class Walker:
             detrend = self.s.one(css="eha-freq-record-detrend")
             return (record, tuple(values.items()), tuple((self._values(RECORD_WINDOW) or {}).items()),
                     detrend.attributes.get("value") if detrend is not None else None)
-        if view == "board-record":
-            tab1, values = self._tab1_key(True), self._values(BOARD_FORM)
-            if tab1 is None or values is None or self._form_errors(BOARD_FORM):
-                return None
-            return tab1, tuple(values.items())
         return ("unknown view", view)
 
     def _views_on_page(self) -> dict[str, Model]:

@@ -16,7 +16,12 @@ import os
 from eha_core.errors import FieldError, not_allowed
 from eha_core.simulate import DEFAULT_H_MAX, simulation_cost
 
-__all__ = ["max_steps", "max_bytes", "check_cost", "check_simulation", "check_frequency", "check_lse"]
+__all__ = ["max_steps", "max_bytes", "check_cost", "check_simulation", "check_frequency", "check_lse",
+           "check_greybox"]
+
+#: A grey-box estimate simulates its record some 25 times, each with one more evaluation of the model
+#: per estimated parameter (the sensitivities); multiple shooting about three times as much.
+GREYBOX_SIMULATIONS = 25
 
 #: Integration steps per request: about 1.5 s of one core with the compiled kernel.
 DEFAULT_MAX_STEPS = 10_000_000
@@ -89,3 +94,12 @@ def check_lse(t_end: float, estimator: str = "ls") -> None:
     cost = lse_cost(t_end, resimulation=True, estimator=estimator)
     check_cost("least-squares excitation", f"{t_end:g} s", cost.steps, cost.peak_bytes, t_end,
                "use a shorter excitation")
+
+
+def check_greybox(t_end: float, n_params: int, n_samples: int, n_signals: int, shooting: str = "single") -> None:
+    """A grey-box estimate: its simulations with sensitivities, counted as plain integration steps."""
+    runs = GREYBOX_SIMULATIONS * (3 if shooting == "multiple" else 1)
+    steps = int(t_end / DEFAULT_H_MAX * (1 + n_params) * runs)
+    peak = n_samples * (4 + n_signals) * (1 + n_params) * 8 * 3     # states, sensitivities, the Jacobian
+    check_cost("record length × (1 + parameters)", f"{t_end:g} s × {1 + n_params}", steps, peak, t_end * runs,
+               "estimate fewer parameters at once, or use a shorter record")

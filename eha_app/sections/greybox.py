@@ -28,6 +28,7 @@ from ..render.greybox import (
 )
 from ..render.layout import side_by_side
 from ..render.tables import SCENARIOS
+from ..runtime.limits import check_greybox
 from ..runtime.tasks import apply_locked, on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot, stale_note
 from ..session.form import Field, Form, Group, parse_fields, raised_to_bounds, regrouped, with_lower_bounds
@@ -396,6 +397,14 @@ class GreyBoxPanel(Section):
                            f"{', '.join(own.signals)}, or load a file with them")
                 return None
         u, t_end = req.input_signal()
+        if own is not None:
+            t_end = float(own.t[-1] - own.t[0])
+        try:       # what it may cost on a shared server, before it is queued
+            check_greybox(t_end, len(req.names), int(round(t_end * 1000)) + 1 if own is None else own.t.size,
+                          len(req.measured), req.shooting)
+        except ValueError as exc:
+            self._fail(str(exc))
+            return None
         params, kp, key, guess = self.state.params, self.state.kp, self.run_key(), self.guess(req)
         run_settings = self.settings()
         d_text = self._disturbance_text(req)

@@ -185,3 +185,13 @@ def test_multiple_shooting_from_the_form_ends_where_output_error_does(ran):
     for n, v in single.items():
         assert gb.result.estimates[n] == pytest.approx(v, rel=2e-3 if n != "B" else 5e-2), n
     type_into(gb.form, gb_shooting="single")
+
+
+def test_a_run_too_large_for_a_shared_server_is_refused_before_it_is_queued():
+    session = Session(AppState())
+    gb = session.build("greybox")
+    type_into(gb.form, gb_excitation="custom", gb_t_end="60",
+              gb_params="M, B, Af, beta_e, Kq1, Kq2, L0, k_f, d0, p1_0")
+    assert gb.run() is None and gb.alert.visible
+    assert "record length × (1 + parameters) = 60 s × 11 is not allowed here" in gb.alert.object
+    assert "estimate fewer parameters at once, or use a shorter record" in gb.alert.object
