@@ -82,3 +82,19 @@ def test_the_command_prints_the_studys_json_and_refuses_a_typo(capsys):
     code = main(["study", "greybox", "--seeds", "2", "--params", "M,mass"])
     out, err = capsys.readouterr()
     assert code != 0 and "mass is not one of" in err
+
+
+def test_a_parameter_held_in_the_seeds_is_known_in_the_others_bound():
+    # from x alone the record does not determine B: held at the guess in every seed, the bound of the
+    # others is the one with B known
+    cfg = GreyBoxStudyConfig(n_seeds=2, t_end=1.5, measured=("x",))
+    res = run_greybox_study(cfg, workers=1)
+    assert res.held["B"] == 2 and math.isnan(res.coverage["B"])
+    truth = ActuatorParams()
+    clean = greybox_data(truth, LSE_INPUT, t_end=1.5, d=LOAD, measured=("x",))
+    known = cramer_rao_bound(truth, ("M", "Af", "beta_e"), clean, res.noise)
+    everything = cramer_rao_bound(truth, cfg.params, clean, res.noise)
+    assert res.crb["M"] == pytest.approx(known["M"], rel=1e-12) and res.crb["M"] < everything["M"]
+    assert res.crb["B"] == pytest.approx(everything["B"], rel=1e-12)
+    d = json.loads(json.dumps(res.to_dict(), allow_nan=False))
+    assert d["coverage"]["B"] is None and d["held"]["B"] == 2
