@@ -21,6 +21,12 @@ the estimator holds in most seeds (the data do not determine it: :func:`identify
 the guess) counts as known in the bound of the others; its own bound is that of all of them (it says
 why it is held).
 
+Measured (the defaults, seeds 0-199, ``eha study greybox --seeds 200``): from x, p1, p2 the coverage
+of M, B, Af, βe is 0.975, 0.935, 0.965, 0.970, std / CRB 0.91, 1.00, 0.98, 0.93, every bias within
+0.13 standard error; over 1000 seeds 0.948-0.958 and 0.96-1.00. From x alone B is held in every seed
+(its bound is 2.5 times its value); M, Af, βe cover 0.960, 0.940, 0.965 with std / CRB 0.96, 1.01,
+0.99. 0.17-0.35 s a seed on two busy cores (0.03-0.06 s with the simulator's coarser grid).
+
 Examples
 --------
 >>> res = run_greybox_study(GreyBoxStudyConfig(n_seeds=3, t_end=2.0))
