@@ -1,4 +1,4 @@
-"""``eha study lse|tf``: one experiment repeated over many noise seeds (:mod:`eha_core.study`).
+"""``eha study lse|tf|greybox``: one experiment repeated over many noise seeds (:mod:`eha_core.study`).
 
 Shows whether an estimator's standard errors are honest: per parameter, the
 mean and spread of the estimates over the seeds, the mean reported standard
@@ -73,9 +73,25 @@ def add_parser(sub) -> None:
                     help="standard deviation of the white noise on the recorded position [m] (default 1e-4)")
     tf.set_defaults(handler=run_study_command, kind="tf")
 
+    gb = stsub.add_parser("greybox", help="grey-box estimate over many noise seeds: coverage and Cramer-Rao bound",
+                          description="The grey-box estimate repeated over seeds: the nonlinear plant (--param), "
+                                      "u = 6 sin(4 pi t), a load 5000 sin(2 pi t) N known to the model, white noise "
+                                      "--snr-db below each measured signal's standard deviation; each seed starts "
+                                      "from the paper's values. Per parameter: mean, std, bias in standard errors, "
+                                      "coverage of the 95 % intervals, the Cramer-Rao bound and std / CRB.")
+    common(gb)
+    gb.add_argument("--params", default="M,B,Af,beta_e", metavar="NAMES",
+                    help="the parameters estimated, comma-separated (default M,B,Af,beta_e)")
+    gb.add_argument("--measured", default="x,p1,p2", metavar="SIGNALS",
+                    help="the signals measured and compared, of x, v, p1, p2 (default x,p1,p2)")
+    gb.add_argument("--snr-db", type=float, default=30.0, help="signal-to-noise ratio of every measured signal [dB] "
+                                                              "(default 30)")
+    gb.add_argument("--t-end", type=float, default=5.0, help="record length [s] (default 5)")
+    gb.set_defaults(handler=run_greybox_study_command, kind="greybox")
+
 
 def _missing_method(args) -> int:
-    raise UsageError("study needs a METHOD: lse or tf (eha study --help tells more)")
+    raise UsageError("study needs a METHOD: lse, tf or greybox (eha study --help tells more)")
 
 
 def _sensor_noise(items) -> dict[str, float]:
@@ -168,6 +184,82 @@ def run_study_command(args) -> int:
     if res.n_failed:
         print(f"eha study {config.kind}: warning: {res.message}", file=sys.stderr)
     return 0 if res.n_failed == 0 else 1
+
+
+def _greybox_config(args):
+    """The checked :class:`~eha_core.identify.greybox_study.GreyBoxStudyConfig`."""
+    from eha_core.identify.greybox import GREYBOX_PARAMS, GREYBOX_SIGNALS
+    from eha_core.identify.greybox_study import GreyBoxStudyConfig
+    from eha_core.study import MAX_SEEDS, MAX_WORKERS
+
+    check_range("--seeds", args.seeds, 1, MAX_SEEDS, "seeds")
+    check_range("--workers", args.workers, 1, MAX_WORKERS, "threads")
+    check_range("--first-seed", args.first_seed, 0, 2**32 - 1 - MAX_SEEDS)
+
+    def names(option, text, allowed):
+        got = tuple(n.strip() for n in str(text).split(",") if n.strip())
+        for n in got:
+            if n not in allowed:
+                raise refused(option, text, f"{n} is not one of {', '.join(allowed)}", value_text=text)
+        if not got or len(set(got)) != len(got):
+            raise refused(option, text, f"name each of {', '.join(allowed)} at most once, at least one",
+                          value_text=text)
+        return got
+
+    try:
+        return GreyBoxStudyConfig(n_seeds=args.seeds, first_seed=args.first_seed,
+                                  params=names("--params", args.params, GREYBOX_PARAMS),
+                                  measured=names("--measured", args.measured, GREYBOX_SIGNALS),
+                                  snr_db=args.snr_db, t_end=args.t_end, truth=parse_params(args.param))
+    except FieldError as exc:
+        raise as_option(exc, {"snr_db": "--snr-db", "t_end": "--t-end"}) from None
+
+
+def run_greybox_study_command(args) -> int:
+    config = _greybox_config(args)
+    from eha_core.identify.greybox_study import run_greybox_study
+
+    progress = _Progress(config.n_seeds) if sys.stderr.isatty() and not args.json else None
+    try:
+        res = run_greybox_study(config, workers=args.workers, progress=progress)
+    finally:
+        if progress is not None:
+            progress.close()
+    print(json_text(res.to_dict()) if args.json else greybox_summary_text(res))
+    if res.n_failed:
+        print(f"eha study greybox: warning: {res.n_failed} seeds failed: {'; '.join(res.failures[:3])}",
+              file=sys.stderr)
+    return 0 if res.n_failed == 0 else 1
+
+
+def greybox_summary_text(res) -> str:
+    """The grey-box study as a table: per parameter truth, mean, std, bias/se, coverage, CRB, std/CRB."""
+    from eha_core.study import coverage_band
+
+    cfg = res.config
+    noise = ", ".join(f"{k} {v:.3g}" for k, v in res.noise.items())
+    lines = [f"study: grey-box estimate of {', '.join(cfg.params)} from {', '.join(cfg.measured)}, "
+             f"{cfg.t_end:g} s, noise at {cfg.snr_db:g} dB ({noise}, SI)",
+             f"seeds {cfg.first_seed}-{cfg.first_seed + cfg.n_seeds - 1}: {res.n_completed} completed, "
+             f"{res.n_failed} failed, {res.elapsed_s:.1f} s ({res.seconds_per_seed:.2f} s per seed)",
+             f"{'parameter':10s}{'truth':>12s}{'mean':>12s}{'std':>11s}{'mean se':>11s}{'bias/se':>9s}"
+             f"{'coverage':>10s}{'CRB':>11s}{'std/CRB':>9s}"]
+
+    def num(v, width, fmt=".5g"):
+        return ("-" if v is None or not math.isfinite(v) else format(v, fmt)).rjust(width)
+
+    for k in cfg.params:
+        lines.append(f"{k:10s}{num(res.truth[k], 12)}{num(res.mean[k], 12)}{num(res.std[k], 11, '.4g')}"
+                     f"{num(res.mean_std_error[k], 11, '.4g')}{num(res.bias_se[k], 9, '+.3f')}"
+                     f"{num(res.coverage[k], 10, '.3f')}{num(res.crb[k], 11, '.4g')}"
+                     f"{num(res.std_over_crb[k], 9, '.3f')}" + (f"  held in {res.held[k]}" if res.held[k] else ""))
+    if res.n_completed:
+        lo, hi = coverage_band(res.n_completed)
+        lines.append(f"coverage: the fraction of seeds whose 95 % interval holds the truth; honest intervals give "
+                     f"{lo:.3f}-{hi:.3f} in 99 % of studies of {res.n_completed} seeds")
+        lines.append("CRB: the Cramer-Rao bound, the smallest std an unbiased estimator can have here; std/CRB near 1: "
+                     "the estimator uses the data's information")
+    return "\n".join(lines)
 
 
 def _bias_text(res, name: str) -> str:
