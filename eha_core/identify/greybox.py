@@ -482,7 +482,7 @@ def _fit(setup, data, rows, y_meas, sigma, max_nfev, cancel):
             try:
                 cache[key] = simulate_with_sensitivities(setup.params_at(z), setup.names if sensitivities else (),
                                                          data, log=setup.log if sensitivities else (), cancel=cancel)
-            except (ComputationError, ValueError):
+            except (ComputationError, ValueError, ArithmeticError):   # a step to exp(huge) is a failed simulation
                 cache[key] = (None, None)
         return cache[key]
 
@@ -592,7 +592,7 @@ def _multiple_shooting(setup, data, measured, rows, y_meas, sigma, segments, max
                     start = None if i == 0 else w[P + 4 * (i - 1):P + 4 * i] * STATE_SCALE
                     runs.append(simulate_with_sensitivities(p, setup.names, part, log=setup.log, initial=start,
                                                             cancel=cancel))
-            except (ComputationError, ValueError):
+            except (ComputationError, ValueError, ArithmeticError):   # a step to exp(huge) is a failed simulation
                 runs = None
             cache[key] = runs
         return cache[key]
