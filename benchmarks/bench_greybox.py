@@ -149,6 +149,9 @@ def main(argv=None):
     ap.add_argument("--diff-step", type=float, default=1e-3,
                     help="least_squares' relative difference step (default 1e-3)")
     ap.add_argument("--no-baseline", action="store_true", help="skip the baseline (minutes)")
+    ap.add_argument("--shooting", default="single", choices=("single", "multiple"),
+                    help="the starts' simulation: output error alone (default: it converged from more starts) "
+                         "or multiple shooting first")
     args = ap.parse_args(argv)
 
     print(f"python {platform.python_version()}, {os.cpu_count()} cores, machine {platform.machine()}")
@@ -203,7 +206,7 @@ def main(argv=None):
               f"the grey-box estimate {costs[0]:.4f}, at the baseline's {costs[1]:.4f}")
 
     # 3. convergence from guesses 50 % off
-    shooting = "multiple" if shooting_available(data) else None
+    shooting = args.shooting if args.shooting == "single" or shooting_available(data) else None
     print(f"\n{args.starts} starts, each parameter the truth times U[0.5, 1.5]; shooting: "
           + (shooting or "single (identify_greybox has no shooting= keyword yet)"))
     ref_start = run_greybox(data, guess=TRUTH, shooting=shooting)
