@@ -415,10 +415,6 @@ class FrequencyPanel(Section):
         self.alert.object = f"The experiment failed: {message}"
         self.alert.visible = True
 
-    def _note(self, text: str) -> None:
-        self.queue_note.object = text
-        self.queue_note.visible = bool(text)
-
     def run(self):
         cfg, errors = self.config()
         if cfg is None or not self.state.valid or self.excitation_errors:

@@ -30,7 +30,7 @@ from ..render.layout import side_by_side
 from ..render.tables import SCENARIOS
 from ..runtime.limits import check_greybox
 from ..runtime.tasks import apply_locked, on_click, watch
-from ..session import ReportPart, Section, SectionSnapshot, stale_note
+from ..session import ReportPart, Section, SectionSnapshot, run_off_notice, stale_note
 from ..session.form import Field, Form, Group, parse_fields, raised_to_bounds, regrouped, with_lower_bounds
 from ..session.freshness import ResultView
 from ..session.state import FIELD_LABELS
@@ -356,25 +356,13 @@ class GreyBoxPanel(Section):
         ok = self.state.valid
         waiting = self.column_mapping.waiting
         self.button.disabled = not ok or bool(errors) or waiting
-        if not ok:
-            self.notice.object = ('<span class="eha-warn">The button is off: a parameter on tab 1 is not valid; '
-                                  'fix it to run the identification.</span>')
-        elif errors:
-            self.notice.object = ('<span class="eha-warn">“Run grey-box estimation” is off until this input is '
-                                  f'fixed: {html.escape(next(iter(errors.values())))}</span>')
-        elif waiting:
-            self.notice.object = ("<span class='eha-note'>“Run grey-box estimation” waits for your file's columns: "
-                                  "choose them below, or go back to simulated data.</span>")
+        self.notice.object = run_off_notice("Run grey-box estimation", tab1_valid=ok, errors=errors, waiting=waiting)
         self.notice.visible = not ok or bool(errors) or waiting
         self._inputs_changed()
 
     def _fail(self, message: str) -> None:
         self.alert.object = f"The grey-box estimation failed: {html.escape(message)}"
         self.alert.visible = True
-
-    def _note(self, text: str) -> None:
-        self.queue_note.object = text
-        self.queue_note.visible = bool(text)
 
     # -- the run -------------------------------------------------------------------------------------------
     def run(self):

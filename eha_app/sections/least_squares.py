@@ -42,7 +42,7 @@ from ..render.tables import (
 )
 from ..runtime.limits import check_lse
 from ..runtime.tasks import apply_locked, on_click, watch
-from ..session import ReportPart, Section, SectionSnapshot, stale_note
+from ..session import ReportPart, Section, SectionSnapshot, run_off_notice, stale_note
 from ..session.form import Field, Form, Group, parse_fields, raised_to_bounds, regrouped, with_lower_bounds
 from ..session.freshness import ResultView
 from ..session.state import FIELD_LABELS
@@ -517,26 +517,14 @@ class LeastSquaresPanel(Section):
         waiting = self.column_mapping.waiting
         self.button.disabled = not ok or bool(errors) or waiting
         self.all_button.disabled = not ok or "lse_seed" in errors
-        if not ok:
-            self.notice.object = ('<span class="eha-warn">The buttons are off: a parameter on tab 1 is not valid; '
-                                  'fix it to run the identification.</span>')
-        elif errors:
-            self.notice.object = ('<span class="eha-warn">“Run least squares” is off until this input is fixed: '
-                                  f'{next(iter(errors.values()))}</span>')
-        elif waiting:
-            # it would otherwise run quietly on the simulated sensors (or on the previous file)
-            self.notice.object = ("<span class='eha-note'>“Run least squares” waits for your file's columns: "
-                                  "choose them below, or go back to simulated data.</span>")
+        self.notice.object = run_off_notice("Run least squares", tab1_valid=ok, errors=errors, waiting=waiting,
+                                            buttons="The buttons are")
         self.notice.visible = not ok or bool(errors) or waiting
         self._inputs_changed()
 
     def _fail(self, message: str) -> None:
         self.alert.object = f"The identification failed: {message}"
         self.alert.visible = True
-
-    def _note(self, text: str) -> None:
-        self.queue_note.object = text
-        self.queue_note.visible = bool(text)
 
     def run(self):
         req, errors = self.request()

@@ -557,10 +557,6 @@ class SimulationTab(Section):
         if self.run_key(self.last_model) != key:
             self._inputs_changed()
 
-    def _note(self, text: str) -> None:
-        self.queue_note.object = text
-        self.queue_note.visible = bool(text)
-
     def _draw(self) -> None:
         """The grid and the status line for the case chosen (all of them unless the selector shows)."""
         results = self.results

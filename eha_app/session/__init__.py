@@ -6,8 +6,18 @@ runner, the page's address, the exercise identity and the sections;
 page order in :data:`~eha_app.session.section.SECTIONS`.
 """
 
-from .section import SECTIONS, Placement, ReportPart, Section, SectionRegistry, SectionSnapshot, stale_note
+from .section import (
+    SECTIONS,
+    Placement,
+    ReportPart,
+    Section,
+    SectionRegistry,
+    SectionSnapshot,
+    run_off_notice,
+    stale_note,
+)
 from .session import MAX_SETTINGS_BYTES, SETTINGS_FORMAT, Session, SessionSnapshot, SettingsError
 
 __all__ = ["Session", "SessionSnapshot", "Section", "SectionSnapshot", "ReportPart", "Placement",
-           "SectionRegistry", "SECTIONS", "SettingsError", "SETTINGS_FORMAT", "MAX_SETTINGS_BYTES", "stale_note"]
+           "SectionRegistry", "SECTIONS", "SettingsError", "SETTINGS_FORMAT", "MAX_SETTINGS_BYTES", "stale_note",
+           "run_off_notice"]

@@ -57,6 +57,25 @@ class ReportPart:
     figures: Mapping[str, Any] = field(default_factory=dict)
 
 
+def run_off_notice(label: str, *, tab1_valid: bool, errors: Mapping[str, str], waiting: bool,
+                   buttons: str = "The button is") -> str:
+    """Why a run button (``label``) is off, as the note under it says it ("" when it is on): tab 1, the
+    first invalid field, or a file that waits for its columns (it would otherwise run quietly on the
+    simulated sensors, or on the previous file)."""
+    import html
+
+    if not tab1_valid:
+        return (f'<span class="eha-warn">{buttons} off: a parameter on tab 1 is not valid; fix it to run the '
+                'identification.</span>')
+    if errors:
+        return (f'<span class="eha-warn">“{label}” is off until this input is fixed: '
+                f'{html.escape(next(iter(errors.values())))}</span>')
+    if waiting:
+        return (f"<span class='eha-note'>“{label}” waits for your file's columns: choose them below, or go back "
+                "to simulated data.</span>")
+    return ""
+
+
 def stale_note(snapshot: SectionSnapshot) -> str:
     """The report's line above results the inputs no longer describe (as the page marks them)."""
     if not snapshot.stale:
@@ -94,6 +113,11 @@ class Section(pn.viewable.Viewer):
     @property
     def runner(self):
         return self.session.runner
+
+    def _note(self, text: str) -> None:
+        """The runner's note (queued, waiting) beside the run button, for a section with a ``queue_note``."""
+        self.queue_note.object = text
+        self.queue_note.visible = bool(text)
 
     def initial_texts(self) -> dict[str, str]:
         """The texts the section's fields open with: defaults, the page's address, loaded settings."""
