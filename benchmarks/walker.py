@@ -497,6 +497,18 @@ class WalkStudent(Student):
             return "simulation updating"
         return ""
 
+    async def sync(self, timeout: float = 5.0) -> None:
+        """A round trip after an action: Panel answers a client's change on the next tick of the
+        server's loop, not while it reads the message, so a quiet spell alone can end before a busy
+        server (other students' work under their locks) has even begun on it. The round trip's
+        ``OK`` comes after the change was handled (the loop runs its callbacks in order)."""
+        if self._broken:
+            return
+        try:
+            await self.round_trip(timeout)
+        except (ProtocolError, ConnectionError, OSError, asyncio.TimeoutError):
+            pass        # the connection invariant reports it
+
     async def settle(self, quiet_s: float, cap_s: float, *, wait_busy: bool = True) -> bool:
         """Wait until no message came for ``quiet_s`` and (``wait_busy``) nothing is in progress, at most
         ``cap_s``; True if it settled."""
@@ -1251,6 +1263,7 @@ class Walker:
             target = s.form_model(css)
             values = dict(target.attributes.get("values") or {})
             await s.set_property(target, "values", {**values, name: text})
+            await s.sync()
             if css == PARAM_FORM:
                 self._shadow_type(name, text)
                 await self._wait_derived()
@@ -1430,6 +1443,8 @@ class Walker:
         runs = tuple(v for v, lab in VIEW_BUTTON.items() if lab == label)
 
         async def press():
+            if runs:
+                await s.sync()      # the inputs as the server has them when the button is pressed
             if button.attributes.get("disabled") or not s.shown(button):
                 # it went off (or away) while the walk went to its tab: a student cannot press it
                 self.history[-1] = desc + " (not pressed: it is off now)"
@@ -2162,9 +2177,11 @@ class Walker:
                     continue
             elif went_away:
                 if name not in AUTO_VIEWS and sig != track.snapshot and sig not in track.runs:
+                    last = track.runs[-1] if track.runs else track.snapshot
                     out.append(("freshness", ("unrun", name, repr(sig)[:200]), f"view {name}: becomes current only "
                                 "with the inputs of a run (or those it showed)",
-                                f"eha-current with {self._describe_change(track.snapshot, sig)}",
+                                f"eha-current with {self._describe_change(last, sig)}"
+                                + (" (against the last run's inputs)" if track.runs else ""),
                                 "eha-out-of-date"))
                 continue
             if sig != track.snapshot and track.snapshot is not None:
