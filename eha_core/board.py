@@ -31,8 +31,10 @@ from ._checks import ComputationError, not_allowed
 from .cancel import CancelToken, check
 from .params import ActuatorParams
 
-__all__ = ["BoardModel", "ModelViews", "RecordComparison", "model_views", "compare_on_record", "validation_record",
-           "reference_models", "lse_model", "BOARD_W", "STEP_T", "nonlinear_step"]
+__all__ = ["BoardModel", "PlantModel", "LinearisedEstimate", "plant_model", "plant_step", "greybox_plant",
+           "linearised_estimate",
+           "simulated_on_record", "ModelViews", "RecordComparison", "model_views", "compare_on_record",
+           "validation_record", "reference_models", "lse_model", "BOARD_W", "STEP_T", "nonlinear_step"]
 
 #: Frequencies of the board's Bode diagrams [rad/s]: 0.01 to the Nyquist frequency of Ts = 0.01 s.
 BOARD_W = np.logspace(-2, math.log10(math.pi / 0.01), 300)
@@ -66,6 +68,35 @@ class BoardModel:
     # the actuator it was identified on (None: unknown, e.g. a student's own record): a record of
     # another actuator compares it with a plant it was not made from, and the board says so
     params: ActuatorParams | None = None
+    # a model of the actuator itself (a grey-box estimate): the board closes its loop with the
+    # controller, simulates it on the record and steps it; num/den are its linearisation
+    plant: PlantModel | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class PlantModel:
+    """A nonlinear model of the actuator (eqs. 1-10 with these values), e.g. a grey-box estimate.
+
+    ``covariance`` (SI) over ``names``, the estimated parameters, gives the bands and regions of its
+    linearisation (eq. 24) to first order; None for a model without one.
+    """
+
+    actuator: ActuatorParams
+    names: tuple[str, ...] = ()
+    covariance: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class LinearisedEstimate:
+    """Eq. 24's closed loop at an estimated actuator, as the uncertainty functions read an estimate:
+    ``num``, ``den`` (monic) and the covariance of ``[den[1:], num]`` carried from the parameters'
+    by their Jacobian (the delta method)."""
+
+    num: np.ndarray
+    den: np.ndarray
+    covariance: np.ndarray
+    ts: float
+    input_delay: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,6 +110,8 @@ class ModelViews:
     pz: object                    # PoleZeroMap
     step: object                  # StepResponse of a unit step (the figures are those of the unit step)
     stable: bool
+    # a plant model's step is the nonlinear loop's at this reference step [m] (stored per unit step)
+    step_amplitude: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,9 +127,80 @@ def _coefficients(model: BoardModel):
     return np.asarray(model.num, dtype=float), np.asarray(model.den, dtype=float)
 
 
+def _closed_loop(actuator: ActuatorParams, kp: float) -> tuple[np.ndarray, np.ndarray]:
+    """(num, den) of eq. 24's H(s) at ``actuator``, den monic."""
+    from .linear import linearize
+
+    num, den = linearize(actuator).closed_loop_coeffs(kp)
+    den = np.asarray(den, dtype=float)
+    return np.asarray(num, dtype=float) / den[0], den / den[0]
+
+
+def linearised_estimate(plant: PlantModel, kp: float, ts: float) -> LinearisedEstimate | None:
+    """Eq. 24 at ``plant.actuator`` with the covariance of its coefficients, J C Jᵀ, J by central
+    differences of the linearisation over each estimated parameter (relative step 1e-5); None
+    without a covariance."""
+    import dataclasses
+
+    num, den = _closed_loop(plant.actuator, kp)
+    cov = plant.covariance
+    if cov is None or not plant.names:
+        return None
+    cov = np.asarray(cov, dtype=float)
+    if cov.shape != (len(plant.names), len(plant.names)) or not np.all(np.isfinite(cov)):
+        return None
+
+    def theta(actuator):
+        n, d = _closed_loop(actuator, kp)
+        return np.concatenate([d[1:], n])
+
+    jac = np.zeros((den.size - 1 + num.size, len(plant.names)))
+    for j, name in enumerate(plant.names):
+        value = float(getattr(plant.actuator, name))
+        h = 1e-5 * max(abs(value), math.sqrt(max(cov[j, j], 0.0)), 1e-12)
+        jac[:, j] = (theta(dataclasses.replace(plant.actuator, **{name: value + h}))
+                     - theta(dataclasses.replace(plant.actuator, **{name: value - h}))) / (2 * h)
+    return LinearisedEstimate(num=num, den=den, covariance=jac @ (0.5 * (cov + cov.T)) @ jac.T, ts=float(ts))
+
+
+def greybox_plant(result) -> PlantModel:
+    """The actuator a grey-box estimate (:class:`~eha_core.identify.greybox.GreyBoxResult`) describes, with
+    the covariance of the parameters it estimated (those it held have none)."""
+    free = [i for i, n in enumerate(result.names)
+            if n not in result.held and math.isfinite(result.std_errors.get(n, math.nan))]
+    names = tuple(result.names[i] for i in free)
+    std = np.array([result.std_errors[n] for n in names])
+    cov = np.outer(std, std) * np.asarray(result.correlation, dtype=float)[np.ix_(free, free)] if names else None
+    return PlantModel(actuator=result.params, names=names, covariance=cov)
+
+
+def plant_model(plant: PlantModel, kp: float, *, name: str, description: str, ts: float = 0.01,
+                params: ActuatorParams | None = None) -> BoardModel:
+    """A board model of ``plant`` in the loop of ``kp``: its linearisation (eq. 24) with the bands its
+    covariance gives, simulated as the nonlinear model on the record and for the step.
+
+    Raises :class:`~eha_core.params.ParameterError` for an actuator that cannot be linearised.
+    """
+    num, den = _closed_loop(plant.actuator, kp)
+    return BoardModel(name=name, kind="greybox", description=description, num=num, den=den,
+                      estimate=linearised_estimate(plant, kp, ts), ts=float(ts), kp=float(kp), params=params,
+                      plant=plant)
+
+
+def plant_step(model: BoardModel, amplitude_m: float, *, step_t=STEP_T, cancel: CancelToken | None = None):
+    """A plant model's step response under its controller (the nonlinear loop, as the plant's own), per
+    unit step like a transfer function's (``y`` divided by ``amplitude_m``)."""
+    import dataclasses
+
+    out = nonlinear_step(model.plant.actuator, model.kp, amplitude_m, cancel=cancel)
+    return dataclasses.replace(out, name=model.name, y=out.y / amplitude_m, amplitude=1.0,
+                               source="nonlinear simulation of the model")
+
+
 def model_views(model: BoardModel, *, w=BOARD_W, step_t=STEP_T, level: float = 0.95, n_draws: int = 300,
-                seed: int = 0) -> ModelViews:
-    """Bode curve (and band), pole-zero map (with regions) and unit step response of ``model``."""
+                seed: int = 0, amplitude_m: float = 0.01) -> ModelViews:
+    """Bode curve (and band), pole-zero map (with regions) and unit step response of ``model``; a plant
+    model's step is its nonlinear loop's to a step of ``amplitude_m`` (per unit step)."""
     from .identify._ctmodels import frequency_response
     from .identify.step import step_response
     from .identify.uncertainty import bode_band, pole_zero_regions, reference_roots
@@ -113,10 +217,13 @@ def model_views(model: BoardModel, *, w=BOARD_W, step_t=STEP_T, level: float = 0
         pz = reference_roots(num, den, ts=None, name=model.name)
     poles = np.roots(den)
     stable = bool(np.all(poles.real < 0))
-    step = step_response((num, den), np.asarray(step_t, dtype=float), name=model.name,
-                         input_delay=model.input_delay)
+    if model.plant is not None:
+        step = plant_step(model, amplitude_m)
+    else:
+        step = step_response((num, den), np.asarray(step_t, dtype=float), name=model.name,
+                             input_delay=model.input_delay)
     return ModelViews(w=np.asarray(w), magnitude_db=fr.magnitude_db, phase_deg=fr.phase_deg, band=band, pz=pz,
-                      step=step, stable=stable)
+                      step=step, stable=stable, step_amplitude=amplitude_m if model.plant is not None else None)
 
 
 def validation_record(params: ActuatorParams | None = None, *, kp: float = 10.0, seed: int = 1,
@@ -143,16 +250,39 @@ def compare_on_record(model: BoardModel, record) -> RecordComparison:
     """``model`` on the record (MATLAB ``compare``: initial state and input offset fitted), with the
     residual tests of its error against the reference and their verdict sentences."""
     from .identify.assessment import assess_residuals
-    from .identify.validate import compare, residual_analysis
+    from .identify.validate import compare, fit_percent, residual_analysis
 
-    num, den = _coefficients(model)
     ts = float(record.t[1] - record.t[0])
-    res = compare(num, den, record.r, record.x, ts, initial_condition="estimate", input_offset="estimate",
-                  input_delay=model.input_delay)
+    if model.plant is not None:
+        y_hat = simulated_on_record(model, record)
+        fit = fit_percent(record.x, y_hat) if np.all(np.isfinite(y_hat)) else float("nan")
+    else:
+        num, den = _coefficients(model)
+        res = compare(num, den, record.r, record.x, ts, initial_condition="estimate", input_offset="estimate",
+                      input_delay=model.input_delay)
+        y_hat, fit = res.y_hat, res.fit_percent
     assessment = None
-    if np.all(np.isfinite(res.y_hat)):
-        assessment = assess_residuals(residual_analysis(record.x - res.y_hat, record.r))
-    return RecordComparison(y_hat=res.y_hat, fit_percent=float(res.fit_percent), assessment=assessment)
+    error = record.x - y_hat
+    # (a model that is the record's own actuator, noise-free, leaves no error to test)
+    if np.all(np.isfinite(y_hat)) and np.any(error != 0):
+        assessment = assess_residuals(residual_analysis(error, record.r))
+    return RecordComparison(y_hat=y_hat, fit_percent=float(fit), assessment=assessment)
+
+
+def simulated_on_record(model: BoardModel, record, cancel: CancelToken | None = None) -> np.ndarray:
+    """A plant model's position on the record: the nonlinear model from its own initial state, in the
+    loop of its Kp sampled at the record's Ts, driven by the record's reference; no load (the model
+    does not know the record's). NaN where the simulation failed."""
+    from .simulate import simulate_closed_loop
+
+    ts = float(record.t[1] - record.t[0])
+    res = simulate_closed_loop(model.plant.actuator, np.asarray(record.r, dtype=float), kp=model.kp, ts=ts,
+                               cancel=cancel)
+    y_hat = np.full(np.shape(record.x), np.nan)
+    if res.success:
+        n = min(y_hat.size, res.x.size)
+        y_hat[:n] = res.x[:n]
+    return y_hat
 
 
 def reference_models(params: ActuatorParams | None = None, kp: float = 10.0, *,

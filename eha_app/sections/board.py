@@ -2,7 +2,10 @@
 
 Each transfer-function estimate (frequency experiment or own record) and each
 least-squares run (as eq. 24's H(s) with its estimates) lands here with a
-short name; the references (eq. 24 with the actuator's values, the paper's Ĥ)
+short name. A grey-box estimate lands as what it is, a nonlinear model of the
+actuator: the board closes its loop with tab 1's controller, simulates it on
+the validation record and for the step, and draws its linearisation's Bode
+diagram and poles with the bands its covariance gives. The references (eq. 24 with the actuator's values, the paper's Ĥ)
 are always offered. The student ticks models to overlay them, one colour per
 model, in four views: the fit on one validation record (MATLAB ``compare``,
 with the residual tests' verdicts), the Bode diagram with 95 % bands, the step
@@ -29,6 +32,8 @@ from eha_core.board import (
     compare_on_record,
     model_views,
     nonlinear_step,
+    plant_model,
+    plant_step,
     reference_models,
     validation_record,
 )
@@ -184,16 +189,26 @@ class ModelBoard(Section):
         if not self.built:
             return
         record = self.record
-        todo = [(e, e.model, e.key not in self.views) for e in self.entries if e.key not in self._failed
-                and (e.key not in self.views or (record is not None and e.key not in self.fits))]
+        amplitude = self.amplitude()
+        # a model of the plant steps as the nonlinear loop does: its step is the board's height's
+        todo = [(e, e.model, e.key not in self.views or self._step_stale(e, amplitude))
+                for e in self.entries if e.key not in self._failed
+                and (e.key not in self.views or self._step_stale(e, amplitude)
+                     or (record is not None and e.key not in self.fits))]
         if not todo:
             return
 
-        def compute(_token):
+        def compute(token):
             out = []
             for entry, model, need_views in todo:
                 try:
-                    views = model_views(model) if need_views else None
+                    views = None
+                    if need_views and model.plant is not None and entry.key in self.views:
+                        views = dataclasses.replace(self.views[entry.key], step=plant_step(model, amplitude,
+                                                                                           cancel=token),
+                                                    step_amplitude=amplitude)
+                    elif need_views:
+                        views = model_views(model, amplitude_m=amplitude)
                     fit = compare_on_record(model, record) if record is not None else None
                     out.append((entry, model, views, fit, ""))
                 except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
@@ -209,13 +224,17 @@ class ModelBoard(Section):
                     self._fail(entry, error)
                     entry.ticked = False
                     continue
-                if views is not None:
+                if views is not None and (views.step_amplitude is None or views.step_amplitude == self.amplitude()):
                     self.views[entry.key] = views
                 if fit is not None and record is self.record:
                     self.fits[entry.key] = fit
             self.refresh()
 
         self.views_runner.run("board: model views", compute, show, fail=lambda m: self._fail(None, m))
+
+    def _step_stale(self, entry: BoardEntry, amplitude: float) -> bool:
+        views = self.views.get(entry.key)
+        return views is not None and views.step_amplitude is not None and views.step_amplitude != amplitude
 
     def _fail(self, entry: BoardEntry | None, message: str) -> None:
         who = f"{html.escape(entry.name)}: " if entry is not None else ""
@@ -280,11 +299,37 @@ class ModelBoard(Section):
         _, errors = self.parsed()
         self.form.errors = errors
         self.update_record()            # with an invalid field: the record is marked, not recomputed
+        if "board_step" not in errors:
+            self._compute_missing()     # the steps of the models of the plant, at the new height
 
     def _plant_changed(self) -> None:
         self._references()
+        self._controller_changed()
         self._compute_missing()
         self.update_record()
+
+    def _controller_changed(self) -> None:
+        """A model of the plant is closed with tab 1's controller: a new Kp makes a new loop of it (its
+        curves and fit computed again); a transfer function stays the loop it was estimated in."""
+        kp = self.state.kp
+        if not self.state.valid:
+            return
+        changed = False
+        for e in self.entries:
+            m = e.model
+            if m.plant is None or m.kp == kp:
+                continue
+            try:
+                e.model = plant_model(m.plant, kp, name=m.name, description=_with_kp(m.description, kp),
+                                      ts=m.ts or 0.01, params=m.params)
+            except ValueError as exc:
+                self._fail(e, " ".join(str(exc).split()))
+                continue
+            self.views.pop(e.key, None)
+            self.fits.pop(e.key, None)
+            changed = True
+        if changed:
+            self._rebuild_list()        # the descriptions name the new gain
 
     def record_inputs(self):
         """(record key, plant key) of the current inputs, or None when they are not valid."""
@@ -466,6 +511,14 @@ class ModelBoard(Section):
         return side_by_side(controls, results)
 
 
+def _with_kp(description: str, kp: float) -> str:
+    """A plant model's description with its loop's new gain (``Kp = … V/m`` replaced)."""
+    import re
+
+    text = re.sub(r"Kp = [^ ]+ V/m", f"Kp = {kp:g} V/m", description)
+    return text if text != description or "Kp =" in description else f"{description}, Kp = {kp:g} V/m"
+
+
 @dataclass(frozen=True)
 class BoardSnapshot:
     """What the board shows at one moment (its ticked models, copied), for the session report."""
@@ -545,5 +598,5 @@ def step_table(entries, views, plant, amplitude: float) -> str:
             "<th>rise time 10-90 % [s]</th>"
             "<th>overshoot [%]</th><th>settling time 2 % [s]</th><th>final x [mm]</th><th></th></tr>"
             + "".join(rows) + "</table></div><p class='eha-note'>Rise, overshoot and settling as python-control's "
-            "step_info; a model's figures are taken against its DC gain, the plant's against its last "
-            "sample (60 s).</p>")
+            "step_info; a transfer function's figures are taken against its DC gain; the plant's, and "
+            "a grey-box model's (the nonlinear loop simulated at this step), against their last sample (60 s).</p>")

@@ -10,7 +10,7 @@ from functools import partial
 import numpy as np
 import panel as pn
 
-from eha_core.board import BoardModel
+from eha_core.board import greybox_plant, plant_model
 from eha_core.errors import ComputationError, FieldError, not_allowed
 from eha_core.experiments import LSE_INPUT, LSE_INPUT_RICH, LSE_INPUT_RICH_T_END, LSE_SCENARIOS
 from eha_core.identify.greybox import GREYBOX_PARAMS, GREYBOX_SIGNALS
@@ -367,7 +367,6 @@ class GreyBoxPanel(Section):
     # -- the run -------------------------------------------------------------------------------------------
     def run(self):
         from eha_core.identify.greybox import GreyBoxData, greybox_data, identify_greybox
-        from eha_core.linear import linearize
 
         req, errors = self.request()
         if errors or not self.state.valid or self.column_mapping.waiting:
@@ -412,15 +411,14 @@ class GreyBoxPanel(Section):
                                    cancel=token)
             model = None
             if res.success:
-                # the board compares transfer functions: the estimate enters as eq. 24's H(s) linearised at
-                # the estimated parameters, as the least squares' does
+                # a nonlinear model of the actuator: the board closes its loop, simulates it on its
+                # record and for its step, and draws its linearisation (eq. 24) with bands
                 try:
-                    num, den = linearize(res.params).closed_loop_coeffs(kp)
-                    model = BoardModel(name="GB", kind="greybox",
-                                       description=f"grey-box ({', '.join(req.names)} from "
-                                                   f"{', '.join(req.measured)}) → eq. 24, Kp = {kp:g} V/m",
-                                       num=np.asarray(num), den=np.asarray(den), ts=data.ts, kp=float(kp),
-                                       params=params if own is None else None)
+                    model = plant_model(greybox_plant(res), kp, name="GB", ts=data.ts,
+                                        description=f"grey-box ({', '.join(req.names)} from "
+                                                    f"{', '.join(req.measured)}): the nonlinear model, "
+                                                    f"Kp = {kp:g} V/m",
+                                        params=params if own is None else None)
                 except (ParameterError, ValueError, ComputationError):
                     model = None
             return res, data, model

@@ -1,6 +1,7 @@
 """Tab 3's grey-box sub-tab without a browser: the run, what the data cannot determine, refused fields,
 the own record, the three routes side by side, the report and settings, the exercise's hand-in."""
 
+import numpy as np
 import pytest
 
 from eha_app.render.formatting import num_html
@@ -195,3 +196,31 @@ def test_a_run_too_large_for_a_shared_server_is_refused_before_it_is_queued():
     assert gb.run() is None and gb.alert.visible
     assert "record length × (1 + parameters) = 60 s × 11 is not allowed here" in gb.alert.object
     assert "estimate fewer parameters at once, or use a shorter record" in gb.alert.object
+
+
+def test_the_board_takes_the_estimate_as_a_nonlinear_model_closed_with_tab_1s_controller():
+    from eha_core.board import nonlinear_step
+
+    session = Session(AppState())
+    board = session.build("board")
+    gb = session.build("greybox")
+    assert gb.run().state == "done"
+    entry = next(e for e in board.entries if e.name == "GB1")
+    eq24 = board.entries[0]
+    assert entry.model.plant.actuator == gb.result.params and entry.ticked
+    assert entry.model.plant.names == ("M", "B", "Af", "beta_e") and "the nonlinear model" in entry.model.description
+    # simulated on the validation record it fits as the plant does; eq. 24's linearisation misses the friction
+    assert board.fits[entry.key].fit_percent > 99 > 95 > board.fits[eq24.key].fit_percent
+    assert board.views[entry.key].band is not None and len(board.views[entry.key].pz.poles) == 3
+    # its step is the nonlinear loop's at the board's height (10 mm, then 20 mm), beside the plant's
+    np.testing.assert_allclose(board.views[entry.key].step.y * 0.01,
+                               nonlinear_step(gb.result.params, 10.0, 0.01).y, atol=1e-12)
+    board.form.values = {**board.form.values, "board_step": "20"}
+    np.testing.assert_allclose(board.views[entry.key].step.y * 0.02,
+                               nonlinear_step(gb.result.params, 10.0, 0.02).y, atol=1e-12)
+    assert "GB1" in board.tables["step"].object and "grey-box model" in board.tables["step"].object
+    # a new Kp on tab 1: the model of the plant is closed with it (a transfer function would stay)
+    session.state.set_text("kp", "25")
+    assert entry.model.kp == 25.0 and "Kp = 25 V/m" in entry.model.description
+    assert board.fits[entry.key].fit_percent > 99 and "Built for Kp" not in board.tables["fit"].object
+    np.testing.assert_allclose(entry.model.den, eq24.model.den / eq24.model.den[0], rtol=2e-3)
