@@ -74,6 +74,7 @@ True
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable, Mapping
@@ -93,7 +94,7 @@ __all__ = ["STUDY_KINDS", "MAX_SEEDS", "MAX_WORKERS", "DEFAULT_WORKERS", "TF_PAR
            "SeedEstimate", "StudyResult", "run_study", "combine_studies", "coverage_band"]
 
 #: The experiments a study repeats.
-STUDY_KINDS = ("lse", "tf")
+STUDY_KINDS = ("lse", "tf", "greybox")
 #: Seeds in one study at most: 1000 least-squares seeds take about 25-30 s
 #: on this project's two cores (with the IV estimator 1-2 minutes), 1000
 #: transfer-function seeds 2-4 minutes.
@@ -223,6 +224,7 @@ class StudyConfig:
     noise_m: float = 1e-4
     estimator: str = "ls"
     intervals: str | None = None
+    greybox: object | None = None
 
     def __post_init__(self):
         from .identify.disturbance import DISTURBANCE_MODELS, MAX_FREQ_HZ
@@ -234,7 +236,7 @@ class StudyConfig:
             object.__setattr__(self, name, int(v))
 
         if self.kind not in STUDY_KINDS:
-            raise not_allowed("kind", self.kind, "use lse (least squares) or tf (transfer function)")
+            raise not_allowed("kind", self.kind, "use lse (least squares), tf (transfer function) or greybox")
         if self.disturbance is None:
             object.__setattr__(self, "disturbance", "white:1000" if self.kind == "lse" else "none")
         whole("n_seeds", 1, MAX_SEEDS, f"use 1 to {MAX_SEEDS} seeds")
@@ -258,8 +260,10 @@ class StudyConfig:
         self._check_estimator()
         if self.kind == "lse":
             self._check_disturbance()
-        else:
+        elif self.kind == "tf":
             self._check_tf_noise()
+        else:
+            self._check_greybox()
         exp = self.experiment if self.experiment is not None else FrequencyExperiment()
         if not isinstance(exp, FrequencyExperiment):
             raise not_allowed("experiment", exp, "must be a FrequencyExperiment")
@@ -286,10 +290,12 @@ class StudyConfig:
         from .identify.lse_choices import checked_choices
 
         estimator, intervals = checked_choices(self.estimator, self.intervals)
-        if self.kind == "tf" and (estimator, self.intervals) != ("ls", None):
+        if self.kind != "lse" and (estimator, self.intervals) != ("ls", None):
             name, value = ("estimator", estimator) if estimator != "ls" else ("intervals", intervals)
-            raise not_allowed(name, value, "the transfer-function study's estimator is tfest, with its own "
-                                            "standard errors; leave estimator and intervals to the least squares")
+            own = ("the transfer-function study's estimator is tfest" if self.kind == "tf"
+                   else "the grey-box study's estimator is the grey-box estimate")
+            raise not_allowed(name, value, f"{own}, with its own standard errors; leave estimator and intervals "
+                                           "to the least squares")
         if self.kind == "lse":
             object.__setattr__(self, "intervals", intervals)
 
@@ -302,6 +308,22 @@ class StudyConfig:
         if self.sensor_noise:
             raise not_allowed("sensor_noise", dict(self.sensor_noise),
                               "the transfer-function study's only sensor is the position; use noise_m")
+
+    def _check_greybox(self) -> None:
+        """The grey-box study: its experiment (parameters, signals, noise) in a GreyBoxStudyConfig; its
+        load is the one the model knows, its noise the sensors' at the experiment's SNR."""
+        from .identify.greybox_study import GreyBoxStudyConfig
+
+        g = self.greybox if self.greybox is not None else GreyBoxStudyConfig()
+        if not isinstance(g, GreyBoxStudyConfig):
+            raise not_allowed("greybox", g, "must be a GreyBoxStudyConfig")
+        if parse_signal(self.disturbance, name="disturbance") != Constant(0.0):
+            raise not_allowed("disturbance", self.disturbance, "the grey-box study's load is its experiment's, "
+                                                               "known to the model; use none")
+        if self.sensor_noise:
+            raise not_allowed("sensor_noise", dict(self.sensor_noise), "the grey-box study's noise is set by "
+                                                                       "its experiment's snr_db")
+        object.__setattr__(self, "greybox", g)
 
     def _check_disturbance(self) -> None:
         """Refuse a disturbance whose noise would be the same in every run."""
@@ -317,7 +339,7 @@ class StudyConfig:
     @property
     def model(self) -> str:
         """The plant: ``nonlinear`` for the least squares, the experiment's for ``tf``."""
-        return "nonlinear" if self.kind == "lse" else self.experiment.model
+        return self.experiment.model if self.kind == "tf" else "nonlinear"
 
     @property
     def seed_range(self) -> range:
@@ -332,6 +354,9 @@ class StudyConfig:
                        disturbance_freq_hz=self.disturbance_freq_hz, sensor_noise=dict(self.sensor_noise),
                        u=self.u.spec, t_end_s=self.t_end, tau_f_s=self.tau_f, estimator=self.estimator,
                        intervals=self.intervals)
+        elif self.kind == "greybox":
+            g = self.greybox
+            out.update(params=list(g.params), measured=list(g.measured), snr_db=g.snr_db, t_end_s=g.t_end, dt_s=g.dt)
         else:
             e = self.experiment
             out.update(noise_m=self.noise_m, n_samples=e.n_samples, ts_s=e.ts, kp=e.kp,
@@ -364,9 +389,14 @@ class SeedEstimate:
     message: str
     elapsed_s: float
     critical_value: float = Z95
+    intervals: tuple[tuple[str, float, float], ...] = ()
 
     def interval(self, name: str) -> tuple[float, float]:
-        """The 95 % interval ``estimate +- critical_value * std_error`` of ``name``."""
+        """The 95 % interval of ``name``: the estimator's own where it gave one (the grey-box estimate's
+        of a positive parameter is its logarithm's), else ``estimate +- critical_value * std_error``."""
+        for n, lo, hi in self.intervals:
+            if n == name:
+                return lo, hi
         e, s = self.estimates[name], self.std_errors[name]
         return e - self.critical_value * s, e + self.critical_value * s
 
@@ -384,7 +414,8 @@ class SeedEstimate:
         """The run as plain values (JSON-ready; a failed run's missing numbers are None)."""
         return {"seed": self.seed, "estimates": _finite_or_none(self.estimates),
                 "std_errors": _finite_or_none(self.std_errors), "critical_value": self.critical_value,
-                "success": self.success, "message": self.message, "elapsed_s": self.elapsed_s}
+                "success": self.success, "message": self.message, "elapsed_s": self.elapsed_s,
+                **({"ci95": {n: [lo, hi] for n, lo, hi in self.intervals}} if self.intervals else {})}
 
 
 @dataclass(frozen=True, eq=False)
@@ -427,6 +458,9 @@ class StudyResult:
         half-width of about 2 of those). NaN without the data for them (fewer
         than 2 seeds for the second). :meth:`biased` says whether the seeds
         show a bias.
+    bound : dict
+        ``greybox``: the Cramér-Rao bound per parameter (the smallest standard deviation an unbiased
+        estimate can have on this experiment), to set ``std`` against; empty for the others.
     elapsed_s : float
         Wall time of the study [s].
     workers : int
@@ -458,6 +492,7 @@ class StudyResult:
     bias: dict[str, float] = field(default_factory=dict)
     bias_std_error: dict[str, float] = field(default_factory=dict)
     bias_per_std_error: dict[str, float] = field(default_factory=dict)
+    bound: dict[str, float] = field(default_factory=dict)
 
     def biased(self, name: str, probability: float = 0.99) -> bool:
         """Whether the seeds show that ``name``'s estimator is biased: ``|bias|`` beyond its two-sided
@@ -502,7 +537,7 @@ class StudyResult:
             "mean": _finite_or_none(self.mean), "std": _finite_or_none(self.std),
             "mean_std_error": _finite_or_none(self.mean_std_error), "coverage": _finite_or_none(self.coverage),
             "bias": _finite_or_none(self.bias), "bias_std_error": _finite_or_none(self.bias_std_error),
-            "bias_per_std_error": _finite_or_none(self.bias_per_std_error),
+            "bias_per_std_error": _finite_or_none(self.bias_per_std_error), "bound": _finite_or_none(self.bound),
             "coverage_band_99": list(self.coverage_band()) if self.n_successful else None,
             "elapsed_s": self.elapsed_s, "seconds_per_seed": None if not self.n_completed else self.seconds_per_seed,
             "workers": self.workers, "cancelled": self.cancelled, "message": self.message,
@@ -620,6 +655,57 @@ class _TfPlan:
                             success=bool(est.success), message=est.message, elapsed_s=time.perf_counter() - t0)
 
 
+class _GreyBoxPlan:
+    """The grey-box experiment (:mod:`eha_core.identify.greybox_study`) on ``params``, each seed estimated
+    from the paper's values; its noise and Cramér-Rao bound computed once per actuator and experiment."""
+
+    def __init__(self, config: StudyConfig, params: ActuatorParams):
+        from .identify.greybox import _value
+
+        g = config.greybox
+        self.config, self.params, self.greybox = config, params, g
+        self.guess = g.guess if g.guess is not None else ActuatorParams()
+        self.parameters = g.params
+        self.nominal = {n: _value(params, n) for n in g.params}
+        self.nominal_is_truth = True
+        self.reference = ("the parameters simulated (the truth); every seed's estimate starts from the paper's "
+                          "values")
+        self.noise, self.clean, self.crb = _greybox_setup(g, params)
+
+    def bound(self, seeds) -> dict[str, float]:
+        from .identify.greybox_study import bound_with_held
+
+        held = [tuple(n for n in self.parameters if not math.isfinite(s.std_errors.get(n, math.nan)))
+                for s in seeds if s.success]
+        return bound_with_held(self.crb, self.params, self.parameters, self.clean, self.noise, held)
+
+    def run(self, seed: int, cancel: CancelToken | None) -> SeedEstimate:
+        from .identify.greybox_study import greybox_seed
+
+        t0 = time.perf_counter()
+        try:
+            res = greybox_seed(self.greybox, self.params, self.guess, self.noise, seed, cancel)
+        except (RuntimeError, ValueError, ArithmeticError) as exc:
+            return _failed(seed, self.parameters, exc, t0)
+        return SeedEstimate(seed=seed, estimates={n: float(v) for n, v in res.estimates.items()},
+                            std_errors={n: float(v) for n, v in res.std_errors.items()}, success=bool(res.success),
+                            message=res.message, elapsed_s=time.perf_counter() - t0,
+                            intervals=tuple((n, float(lo), float(hi)) for n, (lo, hi) in res.ci95.items()))
+
+
+@functools.lru_cache(maxsize=16)
+def _greybox_setup(g, params: ActuatorParams):
+    """A grey-box study's noise, clean record and bound: a function of the experiment and the actuator
+    alone, shared by the parts of a long study (and by students with the same actuator)."""
+    from .identify.greybox_study import study_setup
+
+    return study_setup(g, params)
+
+
+def _plan(config: StudyConfig, params: ActuatorParams):
+    return {"lse": _LsePlan, "tf": _TfPlan, "greybox": _GreyBoxPlan}[config.kind](config, params)
+
+
 def _failed(seed: int, names, exc: BaseException, t0: float) -> SeedEstimate:
     nan = dict.fromkeys(names, math.nan)
     return SeedEstimate(seed=seed, estimates=nan, std_errors=dict(nan), success=False,
@@ -659,6 +745,8 @@ def _message(config: StudyConfig, plan, seeds: list[SeedEstimate], cancelled: bo
     if config.kind == "lse":
         noisy = config.sensor_noise or any(isinstance(t, WhiteNoise) for t in _terms(
             parse_signal(config.disturbance, name="disturbance")))
+    elif config.kind == "greybox":
+        noisy = True                    # its noise is the sensors' at a finite SNR
     else:
         noisy = config.noise_m > 0
     if not noisy:
@@ -701,7 +789,7 @@ def run_study(config: StudyConfig | None = None, params: ActuatorParams | None =
     params = params if params is not None else ActuatorParams()
     if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or not 1 <= workers <= MAX_WORKERS:
         raise not_allowed("workers", workers, f"use 1 to {MAX_WORKERS} threads")
-    plan = _LsePlan(config, params) if config.kind == "lse" else _TfPlan(config, params)
+    plan = _plan(config, params)
     total = config.n_seeds
     done: list[SeedEstimate] = []
     t0 = time.perf_counter()
@@ -737,7 +825,8 @@ def run_study(config: StudyConfig | None = None, params: ActuatorParams | None =
         nominal_is_truth=plan.nominal_is_truth, reference=plan.reference, seeds=tuple(done),
         n_requested=total, n_completed=len(done), n_failed=sum(not s.success for s in done),
         elapsed_s=time.perf_counter() - t0, workers=int(workers), cancelled=cancelled,
-        message=_message(config, plan, done, cancelled, cancel.reason if cancel is not None else ""), **stats,
+        message=_message(config, plan, done, cancelled, cancel.reason if cancel is not None else ""),
+        bound=plan.bound(done) if isinstance(plan, _GreyBoxPlan) else {}, **stats,
     )
 
 
@@ -752,7 +841,7 @@ def combine_studies(config: StudyConfig, parts, params: ActuatorParams | None = 
     its last part.
     """
     params = params if params is not None else ActuatorParams()
-    plan = _LsePlan(config, params) if config.kind == "lse" else _TfPlan(config, params)
+    plan = _plan(config, params)
     done = sorted((s for part in parts for s in part.seeds), key=lambda s: s.seed)
     cancelled = bool(cancelled or any(part.cancelled for part in parts)) and len(done) < config.n_seeds
     stats = _statistics(plan, done)
@@ -762,5 +851,6 @@ def combine_studies(config: StudyConfig, parts, params: ActuatorParams | None = 
         n_requested=config.n_seeds, n_completed=len(done), n_failed=sum(not s.success for s in done),
         elapsed_s=float(sum(part.elapsed_s for part in parts)),
         workers=max((part.workers for part in parts), default=1), cancelled=cancelled,
-        message=_message(config, plan, done, cancelled, "the study was cancelled" if cancelled else ""), **stats,
+        message=_message(config, plan, done, cancelled, "the study was cancelled" if cancelled else ""),
+        bound=plan.bound(done) if isinstance(plan, _GreyBoxPlan) else {}, **stats,
     )

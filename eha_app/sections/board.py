@@ -286,8 +286,8 @@ class ModelBoard(Section):
             rows.append(pn.Column(pn.Row(*parts, width=280), desc, width=280, margin=0))
         if len(self.entries) <= 2:
             rows.append(pn.pane.HTML("<p class='eha-note'>Estimates land here as you make them: run a "
-                                     "transfer-function estimate, one from your own record, or the least "
-                                     "squares.</p>", width=270))
+                                     "transfer-function estimate, one from your own record, the least "
+                                     "squares or a grey-box estimate.</p>", width=270))
         self.list.objects = rows
 
     # -- the validation record and the nonlinear plant -------------------------------------------
@@ -570,8 +570,10 @@ def fit_table(entries, record, fits, record_key, kp: float, hidden=()) -> str:
             "<th>fit</th><th>residual tests on the "
             "validation record</th></tr>" + "".join(rows) + "</table></div>"
             f"<p class='eha-note'>Validation record: a closed-loop experiment on tab 1's actuator (idinput "
-            f"sine, seed {seed}, N = 1000, Ts = 0.01 s). Each model's initial state and input offset are "
-            "fitted to it (MATLAB's compare); fit = 100 (1 − ‖x − x̂‖ / ‖x − mean x‖).</p>"
+            f"sine, seed {seed}, N = 1000, Ts = 0.01 s). Each transfer function's initial state and input "
+            "offset are fitted to it (MATLAB's compare); a grey-box model is the nonlinear model simulated in "
+            "the record's loop from its own initial state, without the record's load (it does not know it); "
+            "fit = 100 (1 − ‖x − x̂‖ / ‖x − mean x‖).</p>"
             + (f"<p class='eha-stale-note eha-board-moved'>Tab 1's actuator changed after {moved} of these models "
                f"{'was' if moved == 1 else 'were'} estimated: the record follows tab 1, so "
                f"{'its fit is' if moved == 1 else 'their fits are'} against another plant (marked in the table)."

@@ -132,7 +132,7 @@ class GreyBoxRequest:
         return (LSE_INPUT, 5.0) if self.excitation == "paper" else (LSE_INPUT_RICH, LSE_INPUT_RICH_T_END)
 
 
-def _names(text: str, allowed, aliases, label: str, field_name: str) -> tuple[tuple[str, ...], str]:
+def _names(text: str, allowed, aliases, label: str) -> tuple[tuple[str, ...], str]:
     """The names a comma-separated field lists (each once, in the order of ``allowed``), or a message."""
     got = []
     for part in str(text).replace(";", ",").split(","):
@@ -150,6 +150,16 @@ def _names(text: str, allowed, aliases, label: str, field_name: str) -> tuple[tu
     return tuple(n for n in allowed if n in got), ""
 
 
+def listed_params(text: str, label: str = "parameters") -> tuple[tuple[str, ...], str]:
+    """The grey-box parameters a comma-separated field names (aliases such as βe taken), or a message."""
+    return _names(text, GREYBOX_PARAMS, _ALIASES, label)
+
+
+def listed_signals(text: str, label: str = "measured") -> tuple[tuple[str, ...], str]:
+    """The signals a comma-separated field names (of x, v, p1, p2), or a message."""
+    return _names(text, GREYBOX_SIGNALS, {s: s for s in GREYBOX_SIGNALS}, label)
+
+
 def gb_hidden(texts: dict) -> list[str]:
     hidden = [] if texts.get("gb_scenario") == "custom" else ["gb_custom"]
     return hidden + ([] if texts.get("gb_excitation") == "custom" else ["gb_u", "gb_t_end"])
@@ -161,11 +171,10 @@ def parse_greybox(texts: dict, fields: dict | None = None, *, measurable=GREYBOX
     exercise bounds them; ``measurable``: the signals the student's sensors give)."""
     hidden = set(gb_hidden(texts))
     values, errors = parse_fields((fields or _GB_FIELDS).values(), texts, skip=hidden)
-    names, msg = _names(texts.get("gb_params", ""), GREYBOX_PARAMS, _ALIASES, "parameters", "gb_params")
+    names, msg = listed_params(texts.get("gb_params", ""))
     if msg:
         errors["gb_params"] = msg
-    measured, msg = _names(texts.get("gb_measured", ""), GREYBOX_SIGNALS, {s: s for s in GREYBOX_SIGNALS},
-                           "measured", "gb_measured")
+    measured, msg = listed_signals(texts.get("gb_measured", ""))
     if msg:
         errors["gb_measured"] = msg
     elif any(s not in measurable for s in measured):

@@ -1,7 +1,8 @@
 """Tab 3, study: one experiment repeated over many noise seeds.
 
-The least squares under a chosen disturbance, or the transfer-function
-estimate, run for N seeds (:func:`eha_core.study.run_study`) in a worker, with
+The least squares under a chosen disturbance, the transfer-function
+estimate or the grey-box estimate (its spread against the Cramér-Rao bound),
+run for N seeds (:func:`eha_core.study.run_study`) in a worker, with
 a progress bar and a cancel button; the page stays live. It shows each
 estimate's distribution against the nominal value, the mean, the spread and
 how often the 95 % interval covered the truth: one run's 10 % error in B under
@@ -37,7 +38,8 @@ __all__ = ["StudyPanel", "STUDY_FORM", "STUDY_DEFAULTS", "MAX_APP_SEEDS"]
 MAX_APP_SEEDS = 500
 STUDY_FORM = (Group("Study over noise seeds", (
     Field("study_kind", "experiment", "select", options=(("lse", "least squares (eqs. 15-18)"),
-                                                         ("tf", "transfer function (eqs. 19-25)")),
+                                                         ("tf", "transfer function (eqs. 19-25)"),
+                                                         ("greybox", "grey-box (the nonlinear model)")),
           short="experiment"),
     Field("study_seeds", "seeds N", "integer", lo=2, hi=MAX_APP_SEEDS, short="seeds N"),
     Field("study_first", "first seed", "integer", lo=0, hi=10**6, short="first seed"),
@@ -54,12 +56,20 @@ STUDY_FORM = (Group("Study over noise seeds", (
           short="model in the loop"),
     Field("study_noise", "position noise σ", "number", unit="mm", lo=0.0, hi=10.0, short="position noise σ",
           tip="transfer function: white noise added to the recorded x"),
+    Field("study_gb_params", "parameters to estimate", "text", short="parameters",
+          tip="grey-box: comma-separated, e.g. M, B, Af, beta_e (the rest held at tab 1's values)"),
+    Field("study_gb_measured", "signals measured", "text", short="measured",
+          tip="grey-box: comma-separated, of x, v, p1, p2 (x alone works)"),
+    Field("study_snr", "signal-to-noise ratio", "number", unit="dB", lo=0.0, hi=80.0, short="SNR",
+          tip="grey-box: white noise on each measured signal, its σ the clean signal's spread / 10^(SNR/20); "
+              "the paper's u = 6 sin(4πt) and a load 5000 sin(2πt) N the model knows, 5 s at 1 ms"),
 )),)
 STUDY_DEFAULTS = {"study_kind": "lse", "study_seeds": "100", "study_first": "0", "study_white": "1000",
-                  "study_dmodel": "constant", "study_model": "linear", "study_noise": "0.1", "study_estimator": "ls"}
+                  "study_dmodel": "constant", "study_model": "linear", "study_noise": "0.1", "study_estimator": "ls",
+                  "study_gb_params": "M, B, Af, beta_e", "study_gb_measured": "x, p1, p2", "study_snr": "30"}
 _FIELDS = {f.name: f for g in STUDY_FORM for f in g.fields}
-_LSE_ONLY = ("study_white", "study_dmodel", "study_estimator")
-_TF_ONLY = ("study_model", "study_noise")
+_ONLY = {"lse": ("study_white", "study_dmodel", "study_estimator"), "tf": ("study_model", "study_noise"),
+         "greybox": ("study_gb_params", "study_gb_measured", "study_snr")}
 #: At most this many progress updates a second reach the page.
 _PROGRESS_HZ = 8.0
 
@@ -70,7 +80,8 @@ def plain_name(name: str) -> str:
 
 
 def study_hidden(texts: dict) -> list[str]:
-    return list(_TF_ONLY if texts.get("study_kind", "lse") == "lse" else _LSE_ONLY)
+    kind = texts.get("study_kind", "lse")
+    return [f for k, fields in _ONLY.items() if k != kind for f in fields]
 
 
 class StudyFigure:
@@ -188,6 +199,8 @@ class StudyPanel(Section):
         values, errors = parse_fields(_FIELDS.values(), texts, skip=set(study_hidden(texts)))
         if errors:
             return None, errors
+        if values["study_kind"] == "greybox":
+            return self._greybox_config(values, texts)
         if values["study_kind"] == "lse":
             sigma = values["study_white"]
             cfg = StudyConfig("lse", n_seeds=values["study_seeds"], first_seed=values["study_first"],
@@ -199,6 +212,21 @@ class StudyPanel(Section):
                               noise_m=values["study_noise"] * 1e-3)
         return cfg, {}
 
+    def _greybox_config(self, values: dict, texts: dict):
+        from eha_core.identify.greybox_study import GreyBoxStudyConfig
+        from eha_core.study import StudyConfig
+
+        from .greybox import listed_params, listed_signals
+
+        names, msg_p = listed_params(texts.get("study_gb_params", ""))
+        measured, msg_m = listed_signals(texts.get("study_gb_measured", ""))
+        errors = {k: m for k, m in (("study_gb_params", msg_p), ("study_gb_measured", msg_m)) if m}
+        if errors:
+            return None, errors
+        g = GreyBoxStudyConfig(params=names, measured=measured, snr_db=float(values["study_snr"]))
+        return StudyConfig("greybox", n_seeds=values["study_seeds"], first_seed=values["study_first"],
+                           greybox=g), {}
+
     def _update_enabled(self, *_events) -> None:
         cfg, errors = self.config()
         self.form.errors = errors
@@ -207,7 +235,7 @@ class StudyPanel(Section):
 
     #: Seeds per job (about a second of one worker): between two jobs of a long study the queue
     #: serves the other students, so a 500-seed study never holds a worker for long.
-    CHUNK_SEEDS = {"lse": 40, "tf": 6}
+    CHUNK_SEEDS = {"lse": 40, "tf": 6, "greybox": 3}
 
     def run(self):
         """Run the study in short jobs on the server's pool; the page shows the progress and the
@@ -336,6 +364,7 @@ def study_summary_html(result) -> str:
 
     names = tuple(result.parameters)
     lo, hi = result.coverage_band()
+    bounded = bool(result.bound)
     rows = []
     for n in names:
         nom = result.nominal.get(n, np.nan)
@@ -354,9 +383,14 @@ def study_summary_html(result) -> str:
         else:
             verdict = "—"
         unit = UNITS.get(n, "")
+        crb = ""
+        if bounded:
+            b = result.bound.get(n, np.nan)
+            ratio = result.std[n] / b if np.isfinite(b) and b > 0 else np.nan
+            crb = f"<td>{_n(b, 3)}</td><td>{_n(ratio, 3)}</td>"
         rows.append(f"<tr><td>{SYMBOLS_HTML.get(n, html.escape(n))}{f' [{unit}]' if unit else ''}</td>"
                     f"<td>{_n(nom)}</td><td>{_n(result.mean[n])}</td><td>{_n(bias)}</td><td>{verdict}</td>"
-                    f"<td>{_n(result.std[n], 3)}</td><td>{_n(result.mean_std_error[n], 3)}</td>"
+                    f"<td>{_n(result.std[n], 3)}</td><td>{_n(result.mean_std_error[n], 3)}</td>{crb}"
                     f"<td>{cov * 100:.1f} % {'✓' if honest else '✗'}</td></tr>")
     done = (f"{result.n_completed} of {result.n_requested} seeds" + (" (cancelled)" if result.cancelled else "")
             + f" in {result.elapsed_s:.1f} s")
@@ -367,13 +401,18 @@ def study_summary_html(result) -> str:
            "<div class='eha-table-scroll'><table class='eha-table eha-study-table'>"
            "<tr><th>parameter</th><th>nominal</th><th>mean</th>"
            "<th>bias (mean − nominal)</th><th>bias / its std error</th>"
-           "<th>spread (std)</th><th>mean reported std error</th><th>95 % interval covered the truth</th></tr>"
+           "<th>spread (std)</th><th>mean reported std error</th>"
+           + ("<th>Cramér-Rao bound</th><th>spread / bound</th>" if bounded else "")
+           + "<th>95 % interval covered the truth</th></tr>"
            + "".join(rows) + "</table></div>"
            f"<p class='eha-note'>{done}. An honest 95 % interval covers the truth in {lo * 100:.1f}-"
            f"{hi * 100:.1f} % of {result.n_successful} seeds (binomial, 99 %): ✓ inside that range, ✗ outside. "
            "Where the spread is larger than the reported standard error, a single run's interval is too "
            "narrow. The bias is measured against its own standard error (spread / √seeds): beyond ±2.58 (99 %) "
-           "the estimator is biased, not unlucky.</p>"
+           "the estimator is biased, not unlucky."
+           + (" The Cramér-Rao bound is the smallest spread an unbiased estimate can have on this experiment "
+              "(from the Fisher information at the truth): a spread / bound near 1 wastes nothing of the data."
+              if bounded else "") + "</p>"
            f"<p class='eha-note eha-study-legend'>Histograms: {swatches}</p>")
     if result.message and result.message != "ok":
         out += f"<p class='eha-note'>{html.escape(result.message)}</p>"

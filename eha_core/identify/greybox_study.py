@@ -53,7 +53,7 @@ from ..signals import Sine
 from .greybox import _LINEAR_SCALE, GREYBOX_SIGNALS, _value, greybox_data, identify_greybox, simulate_with_sensitivities
 
 __all__ = ["GreyBoxStudyConfig", "GreyBoxStudyResult", "run_greybox_study", "cramer_rao", "cramer_rao_bound",
-           "snr_noise"]
+           "snr_noise", "greybox_seed", "study_setup", "bound_with_held"]
 
 _ROWS = {"x": 0, "v": 1, "p1": 2, "p2": 3}
 #: The load the model knows: 5000 sin(2 pi t) N.
@@ -191,23 +191,17 @@ def run_greybox_study(config: GreyBoxStudyConfig | None = None, *, workers: int 
                       cancel: CancelToken | None = None) -> GreyBoxStudyResult:
     """Run the study (seeds on ``workers`` threads: the simulator's kernel releases the GIL).
     ``cancel`` stops it after the seeds under way; the result then holds the seeds completed."""
-    from ..experiments import LSE_INPUT
-
     config = config or GreyBoxStudyConfig()
     truth = config.plant
     guess = config.guess if config.guess is not None else ActuatorParams()
     t0 = time.perf_counter()
-    noise = snr_noise(truth, config.snr_db, config.measured, t_end=config.t_end, dt=config.dt)
-    clean = greybox_data(truth, LSE_INPUT, t_end=config.t_end, dt=config.dt, d=LOAD, measured=config.measured)
-    crb = cramer_rao_bound(truth, config.params, clean, noise)
+    noise, clean, crb = study_setup(config, truth)
 
     def one(seed):
         if cancel is not None and cancel.cancelled:
             return seed, None
-        data = greybox_data(truth, LSE_INPUT, t_end=config.t_end, dt=config.dt, d=LOAD, noise=noise, seed=seed,
-                            measured=config.measured)
         try:
-            res = identify_greybox(data, config.params, measured=config.measured, guess=guess, cancel=cancel)
+            res = greybox_seed(config, truth, guess, noise, seed, cancel)
         except Exception as exc:                    # one seed's failure is a count, not the study's end
             return seed, f"seed {seed}: {type(exc).__name__}: {exc}"
         return seed, res
@@ -226,14 +220,42 @@ def run_greybox_study(config: GreyBoxStudyConfig | None = None, *, workers: int 
                 continue
             rows.append({"seed": seed, "estimates": dict(res.estimates), "std_errors": dict(res.std_errors),
                          "ci95": {k: list(v) for k, v in res.ci95.items()}, "held": list(res.held)})
-    # a parameter the estimator held (at its guess) in most seeds is known to the rest of the estimate: their
-    # bound is then the one with it known (narrower when it is correlated with them); its own, of them all
-    held = {n for n in config.params if 2 * sum(n in r["held"] for r in rows) > len(rows)}
-    free = tuple(n for n in config.params if n not in held)
-    if held and free:
-        crb = {**crb, **cramer_rao_bound(truth, free, clean, noise)}
+    crb = bound_with_held(crb, truth, config.params, clean, noise, [r["held"] for r in rows])
     return _summary(config, truth, noise, crb, rows, failures, time.perf_counter() - t0,
                     bool(cancel is not None and cancel.cancelled))
+
+
+def greybox_seed(config: GreyBoxStudyConfig, truth: ActuatorParams, guess: ActuatorParams, noise: dict, seed: int,
+                 cancel: CancelToken | None = None):
+    """One seed of the study: the record of ``truth`` with the noise drawn from ``seed``, estimated from
+    ``guess`` (a :class:`~eha_core.identify.greybox.GreyBoxResult`)."""
+    from ..experiments import LSE_INPUT
+
+    data = greybox_data(truth, LSE_INPUT, t_end=config.t_end, dt=config.dt, d=LOAD, noise=noise, seed=seed,
+                        measured=config.measured)
+    return identify_greybox(data, config.params, measured=config.measured, guess=guess, cancel=cancel)
+
+
+def study_setup(config: GreyBoxStudyConfig, truth: ActuatorParams):
+    """(noise σ per measured signal, the clean record, the Cramér-Rao bound with every parameter free) of
+    the study of ``config`` on ``truth``."""
+    from ..experiments import LSE_INPUT
+
+    noise = snr_noise(truth, config.snr_db, config.measured, t_end=config.t_end, dt=config.dt)
+    clean = greybox_data(truth, LSE_INPUT, t_end=config.t_end, dt=config.dt, d=LOAD, measured=config.measured)
+    return noise, clean, cramer_rao_bound(truth, config.params, clean, noise)
+
+
+def bound_with_held(crb: dict, truth: ActuatorParams, names, clean, noise: dict, held_per_seed) -> dict:
+    """The bound the seeds are measured against: a parameter the estimator held (at its guess) in most
+    seeds is known to the rest of the estimate, so their bound is the one with it known (narrower when it
+    is correlated with them); its own stays that of them all."""
+    held_per_seed = list(held_per_seed)
+    held = {n for n in names if 2 * sum(n in h for h in held_per_seed) > len(held_per_seed)}
+    free = tuple(n for n in names if n not in held)
+    if held and free:
+        return {**crb, **cramer_rao_bound(truth, free, clean, noise)}
+    return dict(crb)
 
 
 def _summary(config, truth, noise, crb, rows, failures, elapsed, cancelled) -> GreyBoxStudyResult:

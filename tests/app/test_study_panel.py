@@ -139,3 +139,37 @@ def test_histograms_of_estimates_near_the_largest_float_are_drawn_not_refused():
         fig.update(result)
     assert sum(fig.sources["M"].data["top"]) == 3 and sum(fig.sources["beta_e"].data["top"]) == 2
     assert sum(fig.sources["B"].data["top"]) == 1 and fig.figs[1].title.text.startswith("B: mean")
+
+
+def test_a_grey_box_study_on_tab_1s_actuator_against_the_cramer_rao_bound():
+    import dataclasses
+
+    from eha_core.identify.greybox_study import GreyBoxStudyConfig
+    from eha_core.study import StudyConfig, run_study
+
+    session = Session(AppState())
+    session.state.set_text("M", "5000")
+    panel = session.build("study")
+    panel.CHUNK_SEEDS = {**panel.CHUNK_SEEDS, "greybox": 2}       # two jobs: 2 and 2 seeds
+    panel.form.values = {**panel.form.values, "study_kind": "greybox", "study_seeds": "4",
+                         "study_gb_params": "M, βe", "study_gb_measured": "x, p2", "study_snr": "40"}
+    assert {"study_white", "study_noise"} <= set(panel.form.hidden) and "study_snr" not in panel.form.hidden
+    panel.run()
+    res = panel.result
+    assert [p.n_requested for p in panel._parts] == [2, 2] and res.n_completed == 4 and not res.cancelled
+    assert res.parameters == ("M", "beta_e") and res.nominal["M"] == 5000.0          # tab 1's actuator
+    # the same seeds as the core's study run at once
+    cfg = StudyConfig("greybox", n_seeds=4, greybox=GreyBoxStudyConfig(params=("M", "beta_e"), measured=("x", "p2"),
+                                                                       snr_db=40.0))
+    direct = run_study(cfg, session.state.params, workers=1)
+    for name in res.parameters:
+        np.testing.assert_allclose(res.values(name), direct.values(name), rtol=1e-12)
+    assert res.bound == direct.bound and all(b > 0 for b in res.bound.values())
+    # the intervals counted are the estimator's own (log-scale for a positive parameter): asymmetric
+    lo, hi = res.seeds[0].interval("M")
+    assert hi - res.seeds[0].estimates["M"] > res.seeds[0].estimates["M"] - lo
+    assert "Cramér-Rao bound" in panel.summary.object and "spread / bound" in panel.summary.object
+    # the form refuses what the estimator would
+    panel.form.values = {**panel.form.values, "study_gb_params": "M, Q"}
+    assert "Q is not one of" in panel.form.errors["study_gb_params"] and panel.button.disabled
+    assert dataclasses.replace(cfg, n_seeds=2).greybox is cfg.greybox

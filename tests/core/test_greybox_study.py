@@ -98,3 +98,27 @@ def test_a_parameter_held_in_the_seeds_is_known_in_the_others_bound():
     assert res.crb["B"] == pytest.approx(everything["B"], rel=1e-12)
     d = json.loads(json.dumps(res.to_dict(), allow_nan=False))
     assert d["coverage"]["B"] is None and d["held"]["B"] == 2
+
+
+def test_the_study_module_runs_the_same_grey_box_seeds_in_parts():
+    import dataclasses
+
+    from eha_core.study import StudyConfig, combine_studies, run_study
+
+    g = GreyBoxStudyConfig(n_seeds=6, t_end=2.0)
+    alone = run_greybox_study(g, workers=1)
+    cfg = StudyConfig("greybox", n_seeds=6, greybox=g)
+    parts = [run_study(dataclasses.replace(cfg, n_seeds=4), workers=2),
+             run_study(dataclasses.replace(cfg, first_seed=4, n_seeds=2), workers=1)]
+    both = combine_studies(cfg, parts)
+    assert both.n_completed == 6 and both.nominal_is_truth and both.message == "ok"
+    for n in g.params:
+        assert both.mean[n] == pytest.approx(alone.mean[n], rel=1e-12)
+        assert both.std[n] == pytest.approx(alone.std[n], rel=1e-9)
+        assert both.coverage[n] == alone.coverage[n]             # the same (log-scale) intervals counted
+        assert both.bound[n] == pytest.approx(alone.crb[n], rel=1e-12)
+    json.dumps(both.to_dict())
+    with pytest.raises(ValueError, match="disturbance = white:10 is not allowed: the grey-box study's load"):
+        StudyConfig("greybox", disturbance="white:10")
+    with pytest.raises(ValueError, match="greybox = 3 is not allowed"):
+        StudyConfig("greybox", greybox=3)

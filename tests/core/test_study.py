@@ -229,7 +229,7 @@ def test_failed_seeds_are_data_left_out_of_the_statistics():
     ({"n_seeds": 0}, "n_seeds = 0 is not allowed: use 1 to 1000 seeds"),
     ({"n_seeds": MAX_SEEDS + 1}, "n_seeds = 1001 is not allowed: use 1 to 1000 seeds"),
     ({"n_seeds": 2.5}, "n_seeds = 2.5 is not allowed"),
-    ({"kind": "arx"}, "kind = arx is not allowed: use lse (least squares) or tf (transfer function)"),
+    ({"kind": "arx"}, "kind = arx is not allowed: use lse (least squares), tf (transfer function) or greybox"),
     ({"first_seed": -1}, "first_seed = -1 is not allowed"),
     ({"disturbance": "white:1000:3"}, "disturbance = white:1000:3 is not allowed: its noise term"),
     ({"disturbance_model": "linear"}, "disturbance_model = linear is not allowed"),
