@@ -51,7 +51,7 @@ import time
 import numpy as np
 
 from eha_core.experiments import LSE_INPUT
-from eha_core.identify.greybox import _noise_guess, greybox_data, identify_greybox, simulate_with_sensitivities
+from eha_core.identify.greybox import greybox_data, identify_greybox, noise_guess, simulate_with_sensitivities
 from eha_core.model import derivatives, pack_params
 from eha_core.params import ActuatorParams
 from eha_core.signals import Sine
@@ -174,7 +174,7 @@ def main(argv=None):
               f"({(ref.estimates[n] - getattr(TRUTH, n)) / ref.std_errors[n]:+.2f} SE)")
     # the σ identify_greybox weighted its fit with: its first guess from the data (it refits with the
     # residuals' σ only when they differ by more than 20 %; said below if they did)
-    sigma = np.array([_noise_guess(data.signals[s]) for s in MEASURED])
+    sigma = np.array([noise_guess(data.signals[s]) for s in MEASURED])
     refit = max(abs(np.log(ref.noise_std[s] / sigma[k])) for k, s in enumerate(MEASURED)) > np.log(1.2)
     print("  weighting: " + ", ".join(f"{s} σ {sigma[k]:.4g}" for k, s in enumerate(MEASURED))
           + (" (identify_greybox refitted with its residuals' σ: the baseline's weighting differs)" if refit else ""))

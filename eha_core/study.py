@@ -660,13 +660,13 @@ class _GreyBoxPlan:
     from the paper's values; its noise and Cramér-Rao bound computed once per actuator and experiment."""
 
     def __init__(self, config: StudyConfig, params: ActuatorParams):
-        from .identify.greybox import _value
+        from .identify.greybox import param_value
 
         g = config.greybox
         self.config, self.params, self.greybox = config, params, g
         self.guess = g.guess if g.guess is not None else ActuatorParams()
         self.parameters = g.params
-        self.nominal = {n: _value(params, n) for n in g.params}
+        self.nominal = {n: param_value(params, n) for n in g.params}
         self.nominal_is_truth = True
         self.reference = ("the parameters simulated (the truth); every seed's estimate starts from the paper's "
                           "values")

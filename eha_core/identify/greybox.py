@@ -65,7 +65,7 @@ from ..params import ActuatorParams
 from ..signals import ZERO, Signal
 
 __all__ = ["GREYBOX_PARAMS", "GREYBOX_SIGNALS", "GreyBoxData", "GreyBoxResult", "greybox_data", "identify_greybox",
-           "simulate_with_sensitivities", "identifiability"]
+           "simulate_with_sensitivities", "identifiability", "noise_guess", "param_value", "LINEAR_SCALE"]
 
 #: What can be estimated: the model's parameters and the initial state.
 GREYBOX_PARAMS = ("M", "B", "Af", "beta_e", "Kq1", "Kq2", "L0", "k_f", "d0", "x0", "v0", "p1_0", "p2_0")
@@ -74,7 +74,7 @@ GREYBOX_SIGNALS = ("x", "v", "p1", "p2")
 _STATE_INDEX = {"x0": 0, "v0": 1, "p1_0": 2, "p2_0": 3}
 _SIGNAL_INDEX = {"x": 0, "v": 1, "p1": 2, "p2": 3}
 #: A parameter that may be 0 or negative is estimated as a multiple of this scale (SI).
-_LINEAR_SCALE = {"d0": 1000.0, "x0": 0.01, "v0": 0.01}
+LINEAR_SCALE = {"d0": 1000.0, "x0": 0.01, "v0": 0.01}
 Z95 = 1.959963984540054
 #: The states' scales in multiple shooting (x, v, p1, p2 in SI): a segment's initial state is
 #: estimated in these units.
@@ -173,15 +173,15 @@ class _Setup:
     def params_at(self, z: np.ndarray) -> ActuatorParams:
         values = {}
         for n, lg, zj in zip(self.names, self.log, z, strict=True):
-            values[n] = math.exp(zj) if lg else zj * _LINEAR_SCALE[n]
+            values[n] = math.exp(zj) if lg else zj * LINEAR_SCALE[n]
         return self.base.replace(**values)
 
     def z_of(self, params: ActuatorParams) -> np.ndarray:
-        return np.array([math.log(_value(params, n)) if lg else _value(params, n) / _LINEAR_SCALE[n]
+        return np.array([math.log(param_value(params, n)) if lg else param_value(params, n) / LINEAR_SCALE[n]
                          for n, lg in zip(self.names, self.log, strict=True)])
 
 
-def _value(params: ActuatorParams, name: str) -> float:
+def param_value(params: ActuatorParams, name: str) -> float:
     return float(params.initial_state[_STATE_INDEX[name]]) if name == "p2_0" else float(getattr(params, name))
 
 
@@ -196,7 +196,7 @@ def simulate_with_sensitivities(params: ActuatorParams, names, data: GreyBoxData
     from .. import _kernels as K
 
     names = tuple(names)
-    log = tuple(log) if log is not None else tuple(n not in _LINEAR_SCALE for n in names)
+    log = tuple(log) if log is not None else tuple(n not in LINEAR_SCALE for n in names)
     h, sub, ctrl_every, n_steps, n_out, u_st, d_st, r_st, ctrl, kp = _inputs(data)
     prm = pack_params(params)
     P = len(names) + (4 if initial is not None else 0)
@@ -207,7 +207,7 @@ def simulate_with_sensitivities(params: ActuatorParams, names, data: GreyBoxData
     if initial is not None:
         s0[:, len(names):] = np.diag(STATE_SCALE)
     for j, (n, lg) in enumerate(zip(names, log, strict=True)):
-        scale = _value(params, n) if lg else _LINEAR_SCALE[n]
+        scale = param_value(params, n) if lg else LINEAR_SCALE[n]
         if n in PARAM_INDEX and n not in _STATE_INDEX:
             pidx[j], pstep[j] = PARAM_INDEX[n], scale
         if initial is not None:
@@ -215,8 +215,8 @@ def simulate_with_sensitivities(params: ActuatorParams, names, data: GreyBoxData
         # the initial state's sensitivity: directly for x0, v0, p1(0), p2(0); through the force balance
         # of a blank p2(0) for the parameters it depends on (d0, p1(0), ...), by a difference (it is linear)
         eps = 1e-6
-        up = params.replace(**{n: _value(params, n) + eps * scale})
-        dn = params.replace(**{n: _value(params, n) - eps * scale})
+        up = params.replace(**{n: param_value(params, n) + eps * scale})
+        dn = params.replace(**{n: param_value(params, n) - eps * scale})
         s0[:, j] = (up.initial_state - dn.initial_state) / (2 * eps)
     check(cancel)
     out = np.zeros((n_out, 4))
@@ -258,7 +258,7 @@ def _inputs(data: GreyBoxData):
     return _INPUTS[data]
 
 
-def _noise_guess(y: np.ndarray) -> float:
+def noise_guess(y: np.ndarray) -> float:
     """σ of white noise on a smooth signal: its second differences' spread (the signal's own
     curvature at 1 kHz is far below the noise), robustly (median absolute deviation)."""
     d2 = np.diff(y, 2)
@@ -376,8 +376,8 @@ def _check_request(data, names, measured, guess):
         raise not_allowed("record", f"{data.t.size} samples", f"too short for {len(names)} parameters: give at least "
                                                               f"{math.ceil(10 * len(names) / len(measured))} samples")
     for n in names:
-        if n not in _LINEAR_SCALE and not _value(guess, n) > 0:
-            raise not_allowed(n, _value(guess, n), "the initial guess of a positive parameter must be > 0")
+        if n not in LINEAR_SCALE and not param_value(guess, n) > 0:
+            raise not_allowed(n, param_value(guess, n), "the initial guess of a positive parameter must be > 0")
 
 
 def identify_greybox(data: GreyBoxData, params=("M", "B", "Af", "beta_e"), *, measured=None,
@@ -398,14 +398,14 @@ def identify_greybox(data: GreyBoxData, params=("M", "B", "Af", "beta_e"), *, me
     _check_request(data, names, measured, guess)
     rows = [_SIGNAL_INDEX[s] for s in measured]
     y_meas = np.stack([data.signals[s] for s in measured], axis=1)
-    sigma = np.array([_noise_guess(data.signals[s]) for s in measured])
+    sigma = np.array([noise_guess(data.signals[s]) for s in measured])
     sigma = np.maximum(sigma, 1e-9 * (np.std(y_meas, axis=0) + 1e-30))
     held, sentences = _held_at_guess(data, names, guess, rows, sigma, hold_unidentifiable, cancel)
     free = tuple(n for n in names if n not in held)
     if not free:
         raise ComputationError("the data determine none of the parameters asked: "
                                + "; ".join(s for _, s in sentences))
-    setup = _Setup(free, tuple(n not in _LINEAR_SCALE for n in free), guess, data)
+    setup = _Setup(free, tuple(n not in LINEAR_SCALE for n in free), guess, data)
     if shooting not in ("single", "multiple"):
         raise not_allowed("shooting", shooting, "use single or multiple")
     ms_nfev = 0
@@ -449,7 +449,7 @@ def _context(states, data, params) -> dict:
 
 def _held_at_guess(data, names, guess, rows, sigma, hold, cancel):
     """The parameters the data do not determine at the initial guess (held there) and why."""
-    log = tuple(n not in _LINEAR_SCALE for n in names)
+    log = tuple(n not in LINEAR_SCALE for n in names)
     try:
         out0, s0 = simulate_with_sensitivities(guess, names, data, log=log, cancel=cancel)
     except ComputationError as exc:
@@ -632,16 +632,16 @@ def _statistics(J, setup, est_params, names, held, guess):
     se_z = np.sqrt(np.clip(np.diag(cov_z), 0, None))
     estimates, std_errors, ci95 = {}, {}, {}
     for j, (n, lg) in enumerate(zip(setup.names, setup.log, strict=True)):
-        value = _value(est_params, n)
+        value = param_value(est_params, n)
         estimates[n] = value
         if lg:
             std_errors[n] = value * se_z[j]
             ci95[n] = (value * math.exp(-Z95 * se_z[j]), value * math.exp(Z95 * se_z[j]))
         else:
-            std_errors[n] = _LINEAR_SCALE[n] * se_z[j]
+            std_errors[n] = LINEAR_SCALE[n] * se_z[j]
             ci95[n] = (value - Z95 * std_errors[n], value + Z95 * std_errors[n])
     for n in held:
-        estimates[n], std_errors[n], ci95[n] = _value(guess, n), math.nan, (math.nan, math.nan)
+        estimates[n], std_errors[n], ci95[n] = param_value(guess, n), math.nan, (math.nan, math.nan)
     d = np.sqrt(np.clip(np.diag(cov_z), 1e-300, None))
     corr_free = cov_z / np.outer(d, d)
     corr = np.full((len(names), len(names)), np.nan)

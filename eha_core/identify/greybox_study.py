@@ -50,7 +50,14 @@ from .._checks import not_allowed
 from ..cancel import CancelToken
 from ..params import ActuatorParams
 from ..signals import Sine
-from .greybox import _LINEAR_SCALE, GREYBOX_SIGNALS, _value, greybox_data, identify_greybox, simulate_with_sensitivities
+from .greybox import (
+    GREYBOX_SIGNALS,
+    LINEAR_SCALE,
+    greybox_data,
+    identify_greybox,
+    param_value,
+    simulate_with_sensitivities,
+)
 
 __all__ = ["GreyBoxStudyConfig", "GreyBoxStudyResult", "run_greybox_study", "cramer_rao", "cramer_rao_bound",
            "snr_noise", "greybox_seed", "study_setup", "bound_with_held"]
@@ -122,13 +129,13 @@ def cramer_rao_bound(params: ActuatorParams, names, data, sigma: dict) -> dict[s
     sensitivities at ``params``. A positive parameter's is its value times its logarithm's (the
     estimator's scale; to first order the same)."""
     names = tuple(names)
-    log = tuple(n not in _LINEAR_SCALE for n in names)
+    log = tuple(n not in LINEAR_SCALE for n in names)
     _, sens = simulate_with_sensitivities(params, names, data, log=log)
     rows = [_ROWS[s] for s in sigma]
     w = np.array([sigma[s] for s in sigma])
     J = (sens[:, rows, :] / w[None, :, None]).reshape(-1, len(names))
     bound = cramer_rao(J)
-    return {n: float(bound[j] * (_value(params, n) if lg else _LINEAR_SCALE[n]))
+    return {n: float(bound[j] * (param_value(params, n) if lg else LINEAR_SCALE[n]))
             for j, (n, lg) in enumerate(zip(names, log, strict=True))}
 
 
@@ -262,7 +269,7 @@ def _summary(config, truth, noise, crb, rows, failures, elapsed, cancelled) -> G
     stats = {k: {} for k in ("truth", "mean", "std", "mean_std_error", "bias_se", "coverage", "std_over_crb",
                              "held")}
     for n in config.params:
-        true = _value(truth, n)
+        true = param_value(truth, n)
         live = [r for r in rows if n not in r["held"]]
         est = np.array([r["estimates"][n] for r in live])
         se = np.array([r["std_errors"][n] for r in live])
