@@ -26,6 +26,7 @@ from ..render.tables import (
     freq_summary_html,
 )
 from ..runtime.limits import check_frequency
+from ..runtime.shared import shared_results
 from ..runtime.tasks import apply_locked, held, on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot, stale_note
 from ..session.form import Field, Form, Group, parse_fields, raised_to_bounds, regrouped, with_lower_bounds
@@ -438,9 +439,13 @@ class FrequencyPanel(Section):
 
         hidden = self.state.hidden
 
-        def compute(token):
+        def experiment(token):
             fi = run_frequency_identification(params, cfg, cancel=token)
             return fi, plots.frequency_view(fi, hidden)
+
+        def compute(token):
+            # a function of these alone: students with the same actuator and settings share it
+            return shared_results.get(("frequency", params, cfg, bool(hidden)), experiment, token)
 
         def show(out, job):
             fi, view = out

@@ -41,6 +41,7 @@ from ..render.tables import (
     table4_html,
 )
 from ..runtime.limits import check_lse
+from ..runtime.shared import shared_results
 from ..runtime.tasks import apply_locked, on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot, run_off_notice, stale_note
 from ..session.form import Field, Form, Group, parse_fields, raised_to_bounds, regrouped, with_lower_bounds
@@ -180,6 +181,24 @@ def velocity_from_position(data):
     """The record without a velocity sensor: v as the central difference of the measured x (its noise
     amplified by 1/Ts; the least squares' filter H(s) of eqs. 16-18 then smooths it like the others)."""
     return dataclasses.replace(data, v=np.gradient(data.x, data.t), source=data.source + ", v from dx/dt")
+
+
+def _simulated_run(params, req, disturbance, u, t_end, measured, board_model, token):
+    """The least squares on a simulated experiment: the record (as the sensors measure it), the estimate,
+    its re-simulation, the board's model and the harmonic model beside (see ``LeastSquaresPanel.run``)."""
+    data = lse_data(params, disturbance(req), u=u, t_end=t_end, seed=req.seed,
+                    measurement_noise=req.measurement_noise(), cancel=token)
+    if "v" not in measured:
+        data = velocity_from_position(data)
+    res = identify_lse(data, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
+                       estimator=req.estimator, cancel=token)
+    try:
+        resim = lse_resimulation(res, params, data, u=u, cancel=token)
+        resim_error = ""
+    except ParameterError as exc:
+        resim, resim_error = None, f"No re-simulation: the estimate is not physical ({exc})."
+    return (res, plots.lse_view(data, resim), resim_error, data, resim, board_model(res),
+            _beside(req.model, res, data, params, token))
 
 
 def _beside(model: str, res, data, params, token):
@@ -572,20 +591,11 @@ class LeastSquaresPanel(Section):
                                                          "samples): the model is not re-simulated (the input is "
                                                          "known only at its samples)."), own, None, board_model(res),
                         _beside(req.model, res, own, params, token))
-            d = self._disturbance(req)
-            data = lse_data(params, d, u=u, t_end=t_end, seed=req.seed, measurement_noise=req.measurement_noise(),
-                            cancel=token)
-            if "v" not in measured:
-                data = velocity_from_position(data)
-            res = identify_lse(data, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
-                               estimator=req.estimator, cancel=token)
-            try:
-                resim = lse_resimulation(res, params, data, u=u, cancel=token)
-                resim_error = ""
-            except ParameterError as exc:
-                resim, resim_error = None, f"No re-simulation: the estimate is not physical ({exc})."
-            return (res, plots.lse_view(data, resim), resim_error, data, resim, board_model(res),
-                    _beside(req.model, res, data, params, token))
+            return shared_results.get(shared_key, simulated, token)
+
+        # a simulated run is a function of these alone: students with the same inputs share it
+        simulated = partial(_simulated_run, params, req, self._disturbance, u, t_end, measured, board_model)
+        shared_key = ("least squares", params, req, tuple(measured), self._disturbance_text(req), kp, what)
 
         def show(out, job):
             res, view, resim_error, data, resim, model, (alt, leak) = out

@@ -19,6 +19,7 @@ from eha_core.simulate import runs_to_pandas, simulate_many
 from ..render.layout import side_by_side
 from ..render.plots import TimeSeriesGrid
 from ..runtime.limits import check_simulation
+from ..runtime.shared import shared_results
 from ..runtime.tasks import apply_locked, on_click, watch
 from ..session import ReportPart, Section, SectionSnapshot, stale_note
 from ..session.form import (
@@ -539,8 +540,12 @@ class SimulationTab(Section):
         if not auto:
             self.view.inputs_changed(key, updating=True)
         self._pending_key = key
-        return self.runner.run(f"simulation ({model})", lambda token: compute_runs(params, req, model, token, measured),
-                               show, fail=fail, busy=[] if auto else [self.plot_area],
+        def compute(token):
+            # a function of these alone: students with the same inputs share it
+            key = ("simulation", params, req, model, None if measured is None else tuple(measured))
+            return shared_results.get(key, lambda tok: compute_runs(params, req, model, tok, measured), token)
+
+        return self.runner.run(f"simulation ({model})", compute, show, fail=fail, busy=[] if auto else [self.plot_area],
                                note=(lambda _text: None) if auto else self._note)
 
     _UPDATING = "<span class='eha-sim-updating' style='color:#1a56c4'>⟳ updating to the new inputs… </span>"
