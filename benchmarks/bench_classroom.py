@@ -14,6 +14,8 @@ workflow of a lab:
   lse      "Run least squares"; done when the table arrived (an alert "... failed" is an error)
   freqtab  show tab 3's "Frequency domain: transfer function"
   freq     "Run experiment and estimate"; done when the summary shows Ĥ(s) (an alert is an error)
+  retype   back to tab 1 and type M again, every tab now built with results; done when the derived
+           values change
 
 Between steps a barrier: every student finishes (or times out, ``--timeout``,
 an error) before the next step; within a step each starts at a random moment
@@ -28,10 +30,19 @@ server sent per student, the server's CPU seconds, the observer's delays
 during the step; the server's memory (peak VmHWM and RSS, summed over its
 processes) and the client's own CPU time. The last line is
 
-    sessions=N errors=E open_p95=… compare_p95=… freq_ok=K/N observer_p95=…
+    sessions=N errors=E open_p95=… param_p95=… … retype_p95=… slowest=STEP typing_p95_worst_step=…
+    peak_mb=… cpu_per_student=… freq_ok=K/N observer_p95=…
 
-for the largest N (E counts failed or timed-out steps, the server's ERROR
+for the largest N (typing_p95_worst_step: the observer's p95 in the step where it was slowest;
+cpu_per_student: the server's CPU seconds over the steps / N; E counts failed or timed-out steps, the server's ERROR
 replies, broken connections and failed observer changes).
+
+``--distinct`` gives each student values of M of their own: no two runs alike, nothing the
+server can share (it computes a run once for the students with the same inputs).
+
+``--hog study`` (or ``spam``) runs the largest class twice in the same run, without and then with
+one more student who runs a 500-seed study throughout (or presses the study's run and cancel
+buttons every 0.3 s), and prints the other students' p50 and p95 per step with / without.
 
 ``--churn K`` instead opens and closes K sessions, 10 at a time, and prints
 the server's memory every 50 sessions and after the server discarded them.
@@ -62,9 +73,9 @@ from pathlib import Path
 
 # run as a script, this file's folder is on the path: the client is a sibling module
 if __package__:
-    from .classroom_client import STEP_NAMES, STEPS, ClassResult, Student, do_step, run_class, wait_served
+    from .classroom_client import HOGS, STEP_NAMES, STEPS, ClassResult, Student, do_step, run_class, wait_served
 else:
-    from classroom_client import STEP_NAMES, STEPS, ClassResult, Student, do_step, run_class, wait_served
+    from classroom_client import HOGS, STEP_NAMES, STEPS, ClassResult, Student, do_step, run_class, wait_served
 
 ROOT = Path(__file__).resolve().parents[1]
 _TICK = os.sysconf("SC_CLK_TCK")
@@ -282,6 +293,14 @@ def report(r: ClassResult, extra: dict, out=print) -> dict:
     out(f"client CPU: {extra['client_cpu']:.1f} s for {n} students + observer over {extra['wall']:.0f} s "
         f"({100 * extra['client_cpu'] / max(extra['wall'], 1e-9):.0f}% of one core)")
     errors = r.error_count()
+    cpu = [v for v in extra["server_cpu"].values() if v is not None]
+    summary.update(observer_p95_by_step={step: pct([o.delay for o in r.observer if o.step == step
+                                                     and o.delay is not None], 95) for step in r.steps},
+                   cpu_per_student=sum(cpu) / n if cpu else float("nan"))
+    if r.hog_log:
+        runs = sum(1 for h in r.hog_log if h in ("run", "cancel"))
+        out(f"hog: {runs} press(es) of the study's buttons" + "".join(f"; {h}" for h in r.hog_log
+                                                                      if h.startswith("error"))[:300])
     summary.update(errors=errors, observer_p50=pct(obs_all, 50), observer_p95=pct(obs_all, 95),
                    observer_max=max(obs_all) if obs_all else None, memory_mb=mem,
                    client_cpu_s=extra["client_cpu"], wall_s=extra["wall"])
@@ -289,17 +308,25 @@ def report(r: ClassResult, extra: dict, out=print) -> dict:
 
 
 def summary_line(s: dict) -> str:
+    """The last line: every step's p95, the slowest step, typing on tab 1 in the step where it waited most,
+    the server's peak memory and CPU per student."""
     def p95(step):
         return s["steps"].get(step, {}).get("p95", float("nan"))
     freq = s["steps"].get("freq", {})
-    return (f"sessions={s['sessions']} errors={s['errors']} open_p95={p95('open'):.2f} "
-            f"compare_p95={p95('compare'):.2f} freq_ok={freq.get('ok', 0)}/{s['sessions']} "
-            f"observer_p95={s['observer_p95']:.2f}")
+    steps = [k for k in s["steps"] if k != "param"]
+    worst = max(steps, key=lambda k: p95(k) if not math.isnan(p95(k)) else -1) if steps else "-"
+    typing = [v for v in s.get("observer_p95_by_step", {}).values() if v is not None and not math.isnan(v)]
+    mem = (s.get("memory_mb") or {}).get("peak", float("nan"))
+    return (f"sessions={s['sessions']} errors={s['errors']} "
+            + " ".join(f"{k}_p95={p95(k):.2f}" for k in s["steps"])
+            + f" slowest={worst} typing_p95_worst_step={max(typing) if typing else float('nan'):.2f} "
+            f"peak_mb={mem:.0f} cpu_per_student={s.get('cpu_per_student', float('nan')):.2f} "
+            f"freq_ok={freq.get('ok', 0)}/{s['sessions']} observer_p95={s['observer_p95']:.2f}")
 
 
 # -- modes -------------------------------------------------------------------------------------
 
-def run_one(n: int, args, steps) -> tuple[dict, dict]:
+def run_one(n: int, args, steps, hog: str | None = None) -> tuple[dict, dict]:
     server = None if args.url else Server(args.procs)
     tree = server.tree if server else _tree_of(args.server_pid)
     try:
@@ -318,7 +345,8 @@ def run_one(n: int, args, steps) -> tuple[dict, dict]:
 
         c0, w0 = client_cpu(), time.perf_counter()
         result = asyncio.run(run_class(url, n, steps, spread=args.spread, timeout=args.timeout,
-                                       observer=not args.no_observer, seed=args.seed, on_step=on_step))
+                                       observer=not args.no_observer, seed=args.seed, on_step=on_step,
+                                       observer_period=args.observer_period, distinct=args.distinct, hog=hog))
         c1, w1 = client_cpu(), time.perf_counter()
         memory = None
         if tree:
@@ -328,7 +356,9 @@ def run_one(n: int, args, steps) -> tuple[dict, dict]:
     finally:
         if server:
             server.stop(keep_log=bool(problems))
-    extra = {"server": args.url or f"eha serve --num-procs {args.procs}", "server_cpu": server_cpu,
+    label = args.url or f"eha serve --num-procs {args.procs}"
+    label += (", each student their own M" if args.distinct else "") + (f", with a {hog} hog" if hog else "")
+    extra = {"server": label, "server_cpu": server_cpu,
              "memory": memory, "log_problems": problems, "client_cpu": c1 - c0, "wall": w1 - w0,
              "log_path": server.log_path if server else None}
     summary = report(result, extra)
@@ -409,6 +439,13 @@ def main(argv=None) -> int:
     ap.add_argument("--no-observer", action="store_true", help="no observer session")
     ap.add_argument("--seed", type=int, default=0, help="of the random start offsets")
     ap.add_argument("--json", help="write every raw timing to this file")
+    ap.add_argument("--distinct", action="store_true", help="each student types values of M of their own: no two "
+                    "runs alike, nothing the server can share between students")
+    ap.add_argument("--hog", choices=HOGS, help="at the largest size, run the class twice in this run: without, "
+                    "then with one more student who runs a 500-seed study (study) or presses the study's buttons "
+                    "every 0.3 s (spam); prints the others' p50 and p95 with / without")
+    ap.add_argument("--observer-period", type=float, default=2.0, help="the observer types every this many "
+                    "seconds (default 2)")
     ap.add_argument("--churn", type=int, default=0, metavar="K", help="instead: open and close K sessions, "
                     "10 at a time (steps: --steps, default open,param,tab2)")
     args = ap.parse_args(argv)
@@ -450,6 +487,21 @@ def main(argv=None) -> int:
             Path(args.json).write_text(json.dumps(raw, indent=1, default=str))
     base = summaries[0]
     largest = max(summaries, key=lambda s: s["sessions"])
+    if args.hog:
+        hogged, data = run_one(largest["sessions"], args, steps, hog=args.hog)
+        raw.append(data)
+        if args.json:
+            Path(args.json).write_text(json.dumps(raw, indent=1, default=str))
+        print(f"\nwith the {args.hog} hog / without, {largest['sessions']} students (target: within 1.15):")
+        worst = 0.0
+        for s in steps:
+            a, b = largest["steps"][s], hogged["steps"][s]
+            r50 = b["p50"] / a["p50"] if a["p50"] else float("nan")
+            r95 = b["p95"] / a["p95"] if a["p95"] else float("nan")
+            worst = max(worst, r50, r95) if s not in ("open", "param") else worst
+            print(f"  {STEP_NAMES.get(s, s):28s} p50 {a['p50']:.2f} -> {b['p50']:.2f} ({r50:.2f}x)   "
+                  f"p95 {a['p95']:.2f} -> {b['p95']:.2f} ({r95:.2f}x)")
+        print(f"hog={args.hog} worst_ratio={worst:.2f} (steps after open and param)")
     if largest is not base:
         ratios = []
         for s in steps:

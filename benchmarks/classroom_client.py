@@ -246,6 +246,9 @@ class StudentSession:
         self.roots: list[str] = []
         self.cookies: dict[str, str] = {}
         self.upstream = ""              # which backend served the page, if a proxy says so
+        # what the student types into M: on tab 1 first ("param"), and again once every tab is built
+        # ("retype"); a class with --distinct gives each student values of their own (nothing shared)
+        self.param_text, self.retype_text = "6000", "6500"
         # what the server sent: messages, frames and bytes (all frames), by message type
         self.messages_in = 0
         self.frames_in = 0
@@ -742,6 +745,20 @@ class Student(StudentSession):
                                   "eha-lse-alert", timeout)
         return time.perf_counter() - t0
 
+    async def start_study(self, seeds: int, timeout: float | None = None) -> None:
+        """Tab 3's study: ``seeds`` seeds of the default experiment, "Run the study" pressed."""
+        await self.show_tab(2, self.IDENT_TABS, timeout)
+        await self.show_subtab(self.IDENT_TABS, 4, "eha-study-form", timeout)
+        form = self.form("eha-study-form")
+        values = dict(form.attributes.get("values") or {})
+        await self.set_property(form, "values", {**values, "study_seeds": str(seeds)})
+        await self.round_trip(timeout)
+        await self.click(self.button("Run the study"))
+
+    def study_running(self) -> bool:
+        cancel = self.find(css="eha-cancel-study")
+        return bool(cancel) and not cancel[0].attributes.get("disabled", True)
+
     async def frequency_experiment(self, timeout: float | None = None) -> float:
         """Tab 3's frequency panel, "Run experiment and estimate"; done when ``.eha-freq-summary``
         shows the estimate Ĥ(s)."""
@@ -763,10 +780,14 @@ def _run_count(text: str) -> int:
 
 #: The workflow, in order. The "show" steps are a first visit of a tab (built then); a
 #: run step shows its tab itself if no "show" step came before.
-STEPS = ("open", "param", "tab2", "compare", "tab3", "lse", "freqtab", "freq")
+STEPS = ("open", "param", "tab2", "compare", "tab3", "lse", "freqtab", "freq", "retype")
 STEP_NAMES = {"open": "open the page", "param": "change M (tab 1)", "tab2": "show tab 2 (first)",
               "compare": '"Compare both"', "tab3": "show tab 3 (first)", "lse": "least squares",
-              "freqtab": "show frequency tab", "freq": "frequency experiment"}
+              "freqtab": "show frequency tab", "freq": "frequency experiment",
+              "retype": "change M, every tab built"}
+#: What the hog does (``run_class(hog=...)``): a 500-seed study (pressed again when it ends), or a
+#: press every 0.3 s of whichever of "Run the study" and "Cancel" is on.
+HOGS = ("study", "spam")
 OBSERVER_VALUES = ("5000", "5500")
 
 
@@ -775,7 +796,11 @@ async def do_step(student: Student, step: str, timeout: float | None = None) -> 
     if step == "open":
         return await student.open(timeout)
     if step == "param":
-        return await student.change_parameter("M", "6000", timeout)
+        return await student.change_parameter("M", student.param_text, timeout)
+    if step == "retype":
+        # tab 1 once every tab holds results: each section hears of the change
+        await student.show_tab(0, "eha-derived", timeout)
+        return await student.change_parameter("M", student.retype_text, timeout)
     if step == "tab2":
         return await student.show_simulation(timeout)
     if step == "compare":
@@ -822,6 +847,7 @@ class ClassResult:
     step_wall: dict         # step -> (start, end) seconds since the class started
     session_errors: list    # connection errors outside a step
     upstreams: dict = field(default_factory=dict)   # backend (a proxy's X-Eha-Upstream) -> students
+    hog_log: list = field(default_factory=list)     # what the hog did (presses, an error)
 
     def ok(self, step: str) -> int:
         return sum(1 for o in self.steps.get(step, []) if o.seconds is not None and not o.server_errors)
@@ -845,7 +871,8 @@ class ClassResult:
         return {"sessions": self.sessions,
                 "steps": {s: [asdict(o) for o in outs] for s, outs in self.steps.items()},
                 "observer": [asdict(o) for o in self.observer],
-                "step_wall": self.step_wall, "session_errors": self.session_errors, "upstreams": self.upstreams}
+                "step_wall": self.step_wall, "session_errors": self.session_errors, "upstreams": self.upstreams,
+                "hog_log": self.hog_log}
 
 
 async def _observe(url: str, result: ClassResult, current: list, stop: asyncio.Event, ready: asyncio.Event,
@@ -884,6 +911,38 @@ async def _observe(url: str, result: ClassResult, current: list, stop: asyncio.E
         await o.close()
 
 
+async def _hog(url: str, kind: str, stop: asyncio.Event, ready: asyncio.Event, timeout: float,
+               log: list) -> None:
+    """One more student who takes what the app lets one student take: ``kind`` of :data:`HOGS`."""
+    h = Student(url, name="hog", timeout=timeout)
+    try:
+        await h.open(timeout)
+        if kind == "study":
+            await h.start_study(500, timeout)
+        else:
+            await h.start_study(100, timeout)
+        ready.set()
+        while not stop.is_set():
+            period = 0.3 if kind == "spam" else 1.0
+            try:
+                await asyncio.wait_for(stop.wait(), period)
+                break
+            except asyncio.TimeoutError:
+                pass
+            running = h.study_running()
+            if kind == "spam":
+                await h.click(h.find(css="eha-cancel-study")[0] if running else h.button("Run the study"))
+                log.append("cancel" if running else "run")
+            elif not running:
+                await h.click(h.button("Run the study"))
+                log.append("run")
+    except Exception as exc:  # noqa: BLE001 - recorded, the class goes on
+        log.append(f"error: {type(exc).__name__}: {exc}")
+    finally:
+        ready.set()
+        await h.close()
+
+
 async def _act(student: Student, step: str, start: float, timeout: float) -> Outcome:
     """One student's ``step``, begun ``start`` seconds into it."""
     # counted from the step's start: what arrives while the student waits to click belongs here
@@ -905,17 +964,26 @@ async def _act(student: Student, step: str, start: float, timeout: float) -> Out
 
 async def run_class(url: str, n: int, steps=STEPS, *, spread: float = 1.0, timeout: float = 180.0,
                     observer: bool = True, observer_period: float = 2.0, seed: int = 0,
-                    on_step: Callable[[str, str], Any] | None = None) -> ClassResult:
+                    on_step: Callable[[str, str], Any] | None = None, distinct: bool = False,
+                    hog: str | None = None) -> ClassResult:
     """N students through ``steps`` together: within a step each starts at a random moment of the
     first ``spread`` seconds; the next step starts when all are done (or timed out). An observer
     session, opened first and not counted, types into M every ``observer_period`` seconds and
     records how long the derived values take to change. ``on_step(step, "start"|"end")`` is
-    called around each step (the benchmark samples the server's CPU time there)."""
+    called around each step (the benchmark samples the server's CPU time there). ``distinct``:
+    each student types values of M of their own (no two runs alike, nothing for the server to
+    share). ``hog``: one more student, started before the class and not counted, doing ``hog``
+    (:data:`HOGS`) throughout."""
     steps = list(steps)
     if not steps or steps[0] != "open":
         raise ValueError(f"steps = {','.join(steps)} is not allowed: the first step must be open")
     rng = random.Random(seed)
     students = [Student(url, name=f"student {i + 1}", timeout=timeout) for i in range(n)]
+    if distinct:
+        for i, st in enumerate(students):
+            st.param_text, st.retype_text = str(6000 + 7 * i), str(6500 + 7 * i)
+    if hog is not None and hog not in HOGS:
+        raise ValueError(f"hog = {hog} is not allowed: use one of {', '.join(HOGS)}")
     result = ClassResult(n, {s: [] for s in steps}, [], {}, [])
     current = ["before"]
     t_class = time.perf_counter()
@@ -926,9 +994,14 @@ async def run_class(url: str, n: int, steps=STEPS, *, spread: float = 1.0, timeo
         obs_task = asyncio.ensure_future(
             _observe(url, result, current, stop, obs_ready, t_class, timeout, observer_period))
     on_step = on_step or (lambda _step, _when: None)
+    hog_task, hog_ready = None, asyncio.Event()
+    if hog is not None:
+        hog_task = asyncio.ensure_future(_hog(url, hog, stop, hog_ready, timeout, result.hog_log))
     try:
         if obs_task is not None:
             await obs_ready.wait()
+        if hog_task is not None:
+            await hog_ready.wait()
         active = list(students)
         for step in steps:
             current[0] = step
@@ -949,6 +1022,8 @@ async def run_class(url: str, n: int, steps=STEPS, *, spread: float = 1.0, timeo
         stop.set()
         if obs_task is not None:
             await obs_task
+        if hog_task is not None:
+            await hog_task
         result.session_errors = [f"{s.name}: {e}" for s in students for e in s.errors if e.startswith("connection")]
         for s in students:
             if s.upstream:
