@@ -353,7 +353,7 @@ class SessionRunner:
         def done(job: Job) -> None:        # a worker thread, or the submitting thread for "replaced"
             apply_locked(partial(self._finish, job, outcome), doc)
 
-        job, replaced = self.queue.submit(self.owner, compute, label=label, on_done=done)
+        job, replaced = self.queue.submit(self.owner, compute, label=label, on_done=done, place=self._root.owner)
         note(f"Your earlier request ({replaced.label}) was replaced by this one." if replaced is not None else "")
 
         def waiting() -> None:

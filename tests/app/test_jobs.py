@@ -164,3 +164,35 @@ def test_closing_a_page_cancels_every_runner_of_its_session_and_forgets_them(que
     assert waiting.state == waiting2.state == "cancelled"
     owners = {root.owner, board.owner, study.owner, ("student", "study"), ("student", "study"), "x"}
     assert not owners & set(queue._last_served) and not owners & set(queue._queued)
+
+
+def test_a_sessions_runners_share_its_one_place_in_the_queue():
+    """A study, a board job and a tab's run of one session take turns in that session's one place: with two
+    workers, the session's second job waits for another session's, not beside its own first."""
+    q = JobQueue(workers=2)
+    order = []
+    try:
+        open_study, study = gate()
+        s1, _ = q.submit(("A", "study"), study, label="a-study", place="A")
+        wait_for(lambda: s1.state == "running")
+        open_b, body_b = gate()
+        a_run, _ = q.submit("A", lambda t: order.append("a-run"), label="a-run", place="A")
+        b_run, _ = q.submit("B", lambda t: (order.append("b-run"), body_b(t)), label="b-run", place="B")
+        wait_for(lambda: b_run.state == "running")
+        time.sleep(0.05)
+        assert a_run.state == "queued"              # a free worker, but A's place is taken by its study
+        assert q.ahead_of(a_run) == 0
+        open_study.set()
+        wait_for(lambda: a_run.finished)
+        open_b.set()
+        wait_for(lambda: b_run.finished)
+        assert order == ["b-run", "a-run"]
+        # the session's study, asking again, goes behind a session that waits
+        open_study2, study2 = gate()
+        s2, _ = q.submit(("A", "study"), study2, label="a-study-2", place="A")
+        c_run, _ = q.submit("C", lambda t: order.append("c-run"), label="c-run", place="C")
+        wait_for(lambda: c_run.finished and s2.state == "running")
+        open_study2.set()
+        wait_for(lambda: s2.finished)
+    finally:
+        q.shutdown()
