@@ -24,6 +24,7 @@ from .render.layout import WRAP_TAB_HEADERS
 from .render.tables import CSS, SYMBOLS_HTML
 from .runtime.connection import ConnectionWatch
 from .runtime.exercise_file import current_exercise
+from .runtime.patches import on_disconnect
 from .runtime.tasks import (
     SessionRunner,
     apply_locked,
@@ -301,6 +302,8 @@ def create_app(state: AppState | None = None, *, query: dict | None = None, runn
             if jobs:
                 log.info("a page was closed: cancelled %s", ", ".join(j.label for j in jobs))
         pn.state.on_session_destroyed(closed)
+        # at once when its websocket closes (eha serve), not only when the session is discarded
+        on_disconnect(served_document(), lambda: closed(None))
     return page
 
 

@@ -195,10 +195,16 @@ def run(args) -> int:
         bind_port_shared()
     from panel.command import main as panel_main
 
-    from eha_app.runtime.patches import cache_stable_defaults, guard_paths, refuse_foreign_components
+    from eha_app.runtime.patches import (
+        cache_stable_defaults,
+        guard_paths,
+        notice_disconnects,
+        refuse_foreign_components,
+    )
     from eha_app.runtime.teacher_access import route
 
     cache_stable_defaults()     # every page's models built and serialised a quarter faster
+    notice_disconnects()        # a closed page's runs stop at once, not when its session is discarded
     refuse_foreign_components()
     guard_paths(route)          # /teacher answers the teacher only (and 404 without an exercise)
     sys.argv = argv + _oauth_argv(args)

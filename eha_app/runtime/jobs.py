@@ -15,7 +15,9 @@ another student's 0.08 s simulation waited 78 s. The rules here:
   own, so that one does not replace another's request) wait in that one
   place, so a student running a long study takes one worker at most, and only
   in turn with the others (a 500-seed study slowed the others' frequency
-  experiment 1.7x when each of its runners was a place).
+  experiment 1.7x when each of its runners was a place). A long job cut in
+  parts (a study) is *background* work: a free worker takes it only when no
+  other session's request waits, so the others' runs never queue behind it.
 - **Work for nobody is stopped.** Closing the page cancels the session's jobs
   (:meth:`JobQueue.cancel_owner`); a running job stops at its next check of
   its :class:`~eha_core.cancel.CancelToken` (between integration chunks,
@@ -120,6 +122,7 @@ class Job:
     fn: Callable[[CancelToken], Any]
     on_done: Callable[[Job], None] | None = None
     place: Hashable = None          # the session it runs for (its turn in the queue); None: its owner
+    background: bool = False        # a part of a long job: started only when no other request waits
     token: CancelToken = field(default_factory=CancelToken)
     state: JobState = JobState.QUEUED
     seq: int = 0
@@ -183,14 +186,17 @@ class JobQueue:
 
     # -- asking -------------------------------------------------------------------
     def submit(self, owner: Hashable, fn: Callable[[CancelToken], Any], *, label: str = "",
-               on_done: Callable[[Job], None] | None = None, place: Hashable = None) -> tuple[Job, Job | None]:
+               on_done: Callable[[Job], None] | None = None, place: Hashable = None,
+               background: bool = False) -> tuple[Job, Job | None]:
         """Queue ``fn(token)`` for ``owner``; returns the job and the queued job it replaced, if any.
 
         ``place``: the session the job runs for, whose one turn in the queue it takes (default: the
-        owner itself). ``on_done(job)`` is called in the worker thread once the job has ended in any
+        owner itself); ``background``: a part of a long job, started only when nothing else waits.
+        ``on_done(job)`` is called in the worker thread once the job has ended in any
         state (including ``replaced``, from the submitting thread).
         """
-        job = Job(owner=owner, label=label, fn=fn, on_done=on_done, place=owner if place is None else place)
+        job = Job(owner=owner, label=label, fn=fn, on_done=on_done, place=owner if place is None else place,
+                  background=bool(background))
         with self._cond:
             if self._closed:
                 raise RuntimeError("the job queue is shut down")
@@ -226,9 +232,9 @@ class JobQueue:
         with self._cond:
             if job.state != JobState.QUEUED:
                 return 0
-            mine = (self._last_served.get(job.place, -1), job.seq)
+            mine = (job.background, self._last_served.get(job.place, -1), job.seq)
             return sum(1 for j in self._queued.values()
-                       if j is not job and (self._last_served.get(j.place, -1), j.seq) < mine)
+                       if j is not job and (j.background, self._last_served.get(j.place, -1), j.seq) < mine)
 
     def snapshot(self) -> dict:
         """Counts for monitoring: queued, running, completed, workers."""
@@ -249,12 +255,13 @@ class JobQueue:
     # -- the workers ---------------------------------------------------------------
     def _next(self) -> Job | None:
         """The next job to start (call with the lock): among places (sessions) with nothing
-        running, the one served least recently, then the longest waiting."""
+        running, a request before background work, then the place served least recently, then the
+        longest waiting."""
         best, best_key = None, None
         for job in self._queued.values():
             if job.place in self._busy_places:
                 continue
-            key = (self._last_served.get(job.place, -1), job.seq)
+            key = (job.background, self._last_served.get(job.place, -1), job.seq)
             if best is None or key < best_key:
                 best, best_key = job, key
         return best

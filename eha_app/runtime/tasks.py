@@ -285,11 +285,15 @@ class SessionRunner:
         self._root = self
         self._subs: set = set()
         self._after_each: list[Callable[[Job], None]] = []
+        self.background = False
 
-    def sub(self, name: str) -> SessionRunner:
+    def sub(self, name: str, *, background: bool = False) -> SessionRunner:
         """A runner of the same session whose requests do not replace this one's (a preview, the
-        model board, a study): its owner is ``(owner, name)``, cancelled by :meth:`cancel_all`."""
+        model board, a study): its owner is ``(owner, name)``, cancelled by :meth:`cancel_all`, in
+        the session's one place in the queue; ``background``: its jobs (a long job's parts) start
+        only when no other request waits."""
         child = SessionRunner((self.owner, name), self._queue)
+        child.background = background
         child._root = self._root
         self._root._subs.add(child.owner)
         return child
@@ -353,7 +357,8 @@ class SessionRunner:
         def done(job: Job) -> None:        # a worker thread, or the submitting thread for "replaced"
             apply_locked(partial(self._finish, job, outcome), doc)
 
-        job, replaced = self.queue.submit(self.owner, compute, label=label, on_done=done, place=self._root.owner)
+        job, replaced = self.queue.submit(self.owner, compute, label=label, on_done=done, place=self._root.owner,
+                                          background=self.background)
         note(f"Your earlier request ({replaced.label}) was replaced by this one." if replaced is not None else "")
 
         def waiting() -> None:

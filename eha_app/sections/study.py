@@ -159,7 +159,8 @@ class StudyPanel(Section):
     def __init__(self, session, **kwargs):
         super().__init__(session, **kwargs)
         state = self.state
-        self.study_runner = self.runner.sub("study")
+        # a study's parts are background work: the other students' runs never wait behind them
+        self.study_runner = self.runner.sub("study", background=True)
         self.result = None
         self._token = None
         self._busy = False                  # a study is waiting or running: one at a time
@@ -233,9 +234,9 @@ class StudyPanel(Section):
         self.form.hidden = study_hidden(self.form.values)
         self.button.disabled = self._busy or cfg is None or not self.state.valid or bool(self.state.hidden)
 
-    #: Seeds per job (about a second of one worker): between two jobs of a long study the queue
+    #: Seeds per job (a quarter of a second of one worker): between two jobs of a long study the queue
     #: serves the other students, so a 500-seed study never holds a worker for long.
-    CHUNK_SEEDS = {"lse": 40, "tf": 6, "greybox": 3}
+    CHUNK_SEEDS = {"lse": 10, "tf": 2, "greybox": 1}
 
     def run(self):
         """Run the study in short jobs on the server's pool; the page shows the progress and the

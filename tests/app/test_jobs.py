@@ -196,3 +196,19 @@ def test_a_sessions_runners_share_its_one_place_in_the_queue():
         wait_for(lambda: s2.finished)
     finally:
         q.shutdown()
+
+
+def test_background_work_starts_only_when_no_request_waits(queue):
+    """A study's parts wait for every other session's request, however long they have waited."""
+    order = []
+    open_a, body_a = gate()
+    a, _ = queue.submit("A", body_a, label="a")
+    wait_for(lambda: a.state == "running")
+    part, _ = queue.submit(("S", "study"), lambda t: order.append("study part"), label="part", place="S",
+                           background=True)
+    b, _ = queue.submit("B", lambda t: order.append("b"), label="b")
+    c, _ = queue.submit("C", lambda t: order.append("c"), label="c")
+    assert queue.ahead_of(part) == 2 and queue.ahead_of(b) == 0
+    open_a.set()
+    wait_for(lambda: part.finished)
+    assert order == ["b", "c", "study part"]

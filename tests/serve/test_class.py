@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import time
 
 from benchmarks.classroom_client import STEPS, Student, run_students
 
@@ -103,3 +104,25 @@ def test_a_page_closed_while_its_run_computes_holds_up_nobody(serve, monkeypatch
     assert "Traceback" not in log
     # the closed page's experiment (2 x 10000 s of closed loop) was stopped, not finished for nobody
     assert "a page was closed: cancelled frequency experiment" in log
+
+
+def test_a_closed_pages_run_is_cancelled_when_its_websocket_closes(serve, monkeypatch):
+    """Not when Panel discards the session (eha serve: 4 s unused, checked every 1 s): the closed page's run
+    is cancelled from the websocket's close. The bound is the session's lifetime, the property the order."""
+    monkeypatch.setenv("EHA_MAX_STEPS", "50000000")      # a run of about 10 s, for the test
+    server = serve()
+
+    async def scenario():
+        leaver = await _ask_for_a_long_run(server, "leaver")
+        await asyncio.sleep(0.3)
+        await leaver.close()
+        t0 = time.perf_counter()
+        while "a page was closed: cancelled frequency experiment" not in server.log_text():
+            if time.perf_counter() - t0 > 3.5:
+                return None
+            await asyncio.sleep(0.05)
+        return time.perf_counter() - t0
+
+    after = asyncio.run(scenario())
+    assert after is not None, "the run was cancelled only when the session was discarded, or not at all"
+    assert "Traceback" not in server.log_text()
