@@ -227,6 +227,22 @@ class JobQueue:
                 self._notify(j)
         return jobs
 
+    def requests_pending(self) -> bool:
+        """Whether a request (not background work) is running or waiting."""
+        with self._cond:
+            return (any(not j.background for j in self._running.values())
+                    or any(not j.background for j in self._queued.values()))
+
+    def yield_to_requests(self, token: CancelToken | None = None, max_wait_s: float = 2.0) -> None:
+        """Background work between two of its steps: wait while any request runs or waits (at most
+        ``max_wait_s``, so that it still progresses on a busy server). The workers are threads: a
+        study's seed computing beside a student's run would take half of what Python gives them."""
+        deadline = time.perf_counter() + max_wait_s
+        while self.requests_pending() and time.perf_counter() < deadline:
+            if token is not None:
+                token.check()
+            time.sleep(0.01)
+
     def ahead_of(self, job: Job) -> int:
         """About how many jobs start before ``job`` (0 when it is running or next)."""
         with self._cond:

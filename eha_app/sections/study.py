@@ -259,7 +259,12 @@ class StudyPanel(Section):
         doc = served_document()
         last = [0.0]
 
+        queue = self.study_runner.queue
+
         def progress(done, _part_total):
+            # between two seeds: the other students' runs go first (a study is background work)
+            if self._token is not None:
+                queue.yield_to_requests(self._token)
             now = time.perf_counter()
             if now - last[0] < 1.0 / _PROGRESS_HZ:
                 return

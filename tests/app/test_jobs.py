@@ -212,3 +212,23 @@ def test_background_work_starts_only_when_no_request_waits(queue):
     open_a.set()
     wait_for(lambda: part.finished)
     assert order == ["b", "c", "study part"]
+
+
+def test_background_work_waits_between_its_steps_while_a_request_runs(queue):
+    open_a, body_a = gate()
+    a, _ = queue.submit("A", body_a, label="a")
+    wait_for(lambda: a.state == "running")
+    assert queue.requests_pending()
+    threading.Timer(0.2, open_a.set).start()
+    t0 = time.perf_counter()
+    queue.yield_to_requests(max_wait_s=5.0)
+    assert a.finished and time.perf_counter() - t0 >= 0.15
+    assert not queue.requests_pending()
+    # at most its bound when requests keep coming
+    open_b, body_b = gate()
+    b, _ = queue.submit("B", body_b, label="b")
+    wait_for(lambda: b.state == "running")
+    t0 = time.perf_counter()
+    queue.yield_to_requests(max_wait_s=0.1)
+    assert b.state == "running"
+    open_b.set()
