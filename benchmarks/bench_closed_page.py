@@ -40,12 +40,14 @@ IDLE_FOR_S = 0.3
 SAMPLE_S = 0.02
 
 
-async def _start_run(url: str) -> Student:
+async def _start_run(url: str, seed: int) -> Student:
     s = Student(url, name="student", timeout=120)
     await s.open(120)
     await s.show_frequency(120)
     form = s.form("eha-freq-form")
-    await s.set_property(form, "values", {**dict(form.attributes.get("values") or {}), **LARGEST})
+    # a seed of its own each time: the server computes a run once for everyone who asks for the same
+    await s.set_property(form, "values", {**dict(form.attributes.get("values") or {}), **LARGEST,
+                                          "freq_seed": str(seed)})
     await s.round_trip(30)
     await asyncio.sleep(0.5)             # the excitation's preview, after the new settings
     await s.click(s.button("Run experiment and estimate"))
@@ -70,8 +72,8 @@ async def _busy_until_idle(tree, since: float, timeout: float = 120.0) -> float:
     return float("nan")
 
 
-async def _one(url: str, tree, close: bool) -> float:
-    s = await _start_run(url)
+async def _one(url: str, tree, close: bool, seed: int) -> float:
+    s = await _start_run(url, seed)
     t_click = time.perf_counter()
     if close:
         await asyncio.sleep(0.5)
@@ -90,10 +92,10 @@ def main(argv=None) -> int:
     server = Server(1)
     try:
         kept, closed = [], []
-        for _ in range(args.repeat):
-            kept.append(asyncio.run(_one(server.url, server.tree, close=False)))
+        for k in range(args.repeat):
+            kept.append(asyncio.run(_one(server.url, server.tree, close=False, seed=100 + 2 * k)))
             time.sleep(1.0)
-            closed.append(asyncio.run(_one(server.url, server.tree, close=True)))
+            closed.append(asyncio.run(_one(server.url, server.tree, close=True, seed=101 + 2 * k)))
             time.sleep(1.0)
             print(f"kept open: computed {kept[-1]:.2f} s; closed 0.5 s in: still computing {closed[-1]:.2f} s "
                   "after the close")
