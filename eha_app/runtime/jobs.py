@@ -233,12 +233,15 @@ class JobQueue:
             return (any(not j.background for j in self._running.values())
                     or any(not j.background for j in self._queued.values()))
 
-    def yield_to_requests(self, token: CancelToken | None = None, max_wait_s: float = 2.0) -> None:
-        """Background work between two of its steps: wait while any request runs or waits (at most
-        ``max_wait_s``, so that it still progresses on a busy server). The workers are threads: a
-        study's seed computing beside a student's run would take half of what Python gives them."""
+    def yield_to_requests(self, token: CancelToken | None = None, max_wait_s: float = 2.0,
+                          also: Callable[[], bool] | None = None) -> None:
+        """Background work between two of its steps: wait while any request runs or waits, or ``also()``
+        holds (other pages' changes waiting for the event loop), at most ``max_wait_s`` so that it still
+        progresses on a busy server. The workers are threads: a study's seed computing beside a
+        student's run, or beside the event loop drawing thirty results, takes a share of what Python
+        gives them."""
         deadline = time.perf_counter() + max_wait_s
-        while self.requests_pending() and time.perf_counter() < deadline:
+        while (self.requests_pending() or (also is not None and also())) and time.perf_counter() < deadline:
             if token is not None:
                 token.check()
             time.sleep(0.01)

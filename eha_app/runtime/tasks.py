@@ -219,6 +219,11 @@ class PageUpdates:
         else:       # a worker thread before any page event reached this process: ask the document
             doc.add_next_tick_callback(self._start)
 
+    def waiting_for_others(self, doc) -> int:
+        """Page changes waiting for other pages than ``doc``'s (callable from any thread)."""
+        with self._lock:
+            return sum(1 for d, _ in self._pending if d is not doc)
+
     def _start(self) -> None:
         import asyncio
 
@@ -260,6 +265,11 @@ class PageUpdates:
 
 
 _updates = PageUpdates()
+
+
+def others_waiting(doc) -> bool:
+    """Whether other pages' changes wait for the event loop: background work (a study) gives way."""
+    return _updates.waiting_for_others(doc) > 0
 
 
 def apply_locked(fn: Callable[[], None], doc=None) -> None:

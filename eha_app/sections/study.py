@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import html
 import time
+from functools import partial
 
 import numpy as np
 import panel as pn
@@ -27,7 +28,7 @@ from ..render import plots
 from ..render.formatting import num_html
 from ..render.layout import side_by_side
 from ..render.tables import SYMBOLS_HTML, UNITS
-from ..runtime.tasks import apply_locked, on_click, served_document, watch
+from ..runtime.tasks import apply_locked, on_click, others_waiting, served_document, watch
 from ..session import ReportPart, Section, SectionSnapshot
 from ..session.form import Field, Form, Group, parse_fields
 from ..session.state import FIELD_LABELS
@@ -262,9 +263,9 @@ class StudyPanel(Section):
         queue = self.study_runner.queue
 
         def progress(done, _part_total):
-            # between two seeds: the other students' runs go first (a study is background work)
+            # between two seeds: the other students' runs and page changes go first (background work)
             if self._token is not None:
-                queue.yield_to_requests(self._token)
+                queue.yield_to_requests(self._token, also=partial(others_waiting, doc) if doc is not None else None)
             now = time.perf_counter()
             if now - last[0] < 1.0 / _PROGRESS_HZ:
                 return
