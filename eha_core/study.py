@@ -757,7 +757,7 @@ def _message(config: StudyConfig, plan, seeds: list[SeedEstimate], cancelled: bo
 
 def run_study(config: StudyConfig | None = None, params: ActuatorParams | None = None, *,
               workers: int = DEFAULT_WORKERS, progress: Callable[[int, int], object] | None = None,
-              cancel: CancelToken | None = None) -> StudyResult:
+              cancel: CancelToken | None = None, pause: Callable[[], object] | None = None) -> StudyResult:
     """Run a study's seeds on a thread pool and sum them up.
 
     Parameters
@@ -778,6 +778,10 @@ def run_study(config: StudyConfig | None = None, params: ActuatorParams | None =
         seed starts, the running ones stop at their next check, and the
         result holds the seeds completed, with ``cancelled`` True (no
         exception is raised).
+    pause : callable, optional
+        Called in the worker thread before each seed starts: a server that
+        runs the study as background work waits there while others need
+        the CPU.
 
     Returns
     -------
@@ -796,6 +800,9 @@ def run_study(config: StudyConfig | None = None, params: ActuatorParams | None =
 
     def one(seed: int) -> SeedEstimate:
         check(cancel)                 # a seed queued before the cancel does not start
+        if pause is not None:
+            pause()
+            check(cancel)
         return plan.run(seed, cancel)
 
     if cancel is None or not cancel.cancelled:

@@ -262,10 +262,11 @@ class StudyPanel(Section):
 
         queue = self.study_runner.queue
 
+        def pause():
+            # before each seed: the other students' runs and page changes go first (background work)
+            queue.yield_to_requests(self._token, also=partial(others_waiting, doc) if doc is not None else None)
+
         def progress(done, _part_total):
-            # between two seeds: the other students' runs and page changes go first (background work)
-            if self._token is not None:
-                queue.yield_to_requests(self._token, also=partial(others_waiting, doc) if doc is not None else None)
             now = time.perf_counter()
             if now - last[0] < 1.0 / _PROGRESS_HZ:
                 return
@@ -274,7 +275,7 @@ class StudyPanel(Section):
 
         def compute(token):
             self._token = token         # the cancel button's way to the running part
-            return run_study(part, params, workers=1, progress=progress, cancel=token)
+            return run_study(part, params, workers=1, progress=progress, cancel=token, pause=pause)
 
         def show(result, job):
             self._parts.append(result)

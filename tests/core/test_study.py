@@ -277,3 +277,20 @@ def test_a_study_run_in_parts_is_the_study_run_at_once():
         assert merged.coverage[name] == whole.coverage[name] and merged.std[name] == whole.std[name]
     partial = combine_studies(cfg, parts[:1], cancelled=True)
     assert partial.cancelled and partial.n_completed == 4 and "cancelled" in partial.message
+
+
+def test_pause_is_called_before_every_seed_and_a_cancel_there_stops_the_study():
+    from eha_core.cancel import CancelToken
+
+    calls = []
+    res = run_study(StudyConfig("lse", n_seeds=4), workers=1, pause=lambda: calls.append(1))
+    assert len(calls) == 4 and res.n_completed == 4
+    token = CancelToken()
+
+    def pause():
+        calls.append(2)
+        if calls.count(2) == 2:
+            token.cancel("the server needs the CPU")
+
+    res = run_study(StudyConfig("lse", n_seeds=5), workers=1, pause=pause, cancel=token)
+    assert res.cancelled and res.n_completed == 1
