@@ -227,6 +227,11 @@ class JobQueue:
                 self._notify(j)
         return jobs
 
+    def requests_waiting(self) -> bool:
+        """Whether a request (not background work) waits for a worker."""
+        with self._cond:
+            return any(not j.background for j in self._queued.values())
+
     def requests_pending(self) -> bool:
         """Whether a request (not background work) is running or waiting."""
         with self._cond:

@@ -262,8 +262,16 @@ class StudyPanel(Section):
 
         queue = self.study_runner.queue
 
+        gave_way = [False]
+
         def pause():
-            # before each seed: the other students' runs and page changes go first (background work)
+            # before each seed: the other students go first (a study is background work). A run waiting
+            # for a worker gets this one: the part ends here, its seeds kept, and the rest waits in the
+            # queue as background work; a run computing or page changes waiting: the seed waits.
+            if queue.requests_waiting():
+                gave_way[0] = True
+                self._token.cancel("giving way to the other students' runs")
+                return
             queue.yield_to_requests(self._token, also=partial(others_waiting, doc) if doc is not None else None)
 
         def progress(done, _part_total):
@@ -280,9 +288,9 @@ class StudyPanel(Section):
         def show(result, job):
             self._parts.append(result)
             done = done_before + result.n_completed
-            if done < total and not (self._stopped or result.cancelled):
+            if done < total and not self._stopped and (not result.cancelled or gave_way[0]):
                 self._show_progress(done, total)
-                self._run_part(cfg, params, first + part.n_seeds)
+                self._run_part(cfg, params, first + result.n_completed)
                 return
             self.result = combine_studies(cfg, self._parts, params, cancelled=done < total)
             self._draw(self.result, job)
