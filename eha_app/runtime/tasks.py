@@ -30,7 +30,6 @@ calling thread and its result is shown directly.
 from __future__ import annotations
 
 import collections
-import itertools
 import logging
 import threading
 import time
@@ -181,9 +180,7 @@ class PageUpdates:
     event loop, and the next one starts only when nothing else is ready to run
     (or after ``MAX_DEFER_S``, so that a busy server still makes progress):
     small interactions always go first, and wait for at most the one big
-    change already running. The pages take turns in that line (the next change
-    is the oldest of the page served least recently): a student pressing a
-    button again and again queues changes behind everyone else's.
+    change already running.
 
     Each change runs under its session document's lock (Bokeh's
     ``with_locked_document``; a closed session's changes are dropped), as
@@ -199,8 +196,6 @@ class PageUpdates:
 
     def __init__(self):
         self._pending: collections.deque = collections.deque()
-        self._served: dict[int, int] = {}       # id(document) -> turn of its last change
-        self._turns = itertools.count()
         self._lock = threading.Lock()
         self._loop = None
         self._task = None
@@ -223,27 +218,6 @@ class PageUpdates:
             self._loop.call_soon_threadsafe(self._start)
         else:       # a worker thread before any page event reached this process: ask the document
             doc.add_next_tick_callback(self._start)
-
-    def _take(self):
-        """The next change (call with the lock): the oldest of the page served least recently, so
-        that one page's many changes (a student pressing a button again and again) wait for the
-        others' instead of filling the line; a page's own changes keep their order."""
-        best, best_key = 0, None
-        seen = set()
-        for i, (doc, _) in enumerate(self._pending):
-            if id(doc) in seen:
-                continue
-            seen.add(id(doc))
-            key = self._served.get(id(doc), -1)
-            if best_key is None or key < best_key:
-                best, best_key = i, key
-        doc, fn = self._pending[best]
-        del self._pending[best]
-        self._served[id(doc)] = next(self._turns)
-        if len(self._served) > 4 * len(self._pending) + 256:      # forget pages served long ago
-            keep = {id(d) for d, _ in self._pending}
-            self._served = {k: v for k, v in self._served.items() if k in keep}
-        return doc, fn
 
     def waiting_for_others(self, doc) -> int:
         """Page changes waiting for other pages than ``doc``'s (callable from any thread)."""
@@ -269,7 +243,7 @@ class PageUpdates:
             with self._lock:
                 if not self._pending:
                     return
-                doc, fn = self._take()
+                doc, fn = self._pending.popleft()
             waited = 0.0
             await asyncio.sleep(0)
             while self._loop_busy() and waited < self.MAX_DEFER_S:

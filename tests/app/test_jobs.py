@@ -232,16 +232,3 @@ def test_background_work_waits_between_its_steps_while_a_request_runs(queue):
     queue.yield_to_requests(max_wait_s=0.1)
     assert b.state == "running"
     open_b.set()
-
-
-def test_pages_take_turns_in_the_line_of_page_changes():
-    from eha_app.runtime.tasks import PageUpdates
-
-    lines = PageUpdates()
-    a, b, c = object(), object(), object()
-    for doc, name in ((a, "a1"), (a, "a2"), (a, "a3"), (b, "b1"), (c, "c1"), (b, "b2")):
-        lines._pending.append((doc, name))
-    order = [lines._take()[1] for _ in range(6)]
-    # a page's own changes in their order; a page just served waits for the others
-    assert order == ["a1", "b1", "c1", "a2", "b2", "a3"]
-    assert lines.waiting_for_others(a) == 0
