@@ -252,7 +252,9 @@ def _log_to_stderr() -> None:
 
 def serve_session() -> None:
     """Make this browser session's page (the server runs :mod:`eha_app.eha` for every session)."""
-    from .runtime.patches import strict_mode_on, strict_page_changes
+    from bokeh.models import CustomJS
+
+    from .runtime.patches import CONTROLS_BEFORE_RENDER_JS, strict_mode_on, strict_page_changes
     from .runtime.redaction import redact_server_logs
     from .runtime.serving import quiet_closed_websockets, use_local_resources
     from .runtime.tasks import note_loop_thread
@@ -270,7 +272,21 @@ def serve_session() -> None:
     # it opens (the address is kept by eha_app.runtime.connection instead).
     pn.config.browser_info = False
     query = {k: v[-1].decode("utf-8", "replace") for k, v in (pn.state.session_args or {}).items() if v}
-    create_app(query=query).servable(title="EHA: modeling and identification", location=False)
+    # The session's document starts as an empty column; the page is built into it once the browser
+    # has the document (document_ready), as a page change that waits its turn with the others
+    # (PageUpdates). Bokeh makes a session in one callback of the event loop, which nothing
+    # interrupts: building the page there (60-70 ms) made a student typing wait behind every page
+    # opened at the same time (0.7-1.0 s, p95, while thirty opened theirs).
+    shell = pn.Column(sizing_mode="stretch_width", css_classes=["eha-page"])
+    shell.servable(title="EHA: modeling and identification", location=False)
+    # before any widget of the page is built in the browser (see patches.CONTROLS_BEFORE_RENDER_JS)
+    pn.state.curdoc.js_on_event("document_ready", CustomJS(code=CONTROLS_BEFORE_RENDER_JS
+                                                           + "ehaControlsBeforeRender();"))
+
+    def build() -> None:
+        shell.objects = [create_app(query=query).layout]
+
+    pn.state.onload(lambda: apply_locked(build))
 
 
 _patch_warned: set[str] = set()

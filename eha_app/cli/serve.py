@@ -195,19 +195,29 @@ def run(args) -> int:
         bind_port_shared()
     from panel.command import main as panel_main
 
+    from eha_app.app import warm_up
     from eha_app.runtime.patches import (
         cache_stable_defaults,
+        fast_themed_values,
         guard_paths,
+        lazy_container_defaults,
         notice_disconnects,
         refuse_foreign_components,
+        settle_settings,
+        tune_garbage_collector,
     )
     from eha_app.runtime.teacher_access import route
 
     cache_stable_defaults()     # every page's models built and serialised a quarter faster
+    fast_themed_values()        # ... and without an AttributeError raised at every read of a default
+    settle_settings()           # ... and without Bokeh's settings resolved again for every model
+    lazy_container_defaults()   # ... and without 14,000 empty lists and dicts made per page only to be looked into
     notice_disconnects()        # a closed page's runs stop at once, not when its session is discarded
     refuse_foreign_components()
     guard_paths(route)          # /teacher answers the teacher only (and 404 without an exercise)
     sys.argv = argv + _oauth_argv(args)
+    warm_up()                   # the kernels and the identification code loaded before the first page
+    tune_garbage_collector()    # what is loaded so far frozen, the collector started less often
     panel_main()
     return 0
 

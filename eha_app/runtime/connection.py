@@ -11,8 +11,10 @@ and the app reads them back when it starts (:func:`eha_app.app.create_app`).
 
 It also keeps the address in step with the open tab (``tab=2``), and installs
 the page's one layout per message
-(:data:`~eha_app.runtime.patches.LAYOUT_ONCE_JS`), reporting in ``patches``
-whether it took effect.
+(:data:`~eha_app.runtime.patches.LAYOUT_ONCE_JS`) and the guard of widgets
+changed before they are drawn
+(:data:`~eha_app.runtime.patches.CONTROLS_BEFORE_RENDER_JS`), reporting in
+``patches`` whether each took effect.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from __future__ import annotations
 import param
 from panel.custom import JSComponent
 
-from .patches import LAYOUT_ONCE_JS
+from .patches import CONTROLS_BEFORE_RENDER_JS, LAYOUT_ONCE_JS
 
 __all__ = ["ConnectionWatch"]
 
@@ -31,14 +33,15 @@ class ConnectionWatch(JSComponent):
     retry_ms = param.Integer(default=2000, bounds=(100, None))
     tabs_class = param.String(default="eha-main-tabs", doc="css class of the Tabs whose index goes into the URL")
     patches = param.Dict(default={}, doc="what the page reports of the library patches it installed, e.g. "
-                                         "{'layout_once': True}")
+                                         "{'layout_once': True, 'controls_before_render': True}")
 
-    _esm = LAYOUT_ONCE_JS + """
+    _esm = LAYOUT_ONCE_JS + CONTROLS_BEFORE_RENDER_JS + """
 export function render({ view, model, el }) {
   el.style.display = 'none'
   const doc = view.model.document
   // one layout per message from the server: the page says whether BokehJS had what it needs
-  const applied = { layout_once: ehaLayoutOncePerMessage(doc) }
+  // and a widget enabled or disabled before it is drawn does not break the message
+  const applied = { layout_once: ehaLayoutOncePerMessage(doc), controls_before_render: ehaControlsBeforeRender() }
   window.__eha_patches = applied
   model.patches = applied
   let overlay = null

@@ -30,6 +30,19 @@ One layout per message (BokehJS 3.9, ``Document._apply_json_patch`` and ``Layout
     when a page reports it did not (the page still works, only slower).
     No public API lays out once per message.
 
+A widget enabled before it is drawn (BokehJS 3.9, ``ControlView.connect_signals``)
+    BokehJS connects a new widget's signals when it builds its view and draws it
+    (``render``) only once the whole new part of the page is built, which waits
+    for the page's components' modules. A message from the server that enables
+    or disables the widget meanwhile (a download offered once a result is
+    shown, sent 20 ms after the tab that holds it) made BokehJS set an
+    attribute on an element that did not exist yet: an exception inside the
+    patch, and the rest of the tab was never drawn ("Drawing the paper's
+    Fig. 2…" for good, in 5 of 12 pages opened from a link on a fast server).
+    :data:`CONTROLS_BEFORE_RENDER_JS` skips the widget's elements that are not
+    drawn yet (drawing them takes the widget's state then). The page reports
+    it in ``ConnectionWatch.patches`` like the one layout per message.
+
 Is the event loop busy? (CPython 3.10-3.13 ``asyncio.BaseEventLoop._ready``)
     The page updates wait until nothing else is ready to run
     (:class:`~eha_app.runtime.tasks.PageUpdates`): a student typing goes
@@ -85,8 +98,11 @@ from __future__ import annotations
 import sys
 
 __all__ = ["COMPONENT_PACKAGES", "WRITTEN_FOR", "component_allowed", "refuse_foreign_components",
-           "strict_page_changes", "UnlockedChange", "strict_mode_on", "LAYOUT_ONCE_JS", "loop_has_work",
-           "bind_port_shared", "guard_paths"]
+           "strict_page_changes", "UnlockedChange", "strict_mode_on", "LAYOUT_ONCE_JS", "CONTROLS_BEFORE_RENDER_JS",
+           "loop_has_work",
+           "bind_port_shared", "guard_paths", "cache_stable_defaults", "fast_themed_values", "settle_settings",
+           "SETTLED_SETTINGS", "lazy_container_defaults", "tune_garbage_collector", "on_disconnect",
+           "notice_disconnects"]
 
 #: The library versions these changes were written against (checked by the tests; pyproject.toml
 #: keeps both below their next minor version).
@@ -195,6 +211,35 @@ function ehaLayoutOncePerMessage(doc) {
 }
 """
 
+
+#: A widget told it is enabled or disabled before it was drawn (BokehJS 3.9, ``ControlView``).
+CONTROLS_BEFORE_RENDER_JS = """
+function ehaControlsBeforeRender() {
+  let proto = null;
+  try {
+    const button = Bokeh.Models.get("Button");
+    proto = button != null ? button.prototype.default_view.prototype : null;
+    while (proto != null && proto.constructor.__name__ !== "ControlView") { proto = Object.getPrototypeOf(proto); }
+  } catch (e) { proto = null; }
+  if (proto == null || typeof proto.connect_signals !== "function") { return false; }
+  if (proto.connect_signals.__eha_before_render) { return true; }
+  const base = Object.getPrototypeOf(proto);
+  if (base == null || typeof base.connect_signals !== "function") { return false; }
+  const connect = function () {
+    base.connect_signals.call(this);
+    this.connect(this.disabled, (disabled) => {
+      for (const el of this.controls()) {
+        // not drawn yet: render() takes the model's state
+        if (el == null) { continue; }
+        if (disabled) { el.setAttribute("disabled", ""); } else { el.removeAttribute("disabled"); }
+      }
+    });
+  };
+  connect.__eha_before_render = true;
+  proto.connect_signals = connect;
+  return true;
+}
+"""
 
 def loop_has_work(loop) -> bool:
     """Does ``loop`` have callbacks ready to run now? (see the module docstring; False for a loop
@@ -331,6 +376,215 @@ def cache_stable_defaults() -> None:
 
     _get_default._eha_cached = True
     PropertyDescriptor._get_default = _get_default
+
+
+
+def fast_themed_values() -> None:
+    """Read a model's theme values from its ``__dict__`` instead of through a failed attribute lookup.
+
+    Bokeh 3.9 (``HasProps.themed_values``) is ``getattr(self, '__themed_values__', None)``, asked at
+    every read of an unset property; on the usual model, which has no theme values, the lookup fails
+    inside ``HasProps.__getattr__`` and Python builds and swallows an AttributeError each time: 9 % of
+    the server's event loop under a class of thirty (py-spy). Bokeh stores the theme values in the
+    instance's ``__dict__`` (``apply_theme`` sets them with ``setattr`` on a private name), so reading
+    the dict gives the same answer.
+    """
+    from bokeh.core.has_props import HasProps
+
+    if getattr(HasProps.themed_values, "_eha_fast", False):
+        return
+
+    def themed_values(self):
+        return self.__dict__.get("__themed_values__")
+
+    themed_values._eha_fast = True
+    HasProps.themed_values = themed_values
+
+
+#: Bokeh's settings that it reads on every model made or serialised (``make_id``,
+#: ``HasProps.to_serializable``): each read walks the settings' seven sources (the environment, two
+#: configuration files, ...).
+SETTLED_SETTINGS = ("simple_ids", "serialize_include_defaults")
+
+
+def settle_settings() -> None:
+    """Fix Bokeh's hot settings (:data:`SETTLED_SETTINGS`) at the values they have when the server
+    starts, and turn Bokeh's error diagnostics off.
+
+    Bokeh 3.9 resolves a setting from its sources at every read (``PrioritizedSetting.__call__``):
+    ``make_id`` alone, called for every model made, spent 3 % of the event loop there under a class.
+    The value is the same for the server's life (from its environment and configuration files); set
+    as the user's value, a read returns it at the first of the sources it checks.
+
+    Bokeh's ``perform_error_diagnostics`` (its public setting, ``BOKEH_PERFORM_ERROR_DIAGNOSTICS``)
+    checks the signature of every callback a model is given (``inspect.signature``, 250 times for
+    the frequency-domain panel: 8 % of building it) and suggests names for a misspelt attribute. The
+    app's callbacks are the same on every page and the test suite builds every page with the
+    diagnostics on; the server does without them.
+    """
+    from bokeh.settings import settings
+
+    for name in SETTLED_SETTINGS:
+        setting = getattr(settings, name)
+        setting.set_value(setting())
+    settings.perform_error_diagnostics.set_value(False)
+
+
+#: (model class, property name) -> (its default is an empty container, Bokeh wraps that default)
+_EMPTY_DEFAULTS: dict = {}
+
+
+def _empty_default(cls, name: str) -> tuple[bool, bool]:
+    """Is the class's default of property ``name`` an empty container, and one that Bokeh wraps to
+    notice changes (``PropertyValueContainer``: a ``List`` or ``Dict``, not a ``Seq``)? Found once
+    per class and property."""
+    key = (cls, name)
+    known = _EMPTY_DEFAULTS.get(key)
+    if known is None:
+        from bokeh.core.property.instance import InstanceDefault
+        from bokeh.core.property.wrappers import PropertyValueContainer
+
+        overrides = cls._overridden_defaults()
+        prop = cls.lookup(name).property
+        raw = overrides[name] if name in overrides else prop._default
+        if isinstance(raw, InstanceDefault):
+            known = (False, False)           # a model made per instance: it must be seen
+        else:
+            value = raw() if callable(raw) else raw
+            empty = isinstance(value, (list, dict, tuple, set)) and not value
+            known = (empty, empty and isinstance(prop.themed_default(cls, name, None), PropertyValueContainer))
+        _EMPTY_DEFAULTS[key] = known
+    return known
+
+
+def lazy_container_defaults() -> None:
+    """Do not make a model's unset, empty container properties only to look into them.
+
+    Bokeh 3.9 makes an unset container property's default (an empty list or dict, wrapped to
+    notice changes: ``PropertyValueList``, ``PropertyValueDict``) at its first read, and keeps it in
+    the instance. Two walks read every property of every model: the document's graph of models
+    (``bokeh.model.util.visit_immediate_value_references``, every property that can refer to a
+    model) and serialisation (``HasProps.query_properties_with_values``, every property, though
+    it then leaves out the unset ones). A page's 400 models got 14,000 such wrappers, 2.1 MB a
+    student (tracemalloc), made and validated for nothing: an empty default refers to no model,
+    and an unset property is not serialised. Both walks now skip an unset property whose class
+    default is an empty container, serialisation every property it would leave out, and a new
+    model does not make the defaults that Bokeh wraps and would not serialise (an unset ``Seq``,
+    which it serialises, is still made); a themed model, and every property that is set or was
+    read, take Bokeh's own path. The document's models and its JSON are unchanged
+    (``tests/app/test_stable_defaults.py``).
+    """
+    import bokeh.model.util as model_util
+    from bokeh.core.has_props import HasProps
+    from bokeh.core.property.descriptors import UnsetValueError
+    from bokeh.core.property.singletons import Intrinsic, Undefined
+    from bokeh.core.property.wrappers import PropertyValueContainer
+
+    if getattr(model_util.visit_immediate_value_references, "_eha_lazy", False):
+        return
+    _BOKEH.update(HasProps=HasProps, UnsetValueError=UnsetValueError, Intrinsic=Intrinsic, Undefined=Undefined,
+                  PropertyValueContainer=PropertyValueContainer,
+                  visit_value=model_util.visit_value_and_its_immediate_references)
+    model_util.visit_immediate_value_references = _visit_references_lazily
+    HasProps.query_properties_with_values = _query_properties_with_values
+    HasProps.__init__ = _init_model_lazily
+
+
+#: What the functions below take from Bokeh (filled in by :func:`lazy_container_defaults`).
+_BOKEH: dict = {}
+
+
+def _visit_references_lazily(value, visitor) -> None:
+    """``bokeh.model.util.visit_immediate_value_references`` (3.9), skipping an unset property whose
+    default is an empty container."""
+    if isinstance(value, _BOKEH["HasProps"]):
+        cls, values, unstable = value.__class__, value._property_values, value._unstable_default_values
+        plain = value.__dict__.get("__themed_values__") is None
+        visit_value = _BOKEH["visit_value"]
+        for attr in value.properties_with_refs():
+            if plain and attr not in values and attr not in unstable and _empty_default(cls, attr)[0]:
+                continue
+            visit_value(getattr(value, attr), visitor)
+    else:
+        _BOKEH["visit_value"](value, visitor)
+
+
+_visit_references_lazily._eha_lazy = True
+
+
+def _query_properties_with_values(self, query, *, include_defaults=True, include_undefined=False) -> dict:
+    """``HasProps.query_properties_with_values`` (3.9), but the unset properties it leaves out are
+    not read."""
+    themed_keys: set = set()
+    result: dict = {}
+    keys = self.properties(_with_props=True)
+    if include_defaults:
+        selected_keys = set(keys)
+    else:
+        selected_keys = set(self._property_values.keys()) | set(self._unstable_default_values.keys())
+        themed_values = self.themed_values()
+        if themed_values is not None:
+            themed_keys = set(themed_values.keys())
+            selected_keys |= themed_keys
+    for key in keys:
+        if key not in selected_keys:
+            continue
+        descriptor = self.lookup(key)
+        if not query(descriptor):
+            continue
+        try:
+            value = descriptor.get_value(self)
+        except _BOKEH["UnsetValueError"]:
+            if not include_undefined:
+                raise
+            value = _BOKEH["Undefined"]
+        else:
+            if (not include_defaults and key not in themed_keys and key in self._unstable_default_values
+                    and isinstance(value, _BOKEH["PropertyValueContainer"])):
+                continue
+        result[key] = value
+    return result
+
+
+def _init_model_lazily(self, **properties) -> None:
+    """``HasProps.__init__`` (3.9), but the unset properties whose default is an empty container that
+    Bokeh wraps are made at their first read."""
+    super(_BOKEH["HasProps"], self).__init__()
+    self._property_values = {}
+    self._unstable_default_values = {}
+    self._unstable_themed_values = {}
+    undefined, intrinsic = _BOKEH["Undefined"], _BOKEH["Intrinsic"]
+    for name, value in properties.items():
+        if value is undefined or value is intrinsic:
+            continue
+        setattr(self, name, value)
+    cls = self.__class__
+    for name in self.properties(_with_props=True):
+        if name in properties or _empty_default(cls, name)[1]:
+            continue                # made at its first read; unset, it is not serialised
+        desc = self.lookup(name)
+        if desc.has_unstable_default(self):
+            desc._get(self)         # fills in ``_unstable_*_values`` (a model made per instance)
+    self._initialized = True
+
+
+def tune_garbage_collector() -> None:
+    """Collect the server's garbage less often, and never look at what it loaded to start.
+
+    Building a page makes hundreds of thousands of small objects (Bokeh models, Panel's parameters,
+    their dicts); CPython's collector, started every 700 new objects, walked the young ones thousands
+    of times per page and every long-lived one (the libraries, the compiled kernels, every open
+    page) at each of its full passes: a fifth of the time to build a page (measured in-process,
+    pages with every tab built: 68 ms of collection per page, 9 ms after this). What is loaded at
+    start-up is frozen (``gc.freeze``: it is never garbage) and the first collection starts every
+    50,000 new objects. Cyclic garbage lives a little longer; Panel still collects fully after a
+    closed page's session is discarded.
+    """
+    import gc
+
+    gc.collect()
+    gc.freeze()
+    gc.set_threshold(50_000, 20, 20)
 
 
 # -- a page's connection closing -----------------------------------------------------------------------

@@ -1,4 +1,6 @@
-"""Bokeh's stable property defaults, kept per class: the same models, the same JSON, themes still apply."""
+"""The server's changes to how Bokeh makes and serialises models (stable defaults kept per class, theme
+values read from the instance, settings fixed, empty container defaults made only when read): the
+same models, the same JSON, themes still apply."""
 
 import json
 import os
@@ -12,10 +14,16 @@ from bokeh.document import Document
 from bokeh.themes import Theme
 from panel.io.state import set_curdoc
 if sys.argv[1] == "cached":
-    from eha_app.runtime.patches import cache_stable_defaults
-    cache_stable_defaults()
+    from eha_app.runtime import patches
+    patches.cache_stable_defaults()
+    patches.fast_themed_values()
+    patches.settle_settings()
+    patches.lazy_container_defaults()
+    import bokeh.model.util
+    from bokeh.core.has_props import HasProps
     from bokeh.core.property.descriptors import PropertyDescriptor
-    assert PropertyDescriptor._get_default._eha_cached
+    assert PropertyDescriptor._get_default._eha_cached and HasProps.themed_values._eha_fast
+    assert bokeh.model.util.visit_immediate_value_references._eha_lazy
 from eha_app.app import create_app
 from eha_app.session import Session
 from eha_app.session.state import AppState
@@ -25,7 +33,11 @@ with set_curdoc(doc):
     doc.add_root(pn.panel(page).get_root(doc))
     for key in ("simulation", "least_squares", "frequency", "board"):
         page.show(key)
-    text = re.sub(r"at 0x[0-9a-f]+", "at 0x", json.dumps(doc.to_json().content, default=str, sort_keys=True))
+    first = doc.to_json().content
+    # serialised again (a server serialises a model at every change): what the first pass read
+    # must not change the second
+    text = re.sub(r"at 0x[0-9a-f]+", "at 0x", json.dumps([first, doc.to_json().content], default=str,
+                                                          sort_keys=True))
     # ids in the order they first appear (Bokeh's counter, Panel's uuids differ from run to run)
     ids = {}
     out = {"doc": re.sub(r"\bp\d{4,}\b|[0-9a-f]{32}|[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}",
@@ -55,3 +67,20 @@ def test_a_page_serialises_the_same_with_the_defaults_kept():
     own, cached = _run("bokeh"), _run("cached")
     assert cached["themed"] == "31px" and cached["plain"] == own["plain"] != "31px"
     assert len(own["doc"]) > 100_000 and own["doc"] == cached["doc"]
+
+
+GC_SCRIPT = r"""
+import gc, json
+from eha_app.runtime.patches import tune_garbage_collector
+before = gc.get_threshold()
+tune_garbage_collector()
+print(json.dumps({"before": before, "after": gc.get_threshold(), "frozen": gc.get_freeze_count()}))
+"""
+
+
+def test_the_server_freezes_what_it_loaded_and_collects_less_often():
+    done = subprocess.run([sys.executable, "-c", GC_SCRIPT], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    assert out["before"][0] < out["after"][0] == 50_000
+    assert out["frozen"] > 1_000           # the libraries' objects, never scanned again
