@@ -70,17 +70,36 @@ def test_a_page_serialises_the_same_with_the_defaults_kept():
 
 
 GC_SCRIPT = r"""
-import gc, json
+import gc, json, weakref
+import panel.io.document as panel_document
 from eha_app.runtime.patches import tune_garbage_collector
-before = gc.get_threshold()
 tune_garbage_collector()
-print(json.dumps({"before": before, "after": gc.get_threshold(), "frozen": gc.get_freeze_count()}))
+out = {"frozen": gc.get_freeze_count()}
+class Node:
+    pass
+# a cycle alive through a full collection is frozen with the survivors ...
+a, b = Node(), Node()
+a.other, b.other = b, a
+alive = weakref.ref(a)
+frozen = gc.get_freeze_count()
+gc.collect()
+out["frozen_more"] = gc.get_freeze_count() > frozen
+# ... so an ordinary collection no longer finds it once it is garbage (a closed page's objects) ...
+del a, b
+gc.collect()
+out["kept_while_frozen"] = alive() is not None
+# ... the collection after a discarded session does, and freezes the survivors again
+panel_document._panel_last_cleanup = -1e9
+panel_document._garbage_collect()
+out["collected"] = alive() is None
+out["refrozen"] = gc.get_freeze_count() > 1_000
+print(json.dumps(out))
 """
 
 
-def test_the_server_freezes_what_it_loaded_and_collects_less_often():
+def test_the_server_freezes_what_outlives_a_full_collection_and_collects_it_when_a_page_closes():
     done = subprocess.run([sys.executable, "-c", GC_SCRIPT], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     out = json.loads(done.stdout.strip().splitlines()[-1])
-    assert out["before"][0] < out["after"][0] == 50_000
-    assert out["frozen"] > 1_000           # the libraries' objects, never scanned again
+    assert out["frozen"] > 1_000           # what was loaded at start, never scanned again
+    assert out["frozen_more"] and out["kept_while_frozen"] and out["collected"] and out["refrozen"]
