@@ -160,6 +160,11 @@ class Server:
         self.tree = ProcTree(self.proc.pid)
         self.url = f"http://127.0.0.1:{self.port}/eha"
         wait_served(self.proc, self.url, 180, self.log_text, self.stop, poll_s=0.3)
+        # every process serving before the class comes (each loads the kernels before it binds the port)
+        deadline = time.monotonic() + 180
+        while (len(set(re.findall(r"Starting Bokeh server with process id: (\d+)", self.log_text()))) < procs
+               and time.monotonic() < deadline and self.proc.poll() is None):
+            time.sleep(0.2)
 
     def log_text(self) -> str:
         if not self.log.closed:

@@ -7,9 +7,11 @@ sends them, without a browser (tests/ui drives a real one).
 
 from __future__ import annotations
 
+import re
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -45,6 +47,14 @@ class EhaServer:
                                      cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
         self.url = f"http://127.0.0.1:{self.port}/eha"
         wait_http(self.url, self.proc)
+        # with --num-procs N, every process serving: each loads the kernels before it binds the port,
+        # and the first to bind answers the first request
+        procs = int(args[args.index("--num-procs") + 1]) if "--num-procs" in args else 1
+        deadline = time.monotonic() + 120
+        while len(set(re.findall(r"Starting Bokeh server with process id: (\d+)", self.log_text()))) < procs:
+            if time.monotonic() > deadline or self.proc.poll() is not None:
+                pytest.fail(f"{procs} processes did not all start:\n{self.log_text()[-3000:]}")
+            time.sleep(0.2)
 
     def log_text(self) -> str:
         self.log.flush()
