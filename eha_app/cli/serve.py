@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 import socket
+import subprocess
 import sys
 import threading
 import time
@@ -164,9 +165,7 @@ def run(args) -> int:
               + ("" if args.allow_websocket_origin else " (--allow-websocket-origin names others)"), flush=True)
         print("Preparing the simulation kernels (the first start after an install compiles them, "
               "about 30 s)...", flush=True)
-        from eha_app.app import warm_up
-
-        warm_up()         # compiled once here; the server processes load the compiled code from disk
+        _compile_kernels(args.num_procs)
         print("Starting the server. Ctrl+C stops it.", flush=True)
         _announce_when_ready(f"http://127.0.0.1:{args.port}/eha" if args.address in ("0.0.0.0", "::")
                              else f"http://{args.address}:{args.port}/eha")
@@ -220,6 +219,18 @@ def run(args) -> int:
     tune_garbage_collector()    # what is loaded so far frozen, the collector started less often
     panel_main()
     return 0
+
+
+def _compile_kernels(num_procs: int) -> None:
+    """Compile the simulation kernels once (numba's cache on disk) before the server starts."""
+    if num_procs > 1:
+        # in a process of its own: the server processes load the compiled code from disk, and this
+        # one, which only watches them, stays small (it kept 250 MB of libraries)
+        subprocess.run([sys.executable, "-c", "from eha_app.app import warm_up; warm_up()"], check=True)
+    else:
+        from eha_app.app import warm_up
+
+        warm_up()
 
 
 def _print_nginx_config(args) -> int:
