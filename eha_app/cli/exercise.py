@@ -52,8 +52,9 @@ def add_parser(sub) -> None:
                      help="a load force always acting, in the app's signal grammar (e.g. white:200, sine:500:3)")
     new.add_argument("--measured", default="x,v,p1,p2", help="the signals measured (x always; e.g. x,p1,p2: no "
                      "velocity sensor)")
-    new.add_argument("--methods", default="lse,frequency", help="the routes a hand-in may come from: lse (the "
-                     "least squares), frequency (the back-out's βe); default both")
+    new.add_argument("--methods", default="lse,frequency,greybox", help="the routes a hand-in may come from: lse "
+                     "(the least squares), frequency (the back-out's βe), greybox (grey-box identification); "
+                     "default all three")
     new.add_argument("--max-record", default="60", metavar="S", help="the longest record, in s (default 60)")
     new.add_argument("--title", default="EHA identification exercise", help="shown to the students")
     new.add_argument("--out", required=True, help="the exercise file to write (e.g. class.json)")

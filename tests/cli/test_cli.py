@@ -282,6 +282,8 @@ def test_exercise_commands(capsys, tmp_path):
     from eha_core.exercise import Exercise
 
     truth = Exercise.load(path).student_params("ada")
+    # by default every route that exists may be handed in from, grey-box identification included
+    assert Exercise.load(path).conditions.methods == ("lse", "frequency", "greybox")
     assert f"M = {truth.M:.6g} kg" in out and f"B = {truth.B:.6g} N s/m" in out
     assert main(["exercise", "results", path]) == 0
     assert "0 students handed in" in capsys.readouterr().out
