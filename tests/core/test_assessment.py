@@ -1,6 +1,5 @@
 """Tests of eha_core.identify.assessment: verdicts on the residual correlations."""
 
-import time
 
 import numpy as np
 import pytest
@@ -124,13 +123,3 @@ def test_bad_input_is_refused():
         assess_residuals(res, false_alarm=0.7)
     with pytest.raises(ValueError, match=r"^analysis = \[1, 2\] is not allowed: must be a ResidualAnalysis"):
         assess_residuals([1, 2])
-
-
-def test_timing():
-    res = residual_analysis(np.random.default_rng(0).standard_normal(1000), np.random.default_rng(1).random(1000))
-    t0 = time.perf_counter()
-    for _ in range(100):
-        assess_residuals(res)
-    per_call = (time.perf_counter() - t0) / 100
-    print(f"assess_residuals {1e6 * per_call:.0f} us")
-    assert per_call < 0.01
