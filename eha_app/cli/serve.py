@@ -216,7 +216,7 @@ def run(args) -> int:
     guard_paths(route)          # /teacher answers the teacher only (and 404 without an exercise)
     sys.argv = argv + _oauth_argv(args)
     warm_up()                   # the kernels and the identification code loaded before the first page
-    tune_garbage_collector()    # what is loaded so far frozen, the collector started less often
+    tune_garbage_collector()    # what is loaded so far frozen, and what outlives each full collection
     panel_main()
     return 0
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import param
 from panel.custom import JSComponent
 
-from .patches import CONTROLS_BEFORE_RENDER_JS, LAYOUT_ONCE_JS
+from .patches import CONTROLS_BEFORE_RENDER_JS, LAYOUT_ONCE_JS, VIEW_CLASS_JS
 
 __all__ = ["ConnectionWatch"]
 
@@ -35,7 +35,7 @@ class ConnectionWatch(JSComponent):
     patches = param.Dict(default={}, doc="what the page reports of the library patches it installed, e.g. "
                                          "{'layout_once': True, 'controls_before_render': True}")
 
-    _esm = LAYOUT_ONCE_JS + CONTROLS_BEFORE_RENDER_JS + """
+    _esm = VIEW_CLASS_JS + LAYOUT_ONCE_JS + CONTROLS_BEFORE_RENDER_JS + """
 export function render({ view, model, el }) {
   el.style.display = 'none'
   const doc = view.model.document

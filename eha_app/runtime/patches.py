@@ -77,6 +77,18 @@ Stable property defaults (Bokeh 3.9, ``PropertyDescriptor._get_default``)
     defaults take Bokeh's path. A page's models and their JSON are unchanged (a test compares
     them with Bokeh's own); serialising a page with every tab built takes 42 ms instead of 160.
 
+Theme values, settings, empty containers (Bokeh 3.9, ``HasProps.themed_values``, ``HasProps.__init__``,
+``HasProps.query_properties_with_values``, ``bokeh.model.util.visit_immediate_value_references``)
+    :func:`fast_themed_values` reads a model's theme values without a failed attribute lookup,
+    :func:`settle_settings` fixes the settings Bokeh resolves for every model (and turns its
+    error diagnostics off), :func:`lazy_container_defaults` makes an empty list or dict default
+    only when it is read (each function says what it saved). The page's JSON is unchanged
+    (``tests/app/test_stable_defaults.py``).
+
+The collector (CPython's ``gc``; Panel 1.9's ``_garbage_collect`` and ``_destroy_document``)
+    :func:`tune_garbage_collector` freezes what outlives each full collection (no pause of the
+    event loop over 30 ms while a class works) and unfreezes it when Panel discards a session.
+
 A closed page (Bokeh 3.9, ``ServerSession.unsubscribe``)
     Panel hears that a page was closed only when it discards the session, about 5 s later; the
     page's largest run used a core meanwhile. :func:`notice_disconnects` calls the session's
@@ -98,8 +110,8 @@ from __future__ import annotations
 import sys
 
 __all__ = ["COMPONENT_PACKAGES", "WRITTEN_FOR", "component_allowed", "refuse_foreign_components",
-           "strict_page_changes", "UnlockedChange", "strict_mode_on", "LAYOUT_ONCE_JS", "CONTROLS_BEFORE_RENDER_JS",
-           "loop_has_work",
+           "strict_page_changes", "UnlockedChange", "strict_mode_on", "VIEW_CLASS_JS", "LAYOUT_ONCE_JS",
+           "CONTROLS_BEFORE_RENDER_JS", "loop_has_work",
            "bind_port_shared", "guard_paths", "cache_stable_defaults", "fast_themed_values", "settle_settings",
            "SETTLED_SETTINGS", "lazy_container_defaults", "tune_garbage_collector", "on_disconnect",
            "notice_disconnects"]
@@ -168,19 +180,28 @@ def refuse_foreign_components() -> None:
     panel_server.ComponentResourceHandler = GuardedComponentResourceHandler
 
 
+#: BokehJS: ``ehaViewClass(model, name)``, the prototype of the view class called ``name`` among the
+#: ancestors of model ``model``'s view (null if BokehJS has none): the internals the two changes
+#: below take. Pasted once before them.
+VIEW_CLASS_JS = """
+function ehaViewClass(modelName, viewName) {
+  try {
+    const model = Bokeh.Models.get(modelName);
+    let proto = model != null ? model.prototype.default_view.prototype : null;
+    while (proto != null && proto.constructor.__name__ !== viewName) { proto = Object.getPrototypeOf(proto); }
+    return proto;
+  } catch (e) { return null; }
+}
+"""
+
 #: BokehJS: ``ehaLayoutOncePerMessage(doc)`` installs one layout per message on ``doc`` and returns
-#: whether it found the internals it needs (see the module docstring). Pasted into the ESM of
-#: :class:`~eha_app.runtime.connection.ConnectionWatch`.
+#: whether it found the internals it needs (see the module docstring). Pasted, after
+#: :data:`VIEW_CLASS_JS`, into the ESM of :class:`~eha_app.runtime.connection.ConnectionWatch`.
 LAYOUT_ONCE_JS = """
 function ehaLayoutOncePerMessage(doc) {
   if (doc == null || typeof doc._apply_json_patch !== "function") { return false; }
   if (doc.__eha_layout_once) { return true; }
-  let proto = null;
-  try {
-    const column = Bokeh.Models.get("Column");
-    proto = column != null ? column.prototype.default_view.prototype : null;
-    while (proto != null && proto.constructor.__name__ !== "LayoutDOMView") { proto = Object.getPrototypeOf(proto); }
-  } catch (e) { proto = null; }
+  const proto = ehaViewClass("Column", "LayoutDOMView");
   if (proto == null || typeof proto.invalidate_layout !== "function") { return false; }
   doc.__eha_layout_once = true;
   const LayoutDOMView = proto.constructor;
@@ -212,15 +233,11 @@ function ehaLayoutOncePerMessage(doc) {
 """
 
 
-#: A widget told it is enabled or disabled before it was drawn (BokehJS 3.9, ``ControlView``).
+#: A widget told it is enabled or disabled before it was drawn (BokehJS 3.9, ``ControlView``; see the
+#: module docstring): ``ehaControlsBeforeRender()``, after :data:`VIEW_CLASS_JS`.
 CONTROLS_BEFORE_RENDER_JS = """
 function ehaControlsBeforeRender() {
-  let proto = null;
-  try {
-    const button = Bokeh.Models.get("Button");
-    proto = button != null ? button.prototype.default_view.prototype : null;
-    while (proto != null && proto.constructor.__name__ !== "ControlView") { proto = Object.getPrototypeOf(proto); }
-  } catch (e) { proto = null; }
+  const proto = ehaViewClass("Button", "ControlView");
   if (proto == null || typeof proto.connect_signals !== "function") { return false; }
   if (proto.connect_signals.__eha_before_render) { return true; }
   const base = Object.getPrototypeOf(proto);
