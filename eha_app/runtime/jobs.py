@@ -11,13 +11,17 @@ another student's 0.08 s simulation waited 78 s. The rules here:
   nothing running, the one served least recently (then the longest waiting):
   no session can hold more than one worker, and one that was just served goes
   behind those still waiting. A session is one *place* whatever runs for it:
-  its study, its model board's jobs and its tabs' runs (each a runner of its
-  own, so that one does not replace another's request) wait in that one
-  place, so a student running a long study takes one worker at most, and only
-  in turn with the others (a 500-seed study slowed the others' frequency
-  experiment 1.7x when each of its runners was a place). A long job cut in
-  parts (a study) is *background* work: a free worker takes it only when no
-  other session's request waits, so the others' runs never queue behind it.
+  its model board's jobs and its tabs' runs (each a runner of its own, so
+  that one does not replace another's request) wait in that one place.
+- **Long work runs beside, never instead.** A long job cut in parts (a study)
+  is *background* work: its parts run on a thread of their own, one at a
+  time, the sessions' studies taking turns, and compute in a child process
+  at the lowest OS priority (:mod:`eha_app.runtime.background`). It holds no
+  worker and no session's place, and shares neither the GIL nor a core with
+  the class: the cores it uses are the ones the others leave idle. (Run on a
+  worker, pausing between its seeds for the others' runs, a 500-seed study
+  still made the other students' short steps 1.2-1.5x slower: a seed in
+  flight held the GIL in turns with the event loop.)
 - **Work for nobody is stopped.** Closing the page cancels the session's jobs
   (:meth:`JobQueue.cancel_owner`); a running job stops at its next check of
   its :class:`~eha_core.cancel.CancelToken` (between integration chunks,
@@ -122,7 +126,7 @@ class Job:
     fn: Callable[[CancelToken], Any]
     on_done: Callable[[Job], None] | None = None
     place: Hashable = None          # the session it runs for (its turn in the queue); None: its owner
-    background: bool = False        # a part of a long job: started only when no other request waits
+    background: bool = False        # a part of a long job: runs on the background thread, beside the workers
     token: CancelToken = field(default_factory=CancelToken)
     state: JobState = JobState.QUEUED
     seq: int = 0
@@ -175,12 +179,15 @@ class JobQueue:
         self._queued: dict[Hashable, Job] = {}
         self._running: dict[Hashable, Job] = {}
         self._seq = itertools.count()
-        self._last_served: dict[Hashable, int] = {}     # by place
-        self._busy_places: dict[Hashable, int] = {}      # place -> jobs running
+        # by kind of work (False: requests, True: background), by place
+        self._last_served: dict[bool, dict[Hashable, int]] = {False: {}, True: {}}
+        self._busy_places: dict[bool, dict[Hashable, int]] = {False: {}, True: {}}   # place -> jobs running
         self._closed = False
         self.completed = 0
-        self._threads = [threading.Thread(target=self._work, name=f"{name}-{i}", daemon=True)
+        self._threads = [threading.Thread(target=self._work, args=(False,), name=f"{name}-{i}", daemon=True)
                          for i in range(self.workers)]
+        self._threads.append(threading.Thread(target=self._work, args=(True,), name=f"{name}-background",
+                                              daemon=True))
         for t in self._threads:
             t.start()
 
@@ -191,7 +198,8 @@ class JobQueue:
         """Queue ``fn(token)`` for ``owner``; returns the job and the queued job it replaced, if any.
 
         ``place``: the session the job runs for, whose one turn in the queue it takes (default: the
-        owner itself); ``background``: a part of a long job, started only when nothing else waits.
+        owner itself); ``background``: a part of a long job, run on the background thread (its
+        sessions taking turns there), never on a worker.
         ``on_done(job)`` is called in the worker thread once the job has ended in any
         state (including ``replaced``, from the submitting thread).
         """
@@ -207,7 +215,7 @@ class JobQueue:
                 replaced.finished_at = time.perf_counter()
                 replaced.token.cancel("replaced by a newer request")
             self._queued[owner] = job
-            self._cond.notify()
+            self._cond.notify_all()     # the workers and the background thread wait on the same condition
         if replaced is not None:
             self._notify(replaced)
         return job, replaced
@@ -216,7 +224,8 @@ class JobQueue:
         """Cancel the owner's waiting and running jobs (e.g. its page was closed)."""
         with self._cond:
             jobs = [j for j in (self._queued.pop(owner, None), self._running.get(owner)) if j is not None]
-            self._last_served.pop(owner, None)      # a session's own runner is its place: forgotten
+            for served in self._last_served.values():
+                served.pop(owner, None)             # a session's own runner is its place: forgotten
             for j in jobs:
                 j.token.cancel(reason)
                 if j.state == JobState.QUEUED:
@@ -227,38 +236,16 @@ class JobQueue:
                 self._notify(j)
         return jobs
 
-    def requests_waiting(self) -> bool:
-        """Whether a request (not background work) waits for a worker."""
-        with self._cond:
-            return any(not j.background for j in self._queued.values())
-
-    def requests_pending(self) -> bool:
-        """Whether a request (not background work) is running or waiting."""
-        with self._cond:
-            return (any(not j.background for j in self._running.values())
-                    or any(not j.background for j in self._queued.values()))
-
-    def yield_to_requests(self, token: CancelToken | None = None, max_wait_s: float = 2.0,
-                          also: Callable[[], bool] | None = None) -> None:
-        """Background work between two of its steps: wait while any request runs or waits, or ``also()``
-        holds (other pages' changes waiting for the event loop), at most ``max_wait_s`` so that it still
-        progresses on a busy server. The workers are threads: a study's seed computing beside a
-        student's run, or beside the event loop drawing thirty results, takes a share of what Python
-        gives them."""
-        deadline = time.perf_counter() + max_wait_s
-        while (self.requests_pending() or (also is not None and also())) and time.perf_counter() < deadline:
-            if token is not None:
-                token.check()
-            time.sleep(0.01)
-
     def ahead_of(self, job: Job) -> int:
         """About how many jobs start before ``job`` (0 when it is running or next)."""
         with self._cond:
             if job.state != JobState.QUEUED:
                 return 0
-            mine = (job.background, self._last_served.get(job.place, -1), job.seq)
+            served = self._last_served[job.background]
+            mine = (served.get(job.place, -1), job.seq)
             return sum(1 for j in self._queued.values()
-                       if j is not job and (j.background, self._last_served.get(j.place, -1), j.seq) < mine)
+                       if j is not job and j.background == job.background
+                       and (served.get(j.place, -1), j.seq) < mine)
 
     def snapshot(self) -> dict:
         """Counts for monitoring: queued, running, completed, workers."""
@@ -277,33 +264,35 @@ class JobQueue:
             t.join(timeout=30)
 
     # -- the workers ---------------------------------------------------------------
-    def _next(self) -> Job | None:
-        """The next job to start (call with the lock): among places (sessions) with nothing
-        running, a request before background work, then the place served least recently, then the
-        longest waiting."""
+    def _next(self, background: bool) -> Job | None:
+        """The next job of its kind (a request for a worker, background work for the background
+        thread) to start (call with the lock): among places (sessions) with nothing of that kind
+        running, the place served least recently, then the longest waiting."""
         best, best_key = None, None
+        busy, served = self._busy_places[background], self._last_served[background]
         for job in self._queued.values():
-            if job.place in self._busy_places:
+            if job.background != background or job.place in busy:
                 continue
-            key = (job.background, self._last_served.get(job.place, -1), job.seq)
+            key = (served.get(job.place, -1), job.seq)
             if best is None or key < best_key:
                 best, best_key = job, key
         return best
 
-    def _work(self) -> None:
+    def _work(self, background: bool) -> None:
         self._lower_priority()
+        busy, served = self._busy_places[background], self._last_served[background]
         while True:
             with self._cond:
-                job = self._next()
+                job = self._next(background)
                 while job is None:
                     if self._closed:
                         return
                     self._cond.wait()
-                    job = self._next()
+                    job = self._next(background)
                 del self._queued[job.owner]
                 self._running[job.owner] = job
-                self._busy_places[job.place] = self._busy_places.get(job.place, 0) + 1
-                self._last_served[job.place] = next(self._seq)
+                busy[job.place] = busy.get(job.place, 0) + 1
+                served[job.place] = next(self._seq)
                 job.state = JobState.RUNNING
                 job.started_at = time.perf_counter()
             try:
@@ -320,11 +309,11 @@ class JobQueue:
             with self._cond:
                 if self._running.get(job.owner) is job:
                     del self._running[job.owner]
-                left = self._busy_places.get(job.place, 1) - 1
+                left = busy.get(job.place, 1) - 1
                 if left > 0:
-                    self._busy_places[job.place] = left
+                    busy[job.place] = left
                 else:
-                    self._busy_places.pop(job.place, None)
+                    busy.pop(job.place, None)
                 self.completed += 1
                 self._cond.notify_all()
             self._notify(job)

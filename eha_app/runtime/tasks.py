@@ -219,11 +219,6 @@ class PageUpdates:
         else:       # a worker thread before any page event reached this process: ask the document
             doc.add_next_tick_callback(self._start)
 
-    def waiting_for_others(self, doc) -> int:
-        """Page changes waiting for other pages than ``doc``'s (callable from any thread)."""
-        with self._lock:
-            return sum(1 for d, _ in self._pending if d is not doc)
-
     def _start(self) -> None:
         import asyncio
 
@@ -267,11 +262,6 @@ class PageUpdates:
 _updates = PageUpdates()
 
 
-def others_waiting(doc) -> bool:
-    """Whether other pages' changes wait for the event loop: background work (a study) gives way."""
-    return _updates.waiting_for_others(doc) > 0
-
-
 def apply_locked(fn: Callable[[], None], doc=None) -> None:
     """Run ``fn`` on the session's document: now if there is no server, else in
     turn through :class:`PageUpdates` (locked, held, frozen)."""
@@ -300,8 +290,8 @@ class SessionRunner:
     def sub(self, name: str, *, background: bool = False) -> SessionRunner:
         """A runner of the same session whose requests do not replace this one's (a preview, the
         model board, a study): its owner is ``(owner, name)``, cancelled by :meth:`cancel_all`, in
-        the session's one place in the queue; ``background``: its jobs (a long job's parts) start
-        only when no other request waits."""
+        the session's one place in the queue; ``background``: its jobs (a long job's parts) run on
+        the queue's background thread instead, beside the workers and the session's place."""
         child = SessionRunner((self.owner, name), self._queue)
         child.background = background
         child._root = self._root

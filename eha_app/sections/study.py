@@ -2,8 +2,9 @@
 
 The least squares under a chosen disturbance, the transfer-function
 estimate or the grey-box estimate (its spread against the Cramér-Rao bound),
-run for N seeds (:func:`eha_core.study.run_study`) in a worker, with
-a progress bar and a cancel button; the page stays live. It shows each
+run for N seeds (:func:`eha_core.study.run_study`) in the server's child
+process for long work, at the lowest priority (the others' clicks go first),
+with a progress bar and a cancel button; the page stays live. It shows each
 estimate's distribution against the nominal value, the mean, the spread and
 how often the 95 % interval covered the truth: one run's 10 % error in B under
 white noise (the paper's Table 4) is one draw from a wide distribution.
@@ -16,7 +17,6 @@ from __future__ import annotations
 import dataclasses
 import html
 import time
-from functools import partial
 
 import numpy as np
 import panel as pn
@@ -28,7 +28,8 @@ from ..render import plots
 from ..render.formatting import num_html
 from ..render.layout import side_by_side
 from ..render.tables import SYMBOLS_HTML, UNITS
-from ..runtime.tasks import apply_locked, on_click, others_waiting, served_document, watch
+from ..runtime.background import background_process
+from ..runtime.tasks import apply_locked, on_click, served_document, watch
 from ..session import ReportPart, Section, SectionSnapshot
 from ..session.form import Field, Form, Group, parse_fields
 from ..session.state import FIELD_LABELS
@@ -72,7 +73,7 @@ _FIELDS = {f.name: f for g in STUDY_FORM for f in g.fields}
 _ONLY = {"lse": ("study_white", "study_dmodel", "study_estimator"), "tf": ("study_model", "study_noise"),
          "greybox": ("study_gb_params", "study_gb_measured", "study_snr")}
 #: At most this many progress updates a second reach the page.
-_PROGRESS_HZ = 8.0
+_PROGRESS_HZ = 4.0
 
 
 def plain_name(name: str) -> str:
@@ -160,7 +161,7 @@ class StudyPanel(Section):
     def __init__(self, session, **kwargs):
         super().__init__(session, **kwargs)
         state = self.state
-        # a study's parts are background work: the other students' runs never wait behind them
+        # a study's parts are background work: they take no worker and no turn of the session's
         self.study_runner = self.runner.sub("study", background=True)
         self.result = None
         self._token = None
@@ -235,9 +236,9 @@ class StudyPanel(Section):
         self.form.hidden = study_hidden(self.form.values)
         self.button.disabled = self._busy or cfg is None or not self.state.valid or bool(self.state.hidden)
 
-    #: Seeds per job (a quarter of a second of one worker): between two jobs of a long study the queue
-    #: serves the other students, so a 500-seed study never holds a worker for long.
-    CHUNK_SEEDS = {"lse": 10, "tf": 2, "greybox": 1}
+    #: Seeds per part (about 0.7 s of one core): two students' studies take turns part by part, and a
+    #: part's end is a change of the page (fewer parts, less of the event loop's time for one study).
+    CHUNK_SEEDS = {"lse": 50, "tf": 10, "greybox": 8}
 
     def run(self):
         """Run the study in short jobs on the server's pool; the page shows the progress and the
@@ -260,20 +261,6 @@ class StudyPanel(Section):
         doc = served_document()
         last = [0.0]
 
-        queue = self.study_runner.queue
-
-        gave_way = [False]
-
-        def pause():
-            # before each seed: the other students go first (a study is background work). A run waiting
-            # for a worker gets this one: the part ends here, its seeds kept, and the rest waits in the
-            # queue as background work; a run computing or page changes waiting: the seed waits.
-            if queue.requests_waiting():
-                gave_way[0] = True
-                self._token.cancel("giving way to the other students' runs")
-                return
-            queue.yield_to_requests(self._token, also=partial(others_waiting, doc) if doc is not None else None)
-
         def progress(done, _part_total):
             now = time.perf_counter()
             if now - last[0] < 1.0 / _PROGRESS_HZ:
@@ -283,12 +270,15 @@ class StudyPanel(Section):
 
         def compute(token):
             self._token = token         # the cancel button's way to the running part
-            return run_study(part, params, workers=1, progress=progress, cancel=token, pause=pause)
+            # in the server's child process for long work, at the lowest priority: the other
+            # students' clicks never wait for a seed in flight (eha_app.runtime.background)
+            return background_process().call(run_study, part, params, workers=1, progress=progress,
+                                             total=part.n_seeds, cancel=token)
 
         def show(result, job):
             self._parts.append(result)
             done = done_before + result.n_completed
-            if done < total and not self._stopped and (not result.cancelled or gave_way[0]):
+            if done < total and not self._stopped and not result.cancelled:
                 self._show_progress(done, total)
                 self._run_part(cfg, params, first + result.n_completed)
                 return

@@ -163,7 +163,8 @@ def test_closing_a_page_cancels_every_runner_of_its_session_and_forgets_them(que
     wait_for(lambda: running.finished)
     assert waiting.state == waiting2.state == "cancelled"
     owners = {root.owner, board.owner, study.owner, ("student", "study"), ("student", "study"), "x"}
-    assert not owners & set(queue._last_served) and not owners & set(queue._queued)
+    assert not any(owners & set(served) for served in queue._last_served.values())
+    assert not owners & set(queue._queued)
 
 
 def test_a_sessions_runners_share_its_one_place_in_the_queue():
@@ -198,37 +199,40 @@ def test_a_sessions_runners_share_its_one_place_in_the_queue():
         q.shutdown()
 
 
-def test_background_work_starts_only_when_no_request_waits(queue):
-    """A study's parts wait for every other session's request, however long they have waited."""
+def test_background_work_runs_beside_the_workers_and_the_sessions_places(queue):
+    """A study's part holds no worker and no turn: with one worker busy, another session's request
+    and the study's own session's request wait for the worker only, never for the part."""
+    open_a, body_a = gate()
+    a, _ = queue.submit("A", body_a, label="a")
+    wait_for(lambda: a.state == "running")
+    open_s, body_s = gate()
+    part, _ = queue.submit(("S", "study"), body_s, label="part", place="S", background=True)
+    wait_for(lambda: part.state == "running")           # the worker is A's: the part runs anyway
     order = []
-    open_a, body_a = gate()
-    a, _ = queue.submit("A", body_a, label="a")
-    wait_for(lambda: a.state == "running")
-    part, _ = queue.submit(("S", "study"), lambda t: order.append("study part"), label="part", place="S",
-                           background=True)
-    b, _ = queue.submit("B", lambda t: order.append("b"), label="b")
-    c, _ = queue.submit("C", lambda t: order.append("c"), label="c")
-    assert queue.ahead_of(part) == 2 and queue.ahead_of(b) == 0
+    s_run, _ = queue.submit("S", lambda t: order.append("s"), label="s-run", place="S")
+    b_run, _ = queue.submit("B", lambda t: order.append("b"), label="b-run")
+    assert queue.ahead_of(s_run) == 0 and queue.ahead_of(b_run) == 1 and queue.ahead_of(part) == 0
     open_a.set()
+    wait_for(lambda: s_run.finished and b_run.finished)
+    assert order == ["s", "b"] and part.state == "running"    # S's study did not cost S its turn
+    open_s.set()
     wait_for(lambda: part.finished)
-    assert order == ["b", "c", "study part"]
+    assert part.state == "done" and queue.snapshot()["running"] == 0
 
 
-def test_background_work_waits_between_its_steps_while_a_request_runs(queue):
-    open_a, body_a = gate()
-    a, _ = queue.submit("A", body_a, label="a")
-    wait_for(lambda: a.state == "running")
-    assert queue.requests_pending()
-    threading.Timer(0.2, open_a.set).start()
-    t0 = time.perf_counter()
-    queue.yield_to_requests(max_wait_s=5.0)
-    assert a.finished and time.perf_counter() - t0 >= 0.15
-    assert not queue.requests_pending()
-    # at most its bound when requests keep coming
-    open_b, body_b = gate()
-    b, _ = queue.submit("B", body_b, label="b")
-    wait_for(lambda: b.state == "running")
-    t0 = time.perf_counter()
-    queue.yield_to_requests(max_wait_s=0.1)
-    assert b.state == "running"
-    open_b.set()
+def test_studies_take_turns_on_the_background_thread(queue):
+    """One background part at a time; the session served least recently goes first, whatever waits
+    longest."""
+    order = []
+    open_1, body_1 = gate()
+    first, _ = queue.submit(("S", "study"), lambda t: (order.append("s1"), body_1(t)), label="s1", place="S",
+                            background=True)
+    wait_for(lambda: first.state == "running")
+    s2, _ = queue.submit(("S", "study"), lambda t: order.append("s2"), label="s2", place="S", background=True)
+    t1, _ = queue.submit(("T", "study"), lambda t: order.append("t1"), label="t1", place="T", background=True)
+    assert queue.ahead_of(t1) == 0 and queue.ahead_of(s2) == 1
+    time.sleep(0.05)
+    assert s2.state == t1.state == "queued"
+    open_1.set()
+    wait_for(lambda: s2.finished and t1.finished)
+    assert order == ["s1", "t1", "s2"]

@@ -175,22 +175,16 @@ def test_a_grey_box_study_on_tab_1s_actuator_against_the_cramer_rao_bound():
     assert dataclasses.replace(cfg, n_seeds=2).greybox is cfg.greybox
 
 
-def test_a_study_gives_its_worker_to_a_waiting_run_and_goes_on_after(monkeypatch):
-    import itertools
+def test_a_studys_parts_compute_in_the_servers_child_process():
+    import os
 
-    from eha_core.study import StudyConfig, run_study
+    from eha_app.runtime.background import background_process
 
     panel = Session(AppState()).build("study")
     panel.CHUNK_SEEDS = {**panel.CHUNK_SEEDS, "lse": 5}
     panel.form.values = {**panel.form.values, "study_seeds": "12"}
-    asks = itertools.count()
-    # another student's run waits for a worker before the study's 3rd and 8th seed-starts
-    monkeypatch.setattr(panel.study_runner.queue, "requests_waiting", lambda: next(asks) in (2, 8))
+    child = background_process()
+    calls = child.calls
     panel.run()
-    res = panel.result
-    sizes = [p.n_completed for p in panel._parts]
-    assert res.n_completed == 12 and not res.cancelled and "(cancelled)" not in panel.status.object
-    assert sum(sizes) == 12 and sizes[0] == 2 and len(sizes) == 4      # two parts ended early, their seeds kept
-    direct = run_study(StudyConfig("lse", n_seeds=12, disturbance="white:1000"), workers=1)
-    for name in res.parameters:
-        np.testing.assert_allclose(res.values(name), direct.values(name), rtol=1e-12)
+    assert panel.result.n_completed == 12 and [p.n_completed for p in panel._parts] == [5, 5, 2]
+    assert child.calls - calls == 3 and child.pid not in (None, os.getpid())

@@ -1,0 +1,294 @@
+"""Long background computations (a study) in a process of their own, at the lowest priority.
+
+A study of 500 seeds in a worker thread of the server shared the server's
+interpreter with the event loop that answers every student: its Python code
+held the GIL in turns with the loop's, and each student's click waited for
+it (with one student running a study, the others' short steps took 10-60 ms
+longer, 1.2-1.5x). The study paused between its seeds for the others' runs,
+but a seed in flight could not be paused.
+
+Here such work runs in one child process per server process, started when
+first needed and kept: no GIL in common with the server, and an OS priority
+of "idle" (Linux's ``SCHED_IDLE``: it runs only on a core that nothing else
+wants, and gives it up at once), so the child computes with the cores the
+class leaves idle. Nice 19 was not enough: a nice-19 process busy beside a
+class of 30 made their least squares 0.12 -> 0.28 s at the median and the
+first show of tab 2 1.50 -> 1.79 s; an idle-policy one left them as they were
+(0.11, 1.44; ``bench_classroom.py --sessions 30`` beside a busy loop of each).
+
+The server's thread that asked (the job queue's background thread) waits for
+the answer without holding the GIL; the work's progress and a cancel cross
+over in two shared integers:
+
+- ``progress(done, total)`` calls in the child set the count of seeds done;
+  the waiting thread reads it every :data:`POLL_S` and calls the caller's
+  ``progress`` in the server;
+- a cancel of the caller's :class:`~eha_core.cancel.CancelToken` sets the
+  cancel flag, which the child's token reads at each of its checks (between
+  integration chunks and estimator iterations): it stops within one.
+
+The child exits when the server does (it watches its parent) and after
+:data:`IDLE_S` unused (about 200 MB given back); a child that died (killed,
+out of memory) is replaced at the next call, the call it was running said
+failed. Where no child can start at all (a limit on processes, a main script
+it cannot import), the work runs in the caller's thread, and the log says so.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import os
+import pickle
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
+
+from eha_core.cancel import Cancelled, CancelToken
+from eha_core.errors import ComputationError
+
+__all__ = ["BackgroundProcess", "background_process", "CHILD_NICE", "POLL_S"]
+
+log = logging.getLogger("eha_app")
+
+#: The child's OS priority where the idle policy is not available: the lowest, below the
+#: workers' (10) and the event loop's (0).
+CHILD_NICE = 19
+#: How often the waiting thread reads the child's progress and passes on a cancel [s].
+POLL_S = 0.02
+#: How often the child checks that its server still runs [s].
+PARENT_CHECK_S = 0.5
+#: A child unused this long is stopped (its memory, about 200 MB, given back); the next call starts
+#: another (about 1 s) [s].
+IDLE_S = 300.0
+
+
+# -- in the child ---------------------------------------------------------------------------
+_cancel_flag = None
+_done_count = None
+
+
+class _FlagToken(CancelToken):
+    """The child's side of the caller's token: cancelled when the server sets the shared flag."""
+
+    def __init__(self, flag):
+        super().__init__()
+        self._flag = flag
+
+    def _poll(self) -> None:
+        if not self._event.is_set() and self._flag.value:
+            super().cancel("cancelled")
+
+    @property
+    def cancelled(self) -> bool:
+        self._poll()
+        return self._event.is_set()
+
+    def check(self) -> None:
+        self._poll()
+        super().check()
+
+
+def _child_start(flag, done, parent: int, nice: int) -> None:
+    global _cancel_flag, _done_count
+    _cancel_flag, _done_count = flag, done
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, nice)
+    except (AttributeError, OSError):  # not Linux, or not permitted: run at the priority given
+        pass
+    try:
+        # this thread's policy, inherited by any thread the work starts
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):  # not Linux: the nice value alone
+        pass
+    try:
+        import numba
+
+        numba.set_num_threads(1)   # one core: the class's other work runs beside it
+    except Exception:  # noqa: BLE001 - numba missing or no threading layer: nothing to limit
+        pass
+    import numpy as np
+
+    np.seterr(all="ignore")        # as in the workers: the core says what overflowed, not numpy's warnings
+
+    def watch_parent() -> None:
+        # a server killed without a goodbye (SIGKILL, a crash) leaves no one to stop this process
+        while os.getppid() == parent:
+            time.sleep(PARENT_CHECK_S)
+        os._exit(0)
+
+    threading.Thread(target=watch_parent, name="eha-parent-watch", daemon=True).start()
+
+
+def _progress(done: int, _total: int = 0) -> None:
+    _done_count.value = int(done)
+
+
+def _child_call(fn: Callable, args: tuple, kwargs: dict, with_cancel: bool, with_progress: bool):
+    """Run ``fn`` in the child; an outcome the server can always read: ("ok", result),
+    ("cancelled", None) or ("error", (exception or None, its type's name, its message))."""
+    _done_count.value = 0           # the call has begun (a child dying now fails it)
+    if with_cancel:
+        kwargs = {**kwargs, "cancel": _FlagToken(_cancel_flag)}
+    if with_progress:
+        kwargs = {**kwargs, "progress": _progress}
+    try:
+        return "ok", fn(*args, **kwargs)
+    except Cancelled:
+        return "cancelled", None
+    except Exception as exc:  # noqa: BLE001 - every failure goes back to the server, said there
+        try:
+            pickle.loads(pickle.dumps(exc))
+            sent = exc
+        except Exception:  # noqa: BLE001 - an exception that does not cross processes: its words do
+            sent = None
+        return "error", (sent, type(exc).__name__, str(exc))
+
+
+def _child_ready() -> int:
+    return os.getpid()
+
+
+# -- in the server --------------------------------------------------------------------------
+class BackgroundProcess:
+    """One child process that runs calls one at a time (see the module docstring)."""
+
+    def __init__(self, nice: int = CHILD_NICE, idle_s: float = IDLE_S):
+        self._nice = nice
+        self._idle_s = float(idle_s)
+        self._last_used = time.monotonic()
+        self._reaper: threading.Thread | None = None
+        self._lock = threading.Lock()          # one call at a time
+        self._pool: ProcessPoolExecutor | None = None
+        self._flag = self._done = None
+        self.pid: int | None = None
+        self.calls = 0
+        self.restarts = 0
+        self.without_child = False      # the last call found no child to run it (it ran in the caller)
+
+    def _ensure(self) -> ProcessPoolExecutor:
+        if self._pool is None:
+            # spawn, not fork: the server has threads (its event loop, the workers) whose locks a
+            # forked child would inherit held
+            ctx = multiprocessing.get_context("spawn")
+            self._flag, self._done = ctx.Value("b", 0, lock=False), ctx.Value("q", -1, lock=False)
+            self._pool = ProcessPoolExecutor(1, mp_context=ctx, initializer=_child_start,
+                                             initargs=(self._flag, self._done, os.getpid(), self._nice))
+            self.pid = self._pool.submit(_child_ready).result()
+            if self._reaper is None or not self._reaper.is_alive():
+                self._reaper = threading.Thread(target=self._stop_when_idle, name="eha-background-reaper",
+                                                daemon=True)
+                self._reaper.start()
+        return self._pool
+
+    def _stop_when_idle(self) -> None:
+        while True:
+            time.sleep(min(10.0, self._idle_s / 4))
+            # a call running holds the lock: never stopped under it
+            if not self._lock.acquire(blocking=False):
+                continue
+            try:
+                if self._pool is None:
+                    return
+                if time.monotonic() - self._last_used >= self._idle_s:
+                    pool, self._pool, self.pid = self._pool, None, None
+                    pool.shutdown(wait=True)
+                    log.info("the process for long computations stopped after %.0f s unused", self._idle_s)
+                    return
+            finally:
+                self._lock.release()
+
+    def call(self, fn: Callable, *args, cancel: CancelToken | None = None,
+             progress: Callable[[int, int], object] | None = None, total: int = 0, **kwargs) -> Any:
+        """``fn(*args, **kwargs)`` in the child (``fn`` and its arguments picklable), with a ``cancel``
+        token and a ``progress(done, total)`` callback passed through when given. Returns its result;
+        raises what it raised (:class:`~eha_core.cancel.Cancelled` once cancelled, if ``fn`` stops by
+        raising it)."""
+        with self._lock:
+            if cancel is not None:
+                cancel.check()
+            self.calls += 1
+            status = None
+            for attempt in range(2):
+                try:
+                    status, value = self._run(fn, args, kwargs, cancel, progress, total)
+                    break
+                except (BrokenProcessPool, OSError) as exc:
+                    # a child that died before the call reached it (between two calls), or could not
+                    # start: replaced and the call made again; one that died in the call's middle:
+                    # the call failed
+                    started = self._pool is not None and self._done.value >= 0
+                    self._drop()
+                    if started:
+                        raise ComputationError("the server's process for long computations stopped during "
+                                               "this run; try again") from None
+                    if attempt:
+                        self._no_child(exc)
+            self._last_used = time.monotonic()
+        if status is None:
+            # no child process to be had (a main script the child cannot import, a limit on
+            # processes): the work is done here, as it would be without this module
+            return fn(*args, **kwargs, **({"cancel": cancel} if cancel is not None else {}),
+                      **({"progress": lambda done, _total=0: progress(done, total)} if progress is not None
+                         else {}))
+        if status == "ok":
+            return value
+        if status == "cancelled":
+            raise Cancelled(cancel.reason if cancel is not None else "cancelled")
+        exc, name, message = value
+        raise exc if exc is not None else ComputationError(f"{name}: {message}")
+
+    def _run(self, fn, args, kwargs, cancel, progress, total):
+        pool = self._ensure()
+        self.without_child = False
+        self._flag.value, self._done.value = 0, -1       # -1: the child has not begun the call
+        future = pool.submit(_child_call, fn, args, kwargs, cancel is not None, progress is not None)
+        seen, passed = 0, False
+        while True:
+            try:
+                outcome = future.result(timeout=POLL_S)
+            except TimeoutError:
+                outcome = None
+            if cancel is not None and cancel.cancelled and not passed:
+                self._flag.value, passed = 1, True
+            done = self._done.value
+            if progress is not None and done > seen:      # the last count too, before the result
+                seen = done
+                progress(seen, total)
+            if outcome is not None:
+                return outcome
+
+    def _no_child(self, exc: BaseException) -> None:
+        if not self.without_child:
+            log.warning("no process for long computations could start (%s: %s): they run in the server's "
+                        "threads", type(exc).__name__, exc)
+        self.without_child = True
+
+    def _drop(self) -> None:
+        pool, self._pool, self.pid = self._pool, None, None
+        self.restarts += 1
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
+
+    def shutdown(self) -> None:
+        """Stop the child (tests; a server's end stops it anyway)."""
+        with self._lock:
+            pool, self._pool, self.pid = self._pool, None, None
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+_default: BackgroundProcess | None = None
+_default_lock = threading.Lock()
+
+
+def background_process() -> BackgroundProcess:
+    """The server process's child for long computations (started at its first call)."""
+    global _default
+    with _default_lock:
+        if _default is None:
+            _default = BackgroundProcess()
+        return _default
