@@ -204,6 +204,7 @@ def run(args) -> int:
         refuse_foreign_components,
         settle_settings,
         tune_garbage_collector,
+        websocket_nodelay,
     )
     from eha_app.runtime.teacher_access import route
 
@@ -212,6 +213,7 @@ def run(args) -> int:
     settle_settings()           # ... and without Bokeh's settings resolved again for every model
     lazy_container_defaults()   # ... and without 14,000 empty lists and dicts made per page only to be looked into
     notice_disconnects()        # a closed page's runs stop at once, not when its session is discarded
+    websocket_nodelay()         # a message's frames sent at once, not each after the browser's ACK of the last
     refuse_foreign_components()
     guard_paths(route)          # /teacher answers the teacher only (and 404 without an exercise)
     sys.argv = argv + _oauth_argv(args)

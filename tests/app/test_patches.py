@@ -98,3 +98,25 @@ def test_the_teacher_paths_are_answered_before_bokehs_routes(monkeypatch, tmp_pa
     assert handler(f"/teacher?token={ex.teacher_token()}")[0] == "_Login"
     assert handler("/teacher/ws", teacher_access.cookie_value(ex.teacher_token()))[0] == "WSHandler"
     assert handler("/eha")[0] == "DocHandler"
+
+
+def test_the_servers_websockets_send_each_frame_at_once(monkeypatch):
+    """Bokeh writes a message as several frames (the reason for the patch); a connection opened by
+    Bokeh's handler turns Nagle's algorithm off before Bokeh's own opening."""
+    import inspect
+
+    from bokeh.protocol.message import Message
+    from bokeh.server.views.ws import WSHandler
+
+    assert inspect.getsource(Message.send).count("write_message(") >= 3
+    calls = []
+    monkeypatch.setattr(WSHandler, "open", lambda self: calls.append("bokeh's open"))
+    patches.websocket_nodelay()
+    patches.websocket_nodelay()                 # twice: one wrapper
+
+    class Handler:
+        def set_nodelay(self, value):
+            calls.append(("nodelay", value))
+
+    WSHandler.open(Handler())
+    assert calls == [("nodelay", True), "bokeh's open"]
