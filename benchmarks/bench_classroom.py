@@ -43,6 +43,9 @@ server can share (it computes a run once for the students with the same inputs).
 ``--hog study`` (or ``spam``) runs the largest class twice in the same run, without and then with
 one more student who runs a 500-seed study throughout (or presses the study's run and cancel
 buttons every 0.3 s), and prints the other students' p50 and p95 per step with / without.
+``--hog-repeats K`` makes it K classes of each, alternating, their students pooled, and prints the
+spread between the classes without the hog beside (two runs alike differ too: a short step's p95
+of 30 students by 1.2-1.7x).
 
 ``--churn K`` instead opens and closes K sessions, 10 at a time, and prints
 the server's memory every 50 sessions and after the server discarded them.
@@ -51,6 +54,7 @@ the server's memory every 50 sessions and after the server discarded them.
     python benchmarks/bench_classroom.py --sessions 1,10 --procs 2
     python benchmarks/bench_classroom.py --url http://127.0.0.1:8080/eha --sessions 30 --server-pid 1234
     python benchmarks/bench_classroom.py --sessions 30 --steps open,param,compare --json class.json
+    python benchmarks/bench_classroom.py --sessions 30 --hog study --hog-repeats 3
     python benchmarks/bench_classroom.py --churn 200
 """
 
@@ -303,9 +307,10 @@ def report(r: ClassResult, extra: dict, out=print) -> dict:
                                                      and o.delay is not None], 95) for step in r.steps},
                    cpu_per_student=sum(cpu) / n if cpu else float("nan"))
     if r.hog_log:
-        runs = sum(1 for h in r.hog_log if h in ("run", "cancel"))
-        out(f"hog: {runs} press(es) of the study's buttons" + "".join(f"; {h}" for h in r.hog_log
-                                                                      if h.startswith("error"))[:300])
+        presses = [h for h in r.hog_log if h.split()[0] in ("run", "cancel")]
+        out(f"hog: {len(presses)} press(es) of the study's buttons"
+            + (f" ({', '.join(presses[:6])}{', ...' if len(presses) > 6 else ''})" if presses else "")
+            + "".join(f"; {h}" for h in r.hog_log if h.startswith("error"))[:300])
     summary.update(errors=errors, observer_p50=pct(obs_all, 50), observer_p95=pct(obs_all, 95),
                    observer_max=max(obs_all) if obs_all else None, memory_mb=mem,
                    client_cpu_s=extra["client_cpu"], wall_s=extra["wall"])
@@ -330,6 +335,53 @@ def summary_line(s: dict) -> str:
 
 
 # -- modes -------------------------------------------------------------------------------------
+
+def _pooled(runs: list, step: str) -> list:
+    return [o["seconds"] for d in runs for o in d["raw"]["steps"][step] if o["seconds"] is not None]
+
+
+def _ratios(a_runs: list, b_runs: list, steps, label_a: str, label_b: str) -> float:
+    """Print p50 and p95 per step of the pooled students of ``b_runs`` against ``a_runs``; the worst
+    ratio over the steps after open and param."""
+    worst = 0.0
+    for s in steps:
+        a, b = _pooled(a_runs, s), _pooled(b_runs, s)
+        a50, a95, b50, b95 = pct(a, 50), pct(a, 95), pct(b, 50), pct(b, 95)
+        r50 = b50 / a50 if a50 else float("nan")
+        r95 = b95 / a95 if a95 else float("nan")
+        if s not in ("open", "param"):
+            worst = max(worst, r50, r95)
+        print(f"  {STEP_NAMES.get(s, s):28s} p50 {a50:.3f} -> {b50:.3f} ({r50:.2f}x)   "
+              f"p95 {a95:.3f} -> {b95:.3f} ({r95:.2f}x)   [{label_a} -> {label_b}, {len(a)} / {len(b)} students]")
+    return worst
+
+
+def compare_hog(args, steps, largest: dict, largest_data: dict, raw: list) -> None:
+    """The class at the largest size with the hog against without it: ``--hog-repeats`` classes of
+    each, alternating (without, with, without, ...; the first without is the main run's)."""
+    n, k = largest["sessions"], max(1, args.hog_repeats)
+    without = [largest_data]
+    hogged = []
+    for i in range(k):
+        hogged.append(run_one(n, args, steps, hog=args.hog)[1])
+        raw.append(hogged[-1])
+        if i + 1 < k:
+            without.append(run_one(n, args, steps)[1])
+            raw.append(without[-1])
+        if args.json:
+            Path(args.json).write_text(json.dumps(raw, indent=1, default=str))
+    print(f"\nwith the {args.hog} hog / without, {n} students, {k} class(es) of each "
+          "(target: within 1.15):")
+    worst = _ratios(without, hogged, steps, "without", "with")
+    null = float("nan")
+    if k >= 2:
+        half = (k + 1) // 2
+        print(f"the classes without the hog among themselves (runs 1-{half} / {half + 1}-{k}): the spread of "
+              "two runs alike")
+        null = _ratios(without[:half], without[half:], steps, "first", "second")
+    print(f"hog={args.hog} worst_ratio={worst:.2f} null_worst_ratio={null:.2f} repeats={k} "
+          "(steps after open and param)")
+
 
 def run_one(n: int, args, steps, hog: str | None = None) -> tuple[dict, dict]:
     server = None if args.url else Server(args.procs)
@@ -449,6 +501,10 @@ def main(argv=None) -> int:
     ap.add_argument("--hog", choices=HOGS, help="at the largest size, run the class twice in this run: without, "
                     "then with one more student who runs a 500-seed study (study) or presses the study's buttons "
                     "every 0.3 s (spam); prints the others' p50 and p95 with / without")
+    ap.add_argument("--hog-repeats", type=int, default=1, metavar="K", help="with --hog: K classes without "
+                    "and K with the hog, alternating, their students pooled (30K per step): a short step's p95 "
+                    "from 30 students moves 1.2-1.7x between two runs alike; K >= 2 also prints that spread "
+                    "between the classes without (default 1)")
     ap.add_argument("--observer-period", type=float, default=2.0, help="the observer types every this many "
                     "seconds (default 2)")
     ap.add_argument("--churn", type=int, default=0, metavar="K", help="instead: open and close K sessions, "
@@ -493,20 +549,7 @@ def main(argv=None) -> int:
     base = summaries[0]
     largest = max(summaries, key=lambda s: s["sessions"])
     if args.hog:
-        hogged, data = run_one(largest["sessions"], args, steps, hog=args.hog)
-        raw.append(data)
-        if args.json:
-            Path(args.json).write_text(json.dumps(raw, indent=1, default=str))
-        print(f"\nwith the {args.hog} hog / without, {largest['sessions']} students (target: within 1.15):")
-        worst = 0.0
-        for s in steps:
-            a, b = largest["steps"][s], hogged["steps"][s]
-            r50 = b["p50"] / a["p50"] if a["p50"] else float("nan")
-            r95 = b["p95"] / a["p95"] if a["p95"] else float("nan")
-            worst = max(worst, r50, r95) if s not in ("open", "param") else worst
-            print(f"  {STEP_NAMES.get(s, s):28s} p50 {a['p50']:.2f} -> {b['p50']:.2f} ({r50:.2f}x)   "
-                  f"p95 {a['p95']:.2f} -> {b['p95']:.2f} ({r95:.2f}x)")
-        print(f"hog={args.hog} worst_ratio={worst:.2f} (steps after open and param)")
+        compare_hog(args, steps, largest, raw[summaries.index(largest)], raw)
     if largest is not base:
         ratios = []
         for s in steps:

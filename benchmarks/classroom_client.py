@@ -297,6 +297,9 @@ class StudentSession:
         self._ack = loop.create_future()
         self._ws = await websocket_connect(request, subprotocols=["bokeh", match.group(1)],
                                            max_message_size=1024 * 2**20)
+        # as a browser does (Chromium sets TCP_NODELAY on every socket): each frame of a message sent
+        # at once, not after the server's acknowledgement of the one before (delayed up to 40 ms)
+        self._ws.protocol.stream.set_nodelay(True)
         self._reader = asyncio.ensure_future(self._read_forever())
         await asyncio.wait_for(asyncio.shield(self._ack), timeout)
         reply = await self._request("PULL-DOC-REQ", {}, timeout)
@@ -745,13 +748,15 @@ class Student(StudentSession):
                                   "eha-lse-alert", timeout)
         return time.perf_counter() - t0
 
-    async def start_study(self, seeds: int, timeout: float | None = None) -> None:
-        """Tab 3's study: ``seeds`` seeds of the default experiment, "Run the study" pressed."""
+    async def start_study(self, seeds: int, timeout: float | None = None, kind: str | None = None) -> None:
+        """Tab 3's study: ``seeds`` seeds of the default experiment (or ``kind``: lse, tf, greybox),
+        "Run the study" pressed."""
         await self.show_tab(2, self.IDENT_TABS, timeout)
         await self.show_subtab(self.IDENT_TABS, 4, "eha-study-form", timeout)
         form = self.form("eha-study-form")
         values = dict(form.attributes.get("values") or {})
-        await self.set_property(form, "values", {**values, "study_seeds": str(seeds)})
+        await self.set_property(form, "values", {**values, "study_seeds": str(seeds),
+                                                 **({"study_kind": kind} if kind else {})})
         await self.round_trip(timeout)
         await self.click(self.button("Run the study"))
 
@@ -912,8 +917,9 @@ async def _observe(url: str, result: ClassResult, current: list, stop: asyncio.E
 
 
 async def _hog(url: str, kind: str, stop: asyncio.Event, ready: asyncio.Event, timeout: float,
-               log: list) -> None:
-    """One more student who takes what the app lets one student take: ``kind`` of :data:`HOGS`."""
+               log: list, t_class: float = 0.0) -> None:
+    """One more student who takes what the app lets one student take: ``kind`` of :data:`HOGS`.
+    ``log`` gets each press ("run at 12.3 s": seconds since ``t_class``) and an error."""
     h = Student(url, name="hog", timeout=timeout)
     try:
         await h.open(timeout)
@@ -932,10 +938,10 @@ async def _hog(url: str, kind: str, stop: asyncio.Event, ready: asyncio.Event, t
             running = h.study_running()
             if kind == "spam":
                 await h.click(h.find(css="eha-cancel-study")[0] if running else h.button("Run the study"))
-                log.append("cancel" if running else "run")
+                log.append(f"{'cancel' if running else 'run'} at {time.perf_counter() - t_class:.1f} s")
             elif not running:
                 await h.click(h.button("Run the study"))
-                log.append("run")
+                log.append(f"run at {time.perf_counter() - t_class:.1f} s")
     except Exception as exc:  # noqa: BLE001 - recorded, the class goes on
         log.append(f"error: {type(exc).__name__}: {exc}")
     finally:
@@ -996,7 +1002,7 @@ async def run_class(url: str, n: int, steps=STEPS, *, spread: float = 1.0, timeo
     on_step = on_step or (lambda _step, _when: None)
     hog_task, hog_ready = None, asyncio.Event()
     if hog is not None:
-        hog_task = asyncio.ensure_future(_hog(url, hog, stop, hog_ready, timeout, result.hog_log))
+        hog_task = asyncio.ensure_future(_hog(url, hog, stop, hog_ready, timeout, result.hog_log, t_class))
     try:
         if obs_task is not None:
             await obs_ready.wait()
