@@ -91,7 +91,7 @@ from .params import ActuatorParams
 from .signals import Constant, Signal, Sine, Sum, WhiteNoise, parse_signal
 
 __all__ = ["STUDY_KINDS", "MAX_SEEDS", "MAX_WORKERS", "DEFAULT_WORKERS", "TF_PARAMETERS", "StudyConfig",
-           "SeedEstimate", "StudyResult", "run_study", "combine_studies", "coverage_band"]
+           "SeedEstimate", "StudyResult", "run_study", "combine_studies", "coverage_band", "estimated_parameters"]
 
 #: The experiments a study repeats.
 STUDY_KINDS = ("lse", "tf", "greybox")
@@ -548,13 +548,29 @@ class StudyResult:
 # -- the experiments, one seed at a time -----------------------------------------------------
 
 
+def estimated_parameters(config: StudyConfig) -> tuple[str, ...]:
+    """The parameters a study of ``config`` estimates, in the estimator's order (known before any
+    seed runs: a page draws the study's figures before its results come).
+
+    >>> estimated_parameters(StudyConfig("lse"))
+    ('M', 'B', 'Af', 'd0', 'beta_e')
+    >>> estimated_parameters(StudyConfig("tf"))
+    ('a1', 'a2', 'a3', 'b0')
+    """
+    if config.kind == "lse":
+        harmonic = config.disturbance_model == "harmonic"
+        return ("M", "B", "Af", "d0") + (("d_sin", "d_cos") if harmonic else ()) + ("beta_e",)
+    if config.kind == "tf":
+        return TF_PARAMETERS
+    return tuple(config.greybox.params)
+
+
 class _LsePlan:
     """The least-squares experiment, ready to run per seed (thread-safe: no state is changed)."""
 
     def __init__(self, config: StudyConfig, params: ActuatorParams):
         self.config, self.params = config, params
-        harmonic = config.disturbance_model == "harmonic"
-        self.parameters = ("M", "B", "Af", "d0") + (("d_sin", "d_cos") if harmonic else ()) + ("beta_e",)
+        self.parameters = estimated_parameters(config)
         self.nominal = {"M": params.M, "B": params.B, "Af": params.Af, "beta_e": params.beta_e,
                         **self._disturbance_truth()}
         self.nominal_is_truth = True
@@ -618,7 +634,7 @@ class _TfPlan:
         exp = config.experiment
         self.reference_tf = linearize(params).closed_loop_coeffs(exp.kp)
         num, den = self.reference_tf
-        self.parameters = TF_PARAMETERS
+        self.parameters = estimated_parameters(config)
         self.nominal = dict(zip(TF_PARAMETERS, map(float, [*den[1:], *num]), strict=True))
         self.nominal_is_truth = exp.model == "linear"
         self.reference = (
@@ -665,7 +681,7 @@ class _GreyBoxPlan:
         g = config.greybox
         self.config, self.params, self.greybox = config, params, g
         self.guess = g.guess if g.guess is not None else ActuatorParams()
-        self.parameters = g.params
+        self.parameters = estimated_parameters(config)
         self.nominal = {n: param_value(params, n) for n in g.params}
         self.nominal_is_truth = True
         self.reference = ("the parameters simulated (the truth); every seed's estimate starts from the paper's "

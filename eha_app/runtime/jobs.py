@@ -18,7 +18,8 @@ another student's 0.08 s simulation waited 78 s. The rules here:
   time, the sessions' studies taking turns, and compute in a child process
   at the lowest OS priority (:mod:`eha_app.runtime.background`). It holds no
   worker and no session's place, and shares neither the GIL nor a core with
-  the class: the cores it uses are the ones the others leave idle. (Run on a
+  the class: the cores it uses are the ones the others leave idle, and it
+  waits while any request runs or waits (:meth:`JobQueue.requests_pending`). (Run on a
   worker, pausing between its seeds for the others' runs, a 500-seed study
   still made the other students' short steps 1.2-1.5x slower: a seed in
   flight held the GIL in turns with the event loop.)
@@ -49,6 +50,8 @@ from typing import Any
 
 from eha_core.cancel import Cancelled, CancelToken
 from eha_core.errors import ComputationError, not_allowed
+
+from .background import give_way_now
 
 __all__ = ["Job", "JobState", "JobQueue", "default_queue", "worker_count", "session_name", "log_failure",
            "EXPECTED_FAILURES"]
@@ -216,6 +219,8 @@ class JobQueue:
                 replaced.token.cancel("replaced by a newer request")
             self._queued[owner] = job
             self._cond.notify_all()     # the workers and the background thread wait on the same condition
+        if not job.background:
+            give_way_now()              # a study computing beside waits from now on
         if replaced is not None:
             self._notify(replaced)
         return job, replaced
@@ -235,6 +240,12 @@ class JobQueue:
             if j.state == JobState.CANCELLED:
                 self._notify(j)
         return jobs
+
+    def requests_pending(self) -> bool:
+        """Whether a request (not background work) is running or waiting: the class is at work."""
+        with self._cond:
+            return (any(not j.background for j in self._running.values())
+                    or any(not j.background for j in self._queued.values()))
 
     def ahead_of(self, job: Job) -> int:
         """About how many jobs start before ``job`` (0 when it is running or next)."""

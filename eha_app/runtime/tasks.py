@@ -45,6 +45,7 @@ from panel.io.state import set_curdoc
 
 from eha_core.cancel import Cancelled, CancelToken
 
+from .background import give_way_now
 from .jobs import Job, JobQueue, JobState, default_queue, log_failure, session_name
 
 __all__ = ["SessionRunner", "PageUpdates", "apply_locked", "frozen_models", "held",
@@ -199,6 +200,7 @@ class PageUpdates:
         self._lock = threading.Lock()
         self._loop = None
         self._task = None
+        self._applying = False
         self.done = 0
 
     def submit(self, doc, fn: Callable[[], None]) -> None:
@@ -207,6 +209,7 @@ class PageUpdates:
 
         with self._lock:
             self._pending.append((doc, fn))
+        give_way_now()                  # a study computing beside waits from now on
         try:
             loop = asyncio.get_running_loop()
         except RuntimeError:
@@ -218,6 +221,11 @@ class PageUpdates:
             self._loop.call_soon_threadsafe(self._start)
         else:       # a worker thread before any page event reached this process: ask the document
             doc.add_next_tick_callback(self._start)
+
+    def busy(self) -> bool:
+        """Whether a page change is being made or waits (callable from any thread)."""
+        with self._lock:
+            return bool(self._pending) or self._applying
 
     def _start(self) -> None:
         import asyncio
@@ -252,14 +260,22 @@ class PageUpdates:
                 with set_curdoc(locked_doc), hold(locked_doc), lazy_freeze(locked_doc):
                     fn()
 
+            self._applying = True
             try:
                 await context.with_locked_document(locked)
             except Exception:  # noqa: BLE001 - one page's failure must not stop the others'
                 log.exception("a page update failed")
+            finally:
+                self._applying = False
             self.done += 1
 
 
 _updates = PageUpdates()
+
+
+def pages_busy() -> bool:
+    """Whether the event loop makes or has waiting a page change (a tab's build, a result shown)."""
+    return _updates.busy()
 
 
 def apply_locked(fn: Callable[[], None], doc=None) -> None:

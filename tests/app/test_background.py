@@ -80,6 +80,36 @@ def test_a_cancel_crosses_to_the_child_and_keeps_the_seeds_done(child):
     assert child.call(_sleep_cancellable, 0.01, cancel=CancelToken()) == "slept"
 
 
+def _count_for(seconds, cancel=None, progress=None):
+    """Checks its token and counts, for ``seconds`` of wall time."""
+    n, end = 0, time.monotonic() + seconds
+    while time.monotonic() < end:
+        cancel.check()
+        n += 1
+        if n % 1000 == 0:
+            progress(n, 0)
+    return n
+
+
+def test_the_child_waits_while_the_server_asks_it_to_give_way(child):
+    free = child.call(_count_for, 0.6, cancel=CancelToken(), progress=lambda d, t: None,
+                      give_way=lambda: False)
+    held = child.call(_count_for, 0.6, cancel=CancelToken(), progress=lambda d, t: None,
+                      give_way=lambda: True)
+    assert free > 10_000 and held < free / 20           # waited from its first checks on, under 2 s
+    # a server busy without a break: after MAX_PAUSE_S the child still goes on, a little at a time
+    from eha_app.runtime.background import MAX_PAUSE_S
+
+    long = child.call(_count_for, MAX_PAUSE_S + 1.0, cancel=CancelToken(), progress=lambda d, t: None,
+                      give_way=lambda: True)
+    assert long > held
+    # a cancel reaches a child that is giving way (else: 30 s of counting, and no Cancelled)
+    token = CancelToken()
+    threading.Timer(0.2, token.cancel, args=("closed",)).start()
+    with pytest.raises(Cancelled):
+        child.call(_count_for, 30.0, cancel=token, progress=lambda d, t: None, give_way=lambda: True)
+
+
 def test_failures_come_back_as_themselves_or_in_words(child):
     with pytest.raises(ValueError, match="invalid literal"):
         child.call(int, "x")

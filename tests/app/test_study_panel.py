@@ -188,3 +188,34 @@ def test_a_studys_parts_compute_in_the_servers_child_process():
     panel.run()
     assert panel.result.n_completed == 12 and [p.n_completed for p in panel._parts] == [5, 5, 2]
     assert child.calls - calls == 3 and child.pid not in (None, os.getpid())
+
+
+def test_the_histograms_are_made_when_asked_for_and_fill_in_part_by_part():
+    panel = Session(AppState()).build("study")
+    panel.CHUNK_SEEDS = {**panel.CHUNK_SEEDS, "lse": 5}
+    panel.form.values = {**panel.form.values, "study_seeds": "12"}
+    shown = []
+    original = panel._run_part
+
+    def part(cfg, params, first):
+        # before each part: the figure exists, holding the seeds done so far
+        first_name = panel.figure.names[0]
+        shown.append((panel.figure.names, sum(panel.figure.sources[first_name].data["top"])))
+        return original(cfg, params, first)
+
+    panel._run_part = part
+    panel.run()
+    names = ("M", "B", "Af", "d0", "beta_e")
+    assert shown == [(names, 0), (names, 5), (names, 10)]
+    assert sum(panel.figure.sources["M"].data["top"]) == 12 and panel.plot.objects == [panel.figure.layout]
+    # another study of the same parameters keeps its figures; another kind makes its own
+    figure = panel.figure
+    panel.form.values = {**panel.form.values, "study_seeds": "3"}
+    panel.run()
+    assert panel.figure is figure
+    shown.clear()
+    panel.form.values = {**panel.form.values, "study_kind": "tf", "study_seeds": "2"}
+    panel.run()
+    assert shown == [(("a1", "a2", "a3", "b0"), 0)]
+    assert panel.figure is not figure and panel.figure.names == ("a1", "a2", "a3", "b0")
+    assert panel.result.parameters == panel.figure.names
