@@ -340,9 +340,10 @@ def _pooled(runs: list, step: str) -> list:
     return [o["seconds"] for d in runs for o in d["raw"]["steps"][step] if o["seconds"] is not None]
 
 
-def _ratios(a_runs: list, b_runs: list, steps, label_a: str, label_b: str) -> float:
+def _ratios(a_runs: list, b_runs: list, steps, label_a: str, label_b: str, both_ways: bool = False) -> float:
     """Print p50 and p95 per step of the pooled students of ``b_runs`` against ``a_runs``; the worst
-    ratio over the steps after open and param."""
+    ratio over the steps after open and param (``both_ways``: a ratio r counts as max(r, 1/r), for two
+    groups alike, neither of which is the reference)."""
     worst = 0.0
     for s in steps:
         a, b = _pooled(a_runs, s), _pooled(b_runs, s)
@@ -350,7 +351,7 @@ def _ratios(a_runs: list, b_runs: list, steps, label_a: str, label_b: str) -> fl
         r50 = b50 / a50 if a50 else float("nan")
         r95 = b95 / a95 if a95 else float("nan")
         if s not in ("open", "param"):
-            worst = max(worst, r50, r95)
+            worst = max(worst, r50, r95, *((1 / r50, 1 / r95) if both_ways and r50 and r95 else ()))
         print(f"  {STEP_NAMES.get(s, s):28s} p50 {a50:.3f} -> {b50:.3f} ({r50:.2f}x)   "
               f"p95 {a95:.3f} -> {b95:.3f} ({r95:.2f}x)   [{label_a} -> {label_b}, {len(a)} / {len(b)} students]")
     return worst
@@ -378,9 +379,9 @@ def compare_hog(args, steps, largest: dict, largest_data: dict, raw: list) -> No
         half = (k + 1) // 2
         print(f"the classes without the hog among themselves (runs 1-{half} / {half + 1}-{k}): the spread of "
               "two runs alike")
-        null = _ratios(without[:half], without[half:], steps, "first", "second")
+        null = _ratios(without[:half], without[half:], steps, "first", "second", both_ways=True)
     print(f"hog={args.hog} worst_ratio={worst:.2f} null_worst_ratio={null:.2f} repeats={k} "
-          "(steps after open and param)")
+          "(steps after open and param; null: the classes without among themselves, either way)")
 
 
 def run_one(n: int, args, steps, hog: str | None = None) -> tuple[dict, dict]:
