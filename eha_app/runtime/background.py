@@ -17,8 +17,8 @@ first show of tab 2 1.50 -> 1.79 s; an idle-policy one left them as they were
 (0.11, 1.44; ``bench_classroom.py --sessions 30`` beside a busy loop of each).
 
 The server's thread that asked (the job queue's background thread) waits for
-the answer without holding the GIL; the work's progress and a cancel cross
-over in two shared integers:
+the answer without holding the GIL; the work's progress, a cancel and a
+request to wait cross over in three shared integers:
 
 - ``progress(done, total)`` calls in the child set the count of seeds done;
   the waiting thread reads it every :data:`POLL_S` and calls the caller's
@@ -49,21 +49,24 @@ it cannot import), the work runs in the caller's thread, and the log says so.
 
 from __future__ import annotations
 
+import atexit
 import logging
 import multiprocessing
 import os
 import pickle
+import signal
 import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout  # the builtin's alias from Python 3.11 on
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from eha_core.cancel import Cancelled, CancelToken
 from eha_core.errors import ComputationError
 
-__all__ = ["BackgroundProcess", "background_process", "CHILD_NICE", "POLL_S"]
+__all__ = ["BackgroundProcess", "background_process", "give_way_now", "CHILD_NICE", "POLL_S", "MAX_PAUSE_S"]
 
 log = logging.getLogger("eha_app")
 
@@ -81,6 +84,9 @@ MAX_PAUSE_S = 2.0
 MIN_RUN_S = 0.1
 #: ... looking again this often [s].
 PAUSE_STEP_S = 0.005
+#: After no child could start, the calls run in the caller's thread this long before a child is
+#: tried again [s].
+NO_CHILD_RETRY_S = 60.0
 #: A child unused this long is stopped (its memory, about 200 MB, given back); the next call starts
 #: another (about 1 s) [s].
 IDLE_S = 300.0
@@ -134,6 +140,16 @@ class _FlagToken(CancelToken):
 def _child_start(flag, done, pause, parent: int, nice: int) -> None:
     global _cancel_flag, _done_count, _pause_flag
     _cancel_flag, _done_count, _pause_flag = flag, done, pause
+    # the libraries loaded before the priority drops: a child starting on a busy server is ready soon
+    import numpy as np
+
+    try:
+        import numba
+
+        numba.set_num_threads(1)   # one core: the class's other work runs beside it
+    except Exception:  # noqa: BLE001 - numba missing or no threading layer: nothing to limit
+        pass
+    np.seterr(all="ignore")        # as in the workers: the core says what overflowed, not numpy's warnings
     try:
         os.setpriority(os.PRIO_PROCESS, 0, nice)
     except (AttributeError, OSError):  # not Linux, or not permitted: run at the priority given
@@ -143,15 +159,6 @@ def _child_start(flag, done, pause, parent: int, nice: int) -> None:
         os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
     except (AttributeError, OSError):  # not Linux: the nice value alone
         pass
-    try:
-        import numba
-
-        numba.set_num_threads(1)   # one core: the class's other work runs beside it
-    except Exception:  # noqa: BLE001 - numba missing or no threading layer: nothing to limit
-        pass
-    import numpy as np
-
-    np.seterr(all="ignore")        # as in the workers: the core says what overflowed, not numpy's warnings
 
     def watch_parent() -> None:
         # a server killed without a goodbye (SIGKILL, a crash) leaves no one to stop this process
@@ -166,12 +173,13 @@ def _progress(done: int, _total: int = 0) -> None:
     _done_count.value = int(done)
 
 
-def _child_call(fn: Callable, args: tuple, kwargs: dict, with_cancel: bool, with_progress: bool):
+def _child_call(fn: Callable, args: tuple, kwargs: dict, with_cancel: bool, with_progress: bool,
+                with_give_way: bool = False):
     """Run ``fn`` in the child; an outcome the server can always read: ("ok", result),
     ("cancelled", None) or ("error", (exception or None, its type's name, its message))."""
     _done_count.value = 0           # the call has begun (a child dying now fails it)
     if with_cancel:
-        kwargs = {**kwargs, "cancel": _FlagToken(_cancel_flag, _pause_flag)}
+        kwargs = {**kwargs, "cancel": _FlagToken(_cancel_flag, _pause_flag if with_give_way else None)}
     if with_progress:
         kwargs = {**kwargs, "progress": _progress}
     try:
@@ -192,6 +200,10 @@ def _child_ready() -> int:
 
 
 # -- in the server --------------------------------------------------------------------------
+class _NotBegun(Exception):
+    """The child died before it began the call."""
+
+
 class BackgroundProcess:
     """One child process that runs calls one at a time (see the module docstring)."""
 
@@ -208,8 +220,10 @@ class BackgroundProcess:
         self.calls = 0
         self.restarts = 0
         self.without_child = False      # the last call found no child to run it (it ran in the caller)
+        self._no_child_until = 0.0
+        self._exit_hooked = False
 
-    def _ensure(self) -> ProcessPoolExecutor:
+    def _ensure(self, cancel: CancelToken | None) -> ProcessPoolExecutor:
         if self._pool is None:
             # spawn, not fork: the server has threads (its event loop, the workers) whose locks a
             # forked child would inherit held
@@ -219,7 +233,20 @@ class BackgroundProcess:
             self._pool = ProcessPoolExecutor(1, mp_context=ctx, initializer=_child_start,
                                              initargs=(self._flag, self._done, self._pause, os.getpid(),
                                                        self._nice))
-            self.pid = self._pool.submit(_child_ready).result()
+            ready = self._pool.submit(_child_ready)
+            while True:
+                try:
+                    self.pid = ready.result(timeout=POLL_S)
+                    break
+                except FutureTimeout:
+                    if cancel is not None:
+                        cancel.check()      # the child goes on starting, for the next call
+            if not self._exit_hooked:
+                # before the pool's own exit hook (registered earlier, run later), which would wait
+                # for the part in flight: a server told to stop stops its child at once
+                register = getattr(threading, "_register_atexit", None)
+                (register or atexit.register)(self._stop_now)
+                self._exit_hooked = True
             if self._reaper is None or not self._reaper.is_alive():
                 self._reaper = threading.Thread(target=self._stop_when_idle, name="eha-background-reaper",
                                                 daemon=True)
@@ -256,24 +283,21 @@ class BackgroundProcess:
             if cancel is not None:
                 cancel.check()
             self.calls += 1
-            status = None
             for attempt in range(2):
-                try:
-                    status, value = self._run(fn, args, kwargs, cancel, progress, total, give_way)
+                future = self._start_call(fn, args, kwargs, cancel, progress, give_way)
+                if future is None:
                     break
-                except (BrokenProcessPool, OSError) as exc:
-                    # a child that died before the call reached it (between two calls), or could not
-                    # start: replaced and the call made again; one that died in the call's middle:
-                    # the call failed
-                    started = self._pool is not None and self._done.value >= 0
-                    self._drop()
-                    if started:
-                        raise ComputationError("the server's process for long computations stopped during "
-                                               "this run; try again") from None
+                try:
+                    status, value = self._wait(future, cancel, progress, total, give_way)
+                    break
+                except _NotBegun:
+                    # the child had died since the last call (the pool had not noticed yet): another
+                    # child takes the call, which had not begun
                     if attempt:
-                        self._no_child(exc)
+                        raise ComputationError("the server's process for long computations could not start; "
+                                               "try again") from None
             self._last_used = time.monotonic()
-        if status is None:
+        if future is None:
             # no child process to be had (a main script the child cannot import, a limit on
             # processes): the work is done here, as it would be without this module
             return fn(*args, **kwargs, **({"cancel": cancel} if cancel is not None else {}),
@@ -286,44 +310,97 @@ class BackgroundProcess:
         exc, name, message = value
         raise exc if exc is not None else ComputationError(f"{name}: {message}")
 
-    def _run(self, fn, args, kwargs, cancel, progress, total, give_way=None):
-        pool = self._ensure()
-        self.without_child = False
-        self._flag.value, self._done.value, self._pause.value = 0, -1, 0    # -1: the call has not begun
-        future = pool.submit(_child_call, fn, args, kwargs, cancel is not None, progress is not None)
-        self._giving_way = give_way is not None
-        try:
-            return self._wait(future, cancel, progress, total, give_way)
-        finally:
-            self._giving_way = False
+    def _start_call(self, fn, args, kwargs, cancel, progress, give_way):
+        """The call sent to the child (a child that died since the last call replaced first), or None
+        when no child can start."""
+        if time.monotonic() < self._no_child_until:
+            return None
+        for attempt in range(2):
+            try:
+                pool = self._ensure(cancel)
+                self.without_child = False
+                # -1: not begun; waiting from the start if the class is at work now
+                self._flag.value, self._done.value = 0, -1
+                self._pause.value = 1 if give_way is not None and give_way() else 0
+                return pool.submit(_child_call, fn, args, kwargs, cancel is not None, progress is not None,
+                                   give_way is not None)
+            except (BrokenProcessPool, OSError) as exc:
+                self._drop()
+                if attempt:
+                    self._no_child(exc)
+        return None
 
     def _wait(self, future, cancel, progress, total, give_way):
+        """The child's outcome of ``future``, passing on progress, a cancel and the requests to wait."""
         seen, passed = 0, False
-        while True:
-            try:
-                outcome = future.result(timeout=POLL_S)
-            except TimeoutError:
-                outcome = None
-            if cancel is not None and cancel.cancelled and not passed:
-                self._flag.value, passed = 1, True
-            if give_way is not None:
-                self._pause.value = 1 if outcome is None and give_way() else 0
-            done = self._done.value
-            if progress is not None and done > seen:      # the last count too, before the result
-                seen = done
-                progress(seen, total)
-            if outcome is not None:
-                return outcome
+        self._giving_way = give_way is not None
+        try:
+            while True:
+                try:
+                    outcome = future.result(timeout=POLL_S)
+                except FutureTimeout:
+                    outcome = None
+                if cancel is not None and cancel.cancelled and not passed:
+                    self._flag.value, passed = 1, True
+                if give_way is not None:
+                    self._pause.value = 1 if outcome is None and give_way() else 0
+                done = self._done.value
+                if progress is not None and done > seen:      # the last count too, before the result
+                    seen = done
+                    progress(seen, total)
+                if outcome is not None:
+                    return outcome
+        except BrokenProcessPool:
+            begun = self._done.value >= 0
+            self._drop()
+            if not begun:
+                raise _NotBegun from None
+            # the child died in the call's middle (killed, out of memory): the call failed
+            raise ComputationError("the server's process for long computations stopped during this run; "
+                                   "try again") from None
+        except BaseException:
+            # the server's side failed (a page gone, a callback's fault): the child stops too, not
+            # left computing a call nobody waits for
+            if not future.done():
+                self._stop_now()
+            raise
+        finally:
+            self._giving_way = False
 
     def _no_child(self, exc: BaseException) -> None:
         if not self.without_child:
             log.warning("no process for long computations could start (%s: %s): they run in the server's "
-                        "threads", type(exc).__name__, exc)
+                        "threads for the next %.0f s", type(exc).__name__, exc, NO_CHILD_RETRY_S)
         self.without_child = True
+        self._no_child_until = time.monotonic() + NO_CHILD_RETRY_S
+
+    def _stop_now(self) -> None:
+        """Stop the child at once (the server exits, or a call's waiting failed)."""
+        pool, pid = self._pool, self.pid
+        self._pool, self.pid = None, None
+        if pool is None:
+            return
+        try:
+            self._flag.value, self._pause.value = 1, 0
+        except Exception:  # noqa: BLE001 - the shared values are gone with the process: nothing to tell
+            pass
+        if pid is not None:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
+        pool.shutdown(wait=False, cancel_futures=True)
 
     def _drop(self) -> None:
-        pool, self._pool, self.pid = self._pool, None, None
+        """Forget a child that failed (killed if it still runs); the next call starts another."""
+        pool, pid = self._pool, self.pid
+        self._pool, self.pid = None, None
         self.restarts += 1
+        if pid is not None:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:             # gone already
+                pass
         if pool is not None:
             pool.shutdown(wait=False, cancel_futures=True)
 

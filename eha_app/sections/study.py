@@ -87,6 +87,11 @@ def study_hidden(texts: dict) -> list[str]:
     return [f for k, fields in _ONLY.items() if k != kind for f in fields]
 
 
+#: A histogram without seeds (yet): one bar of height 0, so that BokehJS has finite data to set the
+#: figure's ranges from (with none it warns "could not set initial ranges" in the browser's console).
+_NO_BARS = {"left": [-1.0], "right": [1.0], "top": [0]}
+
+
 class StudyFigure:
     """One histogram per parameter: estimates minus the nominal value (in % of it, or in its unit
     when it is zero), the nominal value (dashed) and the mean (solid)."""
@@ -95,7 +100,7 @@ class StudyFigure:
         self.names = names
         self.sources, self.means, self.figs = {}, {}, []
         for name in names:
-            src = ColumnDataSource(data={"left": [], "right": [], "top": []})
+            src = ColumnDataSource(data=dict(_NO_BARS))
             # fixed-size figures in a wrapping row: three across on a wide page, one on a narrow one
             fig = plots._figure(width=width, height=210, sizing_mode="fixed", title=plain_name(name),
                                 x_axis_label="estimate − nominal [%]", y_axis_label="seeds")
@@ -142,7 +147,7 @@ class StudyFigure:
                                            "top": counts.tolist()}
                 self.means[name].location = mean
             else:
-                self.sources[name].data = {"left": [], "right": [], "top": []}
+                self.sources[name].data = dict(_NO_BARS)
             fig.xaxis.axis_label = ("estimate − nominal [%]" if relative
                                     else f"estimate − nominal [{UNITS.get(name, '-')}]")
             cov = result.coverage.get(name, np.nan)
@@ -257,6 +262,9 @@ class StudyPanel(Section):
         # later: made at the study's end, they held every student's next answer for 0.1-0.3 s (the
         # others' frequency experiment 0.11 -> 0.31 s at the median when a study ended in that step)
         apply_locked(partial(self._figure_for, estimated_parameters(cfg)))
+        # the table of an earlier study would stand beside the histograms of this one's first seeds
+        self.summary.object = ("<p class='eha-note'>The study runs: the histograms show the seeds done so far; "
+                               "the table comes when it ends.</p>")
         return self._run_part(cfg, self.state.params, cfg.first_seed)
 
     def _figure_for(self, names: tuple[str, ...]) -> StudyFigure:
@@ -294,7 +302,8 @@ class StudyPanel(Section):
             # in the server's child process for long work, at the lowest priority: the other
             # students' clicks never wait for a seed in flight (eha_app.runtime.background)
             return background_process().call(run_study, part, params, workers=1, progress=progress,
-                                             total=part.n_seeds, cancel=token, give_way=class_at_work)
+                                             total=part.n_seeds, cancel=token,
+                                             give_way=class_at_work if doc is not None else None)
 
         def show(result, job):
             self._parts.append(result)
@@ -311,6 +320,12 @@ class StudyPanel(Section):
 
         def fail(message):
             self.status.object = f"<span class='eha-warn'>The study failed: {html.escape(message)}</span>"
+            if not self._parts:
+                self._show_earlier("The study failed before its first seeds were done.")
+            else:
+                self.result = combine_studies(cfg, self._parts, params, cancelled=True)
+                self._figure_for(tuple(self.result.parameters)).update(self.result)
+                self.summary.object = study_summary_html(self.result)
             self._running(False)
 
         return self.study_runner.run("study", compute, show, fail=fail, note=self._note, cancelled=self._cancelled)
@@ -334,7 +349,18 @@ class StudyPanel(Section):
             cfg, params = self._study
             self.result = combine_studies(cfg, self._parts, params, cancelled=True)
             self._draw(self.result, None)
+        else:
+            self._show_earlier("The study was cancelled before its first seeds were done.")
         self._running(False)
+
+    def _show_earlier(self, why: str) -> None:
+        """A study that ended without a seed: the page shows the earlier study again, if any."""
+        earlier = self.result
+        if earlier is not None:
+            self._figure_for(tuple(earlier.parameters)).update(earlier)
+            self.summary.object = study_summary_html(earlier)
+        else:
+            self.summary.object = f"<p class='eha-note'>{html.escape(why)}</p>"
 
     def _running(self, on: bool) -> None:
         self._busy = on

@@ -11,3 +11,13 @@ def run_async():
     def runner(coro):
         return asyncio.run(coro)
     return runner
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _stop_the_studies_child():
+    """The studies of these tests start the process-wide child for long work: stopped at the end."""
+    yield
+    from eha_app.runtime import background
+
+    if background._default is not None:
+        background._default.shutdown()

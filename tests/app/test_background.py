@@ -147,6 +147,32 @@ def test_an_idle_child_is_stopped_and_started_again_when_needed():
         bp.shutdown()
 
 
+def test_a_server_that_exits_stops_its_child_at_once(tmp_path):
+    """Without a stop of its own the pool's exit hook would wait for the call in flight (60 s here)."""
+    script = textwrap.dedent("""
+        import os, sys, threading, time
+        from eha_app.runtime.background import BackgroundProcess
+        if __name__ == "__main__":
+            bp = BackgroundProcess()
+            print(bp.call(os.getpid), flush=True)
+            threading.Thread(target=bp.call, args=(time.sleep, 60), daemon=True).start()
+            time.sleep(0.5)
+            sys.exit(0)
+    """)
+    path = tmp_path / "server.py"
+    path.write_text(script)
+    server = subprocess.Popen([sys.executable, str(path)], stdout=subprocess.PIPE, text=True)
+    try:
+        pid = int(server.stdout.readline())
+        assert server.wait(30) == 0
+        deadline = time.monotonic() + 10
+        while _alive(pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not _alive(pid)
+    finally:
+        server.kill()
+
+
 def test_the_child_goes_when_its_server_is_killed(tmp_path):
     script = textwrap.dedent("""
         import os, sys, time
@@ -175,7 +201,7 @@ def test_the_child_goes_when_its_server_is_killed(tmp_path):
 def test_without_a_child_the_work_is_done_in_the_callers_thread(monkeypatch, caplog):
     bp = BackgroundProcess()
 
-    def cannot(self):
+    def cannot(self, cancel=None):
         raise OSError("Resource temporarily unavailable")
 
     monkeypatch.setattr(BackgroundProcess, "_ensure", cannot)
@@ -185,7 +211,8 @@ def test_without_a_child_the_work_is_done_in_the_callers_thread(monkeypatch, cap
     assert res.n_completed == 3 and bp.without_child and bp.pid is None
     assert seen[-1] == (3, 3)
     assert "no process for long computations could start" in caplog.text
+    # a cancel reaches the work done here too (else: 1000 seeds)
     token = CancelToken()
-    token.cancel("the page was closed")
-    with pytest.raises(Cancelled):
-        bp.call(run_study, StudyConfig("lse", n_seeds=3), workers=1, cancel=token)
+    threading.Timer(0.3, token.cancel, args=("the page was closed",)).start()
+    res = bp.call(run_study, StudyConfig("lse", n_seeds=1000), workers=1, cancel=token)
+    assert res.cancelled and 0 < res.n_completed < 1000 and bp.without_child

@@ -219,3 +219,48 @@ def test_the_histograms_are_made_when_asked_for_and_fill_in_part_by_part():
     assert shown == [(("a1", "a2", "a3", "b0"), 0)]
     assert panel.figure is not figure and panel.figure.names == ("a1", "a2", "a3", "b0")
     assert panel.result.parameters == panel.figure.names
+
+
+def test_a_study_stopped_before_its_first_seeds_shows_the_earlier_one_again():
+    panel = Session(AppState()).build("study")
+    panel.form.values = {**panel.form.values, "study_seeds": "12"}
+    panel.run()
+    earlier = panel.result
+    assert "95 % interval covered the truth" in panel.summary.object
+    # the next study waits for its first part (queued), its page says what the histograms show
+    panel._run_part = lambda cfg, params, first: None
+    panel.run()
+    assert "histograms show the seeds done so far" in panel.summary.object
+    panel._cancelled(None)                      # cancelled before its first part ran
+    assert panel.result is earlier and "95 % interval covered the truth" in panel.summary.object
+    assert sum(panel.figure.sources["M"].data["top"]) == 12 and not panel.button.disabled
+    # with no earlier study: a note
+    fresh = Session(AppState()).build("study")
+    fresh._run_part = lambda cfg, params, first: None
+    fresh.run()
+    fresh._cancelled(None)
+    assert "cancelled before its first seeds" in fresh.summary.object
+
+
+def test_a_study_failing_midway_keeps_its_seeds_and_says_why(monkeypatch):
+    import eha_app.sections.study as study_module
+    from eha_core.errors import ComputationError
+
+    calls = []
+
+    class Child:
+        def call(self, fn, *args, cancel=None, progress=None, total=0, give_way=None, **kwargs):
+            calls.append(1)
+            if len(calls) == 2:
+                raise ComputationError("the server's process for long computations stopped during this run")
+            return fn(*args, cancel=cancel, **kwargs)
+
+    monkeypatch.setattr(study_module, "background_process", lambda: Child())
+    panel = Session(AppState()).build("study")
+    panel.CHUNK_SEEDS = {**panel.CHUNK_SEEDS, "lse": 5}
+    panel.form.values = {**panel.form.values, "study_seeds": "12"}
+    panel.run()
+    assert "The study failed" in panel.status.object and "stopped during this run" in panel.status.object
+    assert panel.result.n_completed == 5 and panel.result.cancelled
+    assert sum(panel.figure.sources["M"].data["top"]) == 5 and "covered the truth" in panel.summary.object
+    assert not panel.button.disabled and panel.cancel_button.disabled
