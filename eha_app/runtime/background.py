@@ -160,16 +160,6 @@ def _child_start(flag, done, pause, parent: int, nice: int) -> None:
     except (AttributeError, OSError):  # not Linux: the nice value alone
         pass
 
-    try:
-        # one core's caches for the child's work, not every core's: with it pinned, "Compare both"'s p95
-        # beside a study was 1.26x the class alone instead of 1.82x, the other steps within 1.02x (4
-        # classes of 30 each way; two runs alike differ by more, so a hint rather than a proof)
-        cpus = sorted(os.sched_getaffinity(0))
-        if len(cpus) > 1:
-            os.sched_setaffinity(0, {cpus[-1]})
-    except (AttributeError, OSError):  # not Linux: anywhere
-        pass
-
     def watch_parent() -> None:
         # a server killed without a goodbye (SIGKILL, a crash) leaves no one to stop this process
         while os.getppid() == parent:

@@ -57,8 +57,6 @@ def test_a_study_in_the_child_is_the_studys_own_at_the_lowest_priority(child):
     direct = run_study(cfg, workers=1)
     assert child.pid != os.getpid() and _alive(child.pid)
     assert os.sched_getscheduler(child.pid) == os.SCHED_IDLE
-    cpus = os.sched_getaffinity(0)
-    assert os.sched_getaffinity(child.pid) == ({max(cpus)} if len(cpus) > 1 else cpus)
     with open(f"/proc/{child.pid}/stat") as f:
         assert int(f.read().rsplit(")", 1)[1].split()[16]) == CHILD_NICE     # field 19: nice
     for name in res.parameters:
