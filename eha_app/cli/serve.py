@@ -198,6 +198,7 @@ def run(args) -> int:
     from eha_app.runtime.patches import (
         cache_stable_defaults,
         fast_themed_values,
+        give_way_on_messages,
         guard_paths,
         lazy_container_defaults,
         notice_disconnects,
@@ -214,6 +215,7 @@ def run(args) -> int:
     lazy_container_defaults()   # ... and without 14,000 empty lists and dicts made per page only to be looked into
     notice_disconnects()        # a closed page's runs stop at once, not when its session is discarded
     websocket_nodelay()         # a message's frames sent at once, not each after the browser's ACK of the last
+    give_way_on_messages()      # a study computing beside waits from a page's message on
     refuse_foreign_components()
     guard_paths(route)          # /teacher answers the teacher only (and 404 without an exercise)
     sys.argv = argv + _oauth_argv(args)

@@ -120,3 +120,21 @@ def test_the_servers_websockets_send_each_frame_at_once(monkeypatch):
 
     WSHandler.open(Handler())
     assert calls == [("nodelay", True), "bokeh's open"]
+
+
+def test_a_pages_message_asks_a_study_to_give_way(monkeypatch):
+    from bokeh.server.views.ws import WSHandler
+
+    from eha_app.runtime import background
+
+    seen = []
+
+    async def bokehs(self, fragment):
+        seen.append(("bokeh", fragment))
+
+    monkeypatch.setattr(WSHandler, "on_message", bokehs)
+    monkeypatch.setattr(background, "give_way_now", lambda: seen.append("give way"))
+    patches.give_way_on_messages()
+    patches.give_way_on_messages()              # twice: one wrapper
+    asyncio.run(WSHandler.on_message(object(), "frame"))
+    assert seen == ["give way", ("bokeh", "frame")]
