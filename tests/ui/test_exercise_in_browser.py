@@ -37,13 +37,20 @@ def formats(value: float, scale: float) -> set[str]:
     return {s for s in out if len(s.replace("-", "").replace(".", "").replace("e+", "").lstrip("0")) >= 7}
 
 
+def _as_number(number: str) -> str:
+    # not after a digit, a point or a letter: "p1734" is a Bokeh model's id (the server's simple ids,
+    # numbered as the models are made), not the number 1734
+    return rf"(?<![\w.]){re.escape(number)}(?![\d])"
+
+
 def appears(number: str, text: str) -> bool:
-    """``number`` written as a number of its own in ``text`` ("1.2085" in "βe = 1.2085 GPa", not in "21.20853")."""
-    return re.search(rf"(?<![\d.]){re.escape(number)}(?![\d])", text) is not None
+    """``number`` written as a number of its own in ``text`` ("1.2085" in "βe = 1.2085 GPa", not in "21.20853"
+    nor in the model id "p12085")."""
+    return re.search(_as_number(number), text) is not None
 
 
 def surroundings(number: str, text: str) -> str:
-    m = re.search(rf"(?<![\d.]){re.escape(number)}(?![\d])", text)
+    m = re.search(_as_number(number), text)
     return text[max(0, m.start() - 80):m.end() + 40]
 
 
