@@ -376,26 +376,22 @@ class BackgroundProcess:
 
     def _stop_now(self) -> None:
         """Stop the child at once (the server exits, or a call's waiting failed)."""
-        pool, pid = self._pool, self.pid
-        self._pool, self.pid = None, None
-        if pool is None:
+        if self._pool is None:
             return
         try:
             self._flag.value, self._pause.value = 1, 0
         except Exception:  # noqa: BLE001 - the shared values are gone with the process: nothing to tell
             pass
-        if pid is not None:
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except OSError:
-                pass
-        pool.shutdown(wait=False, cancel_futures=True)
+        self._kill()
 
     def _drop(self) -> None:
         """Forget a child that failed (killed if it still runs); the next call starts another."""
+        self.restarts += 1
+        self._kill()
+
+    def _kill(self) -> None:
         pool, pid = self._pool, self.pid
         self._pool, self.pid = None, None
-        self.restarts += 1
         if pid is not None:
             try:
                 os.kill(pid, signal.SIGKILL)

@@ -35,6 +35,30 @@ def _alive(pid: int) -> bool:
         return False
 
 
+def _gone(pid: int, within_s: float = 10.0) -> bool:
+    """Whether process ``pid`` has ended, waiting up to ``within_s``."""
+    deadline = time.monotonic() + within_s
+    while _alive(pid) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return not _alive(pid)
+
+
+def _start_server(tmp_path, body: str) -> tuple[subprocess.Popen, int]:
+    """A script standing for a server: it starts a child for long work, prints the child's pid, then
+    does ``body`` (indented code, ``bp`` the BackgroundProcess); returns the script's process and that pid."""
+    script = textwrap.dedent("""
+        import os, sys, threading, time
+        from eha_app.runtime.background import BackgroundProcess
+        if __name__ == "__main__":
+            bp = BackgroundProcess()
+            print(bp.call(os.getpid), flush=True)
+    """) + textwrap.indent(textwrap.dedent(body), " " * 4)
+    path = tmp_path / "server.py"
+    path.write_text(script)
+    server = subprocess.Popen([sys.executable, str(path)], stdout=subprocess.PIPE, text=True)
+    return server, int(server.stdout.readline())
+
+
 def _raise_unpicklable():
     class Local(Exception):     # a class defined in a function does not cross processes
         pass
@@ -138,10 +162,7 @@ def test_an_idle_child_is_stopped_and_started_again_when_needed():
     bp = BackgroundProcess(idle_s=0.4)
     try:
         pid = bp.call(os.getpid)
-        deadline = time.monotonic() + 10
-        while _alive(pid) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert not _alive(pid) and bp.pid is None
+        assert _gone(pid) and bp.pid is None
         assert bp.call(os.getpid) not in (pid, os.getpid())
     finally:
         bp.shutdown()
@@ -149,51 +170,25 @@ def test_an_idle_child_is_stopped_and_started_again_when_needed():
 
 def test_a_server_that_exits_stops_its_child_at_once(tmp_path):
     """Without a stop of its own the pool's exit hook would wait for the call in flight (60 s here)."""
-    script = textwrap.dedent("""
-        import os, sys, threading, time
-        from eha_app.runtime.background import BackgroundProcess
-        if __name__ == "__main__":
-            bp = BackgroundProcess()
-            print(bp.call(os.getpid), flush=True)
-            threading.Thread(target=bp.call, args=(time.sleep, 60), daemon=True).start()
-            time.sleep(0.5)
-            sys.exit(0)
+    server, pid = _start_server(tmp_path, """
+        threading.Thread(target=bp.call, args=(time.sleep, 60), daemon=True).start()
+        time.sleep(0.5)
+        sys.exit(0)
     """)
-    path = tmp_path / "server.py"
-    path.write_text(script)
-    server = subprocess.Popen([sys.executable, str(path)], stdout=subprocess.PIPE, text=True)
     try:
-        pid = int(server.stdout.readline())
         assert server.wait(30) == 0
-        deadline = time.monotonic() + 10
-        while _alive(pid) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert not _alive(pid)
+        assert _gone(pid)
     finally:
         server.kill()
 
 
 def test_the_child_goes_when_its_server_is_killed(tmp_path):
-    script = textwrap.dedent("""
-        import os, sys, time
-        from eha_app.runtime.background import BackgroundProcess
-        if __name__ == "__main__":
-            bp = BackgroundProcess()
-            print(bp.call(os.getpid), flush=True)
-            time.sleep(60)
-    """)
-    path = tmp_path / "server.py"
-    path.write_text(script)
-    server = subprocess.Popen([sys.executable, str(path)], stdout=subprocess.PIPE, text=True)
+    server, pid = _start_server(tmp_path, "time.sleep(60)")
     try:
-        pid = int(server.stdout.readline())
         assert _alive(pid)
         server.kill()
         server.wait(10)
-        deadline = time.monotonic() + 10
-        while _alive(pid) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert not _alive(pid)
+        assert _gone(pid)
     finally:
         server.kill()
 
