@@ -364,10 +364,14 @@ def compare_hog(args, steps, largest: dict, largest_data: dict, raw: list) -> No
     without = [largest_data]
     hogged = []
     for i in range(k):
-        hogged.append(run_one(n, args, steps, hog=args.hog)[1])
+        # pair i (the class without, then with the hog) clicks at the moments of seed + i: the same
+        # within a pair, other moments from pair to pair (one seed throughout repeated one
+        # coincidence k times, e.g. a full collection of the server's garbage collector that the
+        # hog's own allocations brought into a burst of clicks)
+        hogged.append(run_one(n, args, steps, hog=args.hog, seed=args.seed + i)[1])
         raw.append(hogged[-1])
         if i + 1 < k:
-            without.append(run_one(n, args, steps)[1])
+            without.append(run_one(n, args, steps, seed=args.seed + i + 1)[1])
             raw.append(without[-1])
         if args.json:
             Path(args.json).write_text(json.dumps(raw, indent=1, default=str))
@@ -384,7 +388,7 @@ def compare_hog(args, steps, largest: dict, largest_data: dict, raw: list) -> No
           "(steps after open and param; null: the classes without among themselves, either way)")
 
 
-def run_one(n: int, args, steps, hog: str | None = None) -> tuple[dict, dict]:
+def run_one(n: int, args, steps, hog: str | None = None, seed: int | None = None) -> tuple[dict, dict]:
     server = None if args.url else Server(args.procs)
     tree = server.tree if server else _tree_of(args.server_pid)
     try:
@@ -403,7 +407,8 @@ def run_one(n: int, args, steps, hog: str | None = None) -> tuple[dict, dict]:
 
         c0, w0 = client_cpu(), time.perf_counter()
         result = asyncio.run(run_class(url, n, steps, spread=args.spread, timeout=args.timeout,
-                                       observer=not args.no_observer, seed=args.seed, on_step=on_step,
+                                       observer=not args.no_observer, seed=args.seed if seed is None else seed,
+                                       on_step=on_step,
                                        observer_period=args.observer_period, distinct=args.distinct, hog=hog))
         c1, w1 = client_cpu(), time.perf_counter()
         memory = None
