@@ -9,8 +9,11 @@ of the suite.
 from __future__ import annotations
 
 import asyncio
+import json
 import socket
+import subprocess
 import sys
+import textwrap
 
 import bokeh
 import panel
@@ -138,3 +141,45 @@ def test_a_pages_message_asks_a_study_to_give_way(monkeypatch):
     patches.give_way_on_messages()              # twice: one wrapper
     asyncio.run(WSHandler.on_message(object(), "frame"))
     assert seen == ["give way", ("bokeh", "frame")]
+
+
+def test_full_collections_come_after_three_young_ones_on_a_thread_of_their_own():
+    """In a process of its own (the collector's settings are the process's): with CPython's own
+    full collections turned off, the full collections that still come are ours, about one per
+    FULL_GC_AFTER young ones (the thread may wait its turn while young ones go on), each made on
+    the thread; a second call adds no second thread."""
+    script = textwrap.dedent("""
+        import gc, json, threading, time
+        from eha_app.runtime import patches
+
+        patches.collect_often()
+        patches.collect_often()
+        g0, g1, _ = gc.get_threshold()
+        gc.set_threshold(g0, g1, 10**9)         # CPython's own full collections off
+        young, full = [0], []
+
+        def seen(phase, info):
+            if phase == "stop" and info["generation"] == 1:
+                young[0] += 1
+            elif phase == "stop" and info["generation"] == 2:
+                full.append(threading.current_thread().name)
+
+        gc.callbacks.append(seen)
+        for _ in range(60):
+            cycles = []
+            for i in range(20000):
+                c = [i]
+                c.append(c)
+                cycles.append(c)
+            time.sleep(0.01)                    # the collector's thread gets its turn
+        time.sleep(0.1)
+        print(json.dumps({"young": young[0], "full": full,
+                          "threads": sum(t.name == "eha-full-gc" for t in threading.enumerate())}))
+    """)
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, check=True)
+    seen = json.loads(out.stdout.strip().splitlines()[-1])
+    assert seen["threads"] == 1
+    assert seen["young"] >= 30
+    assert set(seen["full"]) == {"eha-full-gc"}
+    expected = seen["young"] / patches.FULL_GC_AFTER
+    assert 0.5 * expected <= len(seen["full"]) <= expected + 1, seen
