@@ -45,7 +45,9 @@ one more student who runs a 500-seed study throughout (or presses the study's ru
 buttons every 0.3 s), and prints the other students' p50 and p95 per step with / without.
 ``--hog-repeats K`` makes it K classes of each, alternating, their students pooled, and prints the
 spread between the classes without the hog beside (two runs alike differ too: a short step's p95
-of 30 students by 1.2-1.7x).
+of 30 students by 1.2-1.7x). The i-th class with the hog and the class without before it click at
+the same moments (seed + i); the next pair at others: one coincidence (a pause of the server's
+garbage collector landing in a burst of clicks) is not repeated in every class.
 
 ``--churn K`` instead opens and closes K sessions, 10 at a time, and prints
 the server's memory every 50 sessions and after the server discarded them.

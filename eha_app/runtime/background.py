@@ -37,8 +37,13 @@ request to wait cross over in three shared integers:
   running beside 30 students, their least squares took 1.26x, their
   frequency experiment 1.29x and "Compare both" 1.75x (p95) of the time
   without; waiting, every step's p50 and p95 are within 1.09x but Compare
-  both's p95 (0.031 -> 0.040 s), with 1.5x between two runs alike
-  (``bench_classroom.py --sessions 30 --hog study --hog-repeats 4``).
+  both's p95 (``bench_classroom.py --sessions 30 --hog study
+  --hog-repeats 4``). That last one was not the child's doing: with the
+  child stopped outright (SIGSTOP) it stayed (1.44x), and the server's log
+  of its garbage collections showed a full one (25-35 ms) brought by the
+  study's page into the middle of the burst of clicks; smaller, more
+  frequent full collections (:func:`eha_app.runtime.patches.collect_often`)
+  made every step within 1.05x.
 
 The child exits when the server does (it watches its parent) and after
 :data:`IDLE_S` unused (about 200 MB given back); a child that died (killed,

@@ -604,8 +604,9 @@ def tune_garbage_collector() -> None:
     Here what is loaded at start-up is frozen (``gc.freeze``: moved out of the collector's sight),
     and after each full collection
     what survived it is frozen too: the next one looks only at what was made since (no pause over
-    30 ms while a class of thirty works). The thresholds stay CPython's: collected later, the young
-    garbage of 200 pages opened and closed kept 110 MB more (``bench_classroom.py --churn 200``).
+    30 ms while a class of thirty works). The young generations' thresholds stay CPython's:
+    collected later, the young garbage of 200 pages opened and closed kept 110 MB more
+    (``bench_classroom.py --churn 200``); :func:`collect_often` makes full collections sooner.
 
     A closed page's objects are garbage among the frozen ones: once Panel has discarded a session
     everything is unfrozen, and the next full collection looks at all of it (a long pause, as every
@@ -753,9 +754,9 @@ def give_way_on_messages() -> None:
     """A study's child process waits from the moment a page's message arrives (each websocket frame
     a browser sends, in Bokeh's ``WSHandler.on_message``), not only once the click's run or page
     change is queued: the event loop reads the message and runs the click's callback on cores the
-    child has left (:func:`eha_app.runtime.background.give_way_now`). Measured: Compare both's p95
-    beside a study 1.53x the class alone with it, 1.81-1.82x without (4 classes of 30 each way, one
-    run each; two runs alike differ by up to 1.5x): at best a small gain, for one shared byte a frame."""
+    child has left (:func:`eha_app.runtime.background.give_way_now`). No gain was measured: what
+    made Compare both's p95 beside a study 1.5-1.8x was a full garbage collection in the burst of
+    clicks (:func:`collect_often`), not the child; kept as it costs one shared byte a frame."""
     from bokeh.server.views.ws import WSHandler
 
     from .background import give_way_now
