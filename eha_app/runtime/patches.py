@@ -686,10 +686,13 @@ def collect_often() -> None:
     the event loop stopped meanwhile, and every click that came then waited. Where in a step that
     happens depends on every allocation before it: one more student's page (a study's progress,
     or only a page with tab 3 shown) moved it from after a burst of thirty "Compare both" clicks
-    to its middle, and the others' p95 went 0.027 -> 0.047 s (1.7x; ``bench_classroom.py
-    --sessions 30 --hog study``, the server's collections logged). After three young collections
-    it takes 2-7 ms, wherever it falls; in 25 rounds of Compare both by thirty students the
-    server's full collections took 476 ms in all instead of 696, its memory the same (344 MB).
+    to its middle, and the others' p95 went 0.027 -> 0.047 s (1.7x, eight classes of thirty each
+    way, the server's collections logged). After three young collections it takes 2-7 ms,
+    wherever it falls, and a study beside leaves every step within 1.05x (``bench_classroom.py
+    --sessions 30 --hog study --hog-repeats 8``). Less garbage waits for its collection: in 25
+    rounds of Compare both by thirty students the server's full collections took 476 ms in all
+    instead of 696, its memory the same (344 MB); six random walks of 300 actions
+    (``bench_random_walk.py``) ended at 548 MB instead of 626.
 
     A collection cannot start another from the collector's callback: the callback asks (a
     reentrant queue) and a thread of its own collects, at once (the thread waits at most the
