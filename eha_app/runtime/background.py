@@ -188,6 +188,10 @@ def _child_call(fn: Callable, args: tuple, kwargs: dict, with_cancel: bool, with
     if with_progress:
         kwargs = {**kwargs, "progress": _progress}
     try:
+        if with_cancel and with_give_way:
+            # not even begun while the class is at work: a study's set-up (its plan, the nominal
+            # run) computes before its first check
+            kwargs["cancel"].check()
         return "ok", fn(*args, **kwargs)
     except Cancelled:
         return "cancelled", None
