@@ -11,17 +11,21 @@ from __future__ import annotations
 import html
 import io
 import logging
+import secrets
 import time
+import weakref
 from collections.abc import Callable
 from functools import partial
 
 import panel as pn
 
 from eha_core.errors import not_allowed
+from eha_core.exercise import normalize_id
 
 from . import sections as _sections  # noqa: F401 - registers the page's sections
 from .render.layout import WRAP_TAB_HEADERS
 from .render.tables import CSS, SYMBOLS_HTML
+from .runtime import store_calls
 from .runtime.connection import ConnectionWatch
 from .runtime.exercise_file import current_exercise
 from .runtime.patches import on_disconnect
@@ -143,20 +147,70 @@ def _sentence(text: str) -> str:
     return text[:1].upper() + text[1:]
 
 
+def client_address() -> str:
+    """The address of the browser of the current session (behind nginx with ``--behind-proxy``,
+    the one nginx was reached from), or "" without a server."""
+    doc = served_document()
+    request = getattr(getattr(doc, "session_context", None), "request", None)
+    return str(getattr(request, "remote_ip", "") or "")
+
+
+class WrongCodes:
+    """Wrong join codes per client address, for the whole process: a new page (or a reload) does not
+    start the count again. After :attr:`FREE_TRIES` wrong codes, each further try waits
+    :attr:`WAIT_S`; an address is forgotten after an hour without a wrong code, and the table holds at
+    most :attr:`MAX_ADDRESSES` (the oldest go first)."""
+
+    FREE_TRIES = 5
+    WAIT_S = 10.0
+    FORGET_S = 3600.0
+    MAX_ADDRESSES = 10_000
+
+    def __init__(self, clock=time.monotonic):
+        self.clock = clock
+        self._by_address: dict[str, tuple[int, float, float]] = {}     # address -> (wrong, blocked until, last)
+
+    def wait_s(self, address: str) -> float:
+        """Seconds this address must still wait before it may try a code (0: it may now)."""
+        wrong, until, last = self._by_address.get(address, (0, 0.0, 0.0))
+        now = self.clock()
+        if now - last > self.FORGET_S:
+            self._by_address.pop(address, None)
+            return 0.0
+        return max(0.0, until - now)
+
+    def wrong(self, address: str) -> None:
+        now = self.clock()
+        count, until, last = self._by_address.pop(address, (0, 0.0, now))
+        if now - last > self.FORGET_S:
+            count = 0
+        count += 1
+        self._by_address[address] = (count, now + self.WAIT_S if count >= self.FREE_TRIES else until, now)
+        while len(self._by_address) > self.MAX_ADDRESSES:
+            self._by_address.pop(next(iter(self._by_address)))
+
+
+_wrong_codes = WrongCodes()
+
+
 class ExerciseGate:
     """The first screen of an exercise: the student's join code (with a roster) or their id (without
     one), then their actuator. A wrong code is refused without saying whether anyone has it; after
-    a few wrong codes the page waits before it tries again (a code has about 50 bits: guessing is
-    hopeless, but not free)."""
+    a few wrong codes from one address its pages wait before they try again (a code has about 50
+    bits: guessing is hopeless, but not free). In an open exercise, one address may start only the
+    exercise's ``ids_per_client`` new ids an hour (ids that joined before come back freely)."""
 
-    #: Wrong codes a page may try before each further try waits.
-    FREE_TRIES = 5
-    WAIT_S = 10.0
+    #: Wrong codes an address may try before each further try waits.
+    FREE_TRIES = WrongCodes.FREE_TRIES
+    WAIT_S = WrongCodes.WAIT_S
+    #: The longest an open exercise's new id waits for the database's answer before it is let in [s].
+    CHECK_S = 3.0
 
     def __init__(self, exercise, handins, state: AppState, on_start: Callable[[], None]):
         self.exercise, self.handins, self.state, self.on_start = exercise, handins, state, on_start
-        self.wrong = 0
-        self.blocked_until = 0.0
+        self.address = client_address() or f"page-{id(self)}"
+        self.doc = served_document()
+        self._checking = False
         # the tables' symbols (β<sub>e</sub>, not beta_e)
         tol = ", ".join(f"{SYMBOLS_HTML.get(n, html.escape(n))} ±{100 * exercise.tolerance_of(n):g} %"
                         for n in exercise.hide)
@@ -206,25 +260,55 @@ class ExerciseGate:
 
     def start(self) -> None:
         typed = self.student_id.value_input or self.student_id.value
+        if self._checking:
+            return                              # a second click while the first is checked
         if self.exercise.has_roster:
-            now = time.monotonic()
-            if now < self.blocked_until:
-                self.message.object = (f"Too many wrong codes: wait {self.blocked_until - now:.0f} s and type the "
-                                       "code on your slip again.")
+            wait = _wrong_codes.wait_s(self.address)
+            if wait > 0:
+                self.message.object = (f"Too many wrong codes: wait {wait:.0f} s and type the code on your slip "
+                                       "again.")
                 return
             entry = self.exercise.entry_for_code(typed)
             if entry is None:
-                self.wrong += 1
-                if self.wrong >= self.FREE_TRIES:
-                    self.blocked_until = now + self.WAIT_S
+                _wrong_codes.wrong(self.address)
                 shown = " ".join(str(typed).split())[:40] or "(empty)"
                 self.message.object = html.escape(str(not_allowed(
                     "join code", shown, "it is no code of this exercise; type the ten characters on your slip "
                                         "(dashes and case do not matter)")))
                 return
-            student, name = entry.id, entry.name
-        else:
-            student, name = typed, ""
+            self._enter(entry.id, entry.name)
+            return
+        try:
+            student = normalize_id(typed)
+        except ValueError as exc:
+            self.message.object = html.escape(" ".join(str(exc).split()))
+            return
+        limit, store = self.exercise.ids_per_client, self.handins
+        if store is None or not limit:
+            self._enter(student, "")
+            return
+        # an open exercise: a new id counts against this address's hourly share (read off the event loop)
+        self._checking = True
+        self.message.object = "<span class='eha-note'>Starting…</span>"
+
+        def checked(why) -> None:
+            self._checking = False
+            if why:
+                self.message.object = html.escape(why)
+                return
+            self.message.object = ""
+            self._enter(student, "")
+
+        def failed(exc: Exception) -> None:
+            # the database cannot say in time (damaged, or locked by another program): the student is let in
+            # rather than kept waiting (the hand-ins say what is wrong when it matters)
+            log.warning("could not check a new id's address: %s", exc)
+            checked(None)
+
+        store_calls.call(lambda: store.new_id_from(self.address, student, limit=limit, patience=self.CHECK_S),
+                         checked, fail=failed, doc=self.doc)
+
+    def _enter(self, student: str, name: str) -> None:
         try:
             self.state.start_exercise(self.exercise, student, handins=self.handins, name=name)
         except ValueError as exc:
@@ -233,8 +317,12 @@ class ExerciseGate:
         self.on_start()
 
 
-#: How often a student's page looks whether their result may be shown (a reveal, the deadline).
+#: How often a student's page looks whether their result may be shown (a reveal, the deadline) and
+#: whether their id was opened on another page.
 RESULT_POLL_MS = 5000
+#: This process's live pages of an exercise's students, by page token: a page taken over here gives
+#: way at once (one in another process at its next poll).
+_live_pages: dict[str, weakref.ref] = {}
 
 
 def _log_to_stderr() -> None:
@@ -400,26 +488,121 @@ class Page(pn.viewable.Viewer):
                                self.guide.line, self.tabs.tabs]
         self._guide_follows()
         if session.student:
-            self.check_result()
-            if served_document() is not None:
-                # the teacher's reveal (or the deadline) reaches the student's open page within seconds
-                pn.state.add_periodic_callback(self.check_result, period=RESULT_POLL_MS)
+            self._join()
         # in an exercise: the student's kept work back on the page, and kept from now on
         self.work = keep_work(session, lambda text: setattr(self.settings_note, "object", text))
 
+    # -- the student's presence: one live page per id ----------------------------------------------
+    def _join(self) -> None:
+        """Note the student as here on this page (off the event loop), ask the page their id had open
+        before to give way, and look every few seconds whether their result may be shown and whether
+        this page is still theirs."""
+        state, doc = self.session.state, served_document()
+        self.page_token = secrets.token_hex(8)
+        self._polling = False
+        self._poller = None
+        self._noted = store_is_none = state.handins is None      # the page's presence is written
+        self._follows_live = True               # gives way when the store says another page is live
+        self.stopped = False
+        _live_pages[self.page_token] = weakref.ref(self)
+        student, store, token = state.student, state.handins, self.page_token
+
+        def joined(before: str) -> None:
+            self._noted = True
+            self.check_result()                 # only now: before, the live page is still the one before
+            if before:
+                # another page of this id was live: it stops (at once here, within a poll elsewhere)
+                log.info("an id was opened on a second page: the first gives way")
+                other = _live_pages.get(before)
+                page = other() if other is not None else None
+                if page is not None and page is not self:
+                    apply_locked(page.give_way, page.doc)
+
+        def not_noted(exc: Exception) -> None:
+            # a damaged or busy store must not keep a student out (hand-ins say so when it matters); the
+            # store's live page is then another's, which this page must not give way to
+            log.warning("could not note a student's arrival: %s", exc)
+            self._follows_live = False
+            self._noted = True
+            self.check_result()
+
+        self.doc = doc
+        if store is not None:
+            store_calls.call(lambda: store.seen(student, token), joined, fail=not_noted, doc=doc)
+        if store_is_none:
+            self.check_result()
+        if doc is not None:
+            # the teacher's reveal (or the deadline), or this id opened elsewhere, reaches the page within seconds
+            self._poller = pn.state.add_periodic_callback(self.check_result, period=RESULT_POLL_MS)
+
+            def closed() -> None:
+                _live_pages.pop(token, None)
+                state.forget_secrets()
+                if store is not None and not self.stopped:
+                    store_calls.call(lambda: store.left(student, token), doc=doc)
+            on_disconnect(doc, closed)
+            # a session discarded without its websocket's close being seen (a server's own cleanup)
+            pn.state.on_session_destroyed(lambda _context: closed())
+
     def check_result(self) -> None:
-        """Show the student's result once the exercise allows it (one small read of the database)."""
+        """Show the student's result once the exercise allows it, and give way if their id is live on
+        another page now: one small read of the database, off the event loop."""
         from .runtime.handins import StoreError
         from .sections.handin import result_for_student
 
         state = self.session.state
-        try:
-            text = result_for_student(state.exercise, state.student, state.handins)
-        except StoreError:
-            return                                  # the hand-in box says so when it matters
-        if text != self.result_pane.object:
-            self.result_pane.object = text
-            self.result_pane.visible = bool(text)
+        if self._polling or self.stopped or not self._noted:
+            return                                  # the last look has not come back yet, or the page is not noted
+        self._polling = True
+        exercise, student, store, token = state.exercise, state.student, state.handins, self.page_token
+
+        def read():
+            live = store.live_page(student) if store is not None else token
+            return live, result_for_student(exercise, student, store)
+
+        def show(out) -> None:
+            self._polling = False
+            live, text = out
+            if live and live != token and self._follows_live:
+                self.give_way()
+                return
+            if text != self.result_pane.object:
+                self.result_pane.object = text
+                self.result_pane.visible = bool(text)
+
+        def failed(exc: Exception) -> None:
+            self._polling = False
+            if not isinstance(exc, StoreError):
+                log.warning("a student's result could not be read: %s", exc)
+
+        store_calls.call(read, show, fail=failed, doc=getattr(self, "doc", None))
+
+    def give_way(self) -> None:
+        """The student's id was opened on another page: this one stops (its runs, its saves, its
+        uploads and results are let go), and says so."""
+        if self.stopped:
+            return
+        self.stopped = True
+        _live_pages.pop(self.page_token, None)
+        session = self.session
+        session.runner.cancel_all("the id was opened on another page")
+        if self.work is not None:
+            self.work.stop()                        # its saves would overwrite the other page's
+        if self._poller is not None:
+            try:
+                self._poller.stop()
+            except Exception:  # noqa: BLE001 - already stopped with its session
+                pass
+        when = time.strftime("%H:%M:%S")
+        notice = pn.pane.HTML(
+            f"<div class='eha-given-way' role='alert'><h3>Your code was opened on another page ({when})</h3>"
+            "<p>Your work goes on there: one code works on one page at a time, and your teacher sees a code "
+            "used twice. To work on this page again, reload it and type your code (the other page then "
+            "stops).</p></div>", sizing_mode="stretch_width")
+        self.layout.objects = [self.connection, notice]
+        session.release()
+        self.tabs = None
+        self.guide = None
 
     def _guide_follows(self) -> None:
         """The guide line says which section is shown (the student may have come by any way)."""

@@ -13,7 +13,14 @@ Its buttons write through :meth:`~eha_app.runtime.handins.HandIns.set_control`,
 so every server process (and ``eha exercise results``) sees the same switches:
 open or close hand-ins, move the deadline, reveal the verdicts to the students
 once the deadline has passed; and it offers the results as CSV and, with a
-roster, the join-code slips to print.
+roster, the join-code slips to print. A reveal is final: from then on every
+student's page shows the truth, so no hand-in is taken whatever the deadline
+or the open switch say, and the page says so beside both.
+
+Nothing here waits on the database on the server's event loop: the reads are
+made in a thread (:meth:`Dashboard.tick`), the switches are written by
+:func:`~eha_app.runtime.store_calls.call`, and the CSV is made from the table
+as last read.
 
 Everything a student typed (an id) or the teacher's roster holds (a name) is
 HTML-escaped before it is drawn. Nothing here reaches a student: the page is
@@ -33,9 +40,17 @@ import panel as pn
 from eha_core.exercise import FEEDBACK, METHODS, parse_deadline
 
 from .render.tables import SYMBOLS_HTML, UNITS
-from .runtime.classbook import class_rows, describe_conditions, handin_errors, results_csv
+from .runtime import store_calls
+from .runtime.classbook import (
+    class_rows,
+    describe_conditions,
+    describe_pages,
+    describe_source,
+    handin_errors,
+    results_csv,
+)
 from .runtime.handins import StoreError
-from .runtime.tasks import held, on_click, watch
+from .runtime.tasks import held, on_click, served_document, watch
 
 __all__ = ["Dashboard", "serve_dashboard", "POLL_MS", "join_slips_html"]
 
@@ -97,6 +112,19 @@ def _conditions(conditions: dict) -> str:
     text = describe_conditions(conditions)
     cut = text if len(text) <= 80 else text[:79] + "…"
     return f"<span class='small' title='{_esc(text)}'>{_esc(cut)}</span>"
+
+
+def _source(row) -> str:
+    text = describe_source(row)
+    if not text:
+        return ""
+    warn = row.source.get("kind") == "file" or row.damaged
+    return f"<span class='small{' no' if warn else ''}' title='{_esc(text)}'>{_esc(text)}</span>"
+
+
+def _pages(row) -> str:
+    text = describe_pages(row)
+    return f"<span class='{'no' if row.overlaps else 'small'}'>{_esc(text)}</span>" if text else ""
 
 
 def join_slips_html(exercise, student_url: str) -> str:
@@ -175,7 +203,11 @@ class Dashboard(pn.viewable.Viewer):
             self.summary, self.roster,
             pn.Row(pn.pane.HTML("<h3 style='margin:8px 0 0'>Every hand-in, newest first</h3>"), self.who),
             self.history, sizing_mode="stretch_width", margin=(0, 12), css_classes=["eha-dash"])
-        self.poll()
+        self.doc = served_document()
+        if self.doc is None:
+            self.poll()             # no server: read now (a served page reads in its first tick, off the loop)
+        else:
+            self.summary.object = "<span class='small'>Reading the class's results…</span>"
 
     # -- reading and drawing --------------------------------------------------------------------------
     def _passed(self, control: dict | None = None) -> bool:
@@ -218,6 +250,14 @@ class Dashboard(pn.viewable.Viewer):
     def _failed(self, exc: Exception) -> None:
         self.note.object = f"<span style='color:#b00020'>{_esc(exc)}</span>"
 
+    def refresh(self) -> None:
+        """Read again now (after a switch): off the event loop when served."""
+        if self.doc is None:
+            self.poll()
+            return
+        self._key = None
+        store_calls.call(self._read, self._show, fail=self._failed, doc=self.doc)
+
     def _show(self, data: tuple) -> None:
         self._key, self.control, self.rows, self.handins = data
         with held():
@@ -254,7 +294,10 @@ class Dashboard(pn.viewable.Viewer):
                     else "an open exercise: any id typed is taken as given")
         status = ("<span class='badge open'>open</span>" if self.is_open
                   else "<span class='badge closed'>closed</span>")
-        if self._passed():
+        if self.revealed:
+            status = ("<span class='badge closed'>closed for good</span> <span class='small'>(the true values "
+                      "were revealed: no hand-in is taken, whatever the deadline or the open switch say)</span>")
+        elif self._passed():
             status += " <span class='small'>(the deadline has passed: no hand-in is taken)</span>"
         self.rules.object = (
             f"<h2 style='margin:4px 0'>{_esc(ex.title)} <span class='small'>teacher's dashboard</span></h2><dl>"
@@ -271,6 +314,14 @@ class Dashboard(pn.viewable.Viewer):
         self.open_button.color = "danger" if self.is_open else "success"
         self.reveal_button.disabled = self.revealed
         self.reveal_button.label = ("Verdicts revealed" if self.revealed else "Reveal the verdicts to the students")
+        # after a reveal neither switch can open hand-ins again: they say why before anyone tries
+        self.open_button.disabled = self.deadline_button.disabled = self.deadline_input.disabled = self.revealed
+        if self.revealed:
+            self.open_button.label = "Hand-ins closed for good"
+            self.deadline_message.object = ("The true values are revealed on every student's page: hand-ins are "
+                                            "closed for good, and moving the deadline would reopen nothing.")
+        self.reveal_button.description = ("Final: every student sees their true values, and no hand-in is taken "
+                                          "after it, whatever the deadline says" if not self.revealed else None)
 
     def _draw_roster(self) -> None:
         ex, rows = self.exercise, self.rows
@@ -283,7 +334,7 @@ class Dashboard(pn.viewable.Viewer):
                                f"{time.strftime('%H:%M:%S')}</span>")
         head = ("<tr><th>id</th><th>name</th><th>joined</th><th>last seen</th><th>hand-ins</th><th>last</th>"
                 "<th>method</th>" + "".join(f"<th>{_param_head(ex, n)}</th>" for n in ex.hide)
-                + f"<th>score ({_esc(ex.score_rule)})</th><th>conditions</th></tr>")
+                + f"<th>score ({_esc(ex.score_rule)})</th><th>data</th><th>conditions</th><th>pages</th></tr>")
         body = []
         for r in rows:
             cells = "".join(_param_cell(r.estimates.get(n), r.errors.get(n), r.verdicts.get(n), r.count)
@@ -292,9 +343,10 @@ class Dashboard(pn.viewable.Viewer):
             body.append(f"<tr><td>{_esc(r.id)}</td><td>{_esc(r.name)}</td><td>{_when(r.joined, today)}</td>"
                         f"<td>{_when(r.last_seen, today)}</td><td class='num'>{r.count}</td>"
                         f"<td>{_when(r.last_time, today)}</td><td>{_method(r.method)}</td>{cells}"
-                        f"<td class='num'>{score}</td><td>{_conditions(r.conditions)}</td></tr>")
+                        f"<td class='num'>{score}</td><td>{_source(r)}</td><td>{_conditions(r.conditions)}</td>"
+                        f"<td>{_pages(r)}</td></tr>")
         if not body:
-            body.append(f"<tr><td colspan='{9 + len(ex.hide)}' class='dim'>Nobody has joined yet.</td></tr>")
+            body.append(f"<tr><td colspan='{11 + len(ex.hide)}' class='dim'>Nobody has joined yet.</td></tr>")
         self.roster.object = f"<div class='scroll'><table>{head}{''.join(body)}</table></div>"
 
     def _draw_history(self) -> None:
@@ -322,15 +374,18 @@ class Dashboard(pn.viewable.Viewer):
         self.history.object = f"<div class='scroll'><table>{head}{''.join(body)}</table></div>"
 
     # -- the teacher's switches -------------------------------------------------------------------------
-    def _switch(self, key: str, value: str, done: str) -> bool:
-        try:
-            self.store.set_control(key, value)
-        except StoreError as exc:
-            self._failed(exc)
-            return False
-        self.note.object = f"<span style='color:#11703a'>{_esc(done)} ({time.strftime('%H:%M:%S')})</span>"
-        self.poll()
-        return True
+    def _switch(self, key: str, value: str, done: str, then=None) -> None:
+        """Write a switch (off the event loop when served), then say so and read the class again."""
+        store = self.store
+
+        def written(_none) -> None:
+            self.note.object = f"<span style='color:#11703a'>{_esc(done)} ({time.strftime('%H:%M:%S')})</span>"
+            if then is not None:
+                then()
+            self.refresh()
+
+        self.note.object = "<span class='small'>Saving…</span>"
+        store_calls.call(lambda: store.set_control(key, value), written, fail=self._failed, doc=self.doc)
 
     def toggle_open(self) -> None:
         """Close hand-ins if they are open, else open them."""
@@ -345,6 +400,10 @@ class Dashboard(pn.viewable.Viewer):
         if text is None:
             text = self.deadline_input.value_input or self.deadline_input.value or ""
         text = text.strip()
+        if self.revealed:
+            self.deadline_message.object = ("The true values are revealed: hand-ins are closed for good, and moving "
+                                            "the deadline would reopen nothing.")
+            return
         if text:
             try:
                 text = parse_deadline(text)
@@ -368,12 +427,13 @@ class Dashboard(pn.viewable.Viewer):
         if why:
             self.reveal_message.object = f"<span style='color:#b00020'>{why}</span>"
             return
-        if self._switch("revealed", "1", "Verdicts revealed to the students"):
-            self.reveal_message.object = ""
+        self._switch("revealed", "1", "Verdicts revealed to the students; hand-ins are closed for good",
+                     then=lambda: setattr(self.reveal_message, "object", ""))
 
     def csv_bytes(self) -> bytes:
-        """The results as ``eha exercise results --csv`` writes them (formula-like cells neutralised)."""
-        return results_csv(self.exercise, class_rows(self.exercise, self.store)).encode("utf-8")
+        """The results as ``eha exercise results --csv`` writes them (formula-like cells neutralised), from
+        the table as last read (the download is made on the event loop: no database there)."""
+        return results_csv(self.exercise, self.rows).encode("utf-8")
 
     def slips_bytes(self) -> bytes:
         return join_slips_html(self.exercise, self.student_url).encode("utf-8")
@@ -416,6 +476,10 @@ def serve_dashboard() -> None:
     exercise, store = found
     dashboard = Dashboard(exercise, store, student_url=_student_url())
     # only a page a browser shows follows the class (not the session Panel prepares for the next page)
-    pn.state.onload(lambda: pn.state.add_periodic_callback(dashboard.tick, period=POLL_MS))
+    def follow() -> None:
+        dashboard.refresh()
+        pn.state.add_periodic_callback(dashboard.tick, period=POLL_MS)
+
+    pn.state.onload(follow)
     pn.Column(ConnectionWatch(tabs_class="eha-none"), dashboard, sizing_mode="stretch_width").servable(
         title=f"EHA teacher: {exercise.title}", location=False)

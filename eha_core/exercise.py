@@ -70,6 +70,11 @@ _ADDITIVE_SCALE = {"d0": 2000.0, "pr": 1e6, "x0": 0.05, "v0": 0.01}
 MAX_VARY = 0.5
 MAX_ID_LENGTH = 64
 MAX_ROSTER = 2000
+#: An open exercise: new ids one client address may start in an hour (a lab PC used all day by
+#: successive students starts a few; a script starting hundreds is stopped).
+DEFAULT_IDS_PER_CLIENT = 4
+#: The disk the class's kept uploads may take together (each student's at most the upload limit).
+DEFAULT_KEPT_UPLOADS_MB = 1000
 #: The measured signals (SI units) an exercise may put a noise floor on or leave out.
 SIGNALS = {"x": "m", "v": "m/s", "p1": "Pa", "p2": "Pa"}
 #: The routes a student can hand in from.
@@ -286,6 +291,12 @@ class Exercise:
 
     ``tolerance`` is the relative error of a correct answer; ``tolerances`` overrides it per
     parameter. ``attempts`` = 0: no limit. ``deadline``: ISO-8601 or "" (none).
+
+    ``own_files``: hand-ins from a file the student uploaded are taken (labelled as such); by
+    default only estimates from the student's own actuator's experiment count, since a file can
+    be anyone's (a classmate's record). ``ids_per_client``: in an open exercise (no roster), how
+    many new ids one client address may start per hour (0: no limit). ``kept_uploads_mb``: the
+    disk the class's kept uploads may take in all (each student's at most the upload limit).
     """
 
     hide: tuple[str, ...]
@@ -301,6 +312,9 @@ class Exercise:
     feedback: str = "verdict"
     score_rule: str = "best"
     roster: tuple[RosterEntry, ...] = field(default=(), repr=False)
+    own_files: bool = False
+    ids_per_client: int = DEFAULT_IDS_PER_CLIENT
+    kept_uploads_mb: int = DEFAULT_KEPT_UPLOADS_MB
 
     def __post_init__(self):
         if not self.hide:
@@ -342,13 +356,20 @@ class Exercise:
             raise not_allowed("feedback", self.feedback, f"use {', '.join(FEEDBACK)}")
         if self.score_rule not in SCORE_RULES:
             raise not_allowed("score", self.score_rule, f"use {' or '.join(SCORE_RULES)}")
+        if not (isinstance(self.ids_per_client, int) and 0 <= self.ids_per_client <= 10_000):
+            raise not_allowed("ids per client", self.ids_per_client, "a whole number of ids in 0-10000 (0: no limit)")
+        if not (isinstance(self.kept_uploads_mb, int) and 0 <= self.kept_uploads_mb <= 1_000_000):
+            raise not_allowed("kept uploads", f"{self.kept_uploads_mb} MB", "a whole number of MB in 0-1000000 "
+                                                                            "(0: no upload is kept)")
 
     # -- making, reading, writing --------------------------------------------------------
     @classmethod
     def new(cls, hide, vary: float = 0.25, tolerance: float | Mapping[str, float] = 0.05,
             title: str = "EHA identification exercise", secret: str | None = None, *,
             roster: Iterable[tuple[str, str]] | None = None, conditions: Conditions | None = None,
-            deadline: str = "", attempts: int = 0, feedback: str = "verdict", score_rule: str = "best") -> Exercise:
+            deadline: str = "", attempts: int = 0, feedback: str = "verdict", score_rule: str = "best",
+            own_files: bool = False, ids_per_client: int = DEFAULT_IDS_PER_CLIENT,
+            kept_uploads_mb: int = DEFAULT_KEPT_UPLOADS_MB) -> Exercise:
         """A new exercise with a fresh random secret (``secrets.token_hex``) and, with a roster,
         a join code per student (see :meth:`join_code`)."""
         secret = secret or secrets.token_hex(32)
@@ -364,7 +385,8 @@ class Exercise:
         return cls(hide=tuple(hide), vary=float(vary), tolerance=default, title=str(title), secret=secret,
                    created=time.strftime("%Y-%m-%dT%H:%M:%S"), tolerances=tolerances,
                    conditions=conditions if conditions is not None else Conditions(), deadline=deadline,
-                   attempts=int(attempts), feedback=feedback, score_rule=score_rule, roster=tuple(entries))
+                   attempts=int(attempts), feedback=feedback, score_rule=score_rule, roster=tuple(entries),
+                   own_files=bool(own_files), ids_per_client=int(ids_per_client), kept_uploads_mb=int(kept_uploads_mb))
 
     def replace(self, **changes) -> Exercise:
         return dataclasses.replace(self, **changes)
@@ -393,7 +415,10 @@ class Exercise:
                        conditions=conditions, deadline=str(data.get("deadline", "")),
                        attempts=int(data.get("attempts", 0)), feedback=str(data.get("feedback", "verdict")),
                        score_rule=str(data.get("score_rule", "best")),
-                       roster=tuple(RosterEntry(**e) for e in data.get("roster", ())))
+                       roster=tuple(RosterEntry(**e) for e in data.get("roster", ())),
+                       own_files=bool(data.get("own_files", False)),
+                       ids_per_client=int(data.get("ids_per_client", DEFAULT_IDS_PER_CLIENT)),
+                       kept_uploads_mb=int(data.get("kept_uploads_mb", DEFAULT_KEPT_UPLOADS_MB)))
         except (KeyError, TypeError, AttributeError) as exc:
             raise not_allowed(name, "(incomplete)", f"missing or wrong field {exc}") from None
 
@@ -501,9 +526,18 @@ class Exercise:
         return _as_utc(text) if text else None
 
     def refusal(self, count: int, *, now: float | None = None, method: str | None = None, open_: bool = True,
-                deadline: str | None = None) -> str | None:
-        """Why a student who has handed in ``count`` times may not hand in now (None: they may)."""
+                deadline: str | None = None, revealed: bool = False, source: str | None = None) -> str | None:
+        """Why a student who has handed in ``count`` times may not hand in now (None: they may).
+
+        ``revealed``: the teacher has shown every student their true values; that is final, whatever
+        the deadline or the open switch say since. ``source``: "file" for estimates from an uploaded
+        file (refused unless :attr:`own_files`), else the student's own actuator's experiment."""
         now = time.time() if now is None else now
+        if revealed:
+            return "your teacher has revealed the true values: hand-ins are closed for good"
+        if source == "file" and not self.own_files:
+            return ("this exercise takes estimates from your actuator's experiment (the simulated sensors), not from "
+                    "a file: run the identification on the simulated sensors")
         if not open_:
             return "hand-ins are closed by your teacher"
         due = self.deadline_at(deadline)

@@ -176,10 +176,20 @@ def run_codes(args) -> int:
     if args.csv:
         buf = io.StringIO()
         csv.writer(buf).writerows([["id", "name", "code"], *[[csv_cell(c) for c in r] for r in rows]])
-        Path(args.csv).write_text(buf.getvalue(), encoding="utf-8")
-        Path(args.csv).chmod(0o600)
+        _write_private(args.csv, buf.getvalue())
         print(f"wrote {args.csv}", file=sys.stderr)
     return 0
+
+
+def _write_private(path: str, text: str) -> None:
+    """Write a file readable by its owner only, from its first byte (every student's errors against the
+    truth, or every student's join code)."""
+    import os
+
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    os.fchmod(fd, 0o600)                    # an existing file keeps its mode through O_CREAT
+    with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
+        f.write(text)
 
 
 def _store(path: str):
@@ -209,7 +219,7 @@ def run_results(args) -> int:
     for line in (header, *shown):
         print("  ".join(c.ljust(w) for c, w in zip(line, widths, strict=True)).rstrip())
     if args.csv:
-        Path(args.csv).write_text(results_csv(ex, rows), encoding="utf-8")
+        _write_private(args.csv, results_csv(ex, rows))
         print(f"wrote {args.csv}", file=sys.stderr)
     return 0
 

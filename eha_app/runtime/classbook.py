@@ -3,8 +3,11 @@ and ``eha exercise results`` alike (one table, three renderings).
 
 A row holds the roster's id and name (or the id typed, in an open exercise), when the student
 joined and was last seen, their hand-ins (count and the last one's time, method, values), the
-error of each value against the truth and its verdict, and the score by the exercise's rule
-(best or last hand-in). The errors are the teacher's: nothing here goes to a student's page.
+error of each value against the truth and its verdict, the score by the exercise's rule (best or
+last hand-in), where the last hand-in's data came from (their actuator's experiment, or an
+uploaded file: its name, its digest, and the classmates who handed in from the same file) and
+how many pages the student opened (and how many of those while another was live: a code used
+twice). The errors are the teacher's: nothing here goes to a student's page.
 
 >>> import tempfile, pathlib
 >>> from eha_core.exercise import Exercise
@@ -28,8 +31,8 @@ from eha_core.exercise import METHODS
 
 from .handins import HandIn, HandIns
 
-__all__ = ["describe_conditions", "handin_errors", "ClassRow", "class_rows", "results_header", "results_cells",
-           "results_csv"]
+__all__ = ["describe_conditions", "describe_source", "describe_pages", "handin_errors", "ClassRow", "class_rows",
+           "results_header", "results_cells", "results_csv"]
 
 
 @dataclass(frozen=True)
@@ -47,29 +50,75 @@ class ClassRow:
     score: float = 0.0
     conditions: dict = field(default_factory=dict)
     settings: dict = field(default_factory=dict)
+    source: dict = field(default_factory=dict)
+    same_file: tuple[str, ...] = ()     # others who handed in from a file with the same digest
+    pages: int = 0
+    overlaps: int = 0
+    damaged: int = 0                    # hand-ins whose stored values could not be read
 
 
 def class_rows(exercise, store: HandIns) -> list[ClassRow]:
     """Every student of the roster (in its order), then anyone else who joined or handed in."""
     handins: dict[str, list[HandIn]] = {}
+    files: dict[str, set[str]] = {}                 # a file's digest -> who handed in from it
     for h in store.all():
         handins.setdefault(h.student, []).append(h)
-    presence = store.presence()
+        if h.source.get("kind") == "file" and h.source.get("sha256"):
+            files.setdefault(str(h.source["sha256"]), set()).add(h.student)
+    presence = store.presences()
     names = {e.id: e.name for e in exercise.roster}
     ids = list(names) + sorted((set(presence) | set(handins)) - set(names))
     rows = []
     for sid in ids:
         hs = handins.get(sid, [])
-        joined, seen = presence.get(sid, ("", ""))
+        here = presence.get(sid)
         last = hs[-1] if hs else None
+        mine = {str(h.source.get("sha256")) for h in hs if h.source.get("kind") == "file"}
+        same = sorted(set().union(*(files.get(d, set()) for d in mine)) - {sid}) if mine else []
         rows.append(ClassRow(
-            id=sid, name=names.get(sid, ""), joined=joined, last_seen=seen, count=len(hs),
-            last_time=last.time if last else "", method=last.method if last else "",
+            id=sid, name=names.get(sid, ""), joined=here.joined if here else "", last_seen=here.last_seen if here
+            else "", count=len(hs), last_time=last.time if last else "", method=last.method if last else "",
             estimates=last.estimates if last else {},
             errors=last.errors if last and last.errors else handin_errors(exercise, sid, last),
             verdicts=last.verdicts if last else {}, score=exercise.score([h.verdicts for h in hs]),
-            conditions=last.conditions if last else {}, settings=last.settings if last else {}))
+            conditions=last.conditions if last else {}, settings=last.settings if last else {},
+            source=last.source if last else {}, same_file=tuple(same), pages=here.pages if here else 0,
+            overlaps=here.overlaps if here else 0, damaged=sum(h.damaged for h in hs)))
     return rows
+
+
+def describe_source(row) -> str:
+    """Where a hand-in's data came from, in a few words (the dashboard's and the CSV's column).
+
+    >>> describe_source(ClassRow("s1", "", count=1, source={"kind": "file", "name": "run.csv", "sha256": "ab12cd"},
+    ...                          same_file=("s2",)))
+    'uploaded file run.csv (sha256 ab12cd), also handed in by s2'
+    >>> describe_source(ClassRow("s1", "", count=1, source={"kind": "simulated"}))
+    "own actuator's experiment"
+    """
+    if not row.count:
+        return ""
+    src = row.source or {}
+    if src.get("kind") != "file":
+        text = "own actuator's experiment"
+    else:
+        text = f"uploaded file {src.get('name', '?')} (sha256 {src.get('sha256', '?')})"
+        if row.same_file:
+            text += f", also handed in by {', '.join(row.same_file)}"
+    if row.damaged:
+        text += f"; {row.damaged} stored hand-in{'s' if row.damaged > 1 else ''} could not be read"
+    return text
+
+
+def describe_pages(row) -> str:
+    """How many pages the student opened, and how many while another of theirs was live.
+
+    >>> describe_pages(ClassRow("s1", "", pages=3, overlaps=1))
+    '3 (1 while another was open)'
+    """
+    if not row.pages:
+        return ""
+    return f"{row.pages}" + (f" ({row.overlaps} while another was open)" if row.overlaps else "")
 
 
 def handin_errors(exercise, sid: str, last: HandIn | None) -> dict:
@@ -95,6 +144,8 @@ def describe_conditions(conditions: dict) -> str:
     """
     if not conditions:
         return ""
+    if conditions.get("data"):             # an uploaded file: not taken under the exercise's conditions
+        return f"{conditions['data']}: not the exercise's conditions"
     parts = []
     noise = conditions.get("noise") or {}
     if isinstance(noise, dict):
@@ -113,7 +164,7 @@ def results_header(exercise) -> list[str]:
     cols = ["id", "name", "joined", "last seen", "hand-ins", "last hand-in", "method"]
     for n in exercise.hide:
         cols += [n, f"{n} error %", f"{n} ok"]
-    return cols + [f"score ({exercise.score_rule})", "conditions"]
+    return cols + [f"score ({exercise.score_rule})", "data", "conditions", "pages"]
 
 
 def results_cells(exercise, row: ClassRow) -> list[str]:
@@ -125,7 +176,8 @@ def results_cells(exercise, row: ClassRow) -> list[str]:
         cells += [f"{v:.6g}" if isinstance(v, (int, float)) else "",
                   f"{100 * e:.2f}" if isinstance(e, (int, float)) else "",
                   ("yes" if row.verdicts.get(n) else "no") if row.count else ""]
-    return cells + [f"{row.score:.2f}" if row.count else "", describe_conditions(row.conditions)]
+    return cells + [f"{row.score:.2f}" if row.count else "", describe_source(row), describe_conditions(row.conditions),
+                    describe_pages(row)]
 
 
 def results_csv(exercise, rows: list[ClassRow]) -> str:

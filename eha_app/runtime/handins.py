@@ -1,24 +1,34 @@
 """The students' hand-ins of an exercise, in SQLite next to the exercise file.
 
 One row per hand-in: when, who (the normalised id), the estimates, the
-verdicts and the score. Every hand-in is its own transaction on its own
-connection (the server hands in from worker threads): SQLite serialises the
-writers, and with a busy timeout two students handing in at the same moment
-both land. The database outlives the server; WAL mode lets the teacher read
-the results while students hand in.
+verdicts, the score and where the data came from (the student's own actuator's
+experiment, or an uploaded file with its name and digest). Every hand-in is its
+own transaction on its own connection (the server hands in from worker
+threads): SQLite serialises the writers. The database outlives the server; WAL
+mode lets the teacher read the results while students hand in.
+
+Nothing here runs on the server's event loop (the callers use worker threads or
+:mod:`eha_app.runtime.store_calls`), and nothing waits long on a lock: each
+attempt gives up after :data:`BUSY_TIMEOUT_S` and is tried again, with a short
+pause, until the call's patience is spent (:data:`WRITE_PATIENCE_S` for a
+hand-in, which must land; less for a presence). A lock held by another program
+(the teacher's ``sqlite3`` session, a backup, a large save) then delays only
+the calls that need it, each on its own thread.
 
 The file is the teacher's, like the exercise file: it is created readable by
 its owner only (SQLite gives its journal files the same permissions). A file
 that is not a usable database raises :class:`StoreError`, whose message says
-what to do; one deleted while the server runs is made again at the next
-hand-in (the server's log says so).
+what to do. One that disappears while the server runs is not made again
+behind the teacher's back (every student's attempts would start from 0): the
+calls fail, saying so, and the server's log says so, until the teacher puts a
+copy back or starts the server again.
 
 >>> import tempfile, pathlib
 >>> store = HandIns(pathlib.Path(tempfile.mkdtemp()) / "class.json").check()
 >>> store.add("ada", {"M": 4100.0}, {"M": True})
 1
->>> [(r.student, r.score) for r in store.latest()]
-[('ada', 1.0)]
+>>> [(r.student, r.score, r.source) for r in store.latest()]
+[('ada', 1.0, {'kind': 'simulated'})]
 """
 
 from __future__ import annotations
@@ -27,18 +37,28 @@ import json
 import logging
 import os
 import sqlite3
+import threading
 import time
 from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["HandIns", "HandIn", "StoreError", "Refused", "handins_path"]
+__all__ = ["HandIns", "HandIn", "StoreError", "Refused", "handins_path", "CONTROL_KEYS", "BUSY_TIMEOUT_S",
+           "WRITE_PATIENCE_S"]
 
 log = logging.getLogger("eha_app")
+
+#: How long one attempt waits for another connection's lock before it is tried again [s].
+BUSY_TIMEOUT_S = 0.25
+#: How long a write keeps trying before it fails, saying the database is busy [s].
+WRITE_PATIENCE_S = 30.0
+#: The teacher's switches kept in the database (every server process and command sees the same).
+CONTROL_KEYS = ("open", "deadline", "revealed", "token_nonce", "token_expires")
 
 
 class StoreError(RuntimeError):
     """The hand-in database cannot be used: what is wrong and what to do."""
+
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS handins (
@@ -52,10 +72,28 @@ CREATE TABLE IF NOT EXISTS handins (
 CREATE INDEX IF NOT EXISTS handins_student ON handins (student, id);
 CREATE TABLE IF NOT EXISTS control (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS presence (student TEXT PRIMARY KEY, joined TEXT NOT NULL, last_seen TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS clients (address TEXT NOT NULL, student TEXT NOT NULL, first REAL NOT NULL,
+                                    PRIMARY KEY (address, student));
+CREATE TABLE IF NOT EXISTS work (student TEXT PRIMARY KEY, time TEXT NOT NULL, settings TEXT NOT NULL,
+                                 runs TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS work_files (student TEXT NOT NULL, slot TEXT NOT NULL, name TEXT NOT NULL,
+                                       mapping TEXT NOT NULL, digest TEXT NOT NULL, data BLOB NOT NULL,
+                                       PRIMARY KEY (student, slot));
 """
-#: Columns added since the first version (a database made by it gets them at the next start).
-_ADDED = (("method", "TEXT NOT NULL DEFAULT 'lse'"), ("settings", "TEXT NOT NULL DEFAULT '{}'"),
-          ("conditions", "TEXT NOT NULL DEFAULT '{}'"), ("errors", "TEXT NOT NULL DEFAULT '{}'"))
+#: What a complete database holds (tables and indexes by name).
+_NAMES = {"handins", "handins_student", "control", "presence", "clients", "work", "work_files", "work_files_size"}
+#: Columns added since the first version, per table (a database made by an older version gets them at the
+#: next start).
+_ADDED = {
+    "handins": (("method", "TEXT NOT NULL DEFAULT 'lse'"), ("settings", "TEXT NOT NULL DEFAULT '{}'"),
+                ("conditions", "TEXT NOT NULL DEFAULT '{}'"), ("errors", "TEXT NOT NULL DEFAULT '{}'"),
+                ("source", "TEXT NOT NULL DEFAULT '{}'")),
+    # page: the live page's token (one code, one live page); pages: pages opened in all; overlaps: pages
+    # opened while another of the same id was live (the teacher sees a code used twice)
+    "presence": (("page", "TEXT NOT NULL DEFAULT ''"), ("pages", "INTEGER NOT NULL DEFAULT 0"),
+                 ("overlaps", "INTEGER NOT NULL DEFAULT 0")),
+    "work_files": (("size", "INTEGER NOT NULL DEFAULT -1"),),
+}
 
 
 def handins_path(exercise_path: str | Path) -> Path:
@@ -77,27 +115,68 @@ class HandIn:
     settings: dict = field(default_factory=dict)
     conditions: dict = field(default_factory=dict)
     errors: dict = field(default_factory=dict)      # relative errors against the truth: the teacher's only
+    source: dict = field(default_factory=lambda: {"kind": "simulated"})
+    damaged: bool = False   # a row whose values could not be read (edited by hand, a disk fault)
 
 
-_COLUMNS = "id, time, student, estimates, verdicts, score, method, settings, conditions, errors"
+@dataclass(frozen=True)
+class Presence:
+    """A student's presence: when they joined and were last seen, the live page's token ("" when
+    none is open), how many pages they opened and how many of those while another was live."""
+
+    joined: str
+    last_seen: str
+    page: str = ""
+    pages: int = 0
+    overlaps: int = 0
+
+
+_COLUMNS = "id, time, student, estimates, verdicts, score, method, settings, conditions, errors, source"
+
+
+def _loads(text) -> dict | None:
+    """A stored JSON object, or None if the row's text is not one."""
+    try:
+        value = json.loads(text)
+    except (TypeError, ValueError):
+        return None
+    return value if isinstance(value, dict) else None
 
 
 def _row(r) -> HandIn:
-    return HandIn(r[0], r[1], r[2], json.loads(r[3]), json.loads(r[4]), r[5], method=r[6],
-                  settings=json.loads(r[7]), conditions=json.loads(r[8]), errors=json.loads(r[9]))
+    """A stored row; one whose JSON cannot be read is kept, marked damaged, with what could be read."""
+    parts = [_loads(t) for t in (r[3], r[4], r[7], r[8], r[9], r[10])]
+    estimates, verdicts, settings, conditions, errors, source = (p if p is not None else {} for p in parts)
+    try:
+        score, bad_score = float(r[5]), False
+    except (TypeError, ValueError):
+        score, bad_score = 0.0, True
+    return HandIn(r[0], str(r[1]), str(r[2]), estimates, verdicts, score, method=str(r[6]), settings=settings,
+                  conditions=conditions, errors=errors, source=source or {"kind": "simulated"},
+                  damaged=bad_score or any(p is None for p in parts))
 
 
 def _now() -> str:
     return time.strftime("%Y-%m-%d %H:%M:%S")
 
 
+def _busy(exc: sqlite3.Error) -> bool:
+    text = str(exc).lower()
+    return isinstance(exc, sqlite3.OperationalError) and ("locked" in text or "busy" in text)
+
+
 class HandIns:
     """The hand-ins of the exercise at ``exercise_path``, the teacher's switches (``control``: open or
-    closed, an extended deadline, revealed) and who has joined and when they were last seen."""
+    closed, an extended deadline, revealed, the dashboard token's nonce and expiry), who has joined
+    and when they were last seen, and the students' kept work (:mod:`eha_app.runtime.work_store`)."""
 
     def __init__(self, exercise_path: str | Path):
         self.path = handins_path(exercise_path)
-        self._opened = False
+        # the database existed when this process first looked: if it disappears later, it was deleted
+        self._known = self.path.exists()
+        self._missing_said = 0.0
+        self._lock = threading.Lock()
+        self._ready = False                 # the tables were checked by this instance
 
     def check(self) -> HandIns:
         """Open the database (made if missing) and check it: :class:`StoreError` if it is not usable.
@@ -105,6 +184,8 @@ class HandIns:
         if self.path.parent.exists() and not os.access(self.path.parent, os.W_OK):
             raise StoreError(f"the folder {str(self.path.parent)!r} of the hand-in database is read-only; the "
                              "server could not store a single hand-in: serve from a folder you can write to")
+        self._known = False                 # made here if missing: the teacher asked for it
+        self._ready = False
         try:
             with closing(self._connect()) as db:
                 db.execute("PRAGMA journal_mode=WAL")
@@ -114,105 +195,160 @@ class HandIns:
             raise self._unusable(exc) from None
         if problem != "ok":
             raise self._unusable(problem)
-        self._opened = True
         return self
 
     @staticmethod
     def _schema(db) -> None:
-        db.executescript(_SCHEMA)           # a database made again since has no table yet
-        have = {r[1] for r in db.execute("PRAGMA table_info(handins)")}
-        for name, decl in _ADDED:
-            if name not in have:
-                try:
-                    db.execute(f"ALTER TABLE handins ADD COLUMN {name} {decl}")
-                except sqlite3.OperationalError:
-                    pass                    # another process added it meanwhile
+        """The tables, made if missing, and the columns added since (a database of an older version).
+        Only reads when everything is there (no write lock is asked for)."""
+        names = {r[0] for r in db.execute("SELECT name FROM sqlite_master")}
+        if not _NAMES <= names:
+            db.executescript(_SCHEMA)
+        for table, added in _ADDED.items():
+            have = {r[1] for r in db.execute(f"PRAGMA table_info({table})")}
+            for name, decl in added:
+                if name not in have:
+                    try:
+                        db.execute(f"ALTER TABLE {table} ADD COLUMN {name} {decl}")
+                    except sqlite3.OperationalError:
+                        pass                # another process added it meanwhile
+        # the uploads' sizes, for the class's quota (kept before the column existed: measured once); summed
+        # from an index, without reading a single upload's bytes
+        if db.execute("SELECT 1 FROM work_files WHERE size < 0 LIMIT 1").fetchone() is not None:
+            db.execute("UPDATE work_files SET size = length(data) WHERE size < 0")
+        if "work_files_size" not in names:
+            db.execute("CREATE INDEX IF NOT EXISTS work_files_size ON work_files (student, slot, size)")
 
     def _unusable(self, what) -> StoreError:
         return StoreError(f"the hand-in database {str(self.path)!r} cannot be used ({what}); move it away to start "
                           "an empty one, or put back a copy")
 
     def _connect(self) -> sqlite3.Connection:
-        """A connection to the database, made (readable by its owner only) if it is missing."""
+        """A connection to the database, made (readable by its owner only, with its tables) if it is
+        missing and was never there; StoreError if it was there and has gone."""
+        if self._ready and self.path.exists():
+            return sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
         if not self.path.exists():
-            try:
-                os.close(os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
-            except FileExistsError:
-                pass                            # another thread or process made it meanwhile
-            except OSError as exc:
-                raise StoreError(f"the hand-in database {str(self.path)!r} cannot be made ({exc.strerror})") from None
-            if self._opened:                    # it was deleted while the server ran
-                log.warning("the hand-in database %s was missing: an empty one was made", self.path.name)
-        return sqlite3.connect(self.path, timeout=30.0, isolation_level=None)
+            if self._known:
+                now = time.monotonic()
+                if now - self._missing_said > 60:       # said once a minute, not at every page's poll
+                    self._missing_said = now
+                    log.error("the hand-in database %s is missing (deleted while the server ran): hand-ins and "
+                              "saves are refused until a copy is put back or the server is started again",
+                              self.path.name)
+                raise StoreError(f"the hand-in database {str(self.path)!r} is missing: it was deleted while the "
+                                 "server ran; put a copy back, or start the server again to begin an empty one")
+            with self._lock:
+                try:
+                    os.close(os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+                    made = True
+                except FileExistsError:
+                    made = False            # another thread or process made it meanwhile
+                except OSError as exc:
+                    raise StoreError(f"the hand-in database {str(self.path)!r} cannot be made ({exc.strerror})") \
+                        from None
+                db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
+                if made:
+                    db.execute("PRAGMA journal_mode=WAL")
+        else:
+            db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
+        # this instance's first connection: the tables are made (or completed) before anything uses them,
+        # one thread at a time (two threads of a new store once raced: "table handins has no column method")
+        with self._lock:
+            if not self._ready:
+                try:
+                    self._schema(db)
+                except BaseException:
+                    db.close()
+                    raise
+                self._ready = True
+        self._known = True
+        return db
 
-    def _write(self, fn):
+    def _attempts(self, fn, patience: float):
+        """``fn()`` again while the database is locked by another connection, until ``patience`` is spent."""
+        deadline = time.monotonic() + patience
+        pause = 0.02
+        while True:
+            try:
+                return fn()
+            except sqlite3.Error as exc:
+                if not _busy(exc) or time.monotonic() + pause > deadline:
+                    if _busy(exc):
+                        raise StoreError(f"the hand-in database {self.path.name!r} is busy: another program has "
+                                         f"held its lock for {patience:.0f} s; try again in a moment") from None
+                    raise self._unusable(exc) from None
+            time.sleep(pause)
+            pause = min(2 * pause, 0.5)
+
+    def _write(self, fn, patience: float = WRITE_PATIENCE_S):
         """Run ``fn(db)`` in one immediate transaction; :class:`StoreError` if the database cannot take it."""
-        try:
+        def attempt():
             db = self._connect()
-        except sqlite3.Error as exc:
-            raise self._unusable(exc) from None
-        try:
-            self._schema(db)
-            db.execute("BEGIN IMMEDIATE")
-            out = fn(db)
-            db.execute("COMMIT")
-            return out
-        except sqlite3.Error as exc:
             try:
-                if db.in_transaction:
-                    db.execute("ROLLBACK")
-            except sqlite3.Error:
-                pass
-            raise self._unusable(exc) from None
-        finally:
-            db.close()
+                db.execute("BEGIN IMMEDIATE")
+                out = fn(db)
+                db.execute("COMMIT")
+                return out
+            finally:
+                try:
+                    if db.in_transaction:
+                        db.execute("ROLLBACK")
+                except sqlite3.Error:
+                    pass
+                db.close()
+        return self._attempts(attempt, patience)
 
-    def _read(self, sql: str, args=()) -> list:
-        try:
+    def _snapshot(self, fn, patience: float = 5.0):
+        """Run ``fn(db)`` in one read transaction (a consistent view; no write lock is taken or waited for)."""
+        def attempt():
             with closing(self._connect()) as db:
-                self._schema(db)
+                db.execute("BEGIN")
+                try:
+                    return fn(db)
+                finally:
+                    db.execute("COMMIT")
+        return self._attempts(attempt, patience)
+
+    def _read(self, sql: str, args=(), patience: float = 5.0) -> list:
+        def attempt():
+            with closing(self._connect()) as db:
                 return db.execute(sql, args).fetchall()
-        except sqlite3.Error as exc:
-            raise self._unusable(exc) from None
+        return self._attempts(attempt, patience)
 
     def add(self, student: str, estimates: dict, verdicts: dict, *, method: str = "lse", settings: dict | None = None,
-            conditions: dict | None = None, errors: dict | None = None, refusal=None) -> int:
+            conditions: dict | None = None, errors: dict | None = None, source: dict | None = None,
+            refusal=None) -> int:
         """Store a hand-in; returns its row id. :class:`StoreError` if the database cannot take it.
 
-        ``refusal(count)``, if given, is asked inside the transaction with the student's number of
-        hand-ins so far (two pages of one student handing in at once cannot both take the last
-        attempt): a message it returns is raised as :class:`Refused` and nothing is stored."""
+        ``refusal(count, control)``, if given, is asked inside the transaction with the student's number
+        of hand-ins so far and the teacher's switches as they are now (two pages of one student handing
+        in at once cannot both take the last attempt; a reveal a moment ago holds): a message it returns
+        is raised as :class:`Refused` and nothing is stored. ``source``: where the data came from
+        (``{"kind": "simulated"}``, the default, or ``{"kind": "file", "name": ..., "sha256": ...}``)."""
         score = sum(bool(v) for v in verdicts.values()) / max(len(verdicts), 1)
 
         def insert(db):
             if refusal is not None:
                 count = db.execute("SELECT COUNT(*) FROM handins WHERE student = ?", (student,)).fetchone()[0]
-                why = refusal(count)
+                why = refusal(count, dict(db.execute("SELECT key, value FROM control").fetchall()))
                 if why:
                     raise Refused(why)
             cur = db.execute("INSERT INTO handins (time, student, estimates, verdicts, score, method, settings, "
-                             "conditions, errors) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                             "conditions, errors, source) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                              (_now(), student, json.dumps(estimates), json.dumps(verdicts), score, method,
-                              json.dumps(settings or {}), json.dumps(conditions or {}), json.dumps(errors or {})))
+                              json.dumps(settings or {}), json.dumps(conditions or {}), json.dumps(errors or {}),
+                              json.dumps(source or {"kind": "simulated"})))
             return int(cur.lastrowid)
-        try:
-            return self._write(insert)
-        except Refused:
-            raise
+        return self._write(insert)
 
     def all(self) -> list[HandIn]:
-        try:
-            return [_row(r) for r in self._read(f"SELECT {_COLUMNS} FROM handins ORDER BY id")]
-        except (ValueError, TypeError) as exc:
-            raise self._unusable(exc) from None
+        return [_row(r) for r in self._read(f"SELECT {_COLUMNS} FROM handins ORDER BY id")]
 
     def of(self, student: str) -> list[HandIn]:
         """One student's hand-ins, oldest first."""
-        try:
-            return [_row(r) for r in self._read(f"SELECT {_COLUMNS} FROM handins WHERE student = ? ORDER BY id",
-                                                (student,))]
-        except (ValueError, TypeError) as exc:
-            raise self._unusable(exc) from None
+        return [_row(r) for r in self._read(f"SELECT {_COLUMNS} FROM handins WHERE student = ? ORDER BY id",
+                                            (student,))]
 
     def latest(self) -> list[HandIn]:
         """Each student's last hand-in (with how many they made), by id."""
@@ -225,31 +361,82 @@ class HandIns:
 
     # -- the teacher's switches and the class's presence ------------------------------------
     def control(self) -> dict[str, str]:
-        """``open`` ("1"/"0"), ``deadline`` (an extension, ISO-8601) and ``revealed`` ("1"/"0"), as set."""
+        """``open`` ("1"/"0"), ``deadline`` (an extension, ISO-8601), ``revealed`` ("1"/"0"), and the
+        dashboard token's ``token_nonce`` and ``token_expires`` (POSIX time), as set."""
         return dict(self._read("SELECT key, value FROM control"))
 
     def set_control(self, key: str, value: str) -> None:
-        if key not in ("open", "deadline", "revealed"):
+        if key not in CONTROL_KEYS:
             raise ValueError(f"unknown switch {key!r}")
         self._write(lambda db: db.execute("INSERT INTO control (key, value) VALUES (?, ?) ON CONFLICT(key) DO "
                                           "UPDATE SET value = excluded.value", (key, str(value))))
 
-    def seen(self, student: str) -> None:
-        """The student is here now (joined the first time)."""
+    def seen(self, student: str, page: str = "", *, patience: float = 10.0) -> str:
+        """The student is here now (joined the first time), on the page whose token is ``page``.
+        Returns the token of the page that was live before ("" if none): another page of the same
+        id, which gives way to this one."""
         now = _now()
-        self._write(lambda db: db.execute("INSERT INTO presence (student, joined, last_seen) VALUES (?, ?, ?) ON "
-                                          "CONFLICT(student) DO UPDATE SET last_seen = excluded.last_seen",
-                                          (student, now, now)))
+
+        def write(db):
+            row = db.execute("SELECT page FROM presence WHERE student = ?", (student,)).fetchone()
+            before = row[0] if row else ""
+            other = bool(page and before and before != page)
+            db.execute("INSERT INTO presence (student, joined, last_seen, page, pages, overlaps) "
+                       "VALUES (?, ?, ?, ?, ?, 0) ON CONFLICT(student) DO UPDATE SET last_seen = excluded.last_seen, "
+                       "page = CASE WHEN ? != '' THEN excluded.page ELSE presence.page END, "
+                       "pages = presence.pages + ?, overlaps = presence.overlaps + ?",
+                       (student, now, now, page, 1 if page else 0, page, 1 if page else 0, 1 if other else 0))
+            return before if other else ""
+        return self._write(write, patience)
+
+    def left(self, student: str, page: str, *, patience: float = 10.0) -> None:
+        """The page ``page`` of ``student`` was closed: no page of theirs is live, unless another took over."""
+        self._write(lambda db: db.execute("UPDATE presence SET page = '', last_seen = ? WHERE student = ? AND "
+                                          "page = ?", (_now(), student, page)), patience)
+
+    def live_page(self, student: str) -> str:
+        """The token of the student's live page ("" if none)."""
+        rows = self._read("SELECT page FROM presence WHERE student = ?", (student,))
+        return rows[0][0] if rows else ""
 
     def presence(self) -> dict[str, tuple[str, str]]:
         """student -> (joined, last seen)."""
         return {r[0]: (r[1], r[2]) for r in self._read("SELECT student, joined, last_seen FROM presence")}
 
+    def presences(self) -> dict[str, Presence]:
+        """student -> :class:`Presence` (pages and overlaps with it)."""
+        return {r[0]: Presence(r[1], r[2], r[3], int(r[4]), int(r[5])) for r in
+                self._read("SELECT student, joined, last_seen, page, pages, overlaps FROM presence")}
+
+    def new_id_from(self, address: str, student: str, *, limit: int, window_s: float = 3600.0,
+                    patience: float = 10.0) -> str | None:
+        """May the client at ``address`` start ``student`` (an open exercise)? An id that has joined
+        before (from anywhere) may always come back; a new one counts against the address's
+        ``limit`` of new ids in ``window_s``. Returns why not, or None (and notes the id as the
+        address's). ``limit`` 0: no limit."""
+        now = time.time()
+
+        def write(db):
+            known = db.execute("SELECT 1 FROM presence WHERE student = ? UNION SELECT 1 FROM clients WHERE "
+                               "student = ? LIMIT 1", (student, student)).fetchone()
+            if known is None and limit:
+                n = db.execute("SELECT COUNT(*) FROM clients WHERE address = ? AND first > ?",
+                               (address, now - window_s)).fetchone()[0]
+                if n >= limit:
+                    return (f"this computer has started {n} new ids in this exercise in the last hour, the most "
+                            "allowed; type the id you used before, or ask your teacher (several students behind "
+                            "one network address need a higher limit: eha exercise new --ids-per-client)")
+            db.execute("INSERT OR IGNORE INTO clients (address, student, first) VALUES (?, ?, ?)",
+                       (address, student, now))
+            return None
+        return self._write(write, patience=patience)
+
     def version(self) -> tuple:
         """Changes whenever a hand-in, a switch or a presence changes (what a live page polls)."""
         rows = self._read("SELECT (SELECT COUNT(*) FROM handins), (SELECT MAX(id) FROM handins), "
                           "(SELECT group_concat(key || '=' || value) FROM control), "
-                          "(SELECT COUNT(*) FROM presence), (SELECT MAX(last_seen) FROM presence)")
+                          "(SELECT COUNT(*) FROM presence), (SELECT MAX(last_seen) FROM presence), "
+                          "(SELECT SUM(pages) FROM presence), (SELECT group_concat(page) FROM presence)")
         return tuple(rows[0])
 
 

@@ -20,12 +20,15 @@ while the disk is busy are coalesced (the latest is written).
 
 >>> import tempfile, pathlib
 >>> from eha_app.runtime.handins import HandIns
->>> store = WorkStore(HandIns(pathlib.Path(tempfile.mkdtemp()) / "class.json"))
+>>> store = WorkStore(HandIns(pathlib.Path(tempfile.mkdtemp()) / "class.json"), quota_bytes=100)
 >>> store.save(Work("ada", b'{"format": "eha-settings/1"}', {"least_squares": {"views": ["lse"]}},
 ...                 (StoredFile("least_squares", "run.csv", b"t,x\\n0,0\\n", {"x": "pos"}),)))
+[]
+>>> store.save(Work("alan", b'{}', {}, (StoredFile("record", "big.csv", b"0" * 95),)))  # past the class's quota
+['big.csv']
 >>> w = store.load("ada")
->>> w.runs, w.files[0].name, w.files[0].mapping, store.load("alan")
-({'least_squares': {'views': ['lse']}}, 'run.csv', {'x': 'pos'}, None)
+>>> w.runs, w.files[0].name, w.files[0].mapping, store.load("alan").files, store.load("bob")
+({'least_squares': {'views': ['lse']}}, 'run.csv', {'x': 'pos'}, (), None)
 """
 
 from __future__ import annotations
@@ -50,13 +53,6 @@ log = logging.getLogger("eha_app")
 #: The most bytes of uploaded records kept per student (all of their uploads together): the
 #: largest file the page takes.
 MAX_WORK_FILE_BYTES = MAX_DATA_BYTES
-
-_SCHEMA = (
-    "CREATE TABLE IF NOT EXISTS work (student TEXT PRIMARY KEY, time TEXT NOT NULL, settings TEXT NOT NULL, "
-    "runs TEXT NOT NULL)",
-    "CREATE TABLE IF NOT EXISTS work_files (student TEXT NOT NULL, slot TEXT NOT NULL, name TEXT NOT NULL, "
-    "mapping TEXT NOT NULL, digest TEXT NOT NULL, data BLOB NOT NULL, PRIMARY KEY (student, slot))",
-)
 
 
 @dataclass(frozen=True)
@@ -92,22 +88,23 @@ def _now() -> str:
 class WorkStore:
     """The students' work in the exercise's database (the hand-ins' file and helpers)."""
 
-    def __init__(self, handins: HandIns):
+    def __init__(self, handins: HandIns, quota_bytes: int | None = None):
         self.handins = handins
+        self.quota_bytes = quota_bytes
 
     def _transaction(self, fn):
-        """``fn(db)`` in one transaction, the tables made first if missing; StoreError if it fails."""
-        def run(db):
-            for statement in _SCHEMA:
-                db.execute(statement)
-            return fn(db)
-        return self.handins._write(run)
+        """``fn(db)`` in one transaction (the tables are the hand-in store's); StoreError if it fails."""
+        return self.handins._write(fn)
 
-    def save(self, work: Work) -> None:
+    def save(self, work: Work) -> list[str]:
         """Keep ``work`` as the student's (replacing what was kept); an upload is written only when
-        its bytes, name or mapping changed."""
+        its bytes, name or mapping changed. Returns the names of uploads not kept because the class's
+        kept uploads would pass :attr:`quota_bytes` (a slot whose new file is not kept keeps nothing:
+        an older file would come back in its place)."""
         files = {f.slot: f for f in work.files}
         digests = {slot: f.digest() for slot, f in files.items()}       # before the transaction: 20 MB takes a while
+        quota = self.quota_bytes
+        refused: list[str] = []
 
         def write(db):
             db.execute("INSERT INTO work (student, time, settings, runs) VALUES (?, ?, ?, ?) ON CONFLICT(student) "
@@ -117,12 +114,22 @@ class WorkStore:
                 "SELECT slot, name, mapping, digest FROM work_files WHERE student = ?", (work.student,))}
             for slot in kept.keys() - files.keys():
                 db.execute("DELETE FROM work_files WHERE student = ? AND slot = ?", (work.student, slot))
+            refused.clear()
             for slot, f in files.items():
                 row = (f.name, json.dumps(f.mapping), digests[slot])
-                if kept.get(slot) != row:
-                    db.execute("INSERT OR REPLACE INTO work_files (student, slot, name, mapping, digest, data) "
-                               "VALUES (?, ?, ?, ?, ?, ?)", (work.student, slot, *row, f.data))
+                if kept.get(slot) == row:
+                    continue
+                if quota is not None:
+                    used = db.execute("SELECT COALESCE(SUM(size), 0) FROM work_files WHERE NOT (student = ? AND "
+                                      "slot = ?)", (work.student, slot)).fetchone()[0]
+                    if used + len(f.data) > quota:
+                        db.execute("DELETE FROM work_files WHERE student = ? AND slot = ?", (work.student, slot))
+                        refused.append(f.name)
+                        continue
+                db.execute("INSERT OR REPLACE INTO work_files (student, slot, name, mapping, digest, data, size) "
+                           "VALUES (?, ?, ?, ?, ?, ?, ?)", (work.student, slot, *row, f.data, len(f.data)))
         self._transaction(write)
+        return list(refused)
 
     def load(self, student: str) -> Work | None:
         """The student's kept work, or None if there is none."""
@@ -131,7 +138,7 @@ class WorkStore:
             files = db.execute("SELECT slot, name, mapping, data FROM work_files WHERE student = ? ORDER BY slot",
                                (student,)).fetchall()
             return row, files
-        row, files = self._transaction(read)
+        row, files = self.handins._snapshot(read)
         if row is None:
             return None
         try:

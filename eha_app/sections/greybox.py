@@ -36,7 +36,7 @@ from ..session.freshness import ResultView
 from ..session.state import FIELD_LABELS
 from .handin import HandInBox
 from .least_squares import EXCITATIONS
-from .uploads import ColumnMapping, FileUpload, check_size, download, upload_name
+from .uploads import ColumnMapping, FileUpload, check_size, download, file_source, known_on_file, upload_name
 
 __all__ = ["GreyBoxPanel", "GreyBoxRequest", "GB_FORM", "GB_DEFAULTS", "parse_greybox"]
 
@@ -255,6 +255,8 @@ class GreyBoxPanel(Section):
         # the student's own record (CSV or .mat): t, u and the measured signals
         self.own_data = None
         self.own_data_key = None
+        self.own_source: dict = {}          # what a hand-in records of the file (uploads.file_source)
+        self.result_source: dict = {}       # ... and of the data behind the last result
         self._upload = None
         self.upload = FileUpload(accept=".csv,.mat", width=260, css_classes=["eha-gb-upload"])
         watch(self.upload, self._uploaded, "value")
@@ -298,10 +300,11 @@ class GreyBoxPanel(Section):
             return None
         return self.state.params, req, self.own_data_key
 
-    def guess(self, req: GreyBoxRequest) -> ActuatorParams:
+    def guess(self, req: GreyBoxRequest, base: ActuatorParams | None = None) -> ActuatorParams:
         """The initial values: the form's guesses of the estimated parameters; everything else as tab 1
-        says (what the rig's maker measured), except a hidden one, which starts at the paper's value."""
-        base = self.state.params
+        says (what the rig's maker measured), except a hidden one, which starts at the paper's value.
+        ``base``: the parameters taken as known (on a file, :func:`~eha_app.sections.uploads.known_on_file`'s)."""
+        base = self.state.params if base is None else base
         hidden = set(self.state.hidden)
         typed = dict(req.guess)
         values = {}
@@ -313,6 +316,18 @@ class GreyBoxPanel(Section):
         # a hidden parameter held (not estimated) stays at the truth: the plant's simulation and the model
         # agree on it, as the least squares' regressors use it; it is never shown
         return base.replace(**values)
+
+    def _known(self, req, own) -> tuple[ActuatorParams, str] | None:
+        """The parameters the run takes as known and the sentence about them: tab 1's on the student's
+        simulated record; on a file, never a hidden value (it would come back out of the estimates).
+        None, with the failure shown, when the paper's values do not fit what the student typed."""
+        if own is None:
+            return self.state.params, ""
+        try:
+            return known_on_file(self.state, req.names)
+        except ParameterError as exc:
+            self._fail(str(exc))
+            return None
 
     def _conditions_refusal(self, req) -> str | None:
         c = self.conditions
@@ -345,7 +360,7 @@ class GreyBoxPanel(Section):
             self.handin.set_tip(False, "run the grey-box estimation first: the hand-in takes the estimates of its "
                                        "table")
             return
-        if self.result_context.get("own_record"):
+        if self.result_context.get("own_record") and not self.handin.takes_files:
             self.handin.set_tip(False, "a hand-in comes from your actuator's experiment, not from a file")
             return
         names = ", ".join(FIELD_LABELS.get(n, n) for n in self.state.hidden
@@ -401,7 +416,13 @@ class GreyBoxPanel(Section):
         except ValueError as exc:
             self._fail(str(exc))
             return None
-        params, kp, key, guess = self.state.params, self.state.kp, self.run_key(), self.guess(req)
+        kp, key = self.state.kp, self.run_key()
+        known = self._known(req, own)
+        if known is None:
+            return None
+        params, paper_note = known
+        guess = self.guess(req, params)
+        own_source = dict(self.own_source)
         run_settings = self.settings()
         d_text = self._disturbance_text(req)
         run_conditions = ({"noise": req.measurement_noise(), "disturbance_applied": d_text,
@@ -438,9 +459,10 @@ class GreyBoxPanel(Section):
             self.last_data = data
             self.last_settings, self.last_conditions = run_settings, run_conditions
             self.result_context = {"scenario": scenario, "own_record": own is not None, "params": params}
+            self.result_source = own_source if own is not None else {"kind": "simulated"}
             note = (f"<p class='eha-note'>Simulated and estimated in {job.run_s:.1f} s"
                     + (f" (and {job.wait_s:.1f} s waiting for the server)" if job.wait_s > 0.05 else "")
-                    + f". Record: {html.escape(data.source)}, {data.t.size} samples.</p>")
+                    + f". Record: {html.escape(data.source)}, {data.t.size} samples.</p>" + paper_note)
             self.table.object = self._table_html() + note
             fig = GreyBoxFigure(data.t, data.signals, res.simulated)
             self.plot.objects = [pn.pane.Bokeh(fig.layout, sizing_mode="stretch_width")]
@@ -512,7 +534,8 @@ class GreyBoxPanel(Section):
                     return "map", file_columns(data, filename, name="your file"), str(exc)
                 raise
             ts = sample_time(cols["t"], name="your file", path=filename)
-            return "ok", _OwnRecord(cols["t"], cols["u"], {s: cols[s] for s in req.measured}, filename), ts
+            return ("ok", _OwnRecord(cols["t"], cols["u"], {s: cols[s] for s in req.measured}, filename), ts,
+                    file_source(filename, data))
 
         def show(out, _job):
             if out[0] == "map":
@@ -523,8 +546,9 @@ class GreyBoxPanel(Section):
                                            "which column is which (below).</span>")
                 self._update_enabled()
                 return
-            _, rec, ts = out
+            _, rec, ts, source = out
             self.own_data = rec
+            self.own_source = source
             self.own_data_key = (filename, len(data), tuple(sorted((mapping or {}).items())), columns)
             self.mapping.visible = False
             self.simulated_button.visible = True
@@ -570,14 +594,17 @@ class GreyBoxPanel(Section):
     def _handin_estimates(self):
         """The hidden parameters the last run estimated (not those it held), with its settings."""
         res = self.result
-        if res is None or self.result_context.get("own_record"):
+        if res is None:
             return None
         estimates = {n: float(res.estimates[n]) for n in self.state.hidden
                      if n in res.estimates and n not in res.held}
         if not estimates:
             return None
         settings = dict(self.last_settings or self.settings())
-        settings["_conditions"] = dict(self.last_conditions)
+        own = bool(self.result_context.get("own_record"))
+        # the data the estimates came from (HandInBox refuses a file's unless the exercise allows them)
+        settings["_source"] = dict(self.result_source) or {"kind": "simulated"}
+        settings["_conditions"] = {} if own else dict(self.last_conditions)
         return estimates, settings
 
     def hand_in(self):

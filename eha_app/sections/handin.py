@@ -30,7 +30,8 @@ def handin_status(state) -> tuple[str | None, int]:
     ex, store = state.exercise, state.handins
     control = store.control()
     count = len(store.of(state.student))
-    return ex.refusal(count, open_=control.get("open", "1") == "1", deadline=control.get("deadline")), count
+    return ex.refusal(count, open_=control.get("open", "1") == "1", deadline=control.get("deadline"),
+                      revealed=control.get("revealed") == "1"), count
 
 
 class HandInBox:
@@ -47,6 +48,12 @@ class HandInBox:
         on_click(self.button, lambda _e: self.hand_in())
         self.verdict = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-verdict"])
 
+    @property
+    def takes_files(self) -> bool:
+        """Does the exercise take hand-ins from an uploaded file (labelled so)?"""
+        ex = self.section.state.exercise
+        return ex is not None and bool(getattr(ex, "own_files", False))
+
     def set_tip(self, enabled: bool, tip: str) -> None:
         self.button.disabled = not enabled
         if self.button.description != tip:
@@ -60,23 +67,34 @@ class HandInBox:
             return None
         estimates, settings = got
         exercise, student, store, method = s.exercise, s.student, s.handins, self.method
-        conditions = {**exercise.conditions.to_dict(), **settings.pop("_conditions", {})}
+        settings = dict(settings)
+        source = dict(settings.pop("_source", None) or {"kind": "simulated"})
+        from_file = source.get("kind") == "file"
+        # a file's data were not taken under the exercise's conditions: its hand-in says so, not the noise floors
+        conditions = ({"data": "an uploaded file"} if from_file
+                      else {**exercise.conditions.to_dict(), **settings.pop("_conditions", {})})
+        settings.pop("_conditions", None)
 
         def compute(_token):
             from ..runtime.handins import Refused
 
-            control = store.control()
-            opened, deadline = control.get("open", "1") == "1", control.get("deadline")
             verdicts = exercise.verdicts(student, estimates)
+            seen = {}
+
+            def refusal(count, control):
+                # the teacher's switches as the hand-in's own transaction reads them: a close, a
+                # moved deadline or a reveal a moment ago holds
+                seen.update(control)
+                return exercise.refusal(count, open_=control.get("open", "1") == "1",
+                                        deadline=control.get("deadline"), method=method,
+                                        revealed=control.get("revealed") == "1", source=source.get("kind"))
             try:
                 store.add(student, estimates, verdicts, method=method, settings=settings, conditions=conditions,
-                          errors=exercise.errors(student, estimates),
-                          refusal=lambda count: exercise.refusal(count, open_=opened, deadline=deadline,
-                                                                 method=method))
+                          errors=exercise.errors(student, estimates), source=source, refusal=refusal)
             except Refused as exc:
                 return None, str(exc), 0, False
             count = len(store.of(student))
-            shows = exercise.shows_verdicts(deadline=deadline, revealed=control.get("revealed") == "1")
+            shows = exercise.shows_verdicts(deadline=seen.get("deadline"), revealed=seen.get("revealed") == "1")
             return verdicts, "", count, shows
 
         def show(out, _job):
@@ -87,8 +105,9 @@ class HandInBox:
                 self.verdict.visible = True
                 return
             limit = f" of {exercise.attempts} allowed" if exercise.attempts else ""
+            origin = f" on your file {html.escape(source.get('name', ''))}" if from_file else ""
             head = (f"<b>Handed in</b> (hand-in {count}{limit}, from the "
-                    f"{html.escape(METHODS[method].split(' (')[0])})")
+                    f"{html.escape(METHODS[method].split(' (')[0])}{origin})")
             values = "".join(f"<li>{SYMBOLS_HTML.get(n, html.escape(n))} = {v:.5g}" for n, v in estimates.items())
             if shows:
                 score = sum(verdicts.values())

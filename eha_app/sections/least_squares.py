@@ -48,7 +48,7 @@ from ..session.form import Field, Form, Group, parse_fields, raised_to_bounds, r
 from ..session.freshness import ResultView
 from ..session.state import FIELD_LABELS
 from .handin import HandInBox
-from .uploads import ColumnMapping, FileUpload, check_size, download, upload_name
+from .uploads import ColumnMapping, FileUpload, check_size, download, file_source, known_on_file, upload_name
 
 __all__ = ["LeastSquaresPanel", "LseRequest", "LSE_FORM", "LSE_DEFAULTS", "parse_lse"]
 
@@ -268,6 +268,8 @@ class LeastSquaresPanel(Section):
         self.handin_button, self.verdict = self.handin.button, self.handin.verdict
         # the student's own data (CSV or .mat), instead of the simulated sensors
         self.own_data = None                # MeasuredData of an upload, when one is in use
+        self.own_source: dict = {}          # what a hand-in records of that file (uploads.file_source)
+        self.result_source: dict = {}       # ... and of the data behind the last result
         self.own_data_key = None
         self.last_data = None               # the data behind the table and the plot (for downloads)
         self.last_resim = None              # the plot's re-simulation with the estimates
@@ -417,14 +419,15 @@ class LeastSquaresPanel(Section):
                     return "map", file_columns(data, filename, name="your file"), str(exc)
                 raise
             ts = sample_time(cols["t"], name="your file", path=filename)
-            return "ok", MeasuredData(**cols, source=filename), ts
+            return "ok", MeasuredData(**cols, source=filename), ts, file_source(filename, data)
 
         def show(out, _job):
             if out[0] == "map":
                 self._ask_mapping(out[1], filename)
                 return
-            _, measured, ts = out
+            _, measured, ts, source = out
             self.own_data = measured
+            self.own_source = source
             self.own_data_key = (filename, len(data), tuple(sorted((mapping or {}).items())))
             self.mapping.visible = False
             self.window_box.visible = True
@@ -516,7 +519,7 @@ class LeastSquaresPanel(Section):
         names = ", ".join(FIELD_LABELS.get(n, n) for n in self.state.hidden if n in LSE_ESTIMATED)
         if self.result is None:
             self.handin.set_tip(False, "run the least squares first: the hand-in takes the estimates of its table")
-        elif self.result_context.get("own_record"):
+        elif self.result_context.get("own_record") and not self.handin.takes_files:
             self.handin.set_tip(False, "a hand-in comes from your actuator's experiment, not from a file: run the "
                                        "least squares on the simulated sensors")
         elif self.view.status == "current":
@@ -570,7 +573,16 @@ class LeastSquaresPanel(Section):
         scenario = req.scenario if req.excitation == "paper" else None
 
         own = self.windowed() if self.own_data is not None else None
+        paper_note = ""
+        if own is not None:
+            # on a file, a hidden value is never taken as known: it would come back out of the estimates
+            try:
+                params, paper_note = known_on_file(self.state, LSE_ESTIMATED)
+            except ParameterError as exc:
+                self._fail(str(exc))
+                return None
         kp = self.state.kp
+        own_source = dict(self.own_source)
         what = (f"your data {own.source}" if own is not None else
                 f"{SCENARIOS.get(req.scenario, req.scenario)}, {req.model} model")
 
@@ -589,8 +601,8 @@ class LeastSquaresPanel(Section):
                                    estimator=req.estimator, cancel=token)
                 return (res, plots.lse_view(own, None), (f"Your data ({html.escape(own.source)}, {own.t.size} "
                                                          "samples): the model is not re-simulated (the input is "
-                                                         "known only at its samples)."), own, None, board_model(res),
-                        _beside(req.model, res, own, params, token))
+                                                         "known only at its samples)."),
+                        own, None, board_model(res), _beside(req.model, res, own, params, token))
             return shared_results.get(shared_key, simulated, token)
 
         # a simulated run is a function of these alone: students with the same inputs share it
@@ -602,6 +614,7 @@ class LeastSquaresPanel(Section):
             self.result = res
             self.last_settings, self.last_conditions = run_settings, run_conditions
             self.result_context = {"alternative": alt, "leak": leak, "seed": req.seed, "own_record": own is not None}
+            self.result_source = dict(own_source) if own is not None else {"kind": "simulated"}
             self.last_data, self.last_resim = data, resim
             for d in self.downloads:
                 d.disabled = False
@@ -609,7 +622,7 @@ class LeastSquaresPanel(Section):
             done = "Identified" if own is not None else "Simulated, identified and re-simulated"
             note = (f"<p class='eha-note'>{done} in {job.run_s * 1e3:.0f} ms"
                     + (f" (and {job.wait_s:.1f} s waiting for the server)" if job.wait_s > 0.05 else "")
-                    + f". {resim_error}</p>")
+                    + f". {resim_error}</p>" + paper_note)
             warn = "" if res.success else f"<div class='eha-warn'>{res.message}</div>"
             self.table.object = warn + lse_table_html(res, scenario if scenario != "custom" else None,
                                                       hidden=self.state.hidden, **self.result_context) + note
@@ -665,9 +678,11 @@ class LeastSquaresPanel(Section):
             return None
         estimates = {n: float(self.result.estimates[n]) for n in self.state.hidden if n in self.result.estimates}
         settings = dict(self.last_settings or self.settings())
-        if self.own_data is not None:
+        if self.result_context.get("own_record"):
             settings["record"] = "the student's own file"
-        settings["_conditions"] = dict(self.last_conditions)
+        # the data the estimates came from (HandInBox refuses a file's unless the exercise allows them)
+        settings["_source"] = dict(self.result_source) or {"kind": "simulated"}
+        settings["_conditions"] = dict(self.last_conditions) if not self.result_context.get("own_record") else {}
         return estimates, settings
 
     def _disturbance_text(self, req) -> str:

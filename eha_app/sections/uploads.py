@@ -16,7 +16,8 @@ from eha_core.errors import FieldError
 
 from ..runtime.tasks import on_click
 
-__all__ = ["MAX_UPLOAD_BYTES", "FileUpload", "check_size", "upload_name", "ColumnMapping", "download"]
+__all__ = ["MAX_UPLOAD_BYTES", "FileUpload", "check_size", "upload_name", "ColumnMapping", "download",
+           "known_on_file", "file_source"]
 
 #: An upload larger than this is refused, in the page before it is sent and by the server
 #: (the same limit as the data reader's; the server's websocket takes a file this size).
@@ -31,6 +32,43 @@ def _too_big(filename: str, size: int, limit: int) -> str:
 #: The same sentence, written by the browser before it sends a file (a JavaScript template).
 _TOO_BIG_JS = str(FieldError("your file", None, "it has ${(file.size / 1e6).toFixed(1)} MB; at most "
                              "${model.max_bytes / 1e6} MB", value_text="'${file.name}'"))
+
+
+def known_on_file(state, estimated=()):
+    """The parameters a route takes as known on an uploaded file, and the sentence that says which
+    hidden ones are at the paper's value: ``(params, note_html)``, the note "" outside an exercise
+    (see :meth:`~eha_app.session.state.AppState.known_params`). ``estimated``: those the route
+    estimates (their values are guesses or not used, so not named). Raises ``ParameterError``
+    with a sentence for the page when the paper's values do not fit what the student typed."""
+    from eha_core.param_table import FIELD_INFO
+    from eha_core.params import ActuatorParams, ParameterError
+
+    from ..render.tables import SYMBOLS_HTML
+
+    if not state.hidden:
+        return state.params, ""
+    try:
+        params = state.known_params()
+    except ParameterError as exc:
+        raise ParameterError(exc.field, exc.value, "on a file, the hidden parameters are taken at the paper's "
+                             f"values, and with them {exc.allowed}; type values that fit the paper's") from None
+    paper = ActuatorParams()
+    named = [n for n in state.hidden if n not in estimated]
+    if not named:
+        return params, ""
+    values = ", ".join(f"{SYMBOLS_HTML.get(n, html.escape(n))} = {getattr(paper, n) / FIELD_INFO[n].display_scale:.4g}"
+                       f" {html.escape(FIELD_INFO[n].display_unit)}" for n in named)
+    return params, (f"<p class='eha-note eha-paper-values'>Your file is not your actuator's experiment: the hidden "
+                    f"{values} {'is' if len(named) == 1 else 'are'} taken at the paper's value"
+                    f"{'' if len(named) == 1 else 's'}, not your actuator's.</p>")
+
+
+def file_source(name: str, data: bytes) -> dict:
+    """What a hand-in records of an uploaded file it came from: its name and the start of its SHA-256
+    (two students handing in from one file show the same digest on the teacher's dashboard)."""
+    import hashlib
+
+    return {"kind": "file", "name": str(name), "sha256": hashlib.sha256(data).hexdigest()[:16]}
 
 
 def upload_name(filename: str | None) -> str:

@@ -109,7 +109,10 @@ class WorkKeeper:
     def __init__(self, session, note: Callable[[str], None]):
         self.session = session
         self.student = session.student
-        self.store = WorkStore(session.state.handins)
+        exercise = session.state.exercise
+        quota = getattr(exercise, "kept_uploads_mb", None)
+        self.store = WorkStore(session.state.handins, quota_bytes=None if quota is None else quota * 10**6)
+        self._quota_told: set[str] = set()
         self.note = note
         self.doc = served_document()
         self.restoring = True           # nothing is saved before what was kept is back on the page
@@ -117,6 +120,7 @@ class WorkKeeper:
         self._dirty = False
         self._timer = False
         self._closed = False
+        self._stopped = False           # the page gave way to another of the same id: nothing more is saved
         self._last = None               # what was last saved, to skip a save of the same
         self._told = False
         self._watched: set[int] = set()
@@ -153,6 +157,8 @@ class WorkKeeper:
         self._off_page(("read", id(self)), read)
 
     def _put_back(self, work: Work | None, error: StoreError | None) -> None:
+        if self._stopped:
+            return                      # the page gave way meanwhile
         self._watch()
         if error is not None:
             log.warning("a student's saved work could not be read: %s", error)
@@ -249,7 +255,7 @@ class WorkKeeper:
 
     def _next(self, steps: list) -> None:
         """Take the steps in turn, each once the previous one's job is handled on the page."""
-        while steps:
+        while steps and not self._stopped:
             title, step = steps.pop(0)
             try:
                 job = step()
@@ -311,6 +317,8 @@ class WorkKeeper:
 
     def changed(self) -> None:
         """Something to save: in :attr:`SAVE_DELAY_S` (at once without a server)."""
+        if self._stopped:
+            return
         if self.restoring:
             self._dirty = True
             return
@@ -328,6 +336,12 @@ class WorkKeeper:
     def _due(self) -> None:
         self._timer = False
         self.save()
+
+    def stop(self) -> None:
+        """Save nothing more from this page (its id is live on another page, whose work is the student's)."""
+        self._stopped = True
+        self._closed = True
+        self._timer = False
 
     def _closing(self) -> None:
         self._closed = True
@@ -357,6 +371,8 @@ class WorkKeeper:
 
     def save(self) -> None:
         """Write the session's work (on the store's thread), unless it is what was written last."""
+        if self._stopped:
+            return
         if self.restoring:
             self._dirty = True
             return
@@ -370,12 +386,26 @@ class WorkKeeper:
 
         def write():
             try:
-                store.save(work)
+                refused = store.save(work)
             except StoreError as exc:
                 log.warning("a student's work could not be saved: %s", exc)
                 self._on_page(partial(self._not_saved, exc))
+                return
+            if refused:
+                log.warning("the class's kept uploads are at their limit (%s MB): a student's upload is not kept",
+                            store.quota_bytes // 10**6 if store.quota_bytes is not None else "?")
+                self._on_page(partial(self._not_kept, refused))
 
         self._off_page(self._key, write)
+
+    def _not_kept(self, names: list[str]) -> None:
+        new = [n for n in names if n not in self._quota_told]
+        if not new:
+            return
+        self._quota_told.update(new)
+        mb = self.store.quota_bytes // 10**6 if self.store.quota_bytes is not None else 0
+        self._tell(f"Your file {', '.join(new)} is used on this page but not kept for a reload: the class's space "
+                   f"for kept files ({mb} MB) is full. Tell your teacher; your settings and results are kept.")
 
     def _not_saved(self, error: StoreError) -> None:
         self._last = None               # tried again at the next change

@@ -106,6 +106,19 @@ class Session(param.Parameterized):
         apply_locked(fn, self.doc or served_document())
 
     # -- sections ---------------------------------------------------------------------------------
+    def release(self) -> None:
+        """Let go of every section (their results, figures and uploads): the page was given up (its id
+        opened on another page). The session stays usable for nothing but its settings."""
+        self._built.clear()
+        self._mail.clear()
+        self._on_built.clear()
+        # the sections watch the state: its watchers would keep every section (and its upload) alive
+        for kinds in list(self.state.param.watchers.values()):
+            for watchers in list(kinds.values()):
+                for w in list(watchers):
+                    self.state.param.unwatch(w)
+        self.state.forget_secrets()
+
     def section(self, key: str) -> Section | None:
         """The section ``key`` if it was made (shown), else None."""
         return self._built.get(key)

@@ -294,29 +294,51 @@ class AppState(param.Parameterized):
 
     def start_exercise(self, exercise, student_id: str, handins=None, name: str = "") -> None:
         """Run ``exercise`` as ``student_id`` (the roster's id of a checked code, or the id typed in an
-        open exercise): their actuator, its hidden values kept here; the store notes them as here."""
+        open exercise): their actuator, its hidden values kept here. (The page notes them as here in
+        the store, off the event loop: :meth:`eha_app.app.Page._join`.)"""
         from eha_core.exercise import normalize_id
 
         student = normalize_id(student_id)
         actuator = exercise.student_params(student)
-        from ..runtime.redaction import keep_out_of_logs
+        import hashlib
+
+        from ..runtime.redaction import keep_out_of_logs, register_student
 
         self.exercise = exercise
         self.handins = handins
         self.student = student
         self.student_name = name
         self.secret = {n: getattr(actuator, n) for n in exercise.hide}
-        keep_out_of_logs(exercise.secret, *self.secret.values())
+        keep_out_of_logs(exercise.secret)
+        # the student's hidden values are kept out of the log while a page of theirs is open (a registration
+        # per page, released when it closes or gives way: the log's guard does not grow all day)
+        self.forget_secrets()
+        key = hashlib.sha256(exercise.secret.encode()).hexdigest()[:16]
+        self._log_hold = register_student(key, student, self.secret.values())
         self.reset_defaults()
-        if handins is not None:
-            from ..runtime.handins import StoreError
 
-            try:
-                handins.seen(student)
-            except StoreError as exc:       # a damaged store must not keep a student out (hand-ins say so)
-                import logging
+    def forget_secrets(self) -> None:
+        """Release this page's hold on the log's guard of the student's hidden values (the page closed)."""
+        hold = getattr(self, "_log_hold", None)
+        if hold is not None:
+            hold.release()
+            self._log_hold = None
 
-                logging.getLogger("eha_app").warning("could not note a student's arrival: %s", exc)
+    def known_params(self) -> ActuatorParams:
+        """The parameters a route may take as known on a record that is not the student's own
+        actuator's experiment (an uploaded file): tab 1's, each hidden one at the paper's value.
+
+        The hidden values are the truth of the student's actuator. Used as known on a file whose
+        origin the student knows, they come back out of the estimates: the least squares' βe is a
+        fixed function of L0, and one run on the paper's own record gave a hidden L0 to six digits.
+        On the student's simulated record they are the experiment itself, and stay.
+
+        Raises :class:`ParameterError` when the paper's values break a rule with what the student
+        typed (a rod the student made wider than the paper's bore)."""
+        if not self.secret:
+            return self.params
+        paper = ActuatorParams()
+        return self.params.replace(**{n: getattr(paper, n) for n in self.secret})
 
     @property
     def kp_text(self) -> str:

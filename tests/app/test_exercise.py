@@ -173,15 +173,32 @@ def test_a_roster_student_joins_with_their_code_only(tmp_path, monkeypatch):
     gate.student_id.value = ex.join_code("s2")
     gate.start()                                            # the fourth try still counts
     assert page.session.student == "s2" and page.session.state.student_name == "Alan Turing"
+    from eha_app import app as app_module
+
+    now = [1000.0]
+    monkeypatch.setattr(app_module, "_wrong_codes", app_module.WrongCodes(clock=lambda: now[0]))
     page = create_app(AppState())
     gate = page.gate
+    gate.address = "10.0.0.7"
     for _ in range(ExerciseGate.FREE_TRIES):
         gate.student_id.value = "ZZZZZ-ZZZZZ"
         gate.start()
     gate.student_id.value = ex.join_code("s1").lower().replace("-", " ")
     gate.start()                                            # too many wrong codes: the page waits
     assert "Too many wrong codes" in gate.message.object and not page.session.student
-    gate.blocked_until = 0.0
+    # a new page (a reload) from the same address waits too: the count is the address's, not the page's
+    page = create_app(AppState())
+    gate = page.gate
+    gate.address = "10.0.0.7"
+    gate.student_id.value = ex.join_code("s1")
+    gate.start()
+    assert "Too many wrong codes" in gate.message.object and not page.session.student
+    other = create_app(AppState()).gate                     # another computer is not held up
+    other.address = "10.0.0.8"
+    other.student_id.value = ex.join_code("s2")
+    other.start()
+    assert other.state.student == "s2"
+    now[0] += ExerciseGate.WAIT_S + 0.1
     gate.start()
     assert page.session.student == "s1"
     header = page.layout.objects[1].object
@@ -228,7 +245,7 @@ def test_concurrent_hand_ins_of_one_student_cannot_pass_the_attempts(tmp_path):
     def hand_in():
         barrier.wait()
         try:
-            store.add("s1", {"M": 1.0}, {"M": False}, refusal=lambda count: ex.refusal(count))
+            store.add("s1", {"M": 1.0}, {"M": False}, refusal=lambda count, control: ex.refusal(count))
             outcome.append("stored")
         except Exception as exc:           # noqa: BLE001
             outcome.append(type(exc).__name__)

@@ -401,8 +401,17 @@ def test_a_damaged_or_deleted_database_gets_a_message_not_a_traceback(tmp_path, 
     for p in tmp_path.glob("class.handins.sqlite*"):
         p.unlink()                                                # deleted while the server runs
     caplog.set_level(logging.WARNING, logger="eha_app")
-    store.add("bob", {"M": 4100.0}, {"M": True})                  # made again, and said so
-    assert [h.student for h in store.all()] == ["bob"] and "was missing" in caplog.text
+    # not made again behind the teacher's back (every student's attempts would start from 0): refused, and said
+    with pytest.raises(StoreError, match=r"is missing: it was deleted while the server ran; put a copy back"):
+        store.add("bob", {"M": 4100.0}, {"M": True})
+    with pytest.raises(StoreError, match=r"is missing"):
+        store.of("ada")
+    assert not handins_path(path).exists()
+    assert caplog.text.count("is missing (deleted while the server ran)") == 1      # once, not at every call
+    assert [r.levelname for r in caplog.records] == ["ERROR"]
+    store = HandIns(path).check()                                 # the server started again: an empty one
+    store.add("bob", {"M": 4100.0}, {"M": True})
+    assert [h.student for h in store.all()] == ["bob"]
     assert stat.S_IMODE(handins_path(path).stat().st_mode) == 0o600
     handins_path(path).write_bytes(b"not a database " * 100)
     for p in tmp_path.glob("class.handins.sqlite-*"):
