@@ -52,6 +52,7 @@ Examples
 from __future__ import annotations
 
 import math
+import sys
 import time
 import weakref
 from dataclasses import dataclass, field
@@ -76,6 +77,10 @@ _SIGNAL_INDEX = {"x": 0, "v": 1, "p1": 2, "p2": 3}
 #: A parameter that may be 0 or negative is estimated as a multiple of this scale (SI).
 LINEAR_SCALE = {"d0": 1000.0, "x0": 0.01, "v0": 0.01}
 Z95 = 1.959963984540054
+#: log of the largest float: math.exp of more raises OverflowError ("math range error").
+_LOG_FLOAT_MAX = math.log(sys.float_info.max)
+#: A parameter with at least this share of a direction (unit vector) the data do not fix has no bound.
+_UNFIXED_SHARE = 1e-6
 #: The states' scales in multiple shooting (x, v, p1, p2 in SI): a segment's initial state is
 #: estimated in these units.
 STATE_SCALE = np.array([0.01, 0.01, 1e6, 1e6])
@@ -173,6 +178,10 @@ class _Setup:
     def params_at(self, z: np.ndarray) -> ActuatorParams:
         values = {}
         for n, lg, zj in zip(self.names, self.log, z, strict=True):
+            if lg and zj > _LOG_FLOAT_MAX:
+                # a step of the optimiser to exp(huge): math.exp would raise OverflowError ("math range
+                # error"), which no caller expects; this is a model that cannot be simulated
+                raise ComputationError(f"{n} = exp({zj:.4g}) is beyond the largest number a float holds")
             values[n] = math.exp(zj) if lg else zj * LINEAR_SCALE[n]
         return self.base.replace(**values)
 
@@ -323,7 +332,9 @@ def _sentence(who, v, v_max, k_f, pressures) -> str:
 class GreyBoxResult:
     """A grey-box estimate (SI). ``std_errors`` and ``ci95`` from the inverse Fisher information at the
     estimate; ``fit`` per measured signal in %; ``held`` the parameters held at their initial value
-    because the data do not determine them (``identifiability`` says why)."""
+    because the data do not determine them (``identifiability`` says why). ``success`` is the claim
+    that the answer holds: the optimiser stopped at a minimum (its own flag is
+    ``extras["optimiser_success"]``) and every estimated parameter's interval is bounded."""
 
     names: tuple[str, ...]
     estimates: dict
@@ -420,6 +431,7 @@ def identify_greybox(data: GreyBoxData, params=("M", "B", "Af", "beta_e"), *, me
     est_params = setup.params_at(z)
     J = _weighted_jacobian(sout, rows, sigma)
     estimates, std_errors, ci95, corr = _statistics(J, setup, est_params, names, held, guess)
+    unbounded = [n for n in free if not all(math.isfinite(c) for c in ci95[n])]
     fit = {}
     for k, s in enumerate(measured):
         y, yh = y_meas[:, k], out[:, rows[k]]
@@ -431,13 +443,15 @@ def identify_greybox(data: GreyBoxData, params=("M", "B", "Af", "beta_e"), *, me
     e = y_meas[:, 0] - out[:, rows[0]]
     assessment = assess_residuals(residual_analysis(e, data.u if data.u is not None else data.r,
                                                     max_lag=min(25, e.size - 1)))
-    after = identifiability(J, free, **_context(out, data, est_params))
+    # (a Jacobian that is not finite has no singular values: its statistics said unbounded already)
+    after = identifiability(J, free, **_context(out, data, est_params)) if np.all(np.isfinite(J)) else []
     return GreyBoxResult(
         names=names, estimates=estimates, std_errors=std_errors, ci95=ci95, correlation=corr, fit=fit,
         noise_std={s: float(sigma[k]) for k, s in enumerate(measured)}, params=est_params, simulated=out,
         assessment=assessment, identifiability=tuple(sentences) + tuple(after), held=held, nfev=nfev,
-        iterations=njev, time_s=time.perf_counter() - t_start, success=bool(sol.success), message=str(sol.message),
-        measured=measured)
+        iterations=njev, time_s=time.perf_counter() - t_start, success=bool(sol.success) and not unbounded,
+        message=_unbounded_message(unbounded, str(sol.message)) if unbounded else str(sol.message),
+        measured=measured, extras={"optimiser_success": bool(sol.success)})
 
 
 def _context(states, data, params) -> dict:
@@ -627,16 +641,20 @@ def _multiple_shooting(setup, data, measured, rows, y_meas, sigma, segments, max
 
 def _statistics(J, setup, est_params, names, held, guess):
     """Estimates, standard errors, 95 % intervals (a positive parameter's from its logarithm's: never
-    below 0) and the correlation matrix, from the inverse Fisher information ``(J^T J)^-1``."""
-    cov_z = np.linalg.pinv(J.T @ J)
-    se_z = np.sqrt(np.clip(np.diag(cov_z), 0, None))
+    below 0) and the correlation matrix, from the inverse Fisher information ``(J^T J)^-1``.
+
+    A parameter the data do not fix at the estimate (its signals do not move with it there: a
+    record in other units than SI drives the fit to such places) has an unbounded interval, (0, inf)
+    or (-inf, inf), and an infinite standard error, not the 0 a pseudo-inverse gives it; an interval
+    wider than a float reaches ends at inf rather than raising OverflowError."""
+    cov_z, se_z = _inverse_fisher(J)
     estimates, std_errors, ci95 = {}, {}, {}
     for j, (n, lg) in enumerate(zip(setup.names, setup.log, strict=True)):
         value = param_value(est_params, n)
         estimates[n] = value
         if lg:
             std_errors[n] = value * se_z[j]
-            ci95[n] = (value * math.exp(-Z95 * se_z[j]), value * math.exp(Z95 * se_z[j]))
+            ci95[n] = (value * _exp_or_inf(-Z95 * se_z[j]), value * _exp_or_inf(Z95 * se_z[j]))
         else:
             std_errors[n] = LINEAR_SCALE[n] * se_z[j]
             ci95[n] = (value - Z95 * std_errors[n], value + Z95 * std_errors[n])
@@ -644,11 +662,48 @@ def _statistics(J, setup, est_params, names, held, guess):
         estimates[n], std_errors[n], ci95[n] = param_value(guess, n), math.nan, (math.nan, math.nan)
     d = np.sqrt(np.clip(np.diag(cov_z), 1e-300, None))
     corr_free = cov_z / np.outer(d, d)
+    unbounded = ~np.isfinite(se_z)
+    corr_free[unbounded, :] = corr_free[:, unbounded] = np.nan
     corr = np.full((len(names), len(names)), np.nan)
     for a, na in enumerate(setup.names):
         for b, nb in enumerate(setup.names):
             corr[names.index(na), names.index(nb)] = corr_free[a, b]
     return estimates, std_errors, ci95, corr
+
+
+def _inverse_fisher(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(J^T J)^-1`` (as ``np.linalg.pinv`` of it: the directions it keeps, the same numbers) and the
+    standard errors, infinite for a parameter with a share of a direction pinv drops (a singular
+    value of J below 3e-8 of the largest: more than 3e7 times less determined than the best, 0 for
+    a parameter that does not move the signals at all), or for all when J is not finite."""
+    P = J.shape[1]
+    if not np.all(np.isfinite(J)):
+        return np.full((P, P), np.nan), np.full(P, np.inf)
+    _, s, vt = np.linalg.svd(J, full_matrices=False)
+    eig = s**2                                     # J^T J's eigenvalues; pinv drops those below 1e-15 of the top
+    kept = eig > 1e-15 * eig[0] if eig.size and eig[0] > 0 else np.zeros(eig.size, dtype=bool)
+    v_kept = vt[kept].T / s[kept]
+    cov_z = v_kept @ v_kept.T
+    se_z = np.sqrt(np.clip(np.diag(cov_z), 0, None))
+    unfixed = np.any(np.abs(vt[~kept]) >= _UNFIXED_SHARE, axis=0) if (~kept).any() else np.zeros(P, dtype=bool)
+    se_z[unfixed] = np.inf
+    return cov_z, se_z
+
+
+def _exp_or_inf(x: float) -> float:
+    """``math.exp(x)``, inf beyond the floats (where math.exp raises OverflowError)."""
+    return math.inf if x > _LOG_FLOAT_MAX else math.exp(x)
+
+
+def _unbounded_message(unbounded, optimiser_message: str) -> str:
+    """Why an estimate with unbounded intervals is not a success, and what to try."""
+    who = ", ".join(unbounded)
+    one = len(unbounded) == 1
+    return (f"the data do not determine {who} at the estimate: {'its' if one else 'their'} 95 % "
+            f"interval{' is' if one else 's are'} unbounded (the simulated signals hardly move with "
+            f"{'it' if one else 'them'} there). Check that the record is in SI units (u in V, x in m, v in m/s, "
+            f"p1 and p2 in Pa), then estimate fewer parameters, hold {'it' if one else 'them'} at a known value "
+            f"or measure more signals (the optimiser: {optimiser_message})")
 
 
 def _weighted_jacobian(sout: np.ndarray, rows, sigma: np.ndarray) -> np.ndarray:
