@@ -28,11 +28,35 @@ Several processes or machines
     the configuration. Affinity is by a cookie that nginx sets on the first
     request (hashed consistently over the backends), not by client address:
     a class behind one school NAT would otherwise all land on one process.
+
+Every answer's security headers
+    ``eha serve`` runs Panel's ``serve`` command through :func:`run_panel_serve`, a subclass of
+    it whose ``customize_kwargs`` (Bokeh's documented hook for that) hands Tornado's
+    ``Application`` an output transform, :func:`security_transform`: every answer of the
+    server (the app's page, the dashboard's, static files, autoload scripts, 403s and 404s,
+    the websocket's handshake) carries :func:`security_headers`: a Content-Security-Policy, the
+    page refusing to be framed (``frame-ancestors 'none'``, ``X-Frame-Options: DENY``) and
+    ``X-Content-Type-Options: nosniff``. Behind nginx, :func:`nginx_config` adds the same to
+    nginx's own answers (its redirect of ``/``, its 414 and 502 pages), and only to those.
+
+A long address gets an answer
+    Tornado closes the connection, with no answer, on a request whose line and headers exceed
+    its ``max_header_size`` (64 KiB by default): a student who pasted a 70,000-character link
+    saw "connection reset". The server reads up to :data:`MAX_REQUEST_HEAD_BYTES` (Bokeh's
+    ``http_server_kwargs``, set in the same hook) and :func:`refuse_oversized` answers an
+    address longer than :data:`MAX_ADDRESS_CHARS` with 414, and header fields beyond
+    :data:`MAX_HEADER_FIELDS_BYTES` with 431, each with a line saying what to do, before
+    Bokeh's handlers see the request. Beyond :data:`MAX_REQUEST_HEAD_BYTES` the connection is
+    still closed without an answer (Tornado's ``UnsatisfiableReadError``): a bound on what one
+    connection may make the server hold. Behind nginx, nginx answers 414 itself past its own
+    ``large_client_header_buffers`` (8 KiB by default).
 """
 
 from __future__ import annotations
 
+import functools
 import logging
+import re
 import weakref
 from pathlib import Path
 
@@ -40,7 +64,9 @@ from eha_core.data import MAX_DATA_BYTES
 
 __all__ = ["ENTRY_POINT", "TEACHER_ENTRY_POINT", "LOG_FORMAT", "UNUSED_SESSION_MS", "WEBSOCKET_MAX_MESSAGE_BYTES",
            "serve_argv", "default_origins", "lan_address", "local_names", "nginx_config", "nginx_standalone_config",
-           "use_local_resources", "supervise", "quiet_closed_websockets"]
+           "use_local_resources", "supervise", "quiet_closed_websockets", "CONTENT_SECURITY_POLICY",
+           "security_headers", "security_transform", "MAX_REQUEST_HEAD_BYTES", "MAX_ADDRESS_CHARS",
+           "MAX_HEADER_FIELDS_BYTES", "refuse_oversized", "first_answer", "run_panel_serve"]
 
 ENTRY_POINT = Path(__file__).resolve().parents[1] / "eha.py"
 #: The teacher's dashboard, served at /teacher beside the app in an exercise (see runtime/teacher_access.py).
@@ -57,6 +83,166 @@ LOG_FORMAT = "%(asctime)s %(levelname)s %(message)s"
 #: page with it; Bokeh's default is 20 MiB): an upload at the app's limit, which the page's
 #: :class:`~eha_app.sections.uploads.FileUpload` sends as one message of raw bytes, with room to spare.
 WEBSOCKET_MAX_MESSAGE_BYTES = MAX_DATA_BYTES + 2**20
+
+#: The Content-Security-Policy of every answer (``connect-src`` gets the page's own websocket
+#: address besides, see :func:`security_headers`): nothing but what Bokeh 3.9 and Panel 1.9 were
+#: seen to need in Chromium, through every tab and sub-tab, a run in each route and the teacher's
+#: dashboard (tests/ui/test_csp_in_browser.py; each relaxation below, taken away, was a violation):
+#:
+#: * ``script-src 'unsafe-inline'``: the page's document and its start are inline ``<script>``
+#:   elements, different for every session (no hash fits, and Bokeh's template takes no nonce);
+#:   ``'unsafe-eval'``: BokehJS evaluates code given as text (``new Function``);
+#:   ``blob:``, in ``script-src`` and ``connect-src``: Panel's ES-module shim loads the modules of
+#:   the app's ``JSComponent``\ s (the connection watch, the forms, the uploads) as blob URLs it
+#:   makes and fetches;
+#: * ``style-src 'unsafe-inline'``: BokehJS styles its shadow roots with ``<style>`` and ``style=``;
+#: * ``img-src data:``: Bokeh's and Panel's icons are SVG data URLs.
+#:
+#: Everything else is refused: any other origin (every resource is this server's:
+#: :func:`use_local_resources`), plugins, workers, frames, ``<base>``, forms posting elsewhere;
+#: and no page may frame the app (``frame-ancestors 'none'``): a page elsewhere cannot overlay a
+#: student's.
+CONTENT_SECURITY_POLICY = ("default-src 'none'; script-src 'self' 'unsafe-inline' 'unsafe-eval' blob:; "
+                           "style-src 'self' 'unsafe-inline'; img-src 'self' data:; font-src 'self'; "
+                           "connect-src 'self' blob:; base-uri 'none'; form-action 'self'; frame-ancestors 'none'")
+
+#: What Tornado reads of a request's line and headers (its default, 64 KiB, closed the connection
+#: on a 70,000-character address without an answer). Past it the connection is still closed.
+MAX_REQUEST_HEAD_BYTES = 2**20
+#: A longer address (path and query) is answered 414 before Bokeh's handlers see it.
+MAX_ADDRESS_CHARS = 32 * 1024
+#: Header fields (cookies included) beyond this are answered 431: Tornado's own former bound,
+#: which the app, Bokeh and Panel were served with (they copy a request's headers into a session).
+MAX_HEADER_FIELDS_BYTES = 64 * 1024
+
+_HOST = re.compile(r"[A-Za-z0-9.\-]+(:[0-9]{1,5})?|\[[0-9A-Fa-f:.]+\](:[0-9]{1,5})?")
+
+
+def security_headers(host: str | None = None) -> dict[str, str]:
+    """The security headers of an answer to a request for ``host`` (its Host header).
+
+    ``connect-src`` names the page's websocket, ``ws://host`` and ``wss://host``, besides
+    ``'self'``: a browser of CSP level 2 (an older Safari) does not count a websocket to the
+    page's own host as ``'self'``, and a student's old iPad would get a page that never connects.
+    A host that is not a plain ``name[:port]`` is left out (it cannot reach a policy).
+
+    >>> [d for d in security_headers("localhost:5006")["Content-Security-Policy"].split("; ") if "ws:" in d]
+    ["connect-src 'self' ws://localhost:5006 wss://localhost:5006 blob:"]
+    >>> security_headers("evil; script-src *")["Content-Security-Policy"] == CONTENT_SECURITY_POLICY
+    True
+    """
+    policy = CONTENT_SECURITY_POLICY
+    if host and _HOST.fullmatch(host):
+        policy = policy.replace("connect-src 'self'", f"connect-src 'self' ws://{host} wss://{host}")
+    return {"Content-Security-Policy": policy, "X-Frame-Options": "DENY", "X-Content-Type-Options": "nosniff"}
+
+
+@functools.cache
+def security_transform():
+    """The Tornado output transform that puts :func:`security_headers` on every answer (an
+    ``OutputTransform``, for ``Application(transforms=...)`` / ``Application.add_transform``).
+
+    A transform sees every answer of every handler once, when its headers are written: error
+    pages and Tornado's own 404 included, which no handler's ``set_default_headers`` reaches.
+    (A class made at the first call: this module is imported by every ``eha`` command, Tornado
+    only by the server.)"""
+    from tornado.web import OutputTransform
+
+    class SecurityHeaders(OutputTransform):
+        def __init__(self, request):
+            super().__init__(request)
+            self.host = request.host
+
+        def transform_first_chunk(self, status_code, headers, chunk, finishing):
+            for name, value in security_headers(self.host).items():
+                headers[name] = value
+            return status_code, headers, chunk
+
+    return SecurityHeaders
+
+
+@functools.cache
+def _plain_answer():
+    """A Tornado handler answering every method with a status and a line of text."""
+    from tornado.web import RequestHandler
+
+    class PlainAnswer(RequestHandler):
+        def initialize(self, status: int, text: str) -> None:
+            self.answer_status, self.answer_text = status, text
+
+        def prepare(self) -> None:
+            self.set_status(self.answer_status)
+            self.set_header("Content-Type", "text/plain; charset=utf-8")
+            self.set_header("Cache-Control", "no-store")
+            self.finish(self.answer_text)
+
+    return PlainAnswer
+
+
+def refuse_oversized(request):
+    """``(handler, kwargs)`` answering a request whose address or headers are too long to serve
+    (414, 431: see the module docstring), or None for every other request. A route for
+    :func:`eha_app.runtime.patches.guard_paths`, which asks it before Bokeh's handlers."""
+    if len(request.uri) > MAX_ADDRESS_CHARS:
+        return _plain_answer(), {"status": 414, "text": (
+            f"414 URI Too Long: this address is {len(request.uri):,} characters long, more than the "
+            f"{MAX_ADDRESS_CHARS:,} this server reads. Open the app's plain address (ending in /eha) instead.\n")}
+    size = sum(len(k) + len(v) + 4 for k, v in request.headers.get_all())
+    if size > MAX_HEADER_FIELDS_BYTES:
+        return _plain_answer(), {"status": 431, "text": (
+            f"431 Request Header Fields Too Large: this request's headers take {size:,} bytes, more than the "
+            f"{MAX_HEADER_FIELDS_BYTES:,} this server reads. Delete this site's cookies and reload.\n")}
+    return None
+
+
+def first_answer(*routes):
+    """One route (for :func:`~eha_app.runtime.patches.guard_paths`) asking ``routes`` in turn: the
+    first answer that is not None is taken."""
+    def route(request):
+        for r in routes:
+            answer = r(request)
+            if answer is not None:
+                return answer
+        return None
+    return route
+
+
+def run_panel_serve(argv: list[str]) -> int:
+    """Run ``panel serve`` with the command line ``argv`` (``["panel", "serve", ...]``, from
+    :func:`serve_argv`) as Panel's own ``panel`` command does, but through a subclass of its
+    ``serve`` command whose server puts :func:`security_headers` on every answer and reads
+    addresses up to :data:`MAX_REQUEST_HEAD_BYTES` (see the module docstring).
+
+    Both go through Bokeh's documented hook for a subclass of the command,
+    ``customize_kwargs``: ``transforms`` reaches Tornado's ``Application`` (``BokehTornado``
+    passes keyword arguments it does not know on to it) and ``http_server_kwargs`` Tornado's
+    ``HTTPServer`` (``bokeh.server.server.Server``'s own argument)."""
+    import argparse
+
+    from bokeh.command.util import die
+    from panel.command.serve import Serve
+    from panel.config import config
+
+    class ClassroomServe(Serve):
+        def customize_kwargs(self, args, server_kwargs):
+            kwargs = super().customize_kwargs(args, server_kwargs)
+            # (an explicit list: Tornado then adds no gzip of its own, which Bokeh does not ask for)
+            kwargs["transforms"] = [*(kwargs.get("transforms") or ()), security_transform()]
+            kwargs["http_server_kwargs"] = {**(kwargs.get("http_server_kwargs") or {}),
+                                            "max_header_size": MAX_REQUEST_HEAD_BYTES}
+            return kwargs
+
+    parser = argparse.ArgumentParser(prog="panel serve")
+    command = ClassroomServe(parser=parser)
+    args = parser.parse_args(argv[2:])
+    try:
+        command.invoke(args)
+    except Exception as exc:
+        # as panel's own command: the message alone, unless Panel logs in detail
+        if config.autoreload or config.log_level in ("DEBUG", "INFO"):
+            raise
+        die("ERROR: " + str(exc))
+    return 0
 
 
 def use_local_resources(doc) -> None:
@@ -286,7 +472,14 @@ def nginx_config(backends, *, listen: str = "80", server_name: str = "_", prefix
         proxy_read_timeout 3600s;
         proxy_send_timeout 3600s;
         add_header Set-Cookie "eha_affinity=$eha_affinity; Path=/; HttpOnly; SameSite=Lax" always;
-        add_header X-Eha-Upstream $upstream_addr always;"""
+        add_header X-Eha-Upstream $upstream_addr always;
+{security}"""
+    # (a location with add_header of its own inherits none of the server's: each lists them)
+    security = "\n".join(f"        add_header {name} ${var} always;" for name, var in _NGINX_SECURITY.items())
+    proxy = proxy.replace("{security}", security)
+    own = security_headers()
+    maps = "\n".join(f"map $upstream_http_content_security_policy ${var} {{\n    \"\"      \"{own[name]}\";\n"
+                     f"    default \"\";\n}}" for name, var in _NGINX_SECURITY.items())
     return f"""# eha: {len(backends)} app process(es) behind nginx (generated by `eha serve --nginx-config`)
 # A page's HTTP request and its websocket must reach the same process: nginx
 # gives every new browser a random affinity cookie and hashes it consistently
@@ -299,6 +492,10 @@ map $http_upgrade $eha_connection_upgrade {{
     default upgrade;
     ""      close;
 }}
+# The app's security headers (Content-Security-Policy, no framing, no sniffing) on nginx's own
+# answers too (its redirect of /, its 414 and 502 pages): only where no app process answered (an
+# empty value adds no header), the app's own are passed on as they are.
+{maps}
 upstream eha_app {{
     hash $eha_affinity consistent;
 {servers}
@@ -306,6 +503,7 @@ upstream eha_app {{
 server {{
     listen {listen};
     server_name {server_name};
+{security.replace("        add_header", "    add_header")}
     location / {{
 {proxy}
     }}
@@ -320,6 +518,11 @@ server {{
     }}
 }}
 """
+
+
+#: The security headers nginx adds to its own answers, and the variables that hold them.
+_NGINX_SECURITY = {"Content-Security-Policy": "eha_csp", "X-Frame-Options": "eha_frame_options",
+                   "X-Content-Type-Options": "eha_nosniff"}
 
 
 def nginx_standalone_config(backends, *, listen: str, workdir: str) -> str:
