@@ -101,6 +101,16 @@ async def phase(url: str, bystander: StudentSession, student: str, db_path: Path
     # the bystander goes on measuring until the lock is let go (the whole time a page could be stopped)
     while holder is not None and holder.is_alive():
         await asyncio.sleep(0.1)
+    released = time.perf_counter()
+    noted_s = None
+    if db_path is not None:
+        # the joining student's presence, written once the lock is let go (the page's next look)
+        while time.perf_counter() - released < 15:
+            with sqlite3.connect(db_path, timeout=5) as db:
+                if db.execute("SELECT 1 FROM presence WHERE student = ?", (student,)).fetchone():
+                    noted_s = time.perf_counter() - released
+                    break
+            await asyncio.sleep(0.2)
     await asyncio.sleep(0.5)
     stop.set()
     await watcher
@@ -108,7 +118,8 @@ async def phase(url: str, bystander: StudentSession, student: str, db_path: Path
     times.sort()
     return {"join_s": join_s, "watched_s": time.perf_counter() - t_start, "round_trips": len(times),
             "p50_s": times[len(times) // 2], "p95_s": times[int(0.95 * (len(times) - 1))], "max_s": times[-1],
-            "max_while_held_s": max(during) if during else None, "round_trips_while_held": len(during)}
+            "max_while_held_s": max(during) if during else None, "round_trips_while_held": len(during),
+            "noted_after_release_s": noted_s}
 
 
 async def measure(url: str, db_path: Path, hold_s: float, joins: int) -> dict:
@@ -188,6 +199,9 @@ def main(argv=None) -> int:
     print(f"bystander's worst round trip: {s['bystander_max_free_s']:.4f} s free, {s['bystander_max_held_s']:.4f} s "
           f"held ({ratio:.2f}x; target <= 0.2 s held)")
     print(f"bystander's worst round trip while the lock was held: {s['bystander_max_while_held_s']:.4f} s")
+    noted = [r["noted_after_release_s"] for r in figures["held"]]
+    print("the joining student noted as here after the lock was let go: "
+          + ", ".join("never (within 15 s)" if n is None else f"{n:.1f} s" for n in noted))
     print(f"worst join: {s['join_free_s']:.3f} s free, {s['join_held_s']:.3f} s held (the joining student may wait "
           "for the lock; nobody else)")
     return 0

@@ -155,6 +155,17 @@ def client_address() -> str:
     return str(getattr(request, "remote_ip", "") or "")
 
 
+def _this_machine(address: str) -> bool:
+    """Is ``address`` this machine's own (loopback)? A proxy in front of the server without
+    ``--behind-proxy`` makes every student's address 127.0.0.1: capping it would stop a whole class."""
+    import ipaddress
+
+    try:
+        return ipaddress.ip_address(address).is_loopback
+    except ValueError:
+        return False
+
+
 class WrongCodes:
     """Wrong join codes per client address, for the whole process: a new page (or a reload) does not
     start the count again. After :attr:`FREE_TRIES` wrong codes, each further try waits
@@ -198,7 +209,8 @@ class ExerciseGate:
     one), then their actuator. A wrong code is refused without saying whether anyone has it; after
     a few wrong codes from one address its pages wait before they try again (a code has about 50
     bits: guessing is hopeless, but not free). In an open exercise, one address may start only the
-    exercise's ``ids_per_client`` new ids an hour (ids that joined before come back freely)."""
+    exercise's ``ids_per_client`` new ids an hour (ids that joined before come back freely; this
+    machine's own addresses are not capped: see :func:`_this_machine`)."""
 
     #: Wrong codes an address may try before each further try waits.
     FREE_TRIES = WrongCodes.FREE_TRIES
@@ -220,6 +232,9 @@ class ExerciseGate:
             rules.append(f"hand in before {html.escape(exercise.deadline)}")
         if exercise.attempts:
             rules.append(f"you may hand in {exercise.attempts} time{'s' if exercise.attempts > 1 else ''}")
+        if not exercise.own_files:
+            rules.append("a hand-in comes from your actuator's experiment (a file you upload can be identified, "
+                         "not handed in)")
         rules.append({"verdict": "each hand-in tells you which values are within tolerance",
                       "none": "a hand-in is only stored: your teacher tells you the result",
                       "after-deadline": "the verdicts are shown after the deadline"}[exercise.feedback])
@@ -284,7 +299,7 @@ class ExerciseGate:
             self.message.object = html.escape(" ".join(str(exc).split()))
             return
         limit, store = self.exercise.ids_per_client, self.handins
-        if store is None or not limit:
+        if store is None or not limit or _this_machine(self.address):
             self._enter(student, "")
             return
         # an open exercise: a new id counts against this address's hourly share (read off the event loop)
@@ -501,36 +516,14 @@ class Page(pn.viewable.Viewer):
         self.page_token = secrets.token_hex(8)
         self._polling = False
         self._poller = None
-        self._noted = store_is_none = state.handins is None      # the page's presence is written
-        self._follows_live = True               # gives way when the store says another page is live
+        # the page's presence is in the store (until then its live page is another's, which this page must
+        # not give way to); written by the first look, and tried again at every look until it is
+        self._noted = state.handins is None
         self.stopped = False
+        self.doc = doc
         _live_pages[self.page_token] = weakref.ref(self)
         student, store, token = state.student, state.handins, self.page_token
-
-        def joined(before: str) -> None:
-            self._noted = True
-            self.check_result()                 # only now: before, the live page is still the one before
-            if before:
-                # another page of this id was live: it stops (at once here, within a poll elsewhere)
-                log.info("an id was opened on a second page: the first gives way")
-                other = _live_pages.get(before)
-                page = other() if other is not None else None
-                if page is not None and page is not self:
-                    apply_locked(page.give_way, page.doc)
-
-        def not_noted(exc: Exception) -> None:
-            # a damaged or busy store must not keep a student out (hand-ins say so when it matters); the
-            # store's live page is then another's, which this page must not give way to
-            log.warning("could not note a student's arrival: %s", exc)
-            self._follows_live = False
-            self._noted = True
-            self.check_result()
-
-        self.doc = doc
-        if store is not None:
-            store_calls.call(lambda: store.seen(student, token), joined, fail=not_noted, doc=doc)
-        if store_is_none:
-            self.check_result()
+        self.check_result()
         if doc is not None:
             # the teacher's reveal (or the deadline), or this id opened elsewhere, reaches the page within seconds
             self._poller = pn.state.add_periodic_callback(self.check_result, period=RESULT_POLL_MS)
@@ -544,26 +537,46 @@ class Page(pn.viewable.Viewer):
             # a session discarded without its websocket's close being seen (a server's own cleanup)
             pn.state.on_session_destroyed(lambda _context: closed())
 
+    def _took_over(self, before: str) -> None:
+        """This page's presence was written; ``before``, the page of this id that was live (or "")."""
+        self._noted = True
+        if before:
+            # another page of this id was live: it stops (at once here, within a poll elsewhere)
+            log.info("an id was opened on a second page: the first gives way")
+            other = _live_pages.get(before)
+            page = other() if other is not None else None
+            if page is not None and page is not self:
+                apply_locked(page.give_way, page.doc)
+
+    #: How long one look waits for the store to note the page (a lock held by another program: the
+    #: next look tries again) [s].
+    NOTE_PATIENCE_S = 2.0
+
     def check_result(self) -> None:
-        """Show the student's result once the exercise allows it, and give way if their id is live on
-        another page now: one small read of the database, off the event loop."""
+        """Note the page as the student's live one (until that is done), show the student's result once
+        the exercise allows it, and give way if their id is live on another page now: a few small reads
+        (and the one write) of the database, off the event loop."""
         from .runtime.handins import StoreError
         from .sections.handin import result_for_student
 
         state = self.session.state
-        if self._polling or self.stopped or not self._noted:
-            return                                  # the last look has not come back yet, or the page is not noted
+        if self._polling or self.stopped:
+            return                                  # the last look has not come back yet
         self._polling = True
         exercise, student, store, token = state.exercise, state.student, state.handins, self.page_token
+        noted, patience = self._noted, self.NOTE_PATIENCE_S
 
         def read():
+            before = None if noted else store.seen(student, token, patience=patience)
             live = store.live_page(student) if store is not None else token
-            return live, result_for_student(exercise, student, store)
+            return before, live, result_for_student(exercise, student, store)
 
         def show(out) -> None:
             self._polling = False
-            live, text = out
-            if live and live != token and self._follows_live:
+            before, live, text = out
+            if before is not None:
+                self._took_over(before)
+            if live and live != token and self._noted:
                 self.give_way()
                 return
             if text != self.result_pane.object:
@@ -571,11 +584,15 @@ class Page(pn.viewable.Viewer):
                 self.result_pane.visible = bool(text)
 
         def failed(exc: Exception) -> None:
+            # a damaged or busy store keeps no student out (hand-ins say so when it matters): tried again next time
             self._polling = False
-            if not isinstance(exc, StoreError):
+            if not noted:
+                log.warning("could not note a student's arrival (tried again in %d s): %s", RESULT_POLL_MS // 1000,
+                            exc)
+            elif not isinstance(exc, StoreError):
                 log.warning("a student's result could not be read: %s", exc)
 
-        store_calls.call(read, show, fail=failed, doc=getattr(self, "doc", None))
+        store_calls.call(read, show, fail=failed, doc=self.doc)
 
     def give_way(self) -> None:
         """The student's id was opened on another page: this one stops (its runs, its saves, its

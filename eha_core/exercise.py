@@ -463,10 +463,18 @@ class Exercise:
                 found = e
         return found
 
-    def teacher_token(self) -> str:
-        """The token of the teacher's dashboard: drawn from the secret, so every server process of
-        the exercise knows it and a restart keeps the teacher's link; it never reaches a student."""
-        digest = hmac.new(bytes.fromhex(self.secret), b"eha-teacher-dashboard", hashlib.sha256).digest()
+    def teacher_token(self, nonce: str = "") -> str:
+        """The token of the teacher's dashboard: drawn from the secret and ``nonce`` (kept in the class's
+        database, and changed to rotate the token: ``eha exercise token --rotate``), so every server
+        process of the exercise knows it and a restart keeps the teacher's link; it never reaches a
+        student. Rotating it changes no student's actuator or code (those come from the secret alone).
+
+        >>> ex = Exercise.new(hide=("M",), secret="00" * 32)
+        >>> len(ex.teacher_token("a1")), ex.teacher_token("a1") == ex.teacher_token("b2")
+        (40, False)
+        """
+        label = b"eha-teacher-dashboard" + (b"\0" + nonce.encode() if nonce else b"")
+        digest = hmac.new(bytes.fromhex(self.secret), label, hashlib.sha256).digest()
         return digest[:20].hex()
 
     # -- a student's actuator --------------------------------------------------------------

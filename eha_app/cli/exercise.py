@@ -56,6 +56,14 @@ def add_parser(sub) -> None:
                      "(the least squares), frequency (the back-out's βe), greybox (grey-box identification); "
                      "default all three")
     new.add_argument("--max-record", default="60", metavar="S", help="the longest record, in s (default 60)")
+    new.add_argument("--own-files", action="store_true", help="take hand-ins from a file a student uploads "
+                     "(labelled so on the dashboard and in the CSV); by default only estimates from the student's "
+                     "own actuator's experiment count, since a file can be anyone's")
+    new.add_argument("--ids-per-client", default="4", metavar="N", help="without a roster: new ids one network "
+                     "address may start per hour (default 4; 0: no limit; this machine's own addresses are not "
+                     "limited)")
+    new.add_argument("--kept-uploads", default="1000", metavar="MB", help="disk the class's kept uploads may "
+                     "take together, in MB (default 1000; each student's at most 20 MB; 0: none is kept)")
     new.add_argument("--title", default="EHA identification exercise", help="shown to the students")
     new.add_argument("--out", required=True, help="the exercise file to write (e.g. class.json)")
     new.add_argument("--force", action="store_true", help="overwrite an existing file (its secret is lost: "
@@ -73,6 +81,18 @@ def add_parser(sub) -> None:
     rev.add_argument("exercise", help="the exercise file")
     rev.add_argument("--student", required=True, help="the student's id (as in the roster, or as they typed it)")
     rev.set_defaults(handler=run_reveal)
+    tok = cmds.add_parser("token", help="the teacher's dashboard link: print it, or make a new one (--rotate)",
+                          description="Print the link of the teacher's dashboard (a new one if it has expired). "
+                                      "--rotate makes a new link now: the old one, and every browser logged in "
+                                      "with it, stop working within seconds on every server of the exercise. "
+                                      "No student's actuator or code changes.")
+    tok.add_argument("exercise", help="the exercise file")
+    tok.add_argument("--rotate", action="store_true", help="make a new link now (the old one stops working)")
+    tok.add_argument("--days", default=None, metavar="DAYS",
+                     help="how long a new link lasts, in days (default 30; with --rotate or when the link expired)")
+    tok.add_argument("--url", default="http://localhost:5006", metavar="URL",
+                     help="the server's address as the teacher's browser reaches it (default http://localhost:5006)")
+    tok.set_defaults(handler=run_token)
     ex.set_defaults(handler=lambda args: (ex.print_help(), 2)[1])
 
 
@@ -98,6 +118,13 @@ def _tolerances(text: str):
     return out
 
 
+def _whole(option: str, text: str) -> int:
+    try:
+        return int(str(text).strip())
+    except ValueError:
+        raise refused(option, text, "a whole number, e.g. 4") from None
+
+
 def _names(option: str, text: str) -> tuple[str, ...]:
     return tuple(n.strip() for n in str(text).split(",") if n.strip())
 
@@ -121,7 +148,8 @@ def run_new(args) -> int:
     roster = None
     options = {"hide": "--hide", "vary": "--vary", "tolerance": "--tolerance", "noise": "--noise",
                "measured": "--measured", "methods": "--methods", "max record": "--max-record",
-               "deadline": "--deadline", "attempts": "--attempts", "roster": "--roster"}
+               "deadline": "--deadline", "attempts": "--attempts", "roster": "--roster",
+               "ids per client": "--ids-per-client", "kept uploads": "--kept-uploads"}
     try:
         if args.roster:
             check_input_file("--roster", args.roster)
@@ -137,12 +165,15 @@ def run_new(args) -> int:
             parse_signal(args.disturbance, name="--disturbance", hold_s=1e-3)
         except SignalSpecError as exc:
             raise refused("--disturbance", args.disturbance, exc.what) from None
+        ids_per_client = _whole("--ids-per-client", args.ids_per_client)
+        kept_uploads = _whole("--kept-uploads", args.kept_uploads)
         conditions = Conditions(noise=parse_noise(args.noise), disturbance=args.disturbance,
                                 measured=_names("--measured", args.measured),
                                 methods=_names("--methods", args.methods), max_record_s=max_record)
         ex = Exercise.new(hide=hide, vary=vary, tolerance=tolerance, title=args.title, roster=roster,
                           conditions=conditions, deadline=parse_deadline(args.deadline) if args.deadline else "",
-                          attempts=args.attempts, feedback=args.feedback, score_rule=args.score)
+                          attempts=args.attempts, feedback=args.feedback, score_rule=args.score,
+                          own_files=args.own_files, ids_per_client=ids_per_client, kept_uploads_mb=kept_uploads)
     except FieldError as exc:
         raise as_option(exc, options) from None
     ex.save(args.out)
@@ -153,11 +184,16 @@ def run_new(args) -> int:
     print(f"hand-ins: {ex.attempts or 'no limit on the number of'} per student"
           + (f", until {ex.deadline}" if ex.deadline else ", no deadline")
           + f"; feedback: {ex.feedback}; score: the {ex.score_rule} hand-in")
+    print("hand-ins from an uploaded file: " + ("taken, and labelled so" if ex.own_files else
+                                                "refused (only the student's own actuator's experiment counts; "
+                                                "--own-files takes them)")
+          + f"; kept uploads: up to {ex.kept_uploads_mb} MB for the class")
     if ex.has_roster:
         print(f"roster: {len(ex.roster)} students; print their join codes with:  eha exercise codes {args.out}")
     else:
         print("no roster: students type any id and it is taken as given (ids are not checked; anyone can type "
-              "anyone's). Add --roster FILE.csv to give each student a join code")
+              "anyone's). Add --roster FILE.csv to give each student a join code"
+              + (f"; one address may start {ex.ids_per_client} new ids an hour" if ex.ids_per_client else ""))
     print(f"serve it with:  eha serve --exercise {args.out} --address 0.0.0.0")
     return 0
 
@@ -221,6 +257,40 @@ def run_results(args) -> int:
     if args.csv:
         _write_private(args.csv, results_csv(ex, rows))
         print(f"wrote {args.csv}", file=sys.stderr)
+    return 0
+
+
+def run_token(args) -> int:
+    import math
+
+    from eha_app.runtime.teacher_access import TOKEN_DAYS, ensure_token, issue
+
+    ex = _load(args.exercise)
+    days = TOKEN_DAYS
+    if args.days is not None:
+        try:
+            days = float(args.days)
+        except ValueError:
+            days = math.nan
+        if not (math.isfinite(days) and 0 < days <= 3650):
+            raise refused("--days", args.days, "a number of days in (0, 3650]")
+    url = str(args.url).strip().rstrip("/")
+    if not url.startswith(("http://", "https://")) or any(c.isspace() for c in url):
+        raise refused("--url", args.url, "an address such as http://192.168.1.20:5006 (http:// or https://)")
+    store = _store(args.exercise)
+    from eha_app.runtime.handins import StoreError
+
+    try:
+        if args.rotate:
+            token, made = issue(ex, store, days), True
+        else:
+            token, made = ensure_token(ex, store, days)
+    except StoreError as exc:
+        raise refused_file("exercise", args.exercise, f"{exc}") from None
+    what = "new link (the old one no longer works)" if args.rotate else "new link" if made else "current link"
+    print(f"Teacher's dashboard, {what}, valid until {token.expires_text()} (for you only, do not show it to the "
+          f"class):")
+    print(f"{url}/teacher?token={token.token}")
     return 0
 
 

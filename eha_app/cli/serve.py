@@ -128,10 +128,19 @@ def _announce_dashboard(host: str, port: int) -> None:
     """The dashboard's link, printed here only: the token in it opens the teacher's dashboard (it is
     in no page and no log line; the server's access log shows it as [hidden])."""
     from eha_app.app import current_exercise
+    from eha_app.runtime.handins import StoreError
+    from eha_app.runtime.teacher_access import ensure_token
 
-    token = current_exercise()[0].teacher_token()
-    print(f"Teacher's dashboard (for you only, do not show it to the class): http://{host}:{port}/teacher?token={token}",
-          flush=True)
+    exercise, store = current_exercise()
+    try:
+        # the link issued before, while it lasts (a restart keeps the teacher's link); else a new one
+        issued, made = ensure_token(exercise, store)
+    except StoreError as exc:
+        raise refused_file("--exercise", os.environ["EHA_EXERCISE"], f"{exc}") from None
+    print(f"Teacher's dashboard (for you only, do not show it to the class): http://{host}:{port}/teacher?token="
+          f"{issued.token}", flush=True)
+    print(f"  {'a new link, ' if made else ''}valid until {issued.expires_text()}; a new one at any time (the old "
+          f"one stops working): eha exercise token {os.environ['EHA_EXERCISE']} --rotate", flush=True)
 
 
 def run(args) -> int:
@@ -188,12 +197,16 @@ def run(args) -> int:
 
             threading.Timer(8.0, webbrowser.open, args=(url,)).start()
         return supervise(child, args.num_procs)
+    return _serve_here(args, argv)
+
+
+def _serve_here(args, argv: list[str]) -> int:
+    """Serve in this process (one of ``--num-procs`` when ``--share-port``) with Panel's command line
+    ``argv``, the server's changes of its libraries installed first."""
     if args.share_port:
         from eha_app.runtime.patches import bind_port_shared
 
         bind_port_shared()
-    from panel.command import main as panel_main
-
     from eha_app.app import warm_up
     from eha_app.runtime.patches import (
         cache_stable_defaults,
@@ -208,7 +221,8 @@ def run(args) -> int:
         tune_garbage_collector,
         websocket_nodelay,
     )
-    from eha_app.runtime.teacher_access import route
+    from eha_app.runtime.serving import first_answer, refuse_oversized, run_panel_serve
+    from eha_app.runtime.teacher_access import route, watch_token
 
     cache_stable_defaults()     # every page's models built and serialised a quarter faster
     fast_themed_values()        # ... and without an AttributeError raised at every read of a default
@@ -218,13 +232,17 @@ def run(args) -> int:
     websocket_nodelay()         # a message's frames sent at once, not each after the browser's ACK of the last
     give_way_on_messages()      # a study computing beside waits from a page's message on
     refuse_foreign_components()
-    guard_paths(route)          # /teacher answers the teacher only (and 404 without an exercise)
+    # an address too long to serve gets 414 (not a closed connection), before anything else reads it;
+    # then /teacher answers the teacher only (and 404 without an exercise)
+    guard_paths(first_answer(refuse_oversized, route))
+    if os.environ.get("EHA_EXERCISE"):
+        watch_token()           # the dashboard's token read off the event loop, from now on
     sys.argv = argv + _oauth_argv(args)
     warm_up()                   # the kernels and the identification code loaded before the first page
     tune_garbage_collector()    # what is loaded so far frozen, and what outlives each full collection
     collect_often()             # ... and a full collection three times as often, a third as long
-    panel_main()
-    return 0
+    # Panel's `panel serve`, its server putting the security headers on every answer (serving.py)
+    return run_panel_serve(sys.argv)
 
 
 def _compile_kernels(num_procs: int) -> None:

@@ -371,6 +371,18 @@ class HandIns:
         self._write(lambda db: db.execute("INSERT INTO control (key, value) VALUES (?, ?) ON CONFLICT(key) DO "
                                           "UPDATE SET value = excluded.value", (key, str(value))))
 
+    def set_controls(self, values: dict[str, str]) -> None:
+        """Set several switches in one transaction (a reader sees all of them changed, or none)."""
+        unknown = set(values) - set(CONTROL_KEYS)
+        if unknown:
+            raise ValueError(f"unknown switch {sorted(unknown)[0]!r}")
+
+        def write(db):
+            for key, value in values.items():
+                db.execute("INSERT INTO control (key, value) VALUES (?, ?) ON CONFLICT(key) DO UPDATE SET value = "
+                           "excluded.value", (key, str(value)))
+        self._write(write)
+
     def seen(self, student: str, page: str = "", *, patience: float = 10.0) -> str:
         """The student is here now (joined the first time), on the page whose token is ``page``.
         Returns the token of the page that was live before ("" if none): another page of the same

@@ -12,12 +12,22 @@ websocket, its autoload script, its metadata) answers anyone else:
 * every request under ``/teacher`` needs that cookie, else it gets 403;
 * without an exercise there is no dashboard: 404.
 
-The token and the cookie are drawn from the exercise's secret
-(:meth:`eha_core.exercise.Exercise.teacher_token`), so every process of
-``--num-procs N``, and a restarted server, accept the same ones. Both are
-compared in constant time. The token is registered with
+The token is drawn from the exercise's secret and a nonce kept in the class's
+database with the token's expiry (:meth:`eha_core.exercise.Exercise.teacher_token`,
+:func:`issue`), so every process of ``--num-procs N``, and a restarted server,
+accept the same one; the cookie is drawn from the token. A leaked link is
+undone by ``eha exercise token FILE --rotate`` (a new nonce: the old link and
+every cookie made from it stop working within :data:`REFRESH_S` on every
+server), and a link expires by itself (:data:`TOKEN_DAYS` after it was issued
+unless ``--days`` says otherwise): neither changes any student's actuator or
+code. Both are compared in constant time. The token is registered with
 :func:`~eha_app.runtime.redaction.keep_out_of_logs`: Tornado's access log
 writes the URL asked for, query included.
+
+The requests are answered on the server's event loop, which never reads the
+database: the token and its expiry come from a copy refreshed every
+:data:`REFRESH_S` by a thread of its own (:class:`TokenWatch`), started with
+the server.
 """
 
 from __future__ import annotations
@@ -26,16 +36,69 @@ import hashlib
 import hmac
 import logging
 import re
+import secrets
+import threading
+import time
+from dataclasses import dataclass
 from urllib.parse import unquote
 
 from tornado.web import ErrorHandler, RequestHandler
 
-__all__ = ["TEACHER_PATH", "COOKIE", "cookie_value", "same_secret", "is_teacher_path", "route", "decide"]
+__all__ = ["TEACHER_PATH", "COOKIE", "TOKEN_DAYS", "REFRESH_S", "Issued", "cookie_value", "same_secret",
+           "is_teacher_path", "route", "decide", "issue", "issued", "ensure_token", "TokenWatch", "watch_token"]
 
 log = logging.getLogger("eha_app")
 
 TEACHER_PATH = "/teacher"
 COOKIE = "eha_teacher"
+#: How long a dashboard link lasts unless the teacher says otherwise (``eha exercise token --days``).
+TOKEN_DAYS = 30
+#: How often each server reads the token's nonce and expiry again (a rotation holds within this) [s].
+REFRESH_S = 2.0
+
+
+@dataclass(frozen=True)
+class Issued:
+    """The dashboard's current token and when it expires (POSIX time)."""
+
+    token: str
+    expires: float
+
+    @property
+    def expired(self) -> bool:
+        return time.time() >= self.expires
+
+    def expires_text(self) -> str:
+        return time.strftime("%Y-%m-%d %H:%M", time.localtime(self.expires))
+
+
+def issued(exercise, store) -> Issued | None:
+    """The token the class's database holds now (expired or not), None if none was ever issued."""
+    control = store.control()
+    nonce, expires = control.get("token_nonce", ""), control.get("token_expires", "")
+    if not nonce:
+        return None
+    try:
+        when = float(expires)
+    except ValueError:
+        when = 0.0
+    return Issued(exercise.teacher_token(nonce), when)
+
+
+def issue(exercise, store, days: float = TOKEN_DAYS) -> Issued:
+    """A new token (a new nonce), valid for ``days``: the one before stops working on every server."""
+    expires = time.time() + days * 86400.0
+    nonce = secrets.token_hex(16)
+    store.set_controls({"token_nonce": nonce, "token_expires": f"{expires:.0f}"})
+    return Issued(exercise.teacher_token(nonce), float(f"{expires:.0f}"))
+
+
+def ensure_token(exercise, store, days: float = TOKEN_DAYS) -> tuple[Issued, bool]:
+    """The current token if it is still valid, else a new one: ``(token, made now)``."""
+    now = issued(exercise, store)
+    if now is not None and not now.expired:
+        return now, False
+    return issue(exercise, store, days), True
 
 
 def cookie_value(token: str) -> str:
@@ -58,10 +121,11 @@ def is_teacher_path(path: str) -> bool:
     return p == TEACHER_PATH or p.startswith(TEACHER_PATH + "/")
 
 
-def decide(path: str, query_token: str | None, cookie: str | None, token: str | None) -> str:
-    """What to do with a request of ``path``: "pass" (to Bokeh), "login", "forbidden" or "absent".
+def decide(path: str, query_token: str | None, cookie: str | None, token: str | None, *,
+           expired: bool = False) -> str:
+    """What to do with a request of ``path``: "pass" (to Bokeh), "login", "forbidden", "expired" or "absent".
 
-    ``token``: the exercise's teacher token (None: no exercise).
+    ``token``: the exercise's teacher token (None: no exercise, or none issued); ``expired``: it has expired.
 
     >>> t = "ab" * 20
     >>> decide("/teacher", t, None, t), decide("/teacher", None, cookie_value(t), t)
@@ -75,6 +139,10 @@ def decide(path: str, query_token: str | None, cookie: str | None, token: str | 
         return "pass"
     if token is None:
         return "absent"
+    if not token:
+        return "forbidden"              # none issued yet: nobody's link opens it
+    if expired:
+        return "expired"
     # the token opens the page only: what the page loads afterwards goes by the cookie
     if path.rstrip("/") == TEACHER_PATH and query_token is not None and same_secret(query_token, token):
         return "login"
@@ -86,12 +154,14 @@ def decide(path: str, query_token: str | None, cookie: str | None, token: str | 
 class _Login(RequestHandler):
     """Set the teacher's cookie and send the browser on to the dashboard without the token."""
 
-    def initialize(self, value: str) -> None:
+    def initialize(self, value: str, max_age: int | None = None) -> None:
         self.value = value
+        self.max_age = max_age
 
     def get(self) -> None:
+        # the cookie ends with the token (a rotation changes the cookie's value too)
         self.set_cookie(COOKIE, self.value, path=TEACHER_PATH, httponly=True, samesite="Lax",
-                        secure=self.request.protocol == "https")
+                        secure=self.request.protocol == "https", max_age=self.max_age)
         self.set_header("Cache-Control", "no-store")
         self.set_header("Referrer-Policy", "no-referrer")
         # relative: right behind nginx as well, whatever host name the teacher typed
@@ -100,24 +170,95 @@ class _Login(RequestHandler):
     head = get
 
 
-def _teacher_token() -> str | None:
-    """The running exercise's teacher token (None without an exercise)."""
+class _Expired(RequestHandler):
+    """A dashboard link past its expiry: 403, and what to do (the link is the teacher's own)."""
+
+    def get(self) -> None:
+        self.set_status(403)
+        self.set_header("Content-Type", "text/plain; charset=utf-8")
+        self.set_header("Cache-Control", "no-store")
+        self.finish("403: this dashboard link has expired. On the server, run: eha exercise token FILE --rotate "
+                    "(it prints a new link)\n")
+
+    head = get
+
+
+class TokenWatch:
+    """The current token and its expiry, read from the class's database by a thread of its own every
+    :data:`REFRESH_S` (the event loop, which answers the requests, never reads the database).
+
+    :meth:`get` returns the last reading; the first is made at :meth:`start` (before the server
+    serves). Without a server (tests, a notebook: never started) every :meth:`get` reads."""
+
+    def __init__(self, refresh_s: float = REFRESH_S):
+        self.refresh_s = refresh_s
+        self._value: Issued | None = None
+        self._loaded = False
+        self._key = None
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+
+    def _read(self) -> None:
+        from .exercise_file import current_exercise
+        from .redaction import keep_out_of_logs
+
+        try:
+            found = current_exercise()
+            value = issued(*found) if found is not None else None
+        except Exception as exc:  # noqa: BLE001 - a damaged store or file: no dashboard until it is fixed
+            if self._loaded:
+                log.warning("the teacher's dashboard link could not be read (%s): the last one stays", exc)
+                return
+            value = None
+        if value is not None:
+            keep_out_of_logs(value.token)
+        with self._lock:
+            self._value, self._loaded = value, True
+
+    def _run(self) -> None:
+        while True:
+            time.sleep(self.refresh_s)
+            self._read()
+
+    def start(self) -> TokenWatch:
+        """Read now, then every :attr:`refresh_s` on a thread of its own (once)."""
+        if self._thread is None:
+            self._read()
+            self._thread = threading.Thread(target=self._run, name="eha-teacher-token", daemon=True)
+            self._thread.start()
+        return self
+
+    def get(self) -> Issued | None:
+        if self._thread is None:
+            self._read()                # no server started the watch: read here (never on a served loop)
+        with self._lock:
+            return self._value
+
+
+_watch = TokenWatch()
+
+
+def watch_token() -> TokenWatch:
+    """Start this process's :class:`TokenWatch` (``eha serve`` does, before it serves)."""
+    return _watch.start()
+
+
+def _teacher_token() -> Issued | None:
+    """The running exercise's teacher token (None without an exercise; an empty token when none was issued:
+    the dashboard exists, and nobody can open it)."""
     from .exercise_file import current_exercise
 
     try:
-        found = current_exercise()
+        if current_exercise() is None:
+            return None
     except (OSError, ValueError) as exc:
         log.warning("the teacher's dashboard is unavailable: the exercise file cannot be read (%s)",
                     type(exc).__name__)
         return None
-    if found is None:
-        return None
-    from .redaction import keep_out_of_logs, redact_server_logs
+    from .redaction import redact_server_logs
 
-    token = found[0].teacher_token()
-    keep_out_of_logs(token)
     redact_server_logs()        # the server's log handlers exist by now (the first request comes after them)
-    return token
+    return _watch.get() or Issued("", 0.0)
 
 
 class _ToApp(RequestHandler):
@@ -134,13 +275,17 @@ def route(request) -> tuple[type[RequestHandler], dict] | None:
         return _ToApp, {}
     if not is_teacher_path(request.path):
         return None
-    token = _teacher_token()
+    current = _teacher_token()
+    token = current.token if current is not None else None
     given = request.query_arguments.get("token")
     cookie = request.cookies.get(COOKIE)
     what = decide(request.path, given[-1].decode("utf-8", "replace") if given else None,
-                  cookie.value if cookie is not None else None, token)
+                  cookie.value if cookie is not None else None, token,
+                  expired=current is not None and bool(current.token) and current.expired)
     if what == "pass":
         return None
     if what == "login":
-        return _Login, {"value": cookie_value(token)}
+        return _Login, {"value": cookie_value(token), "max_age": max(1, int(current.expires - time.time()))}
+    if what == "expired":
+        return _Expired, {}
     return ErrorHandler, {"status_code": 404 if what == "absent" else 403}

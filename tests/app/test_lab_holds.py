@@ -10,6 +10,7 @@ import html
 import io
 import re
 import stat
+import time
 import weakref
 
 import numpy as np
@@ -225,7 +226,9 @@ def test_an_open_exercise_caps_the_new_ids_of_one_address(tmp_path, monkeypatch)
     _join("student 1", address="10.0.0.9")          # an id that joined before comes back
     _join("student 1", address="10.0.0.10")         # from anywhere
     _join("student 3", address="10.0.0.10")         # another computer has its own share
-    assert set(HandIns(path).presence()) == {"student 0", "student 1", "student 2", "student 3"}
+    for k in range(4, 10):                           # this machine itself (a proxy without --behind-proxy)
+        _join(f"student {k}", address="127.0.0.1")
+    assert set(HandIns(path).presence()) == {f"student {k}" for k in range(10)}
 
 
 def test_kept_uploads_stop_at_the_class_quota_and_the_student_is_told(tmp_path, monkeypatch, paper_record):
@@ -263,3 +266,38 @@ def test_the_teachers_results_survive_a_damaged_row(tmp_path, capsys):
                                        ex.student_params("ada").M, rtol=1e-5)
     # every student's errors against the truth: the teacher's file only
     assert stat.S_IMODE(out_csv.stat().st_mode) == 0o600
+
+
+def test_the_dashboard_token_rotates_and_expires(tmp_path, monkeypatch, capsys):
+    """A leaked link is undone by a rotation (no student's actuator changes), and a link ends by itself."""
+    from eha_app.cli import main
+    from eha_app.runtime import teacher_access as ta
+
+    ex, path = _lab(tmp_path, monkeypatch)
+    store = HandIns(path).check()
+    assert main(["exercise", "token", str(path), "--url", "http://10.1.2.3:5006"]) == 0
+    first = capsys.readouterr().out
+    link = re.search(r"http://10\.1\.2\.3:5006/teacher\?token=([0-9a-f]{40})", first)
+    assert link and "valid until" in first and "new link" in first
+    token = link.group(1)
+    assert ta.decide("/teacher", token, None, ta._teacher_token().token) == "login"
+    assert main(["exercise", "token", str(path)]) == 0                  # printed again: the same link
+    assert token in capsys.readouterr().out
+    students = {s: ex.student_params(s) for s in ("s1", "s2")}
+    assert main(["exercise", "token", str(path), "--rotate", "--days", "7"]) == 0
+    rotated = re.search(r"token=([0-9a-f]{40})", capsys.readouterr().out).group(1)
+    now = ta._teacher_token()
+    assert rotated != token and now.token == rotated and 6.99 < (now.expires - time.time()) / 86400 < 7.01
+    # the old link and the old cookie no longer open anything; the new ones do
+    assert ta.decide("/teacher", token, None, now.token) == "forbidden"
+    assert ta.decide("/teacher/ws", None, ta.cookie_value(token), now.token) == "forbidden"
+    assert ta.decide("/teacher/ws", None, ta.cookie_value(rotated), now.token) == "pass"
+    assert {s: Exercise.load(path).student_params(s) for s in students} == students
+    store.set_controls({"token_expires": "1000"})                      # long past
+    assert ta._teacher_token().expired
+    assert ta.decide("/teacher", rotated, None, rotated, expired=True) == "expired"
+    assert main(["exercise", "token", str(path)]) == 0                  # expired: a new one is made
+    out = capsys.readouterr().out
+    assert "new link" in out and rotated not in out
+    assert main(["exercise", "token", str(path), "--days", "0"]) == 2
+    assert "--days = 0 is not allowed" in capsys.readouterr().err

@@ -98,8 +98,11 @@ def test_the_teacher_paths_are_answered_before_bokehs_routes(monkeypatch, tmp_pa
     ex.save(tmp_path / "class.json")
     monkeypatch.setenv("EHA_EXERCISE", str(tmp_path / "class.json"))
     assert handler("/teacher/ws") == ("ErrorHandler", 403)
-    assert handler(f"/teacher?token={ex.teacher_token()}")[0] == "_Login"
-    assert handler("/teacher/ws", teacher_access.cookie_value(ex.teacher_token()))[0] == "WSHandler"
+    from eha_app.runtime.handins import HandIns
+
+    token = teacher_access.ensure_token(ex, HandIns(tmp_path / "class.json").check())[0].token
+    assert handler(f"/teacher?token={token}")[0] == "_Login"
+    assert handler("/teacher/ws", teacher_access.cookie_value(token))[0] == "WSHandler"
     assert handler("/eha")[0] == "DocHandler"
 
 

@@ -22,6 +22,17 @@ ROOT = Path(__file__).resolve().parents[2]
 EHA = Path(sys.executable).with_name("eha")
 
 
+def dashboard_token(exercise_path) -> str:
+    """The teacher's dashboard token the served exercise issued at its start (kept in its database)."""
+    from eha_app.runtime.handins import HandIns
+    from eha_app.runtime.teacher_access import issued
+    from eha_core.exercise import Exercise
+
+    now = issued(Exercise.load(exercise_path), HandIns(exercise_path))
+    assert now is not None, "the server issued no dashboard token"
+    return now.token
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

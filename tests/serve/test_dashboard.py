@@ -18,6 +18,7 @@ from tornado.websocket import websocket_connect
 
 from eha_app.runtime.teacher_access import COOKIE, cookie_value
 from eha_core.exercise import Exercise
+from tests.serve.conftest import dashboard_token
 
 _SESSION_TOKEN = re.compile(r'"token"\s*:\s*"([^"]+)"')
 
@@ -59,8 +60,8 @@ async def _websocket(port: int, cookie: str | None, session_token: str = "x") ->
 @pytest.mark.parametrize("procs", ["1", "2"])
 def test_only_the_teacher_reaches_the_dashboard(serve, tmp_path, procs):
     ex, path = _exercise(tmp_path)
-    token = ex.teacher_token()
     server = serve("--exercise", path, "--num-procs", procs, "--workers", "1")
+    token = dashboard_token(path)
     port = server.port
     for _ in range(2 * int(procs)):                 # new connections: every process answers some
         for p in ("/teacher", "/teacher/", "/teacher/autoload.js", "/teacher/metadata", "/teacher?token=" + "0" * 40,
@@ -112,10 +113,10 @@ def test_the_dashboard_through_nginx(serve, tmp_path):
     if NGINX is None:
         pytest.skip("nginx not found")
     ex, path = _exercise(tmp_path)
-    token = ex.teacher_token()
     listen = free_port()
     backend = serve("--exercise", path, "--behind-proxy", "--workers", "1", "--allow-websocket-origin",
                     f"127.0.0.1:{listen}")
+    token = dashboard_token(path)
     work = tmp_path / "nginx"
     work.mkdir()
     conf = work / "nginx.conf"
@@ -138,3 +139,42 @@ def test_the_dashboard_through_nginx(serve, tmp_path):
     finally:
         proc.terminate()
         proc.wait(timeout=10)
+
+
+def test_a_rotated_or_expired_link_stops_opening_the_dashboard(serve, tmp_path):
+    """A leaked link is undone on the running server (both processes) by `eha exercise token --rotate`,
+    and a link past its expiry says so; the students' pages are untouched."""
+    import subprocess
+    import time
+
+    from eha_app.runtime.handins import HandIns
+    from tests.serve.conftest import EHA
+
+    ex, path = _exercise(tmp_path)
+    server = serve("--exercise", path, "--num-procs", "2", "--workers", "1")
+    old = dashboard_token(path)
+    assert f"/teacher?token={old}" in server.log_text() and "valid until" in server.log_text()
+    assert _get(server.port, f"/teacher?token={old}")[0] == 302
+    out = subprocess.run([str(EHA), "exercise", "token", path, "--rotate"], capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 0, out.stderr
+    new = re.search(r"token=([0-9a-f]{40})", out.stdout).group(1)
+    assert new == dashboard_token(path) != old
+
+    def statuses(token, cookie=None):          # several requests: both processes answer some
+        return {_get(server.port, f"/teacher?token={token}" if token else "/teacher", cookie)[0] for _ in range(8)}
+
+    deadline = time.monotonic() + 30
+    while statuses(old) != {403} or statuses(new) != {302} or statuses(None, cookie_value(old)) != {403}:
+        assert time.monotonic() < deadline, (statuses(old), statuses(new))
+        time.sleep(0.5)
+    assert statuses(None, cookie_value(new)) == {200}
+    HandIns(path).set_controls({"token_expires": "1000"})          # the link's time is up
+    deadline = time.monotonic() + 30
+    while statuses(new) != {403}:
+        assert time.monotonic() < deadline
+        time.sleep(0.5)
+    status, _, body = _get(server.port, f"/teacher?token={new}")
+    assert "this dashboard link has expired" in body and "eha exercise token" in body
+    assert _get(server.port, "/eha")[0] == 200
+    assert new not in server.log_text().split("valid until")[-1] and "Traceback" not in server.log_text()

@@ -20,13 +20,13 @@ def test_a_held_database_lock_stops_no_other_page(tmp_path):
     # the bystander answered throughout the 10 s the lock was held (one round trip every ~50 ms)
     assert held["round_trips_while_held"] > 50, held
     assert held["max_while_held_s"] <= 0.2, held
-    # the joining student got their page while the lock was still held (the check of a new id gave up
-    # waiting), and was noted as here once the lock was let go
-    assert held["join_s"] < 9.0, held
+    # the joining student got their page while the lock was still held (their presence is written off
+    # the page's path), and was noted as here once the lock was let go
+    assert held["join_s"] < 5.0, held
+    assert held["noted_after_release_s"] is not None and held["noted_after_release_s"] < 8.0, held
     store = HandIns(tmp_path / "class.json")
     assert {"bystander", "free 0", "held 0"} <= set(store.presence()), store.presence()
-    log = figures["log"]
-    assert "Traceback" not in log and "could not check a new id's address" in log, log[-3000:]
+    assert "Traceback" not in figures["log"], figures["log"][-3000:]
 
 
 def test_one_code_on_two_served_pages_the_first_gives_way(serve, tmp_path):

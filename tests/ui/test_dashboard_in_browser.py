@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from eha_app.runtime.handins import HandIns
 from eha_core.exercise import Exercise
-from tests.serve.conftest import EhaServer
+from tests.serve.conftest import EhaServer, dashboard_token
 from tests.ui.browser_helpers import wait_until
 
 
@@ -21,7 +21,7 @@ def test_the_dashboard_follows_the_class_without_a_reload(browser, tmp_path):
     problems = []
     page.on("console", lambda m: problems.append(m.text) if m.type == "error" else None)
     try:
-        page.goto(f"http://127.0.0.1:{server.port}/teacher?token={ex.teacher_token()}")
+        page.goto(f"http://127.0.0.1:{server.port}/teacher?token={dashboard_token(path)}")
         assert page.url.endswith("/teacher"), page.url              # the token left the address bar
         roster = page.locator(".eha-dash-roster")
         roster.get_by_text("Ada Lovelace").wait_for(timeout=60_000)

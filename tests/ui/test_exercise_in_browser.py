@@ -9,7 +9,7 @@ import threading
 from eha_app.runtime.handins import HandIns
 from eha_app.runtime.teacher_access import cookie_value
 from eha_core.exercise import Exercise
-from tests.serve.conftest import EHA, EhaServer, free_port
+from tests.serve.conftest import EHA, EhaServer, dashboard_token, free_port
 from tests.ui.browser_helpers import text_of
 
 HIDE = ("M", "B", "Af", "beta_e")
@@ -190,7 +190,7 @@ def test_the_secret_never_reaches_a_students_browser(browser, tmp_path):
         assert len(frames) > 20 and "s42" in blob                  # the capture saw the session
         assert ex.secret not in blob and "secret" not in blob.lower()
         # nor the teacher's dashboard: its token, its cookie, its address
-        token = ex.teacher_token()
+        token = dashboard_token(path)
         assert token not in blob and cookie_value(token) not in blob and "/teacher" not in blob
         leaks = {n: s for n in HIDE for s in formats(getattr(truth, n), DISPLAY_SCALE[n]) if appears(s, blob)}
         assert not leaks, {n: surroundings(s, blob) for n, s in leaks.items()}

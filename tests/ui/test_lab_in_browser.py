@@ -14,7 +14,7 @@ import subprocess
 
 from eha_app.runtime.handins import HandIns
 from eha_core.exercise import Exercise
-from tests.serve.conftest import EHA, EhaServer
+from tests.serve.conftest import EHA, EhaServer, dashboard_token
 from tests.ui.browser_helpers import JS_TEXT, text_of
 
 ROSTER = "id,name,email\ns1,Ada Lovelace,ada@uni.example\ns2,Alan Turing,alan@uni.example\ns3,Grace Hopper,g@x\n"
@@ -55,9 +55,10 @@ def test_a_lab_from_the_roster_to_the_reveal(browser, tmp_path):
     contexts = [teacher]
     try:
         # the teacher: the link printed on their console
-        assert f"/teacher?token={ex.teacher_token()}" in server.log_text()
+        token = dashboard_token(path)
+        assert f"/teacher?token={token}" in server.log_text()
         dash = teacher.new_page()
-        dash.goto(f"http://127.0.0.1:{server.port}/teacher?token={ex.teacher_token()}")
+        dash.goto(f"http://127.0.0.1:{server.port}/teacher?token={token}")
         roster = dash.locator(".eha-dash-roster")
         roster.get_by_text("Grace Hopper").wait_for(timeout=60_000)
 
