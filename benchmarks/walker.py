@@ -74,9 +74,29 @@ from pathlib import Path
 from urllib.parse import urlencode
 
 if __package__:
-    from .classroom_client import Model, ProtocolError, StepTimeout, Student, _plain, _refs, stop_server, wait_served
+    from .classroom_client import (
+        Model,
+        ProtocolError,
+        StepTimeout,
+        Student,
+        StudentSession,
+        _plain,
+        _refs,
+        stop_server,
+        wait_served,
+    )
 else:  # run as a script: this file's folder is on the path
-    from classroom_client import Model, ProtocolError, StepTimeout, Student, _plain, _refs, stop_server, wait_served
+    from classroom_client import (
+        Model,
+        ProtocolError,
+        StepTimeout,
+        Student,
+        StudentSession,
+        _plain,
+        _refs,
+        stop_server,
+        wait_served,
+    )
 
 __all__ = ["Failure", "LogMonitor", "WalkServer", "WalkStudent", "Walker", "WalkOptions", "run_walks",
            "format_failures", "main"]
@@ -741,6 +761,7 @@ class Walker:
         self.index = -1
         self.pending: Action | None = None        # an action that waits for its tab to be shown first
         self.in_gate = False
+        self.joined_as = ""             # the id typed at the gate when the app was shown (an exercise)
         self.student_id = f"s{seed:07d}"
         self.actions_done = 0
         if monitor is not None:
@@ -924,6 +945,7 @@ class Walker:
             "detrend": lambda: self._detrend(spec["value"]),
             "settings": lambda: self._load_settings(spec["filename"], base64.b64decode(spec["data"]), spec["what"]),
             "reload": lambda: self._reload(spec["query"]),
+            "other-page": lambda: self._other_page(spec["query"]),
             "gate-id": lambda: self._gate_id(spec["text"]),
             "gate-start": self._gate_start,
         }
@@ -1033,7 +1055,7 @@ class Walker:
         "type-gb": 3, "gb-run": 1.5,
         "type-board": 2, "board-tick": 3, "board-rename": 1.5, "board-delete": 0.7, "board-bands": 0.5,
         "type-study": 2, "study-run": 1, "study-cancel": 1.5,
-        "download": 0.8, "any-button": 2, "settings": 1.5, "report": 0.6, "reload": 1.3,
+        "download": 0.8, "any-button": 2, "settings": 1.5, "report": 0.6, "reload": 1.3, "other-page": 0.5,
     }
     #: the kinds that press a run button
     RUNS = ("sim-button", "lse-run", "table4", "freq-run", "record-run", "gb-run", "study-run", "handin")
@@ -1050,7 +1072,7 @@ class Walker:
     def _kinds(self) -> list[str]:
         kinds = [k for k in self.WEIGHTS if (not self.o.only or k in self.o.only) and k not in self.o.exclude]
         if not self.o.exercise_hidden:
-            kinds = [k for k in kinds if k != "handin"]
+            kinds = [k for k in kinds if k not in ("handin", "other-page")]
         else:
             kinds = [k for k in kinds if k not in ("table4",)]
         return kinds
@@ -1136,6 +1158,9 @@ class Walker:
         if s.one("Button", css="eha-start") is None:
             return None
 
+        box = s.one("TextInput", css="eha-student-id")
+        typed = (box.attributes.get("value_input") or box.attributes.get("value") or "") if box else ""
+
         async def start():
             await s.click(s.one("Button", css="eha-start"))
             await s.round_trip(10)
@@ -1146,6 +1171,7 @@ class Walker:
                              "the app after Start")
             if self._app_shown():
                 self.in_gate = False
+                self.joined_as = typed
                 self._apply_query()
                 if not any(k != "tab" for k in self.query):
                     # an address without fields gives the student their kept work back (the app types
@@ -1863,6 +1889,39 @@ class Walker:
 
     def _make_reload(self) -> Action:
         return self._reload(self.page_query())
+
+    def _make_other_page(self) -> Action | None:
+        return self._other_page(self.page_query())
+
+    def _other_page(self, query: dict) -> Action | None:
+        """An exercise: the student opens the app in another browser tab with the same id (one id, one live
+        page: this page gives way and says so), closes that tab, and reloads this one."""
+        who = self.joined_as
+        if not who:
+            return None
+
+        async def other_page():
+            other = StudentSession(self.url, name=f"{self.name}-other", timeout=self.timeout)
+            try:
+                await other.open(self.timeout)
+                box = await other.wait_for_model("TextInput", css="eha-student-id", timeout=self.o.tab_s)
+                await other.set_property(box, "value_input", who)
+                await other.set_property(box, "value", who)
+                await other.click(other.find("Button", css="eha-start")[0])
+                await other.wait_for(lambda: any(other.find(css=c) for c in TAB_READY.values()), self.o.tab_s,
+                                     "the other page's app")
+                try:
+                    await self.s.wait_for(lambda: self.s.find(css="eha-given-way"), 10, "the first page giving way")
+                except Exception:  # noqa: BLE001 - reported as the invariant it breaks
+                    self.fail("invariant", "a page gives way when its id is opened on another page",
+                              "no notice on the first page within 10 s", "Your code was opened on another page")
+                await other.round_trip(10)
+            finally:
+                await other.close()
+            await self._reopen(query, why="the first page opens again after the other closed")
+        shown = _short(who, 20)
+        return Action("other-page", f"open the app with id {shown} in another tab, close it, reload this one",
+                      other_page, spec={"do": "other-page", "query": dict(query)})
 
     def _reload(self, query: dict) -> Action:
         async def reload():

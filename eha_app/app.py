@@ -612,10 +612,10 @@ class Page(pn.viewable.Viewer):
                 pass
         when = time.strftime("%H:%M:%S")
         notice = pn.pane.HTML(
-            f"<div class='eha-given-way' role='alert'><h3>Your code was opened on another page ({when})</h3>"
+            f"<div class='eha-given-way-box' role='alert'><h3>Your code was opened on another page ({when})</h3>"
             "<p>Your work goes on there: one code works on one page at a time, and your teacher sees a code "
             "used twice. To work on this page again, reload it and type your code (the other page then "
-            "stops).</p></div>", sizing_mode="stretch_width")
+            "stops).</p></div>", sizing_mode="stretch_width", css_classes=["eha-given-way"])
         self.layout.objects = [self.connection, notice]
         session.release()
         self.tabs = None

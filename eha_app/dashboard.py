@@ -42,6 +42,7 @@ from eha_core.exercise import FEEDBACK, METHODS, parse_deadline
 from .render.tables import SYMBOLS_HTML, UNITS
 from .runtime import store_calls
 from .runtime.classbook import (
+    ClassRow,
     class_rows,
     describe_conditions,
     describe_pages,
@@ -120,6 +121,11 @@ def _source(row) -> str:
         return ""
     warn = row.source.get("kind") == "file" or row.damaged
     return f"<span class='small{' no' if warn else ''}' title='{_esc(text)}'>{_esc(text)}</span>"
+
+
+def _one(handin) -> ClassRow:
+    """One hand-in as a row of its own (where its data came from, in the history's terms)."""
+    return ClassRow(handin.student, "", count=1, source=handin.source, damaged=int(handin.damaged))
 
 
 def _pages(row) -> str:
@@ -360,7 +366,8 @@ class Dashboard(pn.viewable.Viewer):
         for h in self.handins:
             counts[h.student] = numbers[h.id] = counts.get(h.student, 0) + 1
         head = ("<tr><th>time</th><th>id</th><th>name</th><th>n°</th><th>method</th>"
-                + "".join(f"<th>{_param_head(ex, n)}</th>" for n in ex.hide) + "<th>score</th><th>conditions</th></tr>")
+                + "".join(f"<th>{_param_head(ex, n)}</th>" for n in ex.hide)
+                + "<th>score</th><th>data</th><th>conditions</th></tr>")
         body = []
         for h in handins:
             errors = h.errors or handin_errors(ex, h.student, h)
@@ -368,9 +375,9 @@ class Dashboard(pn.viewable.Viewer):
             body.append(f"<tr><td>{_when(h.time, today)}</td><td>{_esc(h.student)}</td>"
                         f"<td>{_esc(names.get(h.student, ''))}</td><td class='num'>{numbers[h.id]}</td>"
                         f"<td>{_method(h.method)}</td>{cells}<td class='num'>{h.score:.2f}</td>"
-                        f"<td>{_conditions(h.conditions)}</td></tr>")
+                        f"<td>{_source(_one(h))}</td><td>{_conditions(h.conditions)}</td></tr>")
         if not body:
-            body.append(f"<tr><td colspan='{7 + len(ex.hide)}' class='dim'>No hand-in yet.</td></tr>")
+            body.append(f"<tr><td colspan='{8 + len(ex.hide)}' class='dim'>No hand-in yet.</td></tr>")
         self.history.object = f"<div class='scroll'><table>{head}{''.join(body)}</table></div>"
 
     # -- the teacher's switches -------------------------------------------------------------------------

@@ -35,6 +35,14 @@ def paper_record() -> bytes:
     return lse.data_bytes("csv")
 
 
+@pytest.fixture(scope="module")
+def paper_loop() -> bytes:
+    """The frequency panel's own closed-loop record (t, r, x, u) outside an exercise, as its export."""
+    freq = Session(AppState()).build("frequency")
+    freq.run()
+    return freq.data_bytes("csv")
+
+
 def _lab(tmp_path, monkeypatch, **rules) -> tuple[Exercise, object]:
     ex = Exercise.new(**{"hide": ("M", "B", "Af", "beta_e"), "secret": "7c" * 32, **rules})
     path = tmp_path / "class.json"
@@ -79,7 +87,7 @@ def _two_students_apart(ex: Exercise, name: str) -> tuple[str, str]:
 
 
 @pytest.mark.parametrize("hidden", HIDEABLE)
-def test_no_route_on_a_file_changes_with_a_hidden_value(tmp_path, monkeypatch, paper_record, hidden):
+def test_no_route_on_a_file_changes_with_a_hidden_value(tmp_path, monkeypatch, paper_record, paper_loop, hidden):
     """Each parameter hidden in turn: two students whose hidden value differs upload the same file (the
     paper's record) and run every route that takes a file, as often as they like. Nothing they are shown
     may differ: a hidden L0 once came back from the least squares' βe to six digits."""
@@ -98,9 +106,15 @@ def test_no_route_on_a_file_changes_with_a_hidden_value(tmp_path, monkeypatch, p
         _upload(gb, paper_record)
         gb.run()
         assert gb.result is not None, gb.alert.object
+        page.show("frequency")
+        record = page.session.section("record")
+        record.upload.param.update(filename="loop.csv", value=paper_loop)
+        record.run()
+        assert record.result is not None, record.note.object
         board = [(m.name, m.description) for m in page.session.mail("board")]
         shown[who] = (dict(lse.result.estimates), dict(lse.result.std_errors), _shown(lse), lse.estimates_bytes("json"),
-                      dict(gb.result.estimates), dict(gb.result.std_errors), _shown(gb), gb.details.object, board)
+                      dict(gb.result.estimates), dict(gb.result.std_errors), _shown(gb), gb.details.object,
+                      list(record.result.estimate.num), list(record.result.estimate.den), board)
     for k, (x, y) in enumerate(zip(shown[a], shown[b], strict=True)):
         assert x == y, (hidden, k)
     # and the student is told which hidden values stood in for the truth (those the routes do not estimate)
