@@ -74,29 +74,13 @@ from pathlib import Path
 from urllib.parse import urlencode
 
 if __package__:
-    from .classroom_client import (
-        Model,
-        ProtocolError,
-        StepTimeout,
-        Student,
-        StudentSession,
-        _plain,
-        _refs,
-        stop_server,
-        wait_served,
-    )
+    from . import classroom_client as _client
 else:  # run as a script: this file's folder is on the path
-    from classroom_client import (
-        Model,
-        ProtocolError,
-        StepTimeout,
-        Student,
-        StudentSession,
-        _plain,
-        _refs,
-        stop_server,
-        wait_served,
-    )
+    import classroom_client as _client
+
+Model, ProtocolError, StepTimeout, Student, StudentSession = (
+    _client.Model, _client.ProtocolError, _client.StepTimeout, _client.Student, _client.StudentSession)
+_plain, _refs, stop_server, wait_served = _client._plain, _client._refs, _client.stop_server, _client.wait_served
 
 __all__ = ["Failure", "LogMonitor", "WalkServer", "WalkStudent", "Walker", "WalkOptions", "run_walks",
            "format_failures", "main"]

@@ -311,10 +311,7 @@ class HandIns:
         return self._attempts(attempt, patience)
 
     def _read(self, sql: str, args=(), patience: float = 5.0) -> list:
-        def attempt():
-            with closing(self._connect()) as db:
-                return db.execute(sql, args).fetchall()
-        return self._attempts(attempt, patience)
+        return self._snapshot(lambda db: db.execute(sql, args).fetchall(), patience)
 
     def add(self, student: str, estimates: dict, verdicts: dict, *, method: str = "lse", settings: dict | None = None,
             conditions: dict | None = None, errors: dict | None = None, source: dict | None = None,

@@ -66,7 +66,7 @@ __all__ = ["ENTRY_POINT", "TEACHER_ENTRY_POINT", "LOG_FORMAT", "UNUSED_SESSION_M
            "serve_argv", "default_origins", "lan_address", "local_names", "nginx_config", "nginx_standalone_config",
            "use_local_resources", "supervise", "quiet_closed_websockets", "CONTENT_SECURITY_POLICY",
            "security_headers", "security_transform", "MAX_REQUEST_HEAD_BYTES", "MAX_ADDRESS_CHARS",
-           "MAX_HEADER_FIELDS_BYTES", "refuse_oversized", "first_answer", "run_panel_serve"]
+           "MAX_HEADER_FIELDS_BYTES", "refuse_oversized", "first_answer", "run_panel_serve", "plain_answer"]
 
 ENTRY_POINT = Path(__file__).resolve().parents[1] / "eha.py"
 #: The teacher's dashboard, served at /teacher beside the app in an exercise (see runtime/teacher_access.py).
@@ -162,7 +162,7 @@ def security_transform():
 
 
 @functools.cache
-def _plain_answer():
+def plain_answer():
     """A Tornado handler answering every method with a status and a line of text."""
     from tornado.web import RequestHandler
 
@@ -184,12 +184,12 @@ def refuse_oversized(request):
     (414, 431: see the module docstring), or None for every other request. A route for
     :func:`eha_app.runtime.patches.guard_paths`, which asks it before Bokeh's handlers."""
     if len(request.uri) > MAX_ADDRESS_CHARS:
-        return _plain_answer(), {"status": 414, "text": (
+        return plain_answer(), {"status": 414, "text": (
             f"414 URI Too Long: this address is {len(request.uri):,} characters long, more than the "
             f"{MAX_ADDRESS_CHARS:,} this server reads. Open the app's plain address (ending in /eha) instead.\n")}
     size = sum(len(k) + len(v) + 4 for k, v in request.headers.get_all())
     if size > MAX_HEADER_FIELDS_BYTES:
-        return _plain_answer(), {"status": 431, "text": (
+        return plain_answer(), {"status": 431, "text": (
             f"431 Request Header Fields Too Large: this request's headers take {size:,} bytes, more than the "
             f"{MAX_HEADER_FIELDS_BYTES:,} this server reads. Delete this site's cookies and reload.\n")}
     return None

@@ -170,19 +170,6 @@ class _Login(RequestHandler):
     head = get
 
 
-class _Expired(RequestHandler):
-    """A dashboard link past its expiry: 403, and what to do (the link is the teacher's own)."""
-
-    def get(self) -> None:
-        self.set_status(403)
-        self.set_header("Content-Type", "text/plain; charset=utf-8")
-        self.set_header("Cache-Control", "no-store")
-        self.finish("403: this dashboard link has expired. On the server, run: eha exercise token FILE --rotate "
-                    "(it prints a new link)\n")
-
-    head = get
-
-
 class TokenWatch:
     """The current token and its expiry, read from the class's database by a thread of its own every
     :data:`REFRESH_S` (the event loop, which answers the requests, never reads the database).
@@ -194,7 +181,6 @@ class TokenWatch:
         self.refresh_s = refresh_s
         self._value: Issued | None = None
         self._loaded = False
-        self._key = None
         self._thread: threading.Thread | None = None
         self._lock = threading.Lock()
 
@@ -287,5 +273,8 @@ def route(request) -> tuple[type[RequestHandler], dict] | None:
     if what == "login":
         return _Login, {"value": cookie_value(token), "max_age": max(1, int(current.expires - time.time()))}
     if what == "expired":
-        return _Expired, {}
+        from .serving import plain_answer
+
+        return plain_answer(), {"status": 403, "text": "403: this dashboard link has expired. On the server, run: "
+                                "eha exercise token FILE --rotate (it prints a new link)\n"}
     return ErrorHandler, {"status_code": 404 if what == "absent" else 403}

@@ -601,10 +601,9 @@ class GreyBoxPanel(Section):
         if not estimates:
             return None
         settings = dict(self.last_settings or self.settings())
-        own = bool(self.result_context.get("own_record"))
         # the data the estimates came from (HandInBox refuses a file's unless the exercise allows them)
         settings["_source"] = dict(self.result_source) or {"kind": "simulated"}
-        settings["_conditions"] = {} if own else dict(self.last_conditions)
+        settings["_conditions"] = dict(self.last_conditions)
         return estimates, settings
 
     def hand_in(self):

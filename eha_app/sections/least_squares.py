@@ -614,7 +614,7 @@ class LeastSquaresPanel(Section):
             self.result = res
             self.last_settings, self.last_conditions = run_settings, run_conditions
             self.result_context = {"alternative": alt, "leak": leak, "seed": req.seed, "own_record": own is not None}
-            self.result_source = dict(own_source) if own is not None else {"kind": "simulated"}
+            self.result_source = own_source if own is not None else {"kind": "simulated"}
             self.last_data, self.last_resim = data, resim
             for d in self.downloads:
                 d.disabled = False
@@ -682,7 +682,7 @@ class LeastSquaresPanel(Section):
             settings["record"] = "the student's own file"
         # the data the estimates came from (HandInBox refuses a file's unless the exercise allows them)
         settings["_source"] = dict(self.result_source) or {"kind": "simulated"}
-        settings["_conditions"] = dict(self.last_conditions) if not self.result_context.get("own_record") else {}
+        settings["_conditions"] = dict(self.last_conditions)
         return estimates, settings
 
     def _disturbance_text(self, req) -> str:
