@@ -121,7 +121,26 @@ def _rebuilt(cls, args):
 
 
 def not_allowed(name: str, value, what: str, *, value_text: str | None = None, context: str = "") -> FieldError:
-    """The :class:`FieldError` of a refused value (raise it): ``NAME = VALUE is not allowed: WHAT``."""
+    """The :class:`FieldError` of a refused value (raise it): ``NAME = VALUE is not allowed: WHAT``.
+
+    Parameters
+    ----------
+    name : str
+        What the user called it: a field, an option (``--np``), an argument.
+    value : object
+        The refused value.
+    what : str
+        What is allowed, or what is wrong and what to do.
+    value_text : str, optional
+        How the message writes the value; default :func:`shown` (as typed).
+    context : str, optional
+        A condition of the refusal, written after "is not allowed" (``"with --model linear"``).
+
+    Examples
+    --------
+    >>> str(not_allowed("kp", -1.0, "must be a finite gain > 0"))
+    'kp = -1 is not allowed: must be a finite gain > 0'
+    """
     return FieldError(name, value, what, value_text=value_text, context=context)
 
 

@@ -139,7 +139,18 @@ def _closed_loop(actuator: ActuatorParams, kp: float) -> tuple[np.ndarray, np.nd
 def linearised_estimate(plant: PlantModel, kp: float, ts: float) -> LinearisedEstimate | None:
     """Eq. 24 at ``plant.actuator`` with the covariance of its coefficients, J C Jᵀ, J by central
     differences of the linearisation over each estimated parameter (relative step 1e-5); None
-    without a covariance."""
+    without a covariance.
+
+    Parameters
+    ----------
+    plant : PlantModel
+        The actuator and the covariance of its estimated parameters.
+    kp : float
+        The controller's gain [V/m] that closes the loop.
+    ts : float
+        Sample time [s] of the data it came from, kept with the estimate (the pole-zero map flags
+        roots beyond its Nyquist frequency).
+    """
     import dataclasses
 
     num, den = _closed_loop(plant.actuator, kp)
@@ -164,8 +175,8 @@ def linearised_estimate(plant: PlantModel, kp: float, ts: float) -> LinearisedEs
 
 
 def greybox_plant(result) -> PlantModel:
-    """The actuator a grey-box estimate (:class:`~eha_core.identify.greybox.GreyBoxResult`) describes, with
-    the covariance of the parameters it estimated (those it held have none)."""
+    """The actuator a grey-box estimate ``result`` (:class:`~eha_core.identify.greybox.GreyBoxResult`)
+    describes, with the covariance of the parameters it estimated (those it held have none)."""
     free = [i for i, n in enumerate(result.names)
             if n not in result.held and math.isfinite(result.std_errors.get(n, math.nan))]
     names = tuple(result.names[i] for i in free)
@@ -180,6 +191,19 @@ def plant_model(plant: PlantModel, kp: float, *, name: str, description: str, ts
     covariance gives, simulated as the nonlinear model on the record and for the step.
 
     Raises :class:`~eha_core.params.ParameterError` for an actuator that cannot be linearised.
+
+    Parameters
+    ----------
+    plant : PlantModel
+        The actuator, e.g. :func:`greybox_plant` of an estimate.
+    kp : float
+        The controller's gain [V/m] that closes the loop.
+    name, description : str
+        The model's name and one line about it, as the board shows them.
+    ts : float
+        Sample time [s] of the data it was estimated from, kept in the model and its estimate.
+    params : ActuatorParams, optional
+        The actuator the data came from (None: unknown).
     """
     num, den = _closed_loop(plant.actuator, kp)
     return BoardModel(name=name, kind="greybox", description=description, num=num, den=den,
@@ -189,7 +213,19 @@ def plant_model(plant: PlantModel, kp: float, *, name: str, description: str, ts
 
 def plant_step(model: BoardModel, amplitude_m: float, *, step_t=STEP_T, cancel: CancelToken | None = None):
     """A plant model's step response under its controller (the nonlinear loop, as the plant's own), per
-    unit step like a transfer function's (``y`` divided by ``amplitude_m``)."""
+    unit step like a transfer function's (``y`` divided by ``amplitude_m``).
+
+    Parameters
+    ----------
+    model : BoardModel
+        A model with a ``plant`` (:func:`plant_model`).
+    amplitude_m : float
+        The reference step simulated [m].
+    step_t : array
+        Not used: the nonlinear step runs on :data:`STEP_T`'s horizon at 0.01 s (:func:`nonlinear_step`).
+    cancel : eha_core.cancel.CancelToken, optional
+        Checked before and during the simulation.
+    """
     import dataclasses
 
     out = nonlinear_step(model.plant.actuator, model.kp, amplitude_m, cancel=cancel)
@@ -200,7 +236,25 @@ def plant_step(model: BoardModel, amplitude_m: float, *, step_t=STEP_T, cancel: 
 def model_views(model: BoardModel, *, w=BOARD_W, step_t=STEP_T, level: float = 0.95, n_draws: int = 300,
                 seed: int = 0, amplitude_m: float = 0.01) -> ModelViews:
     """Bode curve (and band), pole-zero map (with regions) and unit step response of ``model``; a plant
-    model's step is its nonlinear loop's to a step of ``amplitude_m`` (per unit step)."""
+    model's step is its nonlinear loop's to a step of ``amplitude_m`` (per unit step).
+
+    Parameters
+    ----------
+    model : BoardModel
+        The model drawn.
+    w : array
+        Frequencies of the Bode curve [rad/s].
+    step_t : array
+        Times of a transfer function's step response [s] (a plant model's runs on :data:`STEP_T`).
+    level : float
+        Confidence level of the band and the regions, in (0, 1).
+    n_draws : int
+        Draws of the coefficients for the Bode band (:func:`~eha_core.identify.uncertainty.bode_band`).
+    seed : int
+        Seed of those draws.
+    amplitude_m : float
+        Reference step of a plant model's nonlinear step [m].
+    """
     from .identify._ctmodels import frequency_response
     from .identify.step import step_response
     from .identify.uncertainty import bode_band, pole_zero_regions, reference_roots
@@ -229,10 +283,32 @@ def model_views(model: BoardModel, *, w=BOARD_W, step_t=STEP_T, level: float = 0
 def validation_record(params: ActuatorParams | None = None, *, kp: float = 10.0, seed: int = 1,
                       n_samples: int = 1000, ts: float = 0.01, model: str = "nonlinear",
                       noise_x: float = 0.0, disturbance: str = "none", cancel: CancelToken | None = None):
-    """A fresh closed-loop experiment (the paper's idinput sine excitation, ``seed``) to compare models on;
-    ``noise_x`` and ``disturbance`` as in :class:`~eha_core.experiments.FrequencyExperiment`.
+    """A fresh closed-loop experiment (the paper's idinput sine excitation, ``seed``) to compare models on.
 
-    Returns the :class:`~eha_core.simulate.SimulationResult` (``t``, ``r``, ``x``, ...).
+    Parameters
+    ----------
+    params : ActuatorParams, optional
+        The actuator in the loop; defaults to the paper's parameters.
+    kp : float
+        The controller's gain [V/m].
+    seed : int
+        Seed of the excitation, in [0, 1000000].
+    n_samples : int
+        Samples of the record.
+    ts : float
+        Sample time of the record and the controller [s].
+    model : {'nonlinear', 'linear'}
+        The model simulated.
+    noise_x, disturbance
+        As in :class:`~eha_core.experiments.FrequencyExperiment`: σ of the position
+        sensor's noise [m], and a load force d(t) [N] as signal text.
+    cancel : eha_core.cancel.CancelToken, optional
+        Checked between integration chunks.
+
+    Returns
+    -------
+    eha_core.simulate.SimulationResult
+        The record (``t``, ``r``, ``x``, ...).
     """
     from .experiments import FrequencyExperiment
 
@@ -247,8 +323,12 @@ def validation_record(params: ActuatorParams | None = None, *, kp: float = 10.0,
 
 
 def compare_on_record(model: BoardModel, record) -> RecordComparison:
-    """``model`` on the record (MATLAB ``compare``: initial state and input offset fitted), with the
-    residual tests of its error against the reference and their verdict sentences."""
+    """``model`` on the ``record`` (MATLAB ``compare``: initial state and input offset fitted), with the
+    residual tests of its error against the reference and their verdict sentences.
+
+    ``record`` is a closed-loop :class:`~eha_core.simulate.SimulationResult` (its ``t``, ``r``
+    and ``x``), e.g. :func:`validation_record`'s.
+    """
     from .identify.assessment import assess_residuals
     from .identify.validate import compare, fit_percent, residual_analysis
 
@@ -272,7 +352,17 @@ def compare_on_record(model: BoardModel, record) -> RecordComparison:
 def simulated_on_record(model: BoardModel, record, cancel: CancelToken | None = None) -> np.ndarray:
     """A plant model's position on the record: the nonlinear model from its own initial state, in the
     loop of its Kp sampled at the record's Ts, driven by the record's reference; no load (the model
-    does not know the record's). NaN where the simulation failed."""
+    does not know the record's). NaN where the simulation failed.
+
+    Parameters
+    ----------
+    model : BoardModel
+        A model with a ``plant`` (:func:`plant_model`).
+    record : eha_core.simulate.SimulationResult
+        The closed-loop record: its ``t``, ``r`` [m] and ``x`` [m].
+    cancel : eha_core.cancel.CancelToken, optional
+        Checked between integration chunks.
+    """
     from .simulate import simulate_closed_loop
 
     ts = float(record.t[1] - record.t[0])
@@ -288,7 +378,10 @@ def simulated_on_record(model: BoardModel, record, cancel: CancelToken | None = 
 def reference_models(params: ActuatorParams | None = None, kp: float = 10.0, *,
                      linearised: bool = True) -> list[BoardModel]:
     """The references: eq. 24's H(s) with the actuator's values (unless ``linearised`` is False, e.g.
-    when an exercise hides them) and the paper's Ĥ(s) of eq. 25."""
+    when an exercise hides them) and the paper's Ĥ(s) of eq. 25.
+
+    ``params`` is the actuator (default the paper's), ``kp`` the controller's gain [V/m] of eq. 24.
+    """
     from .experiments import PAPER_EQ25
     from .linear import linearize
 
@@ -308,6 +401,17 @@ def lse_model(result, params: ActuatorParams, kp: float, name: str, description:
     """Eq. 24's H(s) with a least-squares run's estimates of M, B, Af, beta_e (the rest as measured).
 
     Raises :class:`~eha_core.params.ParameterError` when an estimate is not physical (e.g. B < 0).
+
+    Parameters
+    ----------
+    result : eha_core.identify.lse.LSEResult
+        The least-squares estimate.
+    params : ActuatorParams
+        The actuator the data came from: the measured values the estimates replace some of.
+    kp : float
+        The controller's gain [V/m] that closes the loop.
+    name, description : str
+        The model's name and one line about it, as the board shows them.
     """
     from .linear import linearize
 
@@ -320,7 +424,23 @@ def lse_model(result, params: ActuatorParams, kp: float, name: str, description:
 def nonlinear_step(params: ActuatorParams, kp: float, amplitude_m: float, *, noise_x: float = 0.0, seed: int = 0,
                    cancel: CancelToken | None = None):
     """The nonlinear plant's step response under the same controller, on :data:`STEP_T`'s horizon; with
-    ``noise_x`` (σ, m) as a position sensor would record it, its characteristics read from that record."""
+    ``noise_x`` (σ, m) as a position sensor would record it, its characteristics read from that record.
+
+    Parameters
+    ----------
+    params : ActuatorParams
+        The actuator.
+    kp : float
+        The controller's gain [V/m], sampled at 0.01 s.
+    amplitude_m : float
+        The reference step [m].
+    noise_x : float
+        σ of the position sensor's white noise [m]; 0: none.
+    seed : int
+        Seed of that noise.
+    cancel : eha_core.cancel.CancelToken, optional
+        Checked before and during the simulation.
+    """
     import dataclasses
 
     from .identify.step import nonlinear_step_response, step_info

@@ -71,6 +71,6 @@ class CancelToken:
 
 
 def check(token: CancelToken | None) -> None:
-    """``token.check()`` when a token was given."""
+    """``token.check()`` when a ``token`` was given: raise :class:`Cancelled` if it was cancelled; None never raises."""
     if token is not None:
         token.check()

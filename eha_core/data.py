@@ -110,6 +110,17 @@ def guess_columns(available: Sequence[str], needed: Sequence[str],
     columns in bar: p1 and p2 in their order). ``aliases`` adds names a need
     may go by (a record's input u may be the loop's reference r).
 
+    Parameters
+    ----------
+    available : sequence of str
+        The file's column names, units included (``"pA[bar]"``).
+    needed : sequence of str
+        The columns wanted, by the project's names (``"t"``, ``"x"``, ``"p1"``...).
+    aliases : dict of str to sequence of str, optional
+        More names each needed column may go by, tried after :data:`COLUMN_ALIASES`.
+
+    Examples
+    --------
     >>> guess_columns(["time", "position[mm]", "velocity[mm/s]", "pA[bar]", "pB[bar]", "valve[V]"],
     ...               ["t", "x", "v", "p1", "p2", "u"])
     {'t': 'time', 'x': 'position[mm]', 'v': 'velocity[mm/s]', 'p1': 'pA[bar]', 'p2': 'pB[bar]', 'u': 'valve[V]'}
@@ -166,7 +177,19 @@ class DataError(FieldError):
 
 def read_columns(path, columns: Sequence[str], *, name: str = "--data", min_rows: int = 2) -> dict[str, np.ndarray]:
     """The named columns of a CSV (or ``.mat``) file as float arrays in SI: :func:`read_data`
-    for a file name or an open file."""
+    for a file name or an open file.
+
+    Parameters
+    ----------
+    path : str, path or file-like
+        The file's name, or an open file or buffer (text or bytes; its ``name``, if any, names it).
+    columns : sequence of str
+        The columns to read, by name without unit.
+    name : str
+        What the user called the file (an option, a form's field), the field of a :class:`DataError`.
+    min_rows : int
+        Fewest data rows accepted.
+    """
     if hasattr(path, "read"):             # an open file or a buffer
         data = path.read()
         data = data.encode() if isinstance(data, str) else data
@@ -175,7 +198,25 @@ def read_columns(path, columns: Sequence[str], *, name: str = "--data", min_rows
 
 
 def sample_time(t: np.ndarray, *, name: str = "--data", path="data", rtol: float = 1e-6) -> float:
-    """The sample interval of uniformly sampled times, or a :class:`DataError` at the first bad row."""
+    """The sample interval of uniformly sampled times, or a :class:`DataError` at the first bad row.
+
+    Parameters
+    ----------
+    t : array
+        The times [s], at least 2, increasing.
+    name : str
+        The field of a :class:`DataError` (the option or form's name for the file).
+    path : str
+        The file's name, as the error writes it.
+    rtol : float
+        Largest departure of a step from the median step, relative to the larger of the
+        median step and ``|t[-1]|``.
+
+    Returns
+    -------
+    float
+        ``(t[-1] - t[0]) / (len(t) - 1)`` [s].
+    """
     t = np.asarray(t, dtype=float)
     if t.size < 2:
         raise DataError(name, path, "column t needs at least 2 rows")
@@ -214,6 +255,7 @@ _FORMULA_START = ("=", "+", "-", "@", "\t", "\r", "\n")
 def csv_cell(value) -> str:
     r"""A cell as every CSV of the project writes it: text that a spreadsheet would run as a
     formula (``=HYPERLINK(...)``, ``+cmd``, ``@SUM``) gets a leading ``'``; numbers stay numbers.
+    ``value`` is any object, written as ``str(value)``; None is an empty cell.
 
     >>> csv_cell('=HYPERLINK("http://x")'), csv_cell("-1.5e3"), csv_cell("ada"), csv_cell(None)
     ('\'=HYPERLINK("http://x")', '-1.5e3', 'ada', '')
@@ -229,7 +271,17 @@ def csv_cell(value) -> str:
 
 
 def check_data_size(size: int, path, *, name: str = "--data") -> None:
-    """Refuse a file of more than :data:`MAX_DATA_BYTES`, naming it and its size, before reading it."""
+    """Refuse a file of more than :data:`MAX_DATA_BYTES`, naming it and its size, before reading it.
+
+    Parameters
+    ----------
+    size : int
+        The file's size [bytes].
+    path : str
+        The file's name, as the error writes it.
+    name : str
+        The field of the :class:`DataError` (the option or form's name for the file).
+    """
     if size > MAX_DATA_BYTES:
         raise DataError(name, path, f"it has {size / 1e6:.1f} MB; at most {MAX_DATA_BYTES / 1e6:g} MB")
 
@@ -353,7 +405,8 @@ def _csv_header(data: bytes, name: str, path) -> tuple[list[str], Iterator[list[
 
 
 def columns_text(names) -> str:
-    """A file's column names as a message lists them: the first 20, each cut to 40 characters.
+    """A file's column names (``names``, any iterable of str) as a message lists them: the first 20,
+    each cut to 40 characters.
 
     >>> columns_text(["t", "u", "y"]), columns_text([])
     ('t, u, y', 'nothing')
@@ -364,7 +417,17 @@ def columns_text(names) -> str:
 
 
 def file_columns(data: bytes, filename: str, *, name: str = "--data") -> list[str]:
-    """The column names of a CSV or .mat file (units included), for a column-mapping step."""
+    """The column names of a CSV or .mat file (units included), for a column-mapping step.
+
+    Parameters
+    ----------
+    data : bytes
+        The file's content.
+    filename : str
+        The file's name: a ``.mat`` one (or content starting ``MATLAB``) is read as MATLAB's.
+    name : str
+        The field of a :class:`DataError` (the option or form's name for the file).
+    """
     check_data_size(len(data), filename, name=name)
     if _is_mat(data, filename):
         return list(_mat_columns(data, name, filename))
@@ -414,11 +477,26 @@ def read_data(source, columns: Sequence[str], *, name: str = "--data", filename:
               mapping: dict[str, str] | None = None, min_rows: int = 2) -> dict[str, np.ndarray]:
     """The named columns, in SI, of a CSV or ``.mat`` file.
 
-    ``source``: a path, or the file's bytes (an upload; ``filename`` names it).
-    ``mapping``: which of the file's columns holds each needed one (``{"x": "pos[mm]"}``);
-    by default a column of the needed name, with or without a unit. Every problem
-    is a :class:`DataError` naming the file, the column and the row.
+    Every problem is a :class:`DataError` naming the file, the column and the row.
 
+    Parameters
+    ----------
+    source : str, path or bytes
+        A path, or the file's bytes (an upload; ``filename`` names it).
+    columns : sequence of str
+        The needed columns, by name without unit.
+    name : str
+        What the user called the file (an option, a form's field), the field of a :class:`DataError`.
+    filename : str, optional
+        The name of a file given as bytes (default ``"upload"``); a ``.mat`` one is read as MATLAB's.
+    mapping : dict of str to str, optional
+        Which of the file's columns holds each needed one (``{"x": "pos[mm]"}``);
+        by default a column of the needed name, with or without a unit.
+    min_rows : int
+        Fewest data rows accepted.
+
+    Examples
+    --------
     >>> csv_bytes = b"t[ms],x[mm]\\n0,1\\n1,2\\n2,3\\n"
     >>> d = read_data(csv_bytes, ("t", "x"), filename="run.csv")
     >>> d["t"].tolist(), d["x"].tolist()
@@ -472,8 +550,19 @@ def read_data(source, columns: Sequence[str], *, name: str = "--data", filename:
 
 
 def write_data(columns: dict[str, np.ndarray], kind: str = "csv", units: dict[str, str] | str | None = None) -> bytes:
-    """``columns`` (SI) as the bytes of a CSV (``name[unit]`` headers when ``units`` say; ``units="si"``:
-    each known signal's SI unit, :func:`signal_units`) or ``.mat`` file, which :func:`read_data` reads back."""
+    """``columns`` (SI) as the bytes of a CSV or ``.mat`` file, which :func:`read_data` reads back.
+
+    Parameters
+    ----------
+    columns : dict of str to array
+        The columns by name, in SI units.
+    kind : {'csv', 'mat'}
+        The file's format.
+    units : dict of str to str, or 'si', optional
+        CSV only: the unit of each column's ``name[unit]`` header, one of :data:`UNITS`
+        (values are converted from SI into it); ``"si"``: each known signal's SI unit
+        (:func:`signal_units`); default none (bare names, SI values).
+    """
     if kind == "mat":
         import scipy.io
 

@@ -92,7 +92,10 @@ _CODE_LENGTH = 10
 
 
 def normalize_id(student_id: str) -> str:
-    """The id as compared and stored: trimmed, inner spaces collapsed, lower case.
+    """The id as compared and stored: ``student_id`` trimmed, inner spaces collapsed, lower case.
+
+    A :class:`~eha_core._checks.FieldError` when it is empty, holds a control character or is
+    longer than :data:`MAX_ID_LENGTH` characters.
 
     >>> normalize_id("  Ada  Lovelace ")
     'ada lovelace'
@@ -113,7 +116,7 @@ def normalize_id(student_id: str) -> str:
 
 
 def normalize_code(code: str) -> str:
-    """A join code as typed, reduced to its characters: upper case, no spaces or dashes
+    """A join ``code`` as typed, reduced to its characters: upper case, no spaces or dashes
     (``"abcde-fghjk"`` and ``"ABCDEFGHJK"`` are the same code).
 
     >>> normalize_code(" k7m2p-q9rst ")
@@ -128,6 +131,8 @@ def _code_hash(code: str) -> str:
 
 def parse_deadline(text: str, name: str = "deadline") -> str:
     """An ISO-8601 date and time, kept as typed once checked (no zone: the server's local time).
+
+    ``text`` is the deadline as typed (trimmed); a refusal names it ``name``.
 
     >>> parse_deadline("2026-12-01T17:00")
     '2026-12-01T17:00'
@@ -166,6 +171,9 @@ class RosterEntry:
 
 def read_roster(text: str, name: str = "roster") -> list[tuple[str, str]]:
     """``(id, name)`` pairs of a CSV roster with columns ``id`` and ``name`` (more are ignored).
+
+    ``text`` is the CSV file's text; a refusal names the file ``name``. Ids are normalised
+    (:func:`normalize_id`) and must be unique; at most 2000 students.
 
     >>> read_roster("id,name,email\\ns1,Ada Lovelace,a@x\\n S2 ,Alan Turing,\\n")
     [('s1', 'Ada Lovelace'), ('s2', 'Alan Turing')]
@@ -270,11 +278,13 @@ class Conditions:
         return "; ".join(parts)
 
     def to_dict(self) -> dict:
+        """The conditions as plain JSON-able values (the exercise file's ``conditions``)."""
         return {"noise": dict(self.noise), "disturbance": self.disturbance, "measured": list(self.measured),
                 "max_record_s": self.max_record_s, "min_ts_s": self.min_ts_s, "methods": list(self.methods)}
 
     @classmethod
     def from_dict(cls, data: Mapping) -> Conditions:
+        """The conditions written by :meth:`to_dict`: ``data``'s missing keys take their defaults."""
         return cls(noise=dict(data.get("noise", {})), disturbance=str(data.get("disturbance", "none")),
                    measured=tuple(data.get("measured", tuple(SIGNALS))),
                    max_record_s=float(data.get("max_record_s", 60.0)), min_ts_s=float(data.get("min_ts_s", 1e-3)),
@@ -371,7 +381,44 @@ class Exercise:
             own_files: bool = False, ids_per_client: int = DEFAULT_IDS_PER_CLIENT,
             kept_uploads_mb: int = DEFAULT_KEPT_UPLOADS_MB) -> Exercise:
         """A new exercise with a fresh random secret (``secrets.token_hex``) and, with a roster,
-        a join code per student (see :meth:`join_code`)."""
+        a join code per student (see :meth:`join_code`).
+
+        Parameters
+        ----------
+        hide : iterable of str
+            The parameters hidden from the students, names of :data:`HIDEABLE`.
+        vary : float
+            How far each student's hidden parameters vary around the paper's values: a
+            fraction in [0, :data:`MAX_VARY`] (0.25: +-25 %).
+        tolerance : float or mapping of str to float
+            The relative error of a correct answer, in (0, 1); a mapping gives it per hidden
+            parameter (the others 0.05).
+        title : str
+            The exercise's title, shown to the students.
+        secret : str, optional
+            Hex digits (at least 32) the students' actuators and codes are drawn from; default a fresh
+            random one of 64.
+        roster : iterable of (str, str), optional
+            ``(id, name)`` of each student (:func:`read_roster`); without one the exercise is open
+            to any id.
+        conditions : Conditions, optional
+            The experiment's conditions; default :class:`Conditions`'s.
+        deadline : str
+            ISO-8601 date and time of the last hand-in (:func:`parse_deadline`), or "" for none.
+        attempts : int
+            Hand-ins allowed per student, 0 for no limit.
+        feedback : str
+            When a student sees the verdicts, a key of :data:`FEEDBACK`.
+        score_rule : str
+            Which hand-in scores, one of :data:`SCORE_RULES`.
+        own_files : bool
+            Take hand-ins from a file the student uploaded (default: only from their own actuator's
+            experiment).
+        ids_per_client : int
+            Open exercise: new ids one client address may start per hour (0: no limit).
+        kept_uploads_mb : int
+            The disk the class's kept uploads may take in all [MB] (0: no upload is kept).
+        """
         secret = secret or secrets.token_hex(32)
         if isinstance(tolerance, Mapping):
             tolerances, default = dict(tolerance), 0.05
@@ -389,9 +436,11 @@ class Exercise:
                    own_files=bool(own_files), ids_per_client=int(ids_per_client), kept_uploads_mb=int(kept_uploads_mb))
 
     def replace(self, **changes) -> Exercise:
+        """A copy with the fields named in ``**changes`` changed (checked again), as :func:`dataclasses.replace`."""
         return dataclasses.replace(self, **changes)
 
     def to_json(self) -> str:
+        """The exercise file's text (JSON, the secret included: the teacher's, never the class's)."""
         data = {"format": _FORMAT, **{f.name: getattr(self, f.name) for f in dataclasses.fields(self)}}
         data["conditions"] = self.conditions.to_dict()
         data["roster"] = [dataclasses.asdict(e) for e in self.roster]
@@ -400,6 +449,10 @@ class Exercise:
 
     @classmethod
     def from_json(cls, text: str, name: str = "exercise file") -> Exercise:
+        """The exercise of an exercise file's ``text`` (:meth:`to_json`; format 1 files too).
+
+        A refusal names the file ``name``.
+        """
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
@@ -424,10 +477,12 @@ class Exercise:
 
     @classmethod
     def load(cls, path: str | Path) -> Exercise:
+        """The exercise of the exercise file at ``path`` (UTF-8 JSON, :meth:`from_json`)."""
         path = Path(path)
         return cls.from_json(path.read_text(encoding="utf-8"), name=str(path))
 
     def save(self, path: str | Path) -> None:
+        """Write the exercise file to ``path`` (:meth:`to_json`), readable by its owner only."""
         path = Path(path)
         path.write_text(self.to_json(), encoding="utf-8")
         path.chmod(0o600)                   # the teacher's: the secret is not for the class
@@ -446,7 +501,8 @@ class Exercise:
         return next((e for e in self.roster if e.id == sid), None)
 
     def join_code(self, student_id: str) -> str:
-        """The student's join code, ``XXXXX-XXXXX`` (the teacher's, from the secret and the entry's nonce)."""
+        """The join code of ``student_id``, ``XXXXX-XXXXX`` (the teacher's, from the secret and the entry's
+        nonce); a refusal when the id is not in the roster."""
         e = self.entry(student_id)
         if e is None:
             raise not_allowed("student id", student_id, "not in the exercise's roster")
@@ -489,7 +545,7 @@ class Exercise:
         return b + w * _ADDITIVE_SCALE[name] if b == 0 and name in _ADDITIVE_SCALE else b * (1.0 + w)
 
     def student_params(self, student_id: str, base: ActuatorParams | None = None) -> ActuatorParams:
-        """The student's actuator: each hidden parameter of ``base`` (the paper's) times a factor in
+        """The actuator of ``student_id``: each hidden parameter of ``base`` (the paper's) times a factor in
         [1 - vary, 1 + vary] drawn from the secret and the id (a parameter whose paper value is 0,
         d0 for one, moves by up to ``vary`` times a scale of its own: 2000 N for d0). A draw that
         breaks a rule of the parameters (a rod wider than the bore) is drawn again."""
@@ -503,11 +559,20 @@ class Exercise:
         return base
 
     def tolerance_of(self, name: str) -> float:
+        """The relative tolerance of a correct answer for the parameter ``name``."""
         return float(self.tolerances.get(name, self.tolerance))
 
     def errors(self, student_id: str, estimates: Mapping) -> dict[str, float | None]:
         """Per hidden parameter: the estimate's relative error against the truth (the teacher's;
-        for a parameter whose truth is near 0, relative to its scale); None for a missing one."""
+        for a parameter whose truth is near 0, relative to its scale); None for a missing one.
+
+        Parameters
+        ----------
+        student_id : str
+            The student, whose actuator is the truth (:meth:`student_params`).
+        estimates : mapping of str to float
+            The student's estimates by parameter name, in SI units.
+        """
         truth = self.student_params(student_id)
         out = {}
         for n in self.hide:
@@ -523,7 +588,15 @@ class Exercise:
 
     def verdicts(self, student_id: str, estimates: Mapping) -> dict[str, bool]:
         """Per hidden parameter: is the estimate within its tolerance (relative) of the truth?
-        A missing or non-finite estimate is not."""
+        A missing or non-finite estimate is not.
+
+        Parameters
+        ----------
+        student_id : str
+            The student, whose actuator is the truth (:meth:`student_params`).
+        estimates : mapping of str to float
+            The student's estimates by parameter name, in SI units.
+        """
         return {n: e is not None and abs(e) <= self.tolerance_of(n)
                 for n, e in self.errors(student_id, estimates).items()}
 
@@ -537,9 +610,25 @@ class Exercise:
                 deadline: str | None = None, revealed: bool = False, source: str | None = None) -> str | None:
         """Why a student who has handed in ``count`` times may not hand in now (None: they may).
 
-        ``revealed``: the teacher has shown every student their true values; that is final, whatever
-        the deadline or the open switch say since. ``source``: "file" for estimates from an uploaded
-        file (refused unless :attr:`own_files`), else the student's own actuator's experiment."""
+        Parameters
+        ----------
+        count : int
+            The student's hand-ins so far.
+        now : float, optional
+            The time [s, POSIX]; default the current time.
+        method : str, optional
+            The route of the hand-in, a key of :data:`METHODS`; None: not checked.
+        open_ : bool
+            The teacher's switch: False closes hand-ins.
+        deadline : str, optional
+            The teacher's extension of the deadline (ISO-8601), replacing the exercise's.
+        revealed : bool
+            The teacher has shown every student their true values; that is final, whatever
+            the deadline or the open switch say since.
+        source : str, optional
+            "file" for estimates from an uploaded file (refused unless :attr:`own_files`), else the
+            student's own actuator's experiment.
+        """
         now = time.time() if now is None else now
         if revealed:
             return "your teacher has revealed the true values: hand-ins are closed for good"
@@ -559,7 +648,17 @@ class Exercise:
 
     def shows_verdicts(self, *, now: float | None = None, deadline: str | None = None,
                        revealed: bool = False) -> bool:
-        """Are the verdicts shown to the student now (the feedback rule, the deadline, a reveal)?"""
+        """Are the verdicts shown to the student now (the feedback rule, the deadline, a reveal)?
+
+        Parameters
+        ----------
+        now : float, optional
+            The time [s, POSIX]; default the current time.
+        deadline : str, optional
+            The teacher's extension of the deadline (ISO-8601), replacing the exercise's.
+        revealed : bool
+            The teacher has revealed the true values: verdicts are shown whatever the rule.
+        """
         if revealed or self.feedback == "verdict":
             return True
         if self.feedback == "none":
@@ -568,7 +667,11 @@ class Exercise:
         return due is not None and (time.time() if now is None else now) > due
 
     def score(self, verdicts_per_handin: list[Mapping[str, bool]]) -> float:
-        """The score by the exercise's rule (best or last hand-in): the fraction within tolerance."""
+        """The score by the exercise's rule (best or last hand-in): the fraction within tolerance.
+
+        ``verdicts_per_handin`` holds each hand-in's verdicts (:meth:`verdicts`), oldest first;
+        none scores 0.
+        """
         scores = [sum(bool(v) for v in h.values()) / max(len(h), 1) for h in verdicts_per_handin]
         if not scores:
             return 0.0

@@ -79,8 +79,24 @@ def run_paper_cases(params: ActuatorParams | None = None, model: str = "nonlinea
                     **kwargs) -> list[SimulationResult]:
     """Simulate the chosen paper cases as one batch (Fig. 2: nonlinear, Fig. 3: linear).
 
-    ``t_end`` shortens (or lengthens) the paper's 5 s horizon; ``cancel`` and
-    ``kwargs`` (e.g. ``parallel=False``) go to :func:`~eha_core.simulate.simulate_many`.
+    Parameters
+    ----------
+    params : ActuatorParams, optional
+        Defaults to the paper's parameters.
+    model : {'nonlinear', 'linear'}
+        The model simulated (:func:`~eha_core.simulate.simulate`).
+    cases : iterable of int
+        The cases of :data:`PAPER_CASES` (1 to 4), in the order of the results.
+    dt : float
+        Output interval [s].
+    branch : {'switching', 'positive', 'negative'}
+        Linear model only: the valve's branch (:func:`~eha_core.simulate.simulate`).
+    t_end : float, optional
+        Horizon [s]; default the paper's 5 s.
+    cancel : eha_core.cancel.CancelToken, optional
+        Checked between integration chunks.
+    **kwargs
+        Passed on to :func:`~eha_core.simulate.simulate_many` (e.g. ``parallel=False``).
     """
     chosen = []
     for c in cases:
@@ -131,8 +147,21 @@ def lse_simulation(params: ActuatorParams | None = None, disturbance: str | Sign
                    cancel: CancelToken | None = None) -> SimulationResult:
     """Simulate the nonlinear plant for the least-squares experiment (sampled at dt).
 
-    ``cancel`` (a :class:`~eha_core.cancel.CancelToken`) is checked between
-    integration chunks, as in every function of this module that takes it.
+    Parameters
+    ----------
+    params : ActuatorParams, optional
+        Defaults to the paper's parameters.
+    disturbance : str or Signal
+        The load force d(t) [N], a signal or its text (:func:`~eha_core.signals.parse_signal`,
+        e.g. one of :data:`LSE_SCENARIOS`).
+    u : Signal
+        The valve command [V]; default :data:`LSE_INPUT`.
+    t_end, dt : float
+        Horizon and sample interval [s].
+    seed : int
+        Seed of a noise term of ``disturbance`` that gives none; its hold is ``dt``.
+    cancel : eha_core.cancel.CancelToken, optional
+        Checked between integration chunks, as in every function of this module that takes it.
     """
     d = parse_signal(disturbance, name="disturbance", seed=seed, hold_s=dt)
     return simulate(params, u=u, d=d, t_end=t_end, dt=dt, label=f"d = {d.label}", cancel=cancel)
@@ -141,7 +170,21 @@ def lse_simulation(params: ActuatorParams | None = None, disturbance: str | Sign
 def lse_data(params: ActuatorParams | None = None, disturbance: str | Signal = "none", *,
              u: Signal = LSE_INPUT, t_end: float = 5.0, dt: float = 1e-3, seed: int = 0,
              measurement_noise: dict[str, float] | None = None, cancel: CancelToken | None = None):
-    """Measurements for the least squares: the simulated sensors, optionally noisy."""
+    """Measurements for the least squares: the simulated sensors, optionally noisy.
+
+    Parameters
+    ----------
+    params, disturbance, u, t_end, dt, seed, cancel
+        As for :func:`lse_simulation`.
+    measurement_noise : dict of str to float, optional
+        Standard deviation of white sensor noise per signal, in SI units (``{"p1": 1e4}``:
+        :meth:`~eha_core.identify.lse.MeasuredData.with_noise`, seeded ``seed + 1``); none by default.
+
+    Returns
+    -------
+    eha_core.identify.lse.MeasuredData
+        Raises :class:`~eha_core.errors.ComputationError` when the simulation fails.
+    """
     from .identify.lse import MeasuredData
 
     res = lse_simulation(params, disturbance, u=u, t_end=t_end, dt=dt, seed=seed, cancel=cancel)
@@ -160,9 +203,21 @@ def run_lse(params: ActuatorParams | None = None, disturbance: str | Signal = "n
             estimator: str = "ls", intervals: str | None = None, cancel: CancelToken | None = None):
     """Simulate a scenario and identify it: the time-domain experiment in one call.
 
-    ``estimator`` and ``intervals`` are those of
-    :func:`~eha_core.identify.lse.identify_lse` (the paper's least squares by
-    default); ``cancel`` reaches the simulation and the estimator.
+    Parameters
+    ----------
+    params : ActuatorParams, optional
+        The simulated actuator, also the known quantities and the nominal values of the
+        estimate; defaults to the paper's parameters.
+    disturbance, u, t_end, dt, seed, measurement_noise
+        The experiment, as for :func:`lse_data`.
+    disturbance_model, disturbance_freq_hz, tau_f, estimator, intervals
+        Those of :func:`~eha_core.identify.lse.identify_lse` (the paper's least squares by default).
+    cancel : eha_core.cancel.CancelToken, optional
+        Reaches the simulation and the estimator.
+
+    Returns
+    -------
+    eha_core.identify.lse.LSEResult
     """
     from .identify.lse import identify_lse
 
@@ -181,6 +236,19 @@ def lse_resimulation(result, params: ActuatorParams, measured, *, u: Signal = LS
     The disturbance is what the model estimated: d0, plus the sinusoid for the
     harmonic model. Raises ParameterError when an estimate is not physical
     (e.g. a negative B under heavy noise): the message says which.
+
+    Parameters
+    ----------
+    result : eha_core.identify.lse.LSEResult
+        The estimate.
+    params : ActuatorParams
+        The known parameters the estimates replace some of (``result.estimated_params(params)``).
+    measured : eha_core.identify.lse.MeasuredData
+        The record: its first sample is the initial state, its length and interval the run's.
+    u : Signal
+        The valve command [V] the record was made with.
+    cancel : eha_core.cancel.CancelToken, optional
+        Checked between integration chunks.
     """
     est = result.estimated_params(params)
     d: Signal = ZERO
@@ -198,7 +266,21 @@ def run_lse_table(params: ActuatorParams | None = None, *, disturbance_model: st
                   cancel: CancelToken | None = None) -> dict:
     """Table 4: the four disturbance scenarios, identified with one disturbance model.
 
-    ``cancel`` reaches every scenario's simulation and estimation.
+    Parameters
+    ----------
+    params : ActuatorParams, optional
+        Defaults to the paper's parameters.
+    disturbance_model : {'constant', 'harmonic'}
+        The estimator's model of the disturbance (:func:`~eha_core.identify.lse.identify_lse`).
+    seed, u, t_end
+        As for :func:`run_lse`.
+    cancel : eha_core.cancel.CancelToken, optional
+        Reaches every scenario's simulation and estimation.
+
+    Returns
+    -------
+    dict
+        :class:`~eha_core.identify.lse.LSEResult` by scenario name of :data:`LSE_SCENARIOS`.
     """
     return {name: run_lse(params, spec, disturbance_model=disturbance_model, seed=seed, u=u, t_end=t_end,
                           cancel=cancel)
@@ -367,7 +449,8 @@ class FrequencyExperiment:
         parse_signal(self.disturbance, name="disturbance", hold_s=self.ts)     # refused now, not mid-run
 
     def excitation(self, seed: int | None = None):
-        """The reference signal (an :class:`~eha_core.excitation.Excitation`)."""
+        """The reference signal (an :class:`~eha_core.excitation.Excitation`), drawn from ``seed``
+        (default the experiment's own)."""
         from .excitation import idinput
 
         return idinput([self.n_samples, 1, 1], self.signal_type, self.band, self.range,
@@ -375,7 +458,18 @@ class FrequencyExperiment:
 
     def closed_loop(self, params: ActuatorParams, excitation,
                     cancel: CancelToken | None = None) -> SimulationResult:
-        """Run the loop on ``excitation.u`` and record r, u, x at Ts."""
+        """Run the loop on ``excitation.u`` and record r, u, x at Ts.
+
+        Parameters
+        ----------
+        params : ActuatorParams
+            The actuator in the loop.
+        excitation : eha_core.excitation.Excitation
+            The reference r [m] (:meth:`excitation`); its seed also draws the disturbance's
+            and the position sensor's noise.
+        cancel : eha_core.cancel.CancelToken, optional
+            Checked between integration chunks.
+        """
         from .simulate import simulate_closed_loop
 
         # a load force d(t) on the piston (eq. 1), e.g. an exercise's, drawn from the excitation's seed
@@ -459,9 +553,18 @@ def bode_data(estimate: TFEstimate, theoretical, data: DataFrequencyResponse, ts
               n_points: int = 400) -> BodeData:
     """The curves of Fig. 12 from 0.01 rad/s to the Nyquist frequency pi/ts.
 
-    ``data`` is the data's frequency response
-    (:func:`~eha_core.identify.spectral.data_frequency_response`); ``theoretical``
-    ``(num, den)`` or None (a measured record: nothing is known of the plant).
+    Parameters
+    ----------
+    estimate : eha_core.identify.tfest.TFEstimate
+        The estimated H_hat.
+    theoretical : (num, den) or None
+        The linearised H(s) (eq. 24), or None (a measured record: nothing is known of the plant).
+    data : eha_core.identify.spectral.DataFrequencyResponse
+        The data's frequency response (:func:`~eha_core.identify.spectral.data_frequency_response`).
+    ts : float
+        The record's sample time [s].
+    n_points : int
+        Frequencies of the log-spaced grid of the curves.
     """
     from .identify._ctmodels import readonly
     from .identify.validate import frequency_response
@@ -562,6 +665,7 @@ class FrequencyIdentification:
         return float(np.abs(self.data.v).max())
 
     def to_dict(self) -> dict:
+        """The estimates, fits, back-out and timings as plain JSON-able values (``eha`` reports)."""
         e = self.estimate
         out = {
             "num": list(map(float, e.num)), "den": list(map(float, e.den)),
@@ -602,11 +706,18 @@ def run_frequency_identification(params: ActuatorParams | None = None,
     :mod:`eha_core.identify.backout` (the friction saturates at the
     experiment's velocities; l1 holds its slope at v = 0).
 
-    ``cancel`` (a :class:`~eha_core.cancel.CancelToken`) reaches both
-    simulations (checked between integration chunks) and tfest (between SRIVC
-    iterations and residual evaluations), and is checked between the stages;
-    a set token raises :class:`~eha_core.cancel.Cancelled`.
     :meth:`FrequencyExperiment.cost` estimates the cost beforehand.
+
+    Parameters
+    ----------
+    params : ActuatorParams, optional
+        The actuator in the loop; defaults to the paper's parameters.
+    config : FrequencyExperiment, optional
+        The experiment; defaults to the paper's.
+    cancel : eha_core.cancel.CancelToken, optional
+        Reaches both simulations (checked between integration chunks) and tfest
+        (between SRIVC iterations and residual evaluations), and is checked
+        between the stages; a set token raises :class:`~eha_core.cancel.Cancelled`.
     """
     from .identify.backout import backout, open_loop_from_closed
     from .identify.spectral import data_frequency_response

@@ -52,6 +52,7 @@ class OperatingPoint:
         return np.array([self.x, self.v, self.p1, self.p2])
 
     def to_dict(self) -> dict[str, float]:
+        """The point as plain numbers by name (SI): x, v, p1, p2, u."""
         return {"x": self.x, "v": self.v, "p1": self.p1, "p2": self.p2, "u": self.u}
 
 
@@ -61,6 +62,15 @@ def operating_point(params: ActuatorParams, x_e: float = 0.0, p1_e: float | None
     Any position is an equilibrium when u = 0 and the forces balance, so the
     point is chosen: x_e = 0 (docs/model.md §3) and p1_e = the initial
     piston-chamber pressure p1_0 unless given; p2_e = (A1 p1_e - d0) / A2.
+
+    Parameters
+    ----------
+    params : ActuatorParams
+        The actuator.
+    x_e : float
+        The piston's position at the point [m], within the end stops.
+    p1_e : float, optional
+        The piston-chamber pressure at the point [Pa], within [pr, ps]; default ``params.p1_0``.
     """
     p1 = params.p1_0 if p1_e is None else float(p1_e)
     if abs(x_e) > params.x_max:
@@ -108,24 +118,27 @@ class LinearModel:
         return 2.0 * p.k_f * p.Af / math.pi
 
     def gain(self, branch: str = "positive") -> float:
-        """The numerator of P(s) (eq. 23) for a valve branch: l5 l2 + l6 l3."""
+        """The numerator of P(s) (eq. 23), l5 l2 + l6 l3, for the valve's ``branch`` (``'positive'``:
+        u >= 0, ``'negative'``: u < 0)."""
         return float(self.tf_coeffs(branch)[0][-1])
 
     def B(self, branch: str = "positive") -> np.ndarray:
-        """Input vector of a branch: 'positive' (u >= 0) or 'negative' (u < 0)."""
+        """Input vector of the valve's ``branch`` (``'positive'``: u >= 0, ``'negative'``: u < 0)."""
         _check_branch(branch)
         return (self.B_positive if branch == "positive" else self.B_negative).copy()
 
     # -- transfer functions as coefficient arrays (no python-control needed) --
     def tf_coeffs(self, branch: str = "positive") -> tuple[np.ndarray, np.ndarray]:
-        """P(s) = X(s)/U(s) (eq. 21) as (num, den), descending powers of s."""
+        """P(s) = X(s)/U(s) (eq. 21) as (num, den), descending powers of s, for the valve's
+        ``branch`` (``'positive'``: u >= 0, ``'negative'``: u < 0)."""
         _check_branch(branch)
         l1, l2, l3, l4, l5, l6 = self.lambdas if branch == "positive" else self.lambdas_negative
         gain = l5 * l2 + l6 * l3
         return np.array([gain]), np.array([1.0, l1, l2 * l4 + l3 * self.l4_rod, 0.0])
 
     def closed_loop_coeffs(self, kp: float, branch: str = "positive") -> tuple[np.ndarray, np.ndarray]:
-        """H(s) = Kp P / (1 + Kp P) (eq. 22) as (num, den)."""
+        """H(s) = Kp P / (1 + Kp P) (eq. 22) as (num, den), for the proportional gain ``kp`` [V/m] and
+        the valve's ``branch`` (``'positive'``: u >= 0, ``'negative'``: u < 0)."""
         kp = positive_number("kp", kp, "must be a finite gain > 0 V/m")
         num, den = self.tf_coeffs(branch)
         den = den.copy()
@@ -133,11 +146,12 @@ class LinearModel:
         return kp * num, den
 
     def poles(self, branch: str = "positive") -> np.ndarray:
-        """Poles of P(s)."""
+        """Poles of P(s) [rad/s] for the valve's ``branch`` (``'positive'``: u >= 0, ``'negative'``: u < 0)."""
         return np.roots(self.tf_coeffs(branch)[1])
 
     def closed_loop_poles(self, kp: float, branch: str = "positive") -> np.ndarray:
-        """Poles of H(s) for the proportional gain ``kp``."""
+        """Poles of H(s) [rad/s] for the proportional gain ``kp`` [V/m] and the valve's
+        ``branch`` (``'positive'``: u >= 0, ``'negative'``: u < 0)."""
         return np.roots(self.closed_loop_coeffs(kp, branch)[1])
 
     def packed(self) -> np.ndarray:
@@ -168,21 +182,24 @@ class LinearModel:
 
     # -- python-control interchange types --------------------------------------
     def tf(self, branch: str = "positive"):
-        """P(s) as a :class:`control.TransferFunction` (input u, output x)."""
+        """P(s) as a :class:`control.TransferFunction` (input u, output x), for the valve's
+        ``branch`` (``'positive'``: u >= 0, ``'negative'``: u < 0)."""
         import control
 
         num, den = self.tf_coeffs(branch)
         return control.tf(num, den, inputs="u", outputs="x")
 
     def closed_loop_tf(self, kp: float, branch: str = "positive"):
-        """H(s) as a :class:`control.TransferFunction` (input r, output x)."""
+        """H(s) as a :class:`control.TransferFunction` (input r, output x), for the proportional gain
+        ``kp`` [V/m] and the valve's ``branch`` (``'positive'``: u >= 0, ``'negative'``: u < 0)."""
         import control
 
         num, den = self.closed_loop_coeffs(kp, branch)
         return control.tf(num, den, inputs="r", outputs="x")
 
     def ss(self, branch: str = "positive"):
-        """The state-space model as a :class:`control.StateSpace`.
+        """The state-space model as a :class:`control.StateSpace`, for the valve's
+        ``branch`` (``'positive'``: u >= 0, ``'negative'``: u < 0).
 
         Inputs [u, d], outputs the four state deviations (C = I4, D = 0).
         """
@@ -200,6 +217,13 @@ def linearize(params: ActuatorParams, op: OperatingPoint | None = None) -> Linea
     The A matrix is the Jacobian of :func:`eha_core.model.derivatives` with
     respect to the state at ``op``; B is its one-sided derivative with respect
     to u on each side of u = 0.
+
+    Parameters
+    ----------
+    params : ActuatorParams
+        The actuator.
+    op : OperatingPoint, optional
+        The point linearised at; default :func:`operating_point`'s.
     """
     op = op if op is not None else operating_point(params)
     p = params

@@ -43,7 +43,8 @@ N_PACKED_PARAMS = len(PARAM_INDEX)
 
 
 def pack_params(params: ActuatorParams) -> np.ndarray:
-    """Pack the parameters (fields and derived A1, A2, x_max) into the float vector :func:`derivatives` reads."""
+    """Pack the parameters ``params`` (fields and derived A1, A2, x_max, SI) into the float vector
+    :func:`derivatives` reads, in the order of :data:`PARAM_INDEX`."""
     return np.array([getattr(params, name) for name in PACKED], dtype=np.float64)
 
 
@@ -124,6 +125,13 @@ def project_state(x, v, p1, p2, prm):
 
     Returns the state clipped to the end stops (an inelastic impact: the
     velocity towards the stop becomes zero) and to the pressure range [pr, ps].
+
+    Parameters
+    ----------
+    x, v, p1, p2 : float
+        Position [m], velocity [m/s], piston- and rod-chamber pressure [Pa].
+    prm : ndarray
+        Packed parameters, see :func:`pack_params`.
     """
     x_max = prm[12]
     ps = prm[9]
@@ -150,7 +158,16 @@ def project_state(x, v, p1, p2, prm):
 def rhs(state, u: float, d: float, params: ActuatorParams | np.ndarray) -> np.ndarray:
     """Vector form of :func:`derivatives` for analysis (interpreted, not for speed).
 
-    ``params`` is an :class:`~eha_core.params.ActuatorParams` or a packed vector.
+    Parameters
+    ----------
+    state : array of 4
+        The state [x, v, p1, p2] (m, m/s, Pa, Pa).
+    u : float
+        Valve command [V].
+    d : float
+        Load disturbance [N]; the constant part ``d0`` of the parameters is added.
+    params : ActuatorParams or ndarray
+        The parameters, or their packed vector (:func:`pack_params`).
     """
     prm = pack_params(params) if isinstance(params, ActuatorParams) else np.asarray(params, dtype=float)
     x, v, p1, p2 = (float(s) for s in state)

@@ -127,22 +127,23 @@ NON_NEGATIVE_FIELDS: tuple[str, ...] = tuple(sorted((n for n, f in FIELD_INFO.it
 # -- quantities derived from the fields ----------------------------------------------------------
 
 def piston_area(v: Values) -> float:
-    """Piston-side effective area ``A1 = pi Dc^2 / 4`` [m^2]."""
+    """Piston-side effective area ``A1 = pi Dc^2 / 4`` [m^2], from the SI values ``v`` by field name."""
     return math.pi * (v["Dc"] * v["Dc"]) / 4.0    # not **: a float overflows there with an exception
 
 
 def rod_area(v: Values) -> float:
-    """Rod-side effective area ``A2 = pi (Dc^2 - dc^2) / 4`` [m^2]."""
+    """Rod-side effective area ``A2 = pi (Dc^2 - dc^2) / 4`` [m^2], from the SI values ``v`` by field name."""
     return math.pi * (v["Dc"] * v["Dc"] - v["dc"] * v["dc"]) / 4.0
 
 
 def end_stop(v: Values) -> float:
-    """End stop ``x_max = 0.8 L0``: ``|x| <= x_max`` [m]."""
+    """End stop ``x_max = 0.8 L0``: ``|x| <= x_max`` [m], from the SI values ``v`` by field name."""
     return 0.8 * v["L0"]
 
 
 def force_balance(v: Values) -> float:
-    """The rod pressure that holds the piston still, ``(A1 p1_0 - d0) / A2`` (section II-A, eq. 10) [Pa]."""
+    """The rod pressure that holds the piston still, ``(A1 p1_0 - d0) / A2`` (section II-A, eq. 10) [Pa],
+    from the SI values ``v`` by field name."""
     return (piston_area(v) * v["p1_0"] - v["d0"]) / rod_area(v)
 
 
@@ -221,7 +222,7 @@ class Rule:
     core_value: str = ""
 
     def quantities(self, v: Values) -> dict[str, float | None]:
-        """The SI values with the derived quantities (those that can be computed here)."""
+        """The SI values ``v`` (by field name) with the derived quantities (those that can be computed here)."""
         out = dict(v)
         for name, derived in DERIVED.items():
             try:
@@ -231,13 +232,15 @@ class Rule:
         return out
 
     def refusal(self, v: Values) -> tuple[str, float | None, str]:
-        """``(field, value, what)`` of the core's message (in SI) for values that break the rule."""
+        """``(field, value, what)`` of the core's message (in SI) for values ``v`` (SI, by field name)
+        that break the rule."""
         q = self.quantities(v)
         field = self.core_field or self.fields[0]
         return field, q[self.core_value or field], self.core.format(**q)
 
     def sayings(self, v: Values) -> list[tuple[str, str]]:
-        """``(field, template)`` of the app's messages for values that break the rule, in order."""
+        """``(field, template)`` of the app's messages for values ``v`` (SI, by field name) that break
+        the rule, in order."""
         return [(s.field, s.template) for s in self.says if s.when is None or s.when(v)]
 
 

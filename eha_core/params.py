@@ -195,7 +195,8 @@ class ActuatorParams:
 
 
 def parse_param_assignments(items, base: ActuatorParams | None = None) -> ActuatorParams:
-    """Apply ``NAME=VALUE`` strings (the command line's ``--param``) to ``base``.
+    """Apply the ``NAME=VALUE`` strings of ``items`` (the command line's ``--param``, values in SI;
+    ``p2_0=none`` leaves p2(0) to the force balance) to ``base`` (default the paper's parameters).
 
     >>> parse_param_assignments(["M=5000", "p1_0=10e6"]).M
     5000.0

@@ -207,8 +207,16 @@ def reproduce(params: ActuatorParams | None = None, *, seed: int = 0,
               progress: Callable[[str], None] | None = None, cancel: CancelToken | None = None) -> Reproduction:
     """Compute everything the paper shows (see the module docstring).
 
-    ``progress(step)`` is called at the start of each of
-    :data:`REPRODUCTION_STEPS`.
+    Parameters
+    ----------
+    params : ActuatorParams, optional
+        The actuator; defaults to the paper's parameters.
+    seed : int
+        Seed of the least squares' noisy scenarios and of the frequency experiment's excitation.
+    progress : callable, optional
+        ``progress(step)`` is called at the start of each of :data:`REPRODUCTION_STEPS`.
+    cancel : eha_core.cancel.CancelToken, optional
+        Reaches every simulation and estimator; raises :class:`~eha_core.cancel.Cancelled` when set.
     """
     from .identify.backout import open_loop_from_closed
     from .identify.lse import identify_lse

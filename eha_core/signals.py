@@ -385,7 +385,7 @@ _KINDS = {
 
 
 def parse_signal(text, name: str = "signal", *, seed: int = 0, hold_s: float = 1e-3) -> Signal:
-    """Read a signal from its text form (:data:`SIGNAL_GRAMMAR`); a Signal is returned as is.
+    """Read a signal from its text form ``text`` (:data:`SIGNAL_GRAMMAR`); a Signal is returned as is.
 
     ``name`` is used in error messages (e.g. ``"--u"``); ``seed`` and
     ``hold_s`` are those of a noise term that gives none.

@@ -111,7 +111,15 @@ class SimulationResult:
         return pd.DataFrame(cols)
 
     def to_csv(self, path_or_buf=None, **kwargs):
-        """Write the CSV (header t,x,v,p1,p2,u,d[,r]); returns text when no path."""
+        """Write the CSV (header t,x,v,p1,p2,u,d[,r]); returns text when no path.
+
+        Parameters
+        ----------
+        path_or_buf : str, path or file-like, optional
+            Where to write, as for :meth:`pandas.DataFrame.to_csv`; None returns the text.
+        **kwargs
+            Passed on to :meth:`pandas.DataFrame.to_csv` (``float_format`` defaults to ``"%.10g"``).
+        """
         kwargs.setdefault("float_format", "%.10g")
         return self.to_pandas().to_csv(path_or_buf, index=False, **kwargs)
 
@@ -151,7 +159,13 @@ class RangeExcursion:
 
 
 def runs_to_pandas(results):
-    """Several runs as one long table: run, model, t, x, v, p1, p2, u, d (and r)."""
+    """Several runs as one long table: run, model, t, x, v, p1, p2, u, d (and r).
+
+    Parameters
+    ----------
+    results : iterable of SimulationResult
+        The runs; each one's ``label`` fills the column ``run``, its ``model`` the column ``model``.
+    """
     import pandas as pd
 
     frames = []
@@ -507,6 +521,7 @@ def simulate(params: ActuatorParams | None = None, u=None, d=None, *, t_end: flo
     t_end, dt : float
         Horizon and output interval [s]; the result has ``t_end/dt + 1`` samples.
     model : {'nonlinear', 'linear'}
+        The nonlinear model (eqs. 1-4) or the one linearised at ``op`` (eqs. 20-24).
     branch : {'switching', 'positive', 'negative'}
         Linear model only: switch l5, l6 with the sign of u (default, as the
         paper's Fig. 3), or keep one branch.
@@ -516,6 +531,8 @@ def simulate(params: ActuatorParams | None = None, u=None, d=None, *, t_end: flo
         Linearisation point (default :func:`eha_core.linear.operating_point`).
     h_max : float
         Largest integration step [s].
+    label : str
+        The run's name, kept in :attr:`SimulationResult.label`.
     cancel : eha_core.cancel.CancelToken, optional
         Checked between integration chunks; raises Cancelled when set.
     """
@@ -544,6 +561,7 @@ def simulate_many(params: ActuatorParams | Sequence[ActuatorParams] | None, us: 
     initial_states : sequence of arrays of 4, optional
         Each run's initial state.
     labels : sequence of str, optional
+        Each run's name (:attr:`SimulationResult.label`); default empty.
     cancel : eha_core.cancel.CancelToken, optional
         Checked between integration chunks; raises
         :class:`~eha_core.cancel.Cancelled` when set.
@@ -619,6 +637,8 @@ def simulate_closed_loop(params: ActuatorParams | None = None, r=None, *, kp: fl
 
     Parameters
     ----------
+    params : ActuatorParams, optional
+        Defaults to the paper's parameters.
     r : Signal, callable or array
         Reference position [m]. An array is taken as samples at ``ts`` held
         between samples (zero-order hold), as a digital reference would be;
@@ -629,10 +649,27 @@ def simulate_closed_loop(params: ActuatorParams | None = None, r=None, *, kp: fl
         Controller sample time [s] (``controller='zoh'``): the controller reads
         x at k ts and holds u until the next sample.
     controller : {'zoh', 'continuous'}
+        Sampled controller held between samples (default), or u computed continuously.
+    d : Signal, callable, number or array, optional
+        Load disturbance [N], as for :func:`simulate` (an array is one sample per output time); default 0.
+    t_end : float, optional
+        Horizon [s]; required unless ``r`` is an array of samples.
     dt : float, optional
-        Output interval, default ``ts``.
+        Output interval [s], default ``ts``; it and ``ts`` must be whole multiples of one another.
+    model : {'nonlinear', 'linear'}
+        The nonlinear model (eqs. 1-4) or the one linearised at ``op`` (eqs. 20-24).
+    branch : {'switching', 'positive', 'negative'}
+        Linear model only: the valve's branch, as for :func:`simulate`.
+    initial_state : array of 4, optional
+        Initial state [x, v, p1, p2] (SI units); defaults to the parameters' initial conditions.
+    op : OperatingPoint, optional
+        Linearisation point (default :func:`eha_core.linear.operating_point`).
     u_limit : float, optional
         Saturate the valve command to +-u_limit [V] (no limit by default).
+    h_max : float
+        Largest integration step [s].
+    label : str
+        The run's name, kept in :attr:`SimulationResult.label`.
     cancel : eha_core.cancel.CancelToken, optional
         Checked between integration chunks; raises Cancelled when set.
     """

@@ -524,7 +524,7 @@ class StudyResult:
         return np.array([s.std_errors[name] for s in self.seeds if s.usable(name)])
 
     def coverage_band(self, probability: float = 0.99) -> tuple[float, float]:
-        """:func:`coverage_band` for this study's successful seeds."""
+        """:func:`coverage_band` for this study's successful seeds, holding with ``probability``."""
         return coverage_band(max(self.n_successful, 1), probability=probability)
 
     def to_dict(self) -> dict:
@@ -860,8 +860,18 @@ def combine_studies(config: StudyConfig, parts, params: ActuatorParams | None = 
     A web server runs a long study as short jobs, so that other students'
     computations come between them; the combined result equals
     :func:`run_study` over all the seeds (seed k's estimate does not depend on
-    how the seeds were split). ``cancelled``: the study was stopped before
-    its last part.
+    how the seeds were split).
+
+    Parameters
+    ----------
+    config : StudyConfig
+        The whole study, as every part ran a seed range of it.
+    parts : sequence of StudyResult
+        The parts' results, in any order.
+    params : ActuatorParams, optional
+        The plant the parts simulated; default the paper's.
+    cancelled : bool
+        The study was stopped before its last part.
     """
     params = params if params is not None else ActuatorParams()
     plan = _plan(config, params)

@@ -730,6 +730,8 @@ class FrequencyResponseData:
 
     @classmethod
     def from_response(cls, w, response) -> FrequencyResponseData:
+        """The data of complex values ``response`` (``G(j w)``) at the frequencies ``w`` [rad/s]: their
+        magnitude in dB and phase in degrees, unwrapped along ``w``."""
         response = np.asarray(response, dtype=complex)
         with np.errstate(divide="ignore"):
             magnitude_db = 20.0 * np.log10(np.abs(response))

@@ -125,6 +125,15 @@ def chance_allowance(n_lags: int, false_alarm: float = 0.05, p: float = BAND_PRO
 
     The smallest ``k`` with ``P(Binomial(n_lags, p) > k) <= false_alarm``.
 
+    Parameters
+    ----------
+    n_lags : int
+        The lags tested.
+    false_alarm : float
+        The largest probability that a white, independent residual fails the test.
+    p : float
+        The probability that one lag lies outside the band by chance (0.01 for the 99 % band).
+
     Examples
     --------
     >>> chance_allowance(25), chance_allowance(51)

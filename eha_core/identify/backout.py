@@ -54,7 +54,20 @@ __all__ = ["open_loop_instability", "BackoutResult", "open_loop_from_closed", "b
 
 
 def open_loop_from_closed(num_h, den_h, kp: float) -> tuple[np.ndarray, np.ndarray]:
-    """P = N / (Kp (D - N)) for H = N / D (eq. 26), monic denominator."""
+    """P = N / (Kp (D - N)) for H = N / D (eq. 26), monic denominator.
+
+    Parameters
+    ----------
+    num_h, den_h : array_like
+        H_hat's numerator N and denominator D, descending powers of s (a proper H_hat).
+    kp : float
+        The proportional gain Kp of the loop [V/m].
+
+    Returns
+    -------
+    num_p, den_p : numpy.ndarray
+        P_hat's coefficients, the denominator monic.
+    """
     # coefficients are shown in messages as lists (a few numbers, as typed)
     num_h = np.atleast_1d(np.asarray(num_h, dtype=float))
     den_h = np.atleast_1d(np.asarray(den_h, dtype=float))
@@ -81,6 +94,13 @@ def open_loop_instability(num_h, den_h, kp: float) -> tuple[float, float] | None
     integrator (a pole at 0, eq. 21), so its loop has H(0) = 1 exactly; an
     estimate with H_hat(0) > 1 makes the constant term of 1 - H_hat negative and
     moves that pole into the right half-plane.
+
+    Parameters
+    ----------
+    num_h, den_h : array_like
+        H_hat's numerator and denominator, descending powers of s.
+    kp : float
+        The proportional gain Kp of the loop [V/m].
     """
     num_p, den_p = open_loop_from_closed(num_h, den_h, kp)
     poles = np.roots(den_p) if den_p.size > 1 else np.array([])
@@ -133,6 +153,8 @@ class BackoutResult:
         }
 
     def ci95(self) -> dict[str, tuple[float, float]]:
+        """95 % intervals (value +- 1.96 standard errors) of ``damping``, ``beta_e_from_gain`` and
+        ``beta_e_from_stiffness``; NaN bounds without the estimate's covariance."""
         out = {}
         for name in ("damping", "beta_e_from_gain", "beta_e_from_stiffness"):
             v, s = getattr(self, name), getattr(self, name + "_std")
@@ -140,6 +162,7 @@ class BackoutResult:
         return out
 
     def to_dict(self) -> dict:
+        """P_hat, the backed-out values, their errors and the known quantities as plain values (SI)."""
         return {
             "open_loop": {"num": list(self.num_p), "den": list(self.den_p)},
             "l1": self.l1,

@@ -30,7 +30,11 @@ MAX_FREQ_HZ = 500.0
 
 
 def parse_disturbance_model(text: str, name: str = "disturbance model") -> tuple[str, float | None]:
-    """``(model, frequency or None)`` from ``constant`` or ``harmonic[:FREQ_HZ]``; ValueError otherwise."""
+    """``(model, frequency or None)`` from ``constant`` or ``harmonic[:FREQ_HZ]``; ValueError otherwise.
+
+    ``text`` is the model as typed, its frequency in Hz, in (0, :data:`MAX_FREQ_HZ`); a refusal
+    names it ``name`` (an option such as ``--disturbance-model``).
+    """
     model, sep, freq_text = str(text).strip().partition(":")
     usage = "use constant or harmonic[:FREQ_HZ]"
     typed = str(text)                     # written as given (not stripped)

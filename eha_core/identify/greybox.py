@@ -140,7 +140,29 @@ def greybox_data(params: ActuatorParams, u: Signal | None = None, *, t_end: floa
                  noise: dict | None = None, seed: int = 0, measured=GREYBOX_SIGNALS) -> GreyBoxData:
     """A simulated record of the nonlinear plant ``params``: open loop under ``u``, or under the P
     controller (``r``, ``kp``, Ts = ``dt``); white noise of σ ``noise[signal]`` (SI) on the measured
-    signals, drawn from ``seed``."""
+    signals, drawn from ``seed``.
+
+    Parameters
+    ----------
+    params : ActuatorParams
+        The simulated actuator (the truth).
+    u : Signal, optional
+        Open loop: the valve command [V], sampled at the record's times and linear between them.
+    t_end, dt : float
+        The record's length and sample time [s] (``dt`` is also the controller's Ts).
+    d : Signal, optional
+        A known load force [N], kept in the record; none by default.
+    r : Signal, optional
+        Closed loop: the reference position [m]; give it or ``u``.
+    kp : float, optional
+        Closed loop: the controller's gain [V/m].
+    noise : dict of str to float, optional
+        σ of the white noise on each measured signal, SI units (m, m/s, Pa); none by default.
+    seed : int
+        Seed of the noise.
+    measured : iterable of str
+        The signals the record keeps, of :data:`GREYBOX_SIGNALS`.
+    """
     from ..signals import Sampled
     from ..simulate import simulate, simulate_closed_loop
 
@@ -191,6 +213,8 @@ class _Setup:
 
 
 def param_value(params: ActuatorParams, name: str) -> float:
+    """The value (SI) of the estimable parameter ``name`` of ``params``: a field, or p2(0) as the
+    initial state has it (a blank one follows from the force balance)."""
     return float(params.initial_state[_STATE_INDEX[name]]) if name == "p2_0" else float(getattr(params, name))
 
 
@@ -201,7 +225,24 @@ def simulate_with_sensitivities(params: ActuatorParams, names, data: GreyBoxData
     parameters ``names``: d/d log(θ) for the positive ones (``log``), d/d(θ / scale) for the others.
 
     ``initial``: a segment's own initial state (multiple shooting): the parameters then do not move it,
-    and four more columns hold the sensitivities to it, in :data:`STATE_SCALE` units."""
+    and four more columns hold the sensitivities to it, in :data:`STATE_SCALE` units.
+
+    Parameters
+    ----------
+    params : ActuatorParams
+        The parameters simulated with.
+    names : iterable of str
+        The parameters of the sensitivities, of :data:`GREYBOX_PARAMS`.
+    data : GreyBoxData
+        The record: its times, input and load.
+    log : iterable of bool, optional
+        Per parameter: sensitivity to its logarithm (True) or to its multiple of
+        :data:`LINEAR_SCALE` (False); default True for all but those of :data:`LINEAR_SCALE`.
+    initial : array of 4, optional
+        The initial state [x, v, p1, p2] (SI) of a segment; default that of ``params``.
+    cancel : eha_core.cancel.CancelToken, optional
+        Checked before the integration.
+    """
     from .. import _kernels as K
 
     names = tuple(names)
@@ -268,8 +309,8 @@ def _inputs(data: GreyBoxData):
 
 
 def noise_guess(y: np.ndarray) -> float:
-    """σ of white noise on a smooth signal: its second differences' spread (the signal's own
-    curvature at 1 kHz is far below the noise), robustly (median absolute deviation)."""
+    """σ of white noise on a smooth signal ``y`` (in its own unit): its second differences' spread (the
+    signal's own curvature at 1 kHz is far below the noise), robustly (median absolute deviation)."""
     d2 = np.diff(y, 2)
     mad = np.median(np.abs(d2 - np.median(d2))) * 1.4826
     return float(mad / math.sqrt(6.0)) if mad > 0 else float(np.std(y) * 1e-3 + 1e-30)
@@ -282,7 +323,8 @@ def identifiability(J: np.ndarray, names, *, v_max: float | None = None, k_f: fl
     """What the data cannot determine, from the scaled, weighted Jacobian ``J`` (residuals in units of
     their noise σ, parameters in log or scale units): each singular direction whose standard error
     exceeds ``threshold`` (1: a change by a factor e, or by one scale, within one standard error), as
-    ``(the parameters in it, a sentence)``. ``v_max`` (the record's largest |v|, m/s), ``k_f`` and
+    ``(the parameters in it, a sentence)``. ``names`` are the parameters of ``J``'s columns, in order.
+    ``v_max`` (the record's largest |v|, m/s), ``k_f`` (the friction law's slope, s/m) and
     ``pressures`` (are pressures measured?) let the sentence say why.
 
     >>> J = np.array([[1.0, 1.0], [2.0, 2.0], [0.5, 0.5]]) * 1e3      # two columns that move together
@@ -357,6 +399,7 @@ class GreyBoxResult:
     extras: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
+        """The estimate, its statistics and fits as plain JSON-able values."""
         return {"estimates": dict(self.estimates), "std_errors": dict(self.std_errors),
                 "ci95": {k: list(v) for k, v in self.ci95.items()},
                 "correlation": {a: {b: float(self.correlation[i, j]) for j, b in enumerate(self.names)}
@@ -397,11 +440,31 @@ def identify_greybox(data: GreyBoxData, params=("M", "B", "Af", "beta_e"), *, me
                      cancel: CancelToken | None = None) -> GreyBoxResult:
     """Estimate ``params`` of the nonlinear model from ``data`` (output error; see the module).
 
-    ``measured``: the signals compared (default: every signal of the record); ``guess``: the initial
-    values and the values of everything not estimated (default: the paper's). ``shooting="multiple"``:
-    first multiple shooting over ``segments`` pieces of the record (default: one per second, at least
-    2), for a poor initial guess or a long record, then output error from where it ended (the
-    estimate and its statistics are output error's)."""
+    Parameters
+    ----------
+    data : GreyBoxData
+        The record.
+    params : iterable of str
+        The parameters estimated, of :data:`GREYBOX_PARAMS`.
+    measured : iterable of str, optional
+        The signals compared; default every signal of the record.
+    guess : ActuatorParams, optional
+        The initial values and the values of everything not estimated; default the paper's.
+    shooting : {'single', 'multiple'}
+        ``"multiple"``: first multiple shooting over ``segments`` pieces of the record, for a
+        poor initial guess or a long record, then output error from where it ended (the
+        estimate and its statistics are output error's).
+    segments : int, optional
+        Pieces of multiple shooting, at least 2 and 20 samples each; default one per second.
+    max_nfev : int
+        Most model evaluations of each Levenberg-Marquardt run
+        (:func:`scipy.optimize.least_squares`'s ``max_nfev``).
+    hold_unidentifiable : bool
+        Hold at the guess the parameters the data do not determine there (:func:`identifiability`),
+        and say so in the result; False estimates them all.
+    cancel : eha_core.cancel.CancelToken, optional
+        Checked before every simulation of the model; raises :class:`~eha_core.cancel.Cancelled` when set.
+    """
     t_start = time.perf_counter()
     names = tuple(params)
     measured = tuple(measured) if measured is not None else tuple(s for s in GREYBOX_SIGNALS if s in data.signals)

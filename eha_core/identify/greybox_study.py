@@ -108,7 +108,19 @@ class GreyBoxStudyConfig:
 def snr_noise(params: ActuatorParams, snr_db: float, measured, *, t_end: float = 5.0,
               dt: float = 1e-3) -> dict[str, float]:
     """σ of white noise ``snr_db`` below each measured signal of the experiment: the clean signal's
-    standard deviation / 10^(snr_db / 20) (SI)."""
+    standard deviation / 10^(snr_db / 20) (SI).
+
+    Parameters
+    ----------
+    params : ActuatorParams
+        The simulated plant.
+    snr_db : float
+        The signal-to-noise ratio [dB].
+    measured : iterable of str
+        The measured signals, of x, v, p1, p2.
+    t_end, dt : float
+        The record's length and sample time [s].
+    """
     from ..experiments import LSE_INPUT
 
     clean = greybox_data(params, LSE_INPUT, t_end=t_end, dt=dt, d=LOAD, measured=tuple(measured))
@@ -117,8 +129,8 @@ def snr_noise(params: ActuatorParams, snr_db: float, measured, *, t_end: float =
 
 def cramer_rao(J: np.ndarray) -> np.ndarray:
     """sqrt(diag((JᵀJ)⁻¹)): the smallest standard deviation of an unbiased estimate of each column's
-    parameter, with J the Jacobian of residuals in units of their noise σ (Gaussian white noise:
-    JᵀJ is the Fisher information)."""
+    parameter, with ``J`` the Jacobian of residuals in units of their noise σ (Gaussian white noise:
+    JᵀJ is the Fisher information), one column per parameter, in the parameters' own units."""
     J = np.asarray(J, dtype=float)
     return np.sqrt(np.diag(np.linalg.inv(J.T @ J)))
 
@@ -169,6 +181,7 @@ class GreyBoxStudyResult:
         return self.elapsed_s / max(self.n_completed + self.n_failed, 1)
 
     def to_dict(self) -> dict:
+        """The statistics, settings and estimates as JSON-able values (NaN written as null)."""
         cfg = self.config
         return _json_safe({
             "coverage": self.coverage, "mean": self.mean, "std": self.std, "crb": self.crb, "bias_se": self.bias_se,
@@ -197,7 +210,18 @@ def run_greybox_study(config: GreyBoxStudyConfig | None = None, *, workers: int 
                       progress: Callable[[int, int], object] | None = None,
                       cancel: CancelToken | None = None) -> GreyBoxStudyResult:
     """Run the study (seeds on ``workers`` threads: the simulator's kernel releases the GIL).
-    ``cancel`` stops it after the seeds under way; the result then holds the seeds completed."""
+
+    Parameters
+    ----------
+    config : GreyBoxStudyConfig, optional
+        The study; default :class:`GreyBoxStudyConfig`'s.
+    workers : int
+        Threads the seeds run on.
+    progress : callable, optional
+        ``progress(done, n_seeds)`` after each seed.
+    cancel : eha_core.cancel.CancelToken, optional
+        Stops the study after the seeds under way; the result then holds the seeds completed.
+    """
     config = config or GreyBoxStudyConfig()
     truth = config.plant
     guess = config.guess if config.guess is not None else ActuatorParams()
@@ -235,7 +259,21 @@ def run_greybox_study(config: GreyBoxStudyConfig | None = None, *, workers: int 
 def greybox_seed(config: GreyBoxStudyConfig, truth: ActuatorParams, guess: ActuatorParams, noise: dict, seed: int,
                  cancel: CancelToken | None = None):
     """One seed of the study: the record of ``truth`` with the noise drawn from ``seed``, estimated from
-    ``guess`` (a :class:`~eha_core.identify.greybox.GreyBoxResult`)."""
+    ``guess`` (a :class:`~eha_core.identify.greybox.GreyBoxResult`).
+
+    Parameters
+    ----------
+    config : GreyBoxStudyConfig
+        The experiment and the parameters estimated.
+    truth, guess : ActuatorParams
+        The simulated plant, and the estimate's initial guess.
+    noise : dict of str to float
+        σ of the white noise per measured signal (SI), e.g. :func:`snr_noise`'s.
+    seed : int
+        Seed of the noise.
+    cancel : eha_core.cancel.CancelToken, optional
+        Reaches the estimator.
+    """
     from ..experiments import LSE_INPUT
 
     data = greybox_data(truth, LSE_INPUT, t_end=config.t_end, dt=config.dt, d=LOAD, noise=noise, seed=seed,
@@ -256,7 +294,23 @@ def study_setup(config: GreyBoxStudyConfig, truth: ActuatorParams):
 def bound_with_held(crb: dict, truth: ActuatorParams, names, clean, noise: dict, held_per_seed) -> dict:
     """The bound the seeds are measured against: a parameter the estimator held (at its guess) in most
     seeds is known to the rest of the estimate, so their bound is the one with it known (narrower when it
-    is correlated with them); its own stays that of them all."""
+    is correlated with them); its own stays that of them all.
+
+    Parameters
+    ----------
+    crb : dict of str to float
+        The Cramér-Rao bound (SI) with every parameter free (:func:`study_setup`).
+    truth : ActuatorParams
+        The simulated plant.
+    names : iterable of str
+        The parameters estimated.
+    clean : GreyBoxData
+        The noise-free record.
+    noise : dict of str to float
+        σ of the white noise per measured signal (SI).
+    held_per_seed : iterable of iterable of str
+        The parameters the estimator held, per completed seed.
+    """
     held_per_seed = list(held_per_seed)
     held = {n for n in names if 2 * sum(n in h for h in held_per_seed) > len(held_per_seed)}
     free = tuple(n for n in names if n not in held)

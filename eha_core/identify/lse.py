@@ -153,11 +153,16 @@ class MeasuredData:
 
     @classmethod
     def from_simulation(cls, res, source: str = "simulation") -> MeasuredData:
+        """The sensors of a simulated run ``res`` (a :class:`~eha_core.simulate.SimulationResult`),
+        noise-free; ``source`` says where they come from."""
         return cls(res.t, res.x, res.v, res.p1, res.p2, res.u, source=source)
 
     @classmethod
     def from_table(cls, table, source: str = "table") -> MeasuredData:
-        """From a pandas DataFrame or a mapping with columns t, x, v, p1, p2, u."""
+        """From a pandas DataFrame or a mapping with columns t, x, v, p1, p2, u.
+
+        ``table`` holds the columns in SI units; ``source`` says where they come from.
+        """
         missing = [c for c in ("t", "x", "v", "p1", "p2", "u") if c not in table]
         if missing:
             have = ", ".join(str(c) for c in table) or "none"
@@ -168,7 +173,11 @@ class MeasuredData:
     @classmethod
     def from_csv(cls, path, *, name: str = "--data") -> MeasuredData:
         """From a CSV file with columns t, x, v, p1, p2, u (SI units), read by
-        :func:`eha_core.data.read_columns` (a bad cell is named by column and row)."""
+        :func:`eha_core.data.read_columns` (a bad cell is named by column and row).
+
+        ``path`` is the file's name or an open file; a refusal names it ``name`` (the option
+        or form field that gave it).
+        """
         from ..data import read_columns, sample_time
 
         cols = read_columns(path, ("t", "x", "v", "p1", "p2", "u"), name=name, min_rows=_MIN_ROWS)
@@ -176,7 +185,16 @@ class MeasuredData:
         return cls(*(cols[c] for c in ("t", "x", "v", "p1", "p2", "u")), source=str(path))
 
     def with_noise(self, sigmas: dict[str, float], seed: int = 0) -> MeasuredData:
-        """Add white Gaussian measurement noise per sensor, e.g. {'v': 1e-4, 'p1': 1e4}."""
+        """Add white Gaussian measurement noise per sensor, e.g. {'v': 1e-4, 'p1': 1e4}.
+
+        Parameters
+        ----------
+        sigmas : dict of str to float
+            Standard deviation per sensor (x, v, p1, p2), in the sensor's SI unit (m, m/s, Pa);
+            a sensor not named stays noise-free.
+        seed : int
+            Seed of the noise (:func:`numpy.random.default_rng`).
+        """
         rng = np.random.default_rng(seed)
         cols = {n: getattr(self, n) for n in ("x", "v", "p1", "p2")}
         for name, sigma in sigmas.items():
@@ -194,6 +212,15 @@ def prefilter(y: np.ndarray, ts: float, tau_f: float) -> tuple[np.ndarray, np.nd
 
     H is discretised exactly for y linear between samples and starts in steady
     state at y[0]; (s H)[y] = (y - H[y]) / tau_f is the exact derivative filter.
+
+    Parameters
+    ----------
+    y : array
+        The signal, uniformly sampled.
+    ts : float
+        Sample interval [s].
+    tau_f : float
+        Prefilter time constant [s].
     """
     a = math.exp(-ts / tau_f)
     c = tau_f / ts * (1.0 - a)
@@ -269,6 +296,7 @@ class LSEResult:
         return base.replace(**changes)
 
     def to_dict(self) -> dict:
+        """The estimates, their errors and the settings as plain JSON-able values (SI)."""
         return {
             "estimates": self.estimates, "std_errors": self.std_errors,
             "std_errors_textbook": self.std_errors_textbook,
@@ -569,6 +597,8 @@ def _iv(p, data, names, theta1, theta2, freq, upsample, tau_f, keep, exogenous, 
 def default_cosine_terms(n_samples: int, ts: float, tau_f: float) -> int:
     """Cosines of the EWC intervals by default: those below a tenth of the prefilter's corner frequency.
 
+    ``n_samples`` are the samples fitted, ``ts`` their interval [s], ``tau_f``
+    the prefilter's time constant [s]; the terms are
     ``n_samples ts / (10 pi tau_f)`` (15 for the default 5 s record, tau_f =
     0.01 s), at least :data:`MIN_COSINE_TERMS`. The cosines cover frequencies
     up to ``terms / (2 n ts)``, 1.6 Hz here: the score ``q_t e_t`` must have a
@@ -629,8 +659,10 @@ def identify_lse(data: MeasuredData, params: ActuatorParams | None = None, *, ta
     tau_f : float
         Prefilter time constant [s] (eq. 17; the paper's 0.01).
     disturbance_model : {'constant', 'harmonic'}
+        The load disturbance's model: d = d0 (the paper's), or d0 plus a
+        sinusoid ``d_sin sin(2 pi f t) + d_cos cos(2 pi f t)``.
     disturbance_freq_hz : float, optional
-        Frequency of the harmonic disturbance; estimated from the data when None.
+        Frequency f of the harmonic disturbance [Hz]; estimated from the data when None.
     skip_s : float, optional
         Initial stretch left out of the fit, default 5 tau_f (filter start-up).
     hac_lags : int, optional

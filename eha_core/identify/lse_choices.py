@@ -40,8 +40,14 @@ def checked_choices(estimator, intervals=None, *, name: str = "estimator",
                     intervals_name: str = "intervals") -> tuple[str, str]:
     """``(estimator, intervals)`` checked, ``intervals`` the estimator's default when None.
 
-    ``name`` and ``intervals_name`` are what the refusals call the two (an
-    argument, or an option such as ``--estimator``).
+    Parameters
+    ----------
+    estimator : str
+        One of :data:`ESTIMATORS`.
+    intervals : str, optional
+        One of :data:`INTERVALS`; default the estimator's (:data:`DEFAULT_INTERVALS`).
+    name, intervals_name : str
+        What the refusals call the two (an argument, or an option such as ``--estimator``).
     """
     if not isinstance(estimator, str) or estimator not in ESTIMATORS:
         raise not_allowed(name, estimator, "use ls (the paper's least squares) or iv (instrumental variables)")

@@ -139,7 +139,8 @@ def _tolerance(res, name: str, nominal: float | None) -> float:
 
 
 def read_estimate(res, name: str, *, known: bool = True) -> EstimateReading:
-    """The reading of ``res.estimates[name]`` (``res`` an :class:`~eha_core.identify.lse.LSEResult`).
+    """The reading of ``res.estimates[name]`` (``res`` an :class:`~eha_core.identify.lse.LSEResult`,
+    ``name`` one of its estimates: M, B, Af, d0, d_sin, d_cos or beta_e).
 
     In order: *impossible* when the estimate breaks the parameter's physical
     bound (M, β_e > 0; B, Af >= 0); *exact* when the interval has collapsed
@@ -147,7 +148,7 @@ def read_estimate(res, name: str, *, known: bool = True) -> EstimateReading:
     nominal value within it; *undetermined* when the interval is wider than
     the estimate (for M, B, Af, β_e: the data do not determine it); then
     *covers* or *misses* against the nominal value, or *estimated* when there
-    is none. ``known=False`` reads without the nominal value (a student's own
+    is none. ``known`` False reads without the nominal value (a student's own
     record, an exercise's hidden parameter): the truth never shapes the
     reading.
     """

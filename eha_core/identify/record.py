@@ -112,6 +112,20 @@ def prepare_record(t, u, y, *, detrend: str = "none", t_from=None, t_to=None,
     Raises ValueError naming ``from t`` / ``to t`` (as the app's fields are
     called) when a time is not a number, lies outside the record, or leaves
     fewer than :data:`MIN_RECORD_SAMPLES` samples.
+
+    Parameters
+    ----------
+    t : array_like
+        Sample times [s], uniformly spaced.
+    u, y : array_like
+        Input and output samples, one per time (for the paper's closed loop: r and x [m]).
+    detrend : {'none', 'mean', 'linear'}
+        What is removed from u and y over the chosen range: nothing, the mean or a straight line.
+    t_from, t_to : float or str, optional
+        The range kept [s] (a comma as decimal mark is accepted); None or blank: the record's
+        start or end.
+    validation_fraction : float
+        The share of the prepared record, at its end, kept to validate, in [0, 0.9).
     """
     from ..data import sample_time
 
@@ -141,8 +155,30 @@ def identify_record(t, u, y, *, n_poles: int = 3, n_zeros: int = 0, initial_cond
     """Estimate H(s) = Y(s)/U(s) from a record and validate it on the record's last part.
 
     The record is first prepared by :func:`prepare_record` (time range, trend).
-    ``input_delay``: the model's dead time in seconds, or ``"estimate"`` (see
-    :func:`~eha_core.identify.tfest.tfest`); a measured actuator often has one.
+
+    Parameters
+    ----------
+    t : array_like
+        Sample times [s], uniformly spaced.
+    u, y : array_like
+        Input and output samples, one per time (for the paper's closed loop: r and x [m]).
+    detrend : {'none', 'mean', 'linear'}
+        What is removed from u and y over the chosen range: nothing, the mean or a straight line.
+    t_from, t_to : float or str, optional
+        The range kept [s] (a comma as decimal mark is accepted); None or blank: the record's
+        start or end.
+    validation_fraction : float
+        The share of the prepared record, at its end, kept to validate, in [0, 0.9).
+    n_poles, n_zeros : int
+        The model's orders, as for :func:`~eha_core.identify.tfest.tfest`.
+    initial_condition, input_offset : {'estimate', 'zero'}
+        Estimate the initial state and a constant input offset with the model, or not
+        (:func:`~eha_core.identify.tfest.tfest`); the validation estimates its own initial state.
+    input_delay : float or 'estimate'
+        The model's dead time [s], or ``"estimate"`` (see :func:`~eha_core.identify.tfest.tfest`);
+        a measured actuator often has one.
+    cancel : eha_core.cancel.CancelToken, optional
+        Reaches the estimator.
     """
     from .spectral import data_frequency_response
     from .tfest import tfest

@@ -153,6 +153,7 @@ class StepComparison:
         return tuple(r.name for r in self.responses)
 
     def response(self, name: str) -> StepResponse:
+        """The response of the model called ``name``; a refusal naming the others when there is none."""
         for r in self.responses:
             if r.name == name:
                 return r
@@ -317,6 +318,7 @@ def step_response(model, t=None, *, amplitude=1.0, name="model", dt=None, input_
     Parameters
     ----------
     model : (num, den), TFEstimate or control.TransferFunction
+        The transfer function, coefficients in descending powers of s.
     t : array_like, optional
         Uniform time grid from 0 [s]. Default: :func:`default_step_horizon`
         with ``dt`` (default: 1/1000 of the horizon).
@@ -324,6 +326,7 @@ def step_response(model, t=None, *, amplitude=1.0, name="model", dt=None, input_
         Step height (e.g. metres of reference); ``y`` is scaled by it, the
         figures are those of the unit step (steady state = the DC gain).
     name : str
+        The response's name, as a figure's legend shows it.
     dt : float, optional
         Step of the default grid [s] (ignored when ``t`` is given).
     input_delay : float, optional
@@ -399,7 +402,9 @@ def nonlinear_step_response(params=None, *, amplitude_m=0.01, t_end_s=20.0, dt_s
     kp, ts, controller
         As for :func:`~eha_core.simulate.simulate_closed_loop`.
     name : str
+        The response's name (the run's label).
     cancel : eha_core.cancel.CancelToken, optional
+        Checked between integration chunks; raises :class:`~eha_core.cancel.Cancelled` when set.
 
     Returns
     -------

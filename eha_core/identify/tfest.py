@@ -421,6 +421,7 @@ def oe_fit(u, y, ts, num0, den0, *, initial_condition="zero", input_offset="zero
     num0, den0 : array_like
         Start model, descending powers of s.
     initial_condition : {"zero", "estimate"}
+        Start at rest, or estimate the initial state with the coefficients, see :func:`tfest`.
     input_offset : {"zero", "estimate"}
         Estimate a constant input offset ``c`` (``y = G(s) (u + c)``), see
         :func:`tfest`.

@@ -497,6 +497,7 @@ def pole_zero_regions(estimate, *, level=0.95, monte_carlo=False, n_draws=500, s
     max_relative_size : float
         Flag a root whose region's half-width exceeds this fraction of ``|r|``.
     name : str
+        The model's name, kept in the map.
 
     Returns
     -------
@@ -569,6 +570,15 @@ def reference_roots(num, den, *, ts=None, name="reference") -> PoleZeroMap:
     such data cannot show it. The linearised closed loop of eq. 24 at the
     paper's Ts = 0.01 s has one such pole.
 
+    Parameters
+    ----------
+    num, den : array_like
+        The model's numerator and denominator coefficients, highest power of s first.
+    ts : float, optional
+        Sampling time [s] of the data it is compared with; None: no root is flagged.
+    name : str
+        The model's name, kept in the map.
+
     Examples
     --------
     >>> pz = reference_roots([2437.0], [1.0, 430.1, 1.721e4, 2437.0], ts=0.01, name="eq. 24")
@@ -618,10 +628,13 @@ def bode_band(estimate, w, *, level=0.95, n_draws=400, seed=0) -> BodeBand:
     Parameters
     ----------
     estimate : TFEstimate
+        An estimate with a covariance of its coefficients (and possibly an input delay).
     w : array_like
         Frequencies [rad/s].
     level : float
+        Confidence level of the band, in (0, 1).
     n_draws, seed : int
+        Coefficient vectors drawn, and the seed of the draws.
 
     Returns
     -------

@@ -84,6 +84,15 @@ def fit_conditions(initial_condition, input_offset) -> str:
     model board, Figs. 11 and 13 and the estimates of Ĥ(s) by default); a
     number computed otherwise says so.
 
+    Parameters
+    ----------
+    initial_condition : {'estimate', 'zero'}, None or array
+        As given to :func:`compare`: fitted, at rest (``"zero"`` or None), or a given initial state.
+    input_offset : {'estimate', 'zero'}, None or float
+        As given to :func:`compare`: fitted, none (``"zero"`` or None), or a given offset.
+
+    Examples
+    --------
     >>> fit_conditions("estimate", "estimate")
     'initial state and input offset fitted'
     >>> fit_conditions("zero", None)
