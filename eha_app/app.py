@@ -357,7 +357,7 @@ def serve_session() -> None:
     """Make this browser session's page (the server runs :mod:`eha_app.eha` for every session)."""
     from bokeh.models import CustomJS
 
-    from .runtime.patches import CONTROLS_BEFORE_RENDER_JS, VIEW_CLASS_JS, strict_mode_on, strict_page_changes
+    from .runtime.patches import CONTROLS_BEFORE_RENDER_JS, VIEW_CLASS_JS, apply_patches, strict_mode_on, usable
     from .runtime.redaction import redact_server_logs
     from .runtime.serving import quiet_closed_websockets, use_local_resources
     from .runtime.tasks import note_loop_thread
@@ -366,7 +366,7 @@ def serve_session() -> None:
     redact_server_logs()
     note_loop_thread()
     if strict_mode_on():
-        strict_page_changes()
+        apply_patches(("strict",))
     warm_up()
     quiet_closed_websockets()
     use_local_resources(pn.state.curdoc)
@@ -383,8 +383,9 @@ def serve_session() -> None:
     shell = pn.Column(sizing_mode="stretch_width", css_classes=["eha-page"])
     shell.servable(title="EHA: modeling and identification", location=False)
     # before any widget of the page is built in the browser (see patches.CONTROLS_BEFORE_RENDER_JS)
-    pn.state.curdoc.js_on_event("document_ready", CustomJS(code=VIEW_CLASS_JS + CONTROLS_BEFORE_RENDER_JS
-                                                           + "ehaControlsBeforeRender();"))
+    if usable("controls_before_render"):
+        pn.state.curdoc.js_on_event("document_ready", CustomJS(code=VIEW_CLASS_JS + CONTROLS_BEFORE_RENDER_JS
+                                                               + "ehaControlsBeforeRender();"))
 
     def build() -> None:
         shell.objects = [create_app(query=query).layout]

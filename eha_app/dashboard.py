@@ -463,7 +463,7 @@ def serve_dashboard() -> None:
     """Make this session's dashboard (the server runs :mod:`eha_app.teacher` for every teacher's page)."""
     from .app import _log_to_stderr, current_exercise
     from .runtime.connection import ConnectionWatch
-    from .runtime.patches import strict_mode_on, strict_page_changes
+    from .runtime.patches import apply_patches, strict_mode_on
     from .runtime.redaction import redact_server_logs
     from .runtime.serving import quiet_closed_websockets, use_local_resources
     from .runtime.tasks import note_loop_thread
@@ -472,7 +472,7 @@ def serve_dashboard() -> None:
     redact_server_logs()
     note_loop_thread()
     if strict_mode_on():
-        strict_page_changes()
+        apply_patches(("strict",))
     quiet_closed_websockets()
     use_local_resources(pn.state.curdoc)
     pn.config.browser_info = False

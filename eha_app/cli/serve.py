@@ -203,35 +203,22 @@ def run(args) -> int:
 def _serve_here(args, argv: list[str]) -> int:
     """Serve in this process (one of ``--num-procs`` when ``--share-port``) with Panel's command line
     ``argv``, the server's changes of its libraries installed first."""
-    if args.share_port:
-        from eha_app.runtime.patches import bind_port_shared
-
-        bind_port_shared()
     from eha_app.app import warm_up
-    from eha_app.runtime.patches import (
-        cache_stable_defaults,
-        collect_often,
-        fast_themed_values,
-        give_way_on_messages,
-        guard_paths,
-        lazy_container_defaults,
-        notice_disconnects,
-        refuse_foreign_components,
-        settle_settings,
-        tune_garbage_collector,
-        websocket_nodelay,
-    )
-    from eha_app.runtime.serving import first_answer, refuse_oversized, run_panel_serve
+    from eha_app.runtime.patches import AFTER_LOAD_PATCHES, SERVER_PATCHES, apply_patches, guard_paths
+    from eha_app.runtime.serving import first_answer, refuse_oversized
     from eha_app.runtime.teacher_access import route, watch_token
 
-    cache_stable_defaults()     # every page's models built and serialised a quarter faster
-    fast_themed_values()        # ... and without an AttributeError raised at every read of a default
-    settle_settings()           # ... and without Bokeh's settings resolved again for every model
-    lazy_container_defaults()   # ... and without 14,000 empty lists and dicts made per page only to be looked into
-    notice_disconnects()        # a closed page's runs stop at once, not when its session is discarded
-    websocket_nodelay()         # a message's frames sent at once, not each after the browser's ACK of the last
-    give_way_on_messages()      # a study computing beside waits from a page's message on
-    refuse_foreign_components()
+    # the libraries' internals this server changes, each checked against the installed versions and
+    # what it replaces (eha_app/runtime/patches.py); one line says which were applied
+    status = apply_patches(("shared_port",) if args.share_port else ())
+    if args.share_port and status["shared_port"] != "applied":
+        return _refuse("--num-procs above 1 needs the shared_port patch, which does not fit this Bokeh: "
+                       "serve with --num-procs 1, or install bokeh 3.9")
+    status.update(apply_patches(SERVER_PATCHES))
+    unsafe = [n for n in ("component_guard", "teacher_routes") if status[n] != "applied"]
+    if unsafe:
+        return _refuse(f"the {' and '.join(unsafe)} check cannot be installed on this Panel/Bokeh: the server "
+                       "would not be safe to open to a class (see the warning above); install panel 1.9 and bokeh 3.9")
     # an address too long to serve gets 414 (not a closed connection), before anything else reads it;
     # then /teacher answers the teacher only (and 404 without an exercise)
     guard_paths(first_answer(refuse_oversized, route))
@@ -239,10 +226,30 @@ def _serve_here(args, argv: list[str]) -> int:
         watch_token()           # the dashboard's token read off the event loop, from now on
     sys.argv = argv + _oauth_argv(args)
     warm_up()                   # the kernels and the identification code loaded before the first page
-    tune_garbage_collector()    # what is loaded so far frozen, and what outlives each full collection
-    collect_often()             # ... and a full collection three times as often, a third as long
+    # what is loaded so far frozen out of the collector's sight, and full collections small and often
+    status.update(apply_patches(AFTER_LOAD_PATCHES))
+    _say_patches(status)
     # Panel's `panel serve`, its server putting the security headers on every answer (serving.py)
+    from eha_app.runtime.serving import run_panel_serve
+
     return run_panel_serve(sys.argv)
+
+
+def _say_patches(status: dict[str, str]) -> None:
+    """One line on stderr: the library patches applied (and how many were not; a warning each above)."""
+    from eha_app.runtime.patches import usable
+
+    for name in ("lock_check", "lazy_freeze", "loop_has_work", "layout_once", "controls_before_render"):
+        status.setdefault(name, "applied" if usable(name) else "not applied")
+    applied = [n for n, s in status.items() if s == "applied"]
+    others = [n for n, s in status.items() if s != "applied"]
+    print(f"eha serve: library patches applied: {', '.join(applied) or 'none'}"
+          + (f"; not applied: {', '.join(others)}" if others else ""), file=sys.stderr, flush=True)
+
+
+def _refuse(message: str) -> int:
+    print(f"eha serve: {message}", file=sys.stderr)
+    return 2
 
 
 def _compile_kernels(num_procs: int) -> None:

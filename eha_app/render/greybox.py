@@ -231,12 +231,12 @@ class GreyBoxFigure:
         figs = []
         x_range = None
         names = list(measured)
+        self.names = tuple(names)
+        self.sources = {}
         share = width // 2 if len(names) > 1 else width
         for k, s in enumerate(names):
             title, label, scale = SIGNAL_DISPLAY[s]
-            td, ym, ys = decimate(np.asarray(t), np.asarray(measured[s]) * scale,
-                                  np.asarray(simulated[:, _STATE_COLUMN[s]]) * scale)
-            src = ColumnDataSource(data={"t": _f32(td), "m": _f32(ym), "s": _f32(ys)})
+            src = self.sources[s] = ColumnDataSource(data=self._columns(t, measured, simulated, s))
             kw = {"x_range": x_range} if x_range is not None else {}
             fig = _figure(width=share, height=height, x_axis_label="t [s]", y_axis_label=label, title=title, **kw)
             x_range = fig.x_range
@@ -250,3 +250,19 @@ class GreyBoxFigure:
         self.figures = figs
         self.layout = gridplot(figs, ncols=2 if len(figs) > 1 else 1, sizing_mode="stretch_width",
                                toolbar_location="right", merge_tools=True)
+
+    @staticmethod
+    def _columns(t, measured: dict, simulated, s: str) -> dict:
+        scale = SIGNAL_DISPLAY[s][2]
+        td, ym, ys = decimate(np.asarray(t), np.asarray(measured[s]) * scale,
+                              np.asarray(simulated[:, _STATE_COLUMN[s]]) * scale)
+        return {"t": _f32(td), "m": _f32(ym), "s": _f32(ys)}
+
+    def update(self, t, measured: dict, simulated) -> bool:
+        """Show another run in the same figures (new column data, no new models); False when its
+        signals are not the ones these figures plot (then make a new figure)."""
+        if tuple(measured) != self.names:
+            return False
+        for s, src in self.sources.items():
+            src.data = self._columns(t, measured, simulated, s)
+        return True

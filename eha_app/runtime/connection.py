@@ -34,6 +34,13 @@ class ConnectionWatch(JSComponent):
     tabs_class = param.String(default="eha-main-tabs", doc="css class of the Tabs whose index goes into the URL")
     patches = param.Dict(default={}, doc="what the page reports of the library patches it installed, e.g. "
                                          "{'layout_once': True, 'controls_before_render': True}")
+    install = param.List(default=[], doc="the BokehJS patches the server found fit for its Bokeh (patches.usable)")
+
+    def __init__(self, **params):
+        from .patches import usable
+
+        params.setdefault("install", [n for n in ("layout_once", "controls_before_render") if usable(n)])
+        super().__init__(**params)
 
     _esm = VIEW_CLASS_JS + LAYOUT_ONCE_JS + CONTROLS_BEFORE_RENDER_JS + """
 export function render({ view, model, el }) {
@@ -41,7 +48,11 @@ export function render({ view, model, el }) {
   const doc = view.model.document
   // one layout per message from the server: the page says whether BokehJS had what it needs
   // and a widget enabled or disabled before it is drawn does not break the message
-  const applied = { layout_once: ehaLayoutOncePerMessage(doc), controls_before_render: ehaControlsBeforeRender() }
+  // (only those the server found written for its Bokeh: patches.py)
+  const wanted = model.install
+  const applied = {}
+  if (wanted.includes('layout_once')) { applied.layout_once = ehaLayoutOncePerMessage(doc) }
+  if (wanted.includes('controls_before_render')) { applied.controls_before_render = ehaControlsBeforeRender() }
   window.__eha_patches = applied
   model.patches = applied
   let overlay = null

@@ -1,9 +1,18 @@
 """Where the server changes a library's behaviour beyond its public API, in one place; and the
 strict mode of the test suite.
 
-Each change names the library versions it was written against and has a test
-that it takes effect (``tests/serve/test_hardening.py``): a library upgrade that
-moves the internals fails that test instead of silently dropping the change.
+Every change is a :class:`Patch` in :data:`PATCHES`: the library and minor versions it was
+written for, the names it replaces or reads, a check of their shape, and the figure that justifies
+it (``benchmarks/bench_patches.py`` measures each speed patch with and without it in one run;
+a fix names the test that fails without it). When ``eha serve`` starts, :func:`apply_patches`
+applies each one only if the installed version is one it was written for and what it replaces is
+there with the shape it expects; otherwise it logs one line naming it and why, and the app works
+without it (slower; a feature that needs a fix is refused; the server does not start without its
+two security guards, which use public Tornado hooks and so are checked by shape, not version).
+``eha serve`` prints one line of what it applied. ``EHA_PATCHES_OFF=name,name`` (or ``all``)
+turns patches off, for the benchmarks. A test fakes a newer Panel and Bokeh and drives a page
+without the patches (``tests/serve/test_newer_libraries.py``); each patch also has a test that it
+takes effect (``tests/app/test_patches.py``, ``tests/serve/test_hardening.py``).
 
 Component resources (Panel 1.9, ``panel.io.server.ComponentResourceHandler``)
     Panel serves ``/components/<module>/<class>/<attribute>/<path>`` for
@@ -116,16 +125,21 @@ The strict mode (Bokeh 3.9, ``DocumentCallbackManager.trigger_on_change``)
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
+from contextlib import contextmanager
+from dataclasses import dataclass
 
 __all__ = ["COMPONENT_PACKAGES", "WRITTEN_FOR", "component_allowed", "refuse_foreign_components",
            "strict_page_changes", "UnlockedChange", "strict_mode_on", "VIEW_CLASS_JS", "LAYOUT_ONCE_JS",
            "CONTROLS_BEFORE_RENDER_JS", "loop_has_work",
            "bind_port_shared", "guard_paths", "cache_stable_defaults", "fast_themed_values", "settle_settings",
            "SETTLED_SETTINGS", "lazy_container_defaults", "tune_garbage_collector", "collect_often", "on_disconnect",
-           "notice_disconnects"]
+           "notice_disconnects", "websocket_nodelay", "note_loop_thread", "holds_lock", "lazy_freeze", "Patch",
+           "PATCHES", "SERVER_PATCHES", "AFTER_LOAD_PATCHES", "apply_patches", "usable", "why_not",
+           "installed_version", "turned_off", "forget_status"]
 
-#: The library versions these changes were written against (checked by the tests; pyproject.toml
-#: keeps both below their next minor version).
+#: The library versions these changes were written against (pyproject.toml admits these minor
+#: versions only: tests/app/test_patches.py checks both).
 WRITTEN_FOR = {"panel": "1.9", "bokeh": "3.9"}
 #: The Pythons whose asyncio loop :func:`loop_has_work` reads (``BaseEventLoop._ready``).
 PYTHONS = ((3, 10), (3, 11), (3, 12), (3, 13))
@@ -268,10 +282,11 @@ function ehaControlsBeforeRender() {
 
 def loop_has_work(loop) -> bool:
     """Does ``loop`` have callbacks ready to run now? (see the module docstring; False for a loop
-    that is not one of CPython's, which cannot tell)."""
+    that is not one of CPython's, which cannot tell, and on a Python it was not written for)."""
     import asyncio
 
-    return isinstance(loop, asyncio.BaseEventLoop) and bool(getattr(loop, "_ready", ()))
+    return (isinstance(loop, asyncio.BaseEventLoop) and usable("loop_has_work")
+            and bool(getattr(loop, "_ready", ())))
 
 
 def bind_port_shared() -> None:
@@ -313,6 +328,81 @@ def guard_paths(route) -> None:
     BokehTornado.find_handler = find_handler
 
 
+# -- what the app reads of Bokeh's internals -------------------------------------------------------------
+
+_loop_thread: int | None = None
+
+
+def note_loop_thread() -> None:
+    """Remember the server's event-loop thread (called where a session is made: on that thread)."""
+    import threading
+
+    global _loop_thread
+    _loop_thread = threading.get_ident()
+
+
+def holds_lock(doc) -> bool:
+    """May ``doc`` be changed here and now? Yes outside a server, and while the page is being built
+    (no browser has it yet); else only on the server's event loop while it holds the document's
+    lock: Bokeh 3.9's ``ServerSession._pending_writes`` is a list for exactly that time (its
+    ``with_document_locked``). A session without that attribute (another Bokeh) is never called
+    locked: the caller defers its change to a locked callback, which is always safe."""
+    import threading
+
+    context = getattr(doc, "session_context", None)
+    if context is None:
+        return True                     # not served: a test, a notebook, a report
+    session = getattr(context, "_session", _MISSING)
+    if session is None:
+        return True                     # being built: no browser has the page yet
+    if session is _MISSING or not usable("lock_check") or not hasattr(session, "_pending_writes"):
+        return False                    # cannot tell: not locked
+    return threading.get_ident() == _loop_thread and session._pending_writes is not None
+
+
+_MISSING = object()
+
+
+@contextmanager
+def lazy_freeze(doc):
+    """``doc.models.freeze()`` that recomputes the model graph at the end only if the block changed it.
+
+    Bokeh 3.9 (``bokeh.document.models.DocumentModelManager``) recomputes a document's set of models
+    (a walk over every property of every model reachable from its roots: 30-60 ms for a page with
+    every tab built) whenever its outermost freeze ends, even when the block only set a text or a
+    data source's columns. A change that adds or removes models calls ``models.invalidate()``
+    (``Model.trigger``), a new root goes through ``add_root``: the block notes both, and the walk
+    is skipped when neither happened. A model manager of another shape (another Bokeh, or the
+    patch turned off: ``EHA_PATCHES_OFF=lazy_freeze``) gets Bokeh's own freeze.
+    """
+    models = getattr(doc, "models", None)
+    if (models is None or not _lazy_freeze_fits(models) or models._freeze_count > 0
+            or not usable("lazy_freeze")):
+        with (models.freeze() if models is not None else _nothing()):
+            yield
+        return
+    dirty = []
+    roots = list(doc.roots)
+    models.invalidate = lambda: dirty.append(True)     # this block only: the document is locked
+    models._push_freeze()
+    try:
+        yield
+    finally:
+        del models.invalidate                          # back to the class's own
+        models._freeze_count -= 1
+        if models._freeze_count == 0 and (dirty or list(doc.roots) != roots):
+            models.recompute()
+
+
+def _lazy_freeze_fits(models) -> bool:
+    return all(hasattr(models, name) for name in ("_push_freeze", "_freeze_count", "recompute", "invalidate"))
+
+
+@contextmanager
+def _nothing():
+    yield
+
+
 class UnlockedChange(RuntimeError):
     """A served page was changed outside its document's lock (strict mode)."""
 
@@ -343,8 +433,6 @@ def strict_page_changes() -> None:
     """
     from bokeh.document.callbacks import DocumentCallbackManager
     from bokeh.document.events import DocumentPatchedEvent
-
-    from .tasks import holds_lock
 
     trigger = DocumentCallbackManager.trigger_on_change
     if getattr(trigger, "eha_strict", False):
@@ -753,29 +841,6 @@ def websocket_nodelay() -> None:
     WSHandler.open = open
 
 
-def give_way_on_messages() -> None:
-    """A study's child process waits from the moment a page's message arrives (each websocket frame
-    a browser sends, in Bokeh's ``WSHandler.on_message``), not only once the click's run or page
-    change is queued: the event loop reads the message and runs the click's callback on cores the
-    child has left (:func:`eha_app.runtime.background.give_way_now`). No gain was measured: what
-    made Compare both's p95 beside a study 1.5-1.8x was a full garbage collection in the burst of
-    clicks (:func:`collect_often`), not the child; kept as it costs one shared byte a frame."""
-    from bokeh.server.views.ws import WSHandler
-
-    from .background import give_way_now
-
-    if getattr(WSHandler.on_message, "_eha_gives_way", False):
-        return
-    original = WSHandler.on_message
-
-    async def on_message(self, fragment):
-        give_way_now()
-        return await original(self, fragment)
-
-    on_message._eha_gives_way = True
-    WSHandler.on_message = on_message
-
-
 # -- a page's connection closing -----------------------------------------------------------------------
 
 def on_disconnect(doc, fn) -> None:
@@ -815,3 +880,239 @@ def notice_disconnects() -> None:
 
     unsubscribe._eha_notices = True
     ServerSession.unsubscribe = unsubscribe
+
+
+# -- which changes apply, and why ---------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Patch:
+    """One change of a library's behaviour beyond its public API (see the module docstring).
+
+    ``versions``: the minor versions of ``library`` it was written for (None: it uses public hooks
+    only, and its shape decides); ``replaces``: the dotted names it replaces or reads, each of which
+    must exist; ``shape``: a further check of what it replaces ("" when it fits, else why not);
+    ``install``: what applies it in this process (None: read where it is used, or pasted into the
+    page for the browser); ``gain``: the figure that justifies it (``benchmarks/bench_patches.py``
+    measures it with and without the patch in one run) or, for a fix, the test that fails without
+    it; ``kind``: "speed" (the app works without it, slower), "fix" (the app misbehaves without it:
+    the feature that needs it is refused), "guard" (a security check: the server does not start
+    without it) or "test" (the suite's strict mode).
+    """
+
+    name: str
+    library: str
+    versions: tuple[str, ...] | None
+    replaces: tuple[str, ...]
+    gain: str
+    kind: str = "speed"
+    install: Callable[[], None] | None = None
+    shape: Callable[[], str] | None = None
+
+    @property
+    def in_browser(self) -> bool:
+        return self.replaces[0].startswith("BokehJS")
+
+
+def installed_version(library: str) -> str:
+    """The installed version of ``library`` ("python" for the interpreter), as its distribution says."""
+    if library == "python":
+        return f"{sys.version_info[0]}.{sys.version_info[1]}.{sys.version_info[2]}"
+    from importlib.metadata import version
+
+    return version(library)
+
+
+def _resolve(dotted: str):
+    """The object a dotted name refers to (a module's attribute, a class's attribute...), or _MISSING."""
+    import importlib
+
+    parts = dotted.split(".")
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:i]))
+        except ImportError:
+            continue
+        for name in parts[i:]:
+            obj = getattr(obj, name, _MISSING)
+            if obj is _MISSING:
+                return _MISSING
+        return obj
+    return _MISSING
+
+
+def _sets_in_init(cls_name: str, *attrs: str) -> Callable[[], str]:
+    """A shape check: class ``cls_name``'s ``__init__`` sets each of ``attrs`` (an instance's attribute
+    that the class does not hold)."""
+    def check() -> str:
+        import inspect
+
+        cls = _resolve(cls_name)
+        try:
+            source = inspect.getsource(cls.__init__)
+        except (TypeError, OSError, AttributeError):
+            return f"{cls_name}.__init__ cannot be read"
+        lacking = [a for a in attrs if f"self.{a}" not in source]
+        return f"{cls_name} no longer sets {', '.join(lacking)}" if lacking else ""
+    return check
+
+
+def _find_handler_is_tornados() -> str:
+    """``BokehTornado`` is a Tornado ``Application`` that leaves ``find_handler`` (a public Tornado
+    method) to Tornado: overriding it then puts a check in front of every route."""
+    from tornado.web import Application
+
+    cls = _resolve("bokeh.server.tornado.BokehTornado")
+    if not (isinstance(cls, type) and issubclass(cls, Application)):
+        return "BokehTornado is not a Tornado Application"
+    if "find_handler" in cls.__dict__ and not getattr(cls.find_handler, "eha_guarded", False):
+        return "BokehTornado routes requests itself (find_handler)"
+    return ""
+
+
+def _component_handler_is_static() -> str:
+    """Panel's component route is a Tornado ``StaticFileHandler`` that resolves its path in
+    ``parse_url_path`` (public Tornado methods): a subclass can refuse a path first."""
+    from tornado.web import StaticFileHandler
+
+    cls = _resolve("panel.io.server.ComponentResourceHandler")
+    if not (isinstance(cls, type) and issubclass(cls, StaticFileHandler)):
+        return "ComponentResourceHandler is not a StaticFileHandler"
+    return ""
+
+
+_BOKEH_39 = ("3.9",)
+_PANEL_19 = ("1.9",)
+_PYTHONS = tuple(f"{major}.{minor}" for major, minor in PYTHONS)
+
+#: Every patch, by name (``EHA_PATCHES_OFF=name,name`` or ``all`` turns patches off, for the benchmarks).
+PATCHES: dict[str, Patch] = {p.name: p for p in (
+    Patch("component_guard", "panel", None, ("panel.io.server.ComponentResourceHandler",),
+          "tests/serve/test_hardening.py: /components/eha_app.cli.__main__/... made the server exit", "guard",
+          refuse_foreign_components, _component_handler_is_static),
+    Patch("teacher_routes", "bokeh", None, ("bokeh.server.tornado.BokehTornado.get_handler_delegate",),
+          "tests/serve/test_dashboard.py: /teacher's page, websocket and autoload answer 403 without the "
+          "teacher's cookie; 414/431 for oversized requests", "guard", None, _find_handler_is_tornados),
+    Patch("shared_port", "bokeh", _BOKEH_39, ("bokeh.server.server.bind_sockets",),
+          "tests/serve/test_hardening.py: --num-procs N binds one port; Bokeh's forks put 28 of 30 students "
+          "in one of two processes", "fix", bind_port_shared),
+    Patch("strict", "bokeh", _BOKEH_39,
+          ("bokeh.document.callbacks.DocumentCallbackManager.trigger_on_change",
+           "bokeh.document.events.DocumentPatchedEvent"),
+          "tests/app/test_patches.py::test_strict_mode_raises_on_a_change_outside_the_lock", "test",
+          strict_page_changes, lambda: why_not("lock_check")),
+    Patch("lock_check", "bokeh", _BOKEH_39, ("bokeh.server.session.ServerSession",),
+          "tests/serve/test_any_order.py: a change outside the lock broke tab 1 for good", "fix",
+          shape=_sets_in_init("bokeh.server.session.ServerSession", "_pending_writes")),
+    Patch("stable_defaults", "bokeh", _BOKEH_39,
+          ("bokeh.core.property.descriptors.PropertyDescriptor._get_default",
+           "bokeh.core.property.descriptors.PropertyDescriptor.has_unstable_default",
+           "bokeh.core.has_props.HasProps.themed_values"),
+          "bench_patches.py: page_build_ms", install=cache_stable_defaults),
+    Patch("fast_themed_values", "bokeh", _BOKEH_39, ("bokeh.core.has_props.HasProps.themed_values",),
+          "bench_patches.py: page_build_ms", install=fast_themed_values),
+    Patch("settled_settings", "bokeh", _BOKEH_39,
+          tuple(f"bokeh.settings.settings.{n}" for n in (*SETTLED_SETTINGS, "perform_error_diagnostics")),
+          "bench_patches.py: page_build_ms", install=settle_settings),
+    Patch("lazy_containers", "bokeh", _BOKEH_39,
+          ("bokeh.model.util.visit_immediate_value_references",
+           "bokeh.model.util.visit_value_and_its_immediate_references",
+           "bokeh.core.has_props.HasProps.query_properties_with_values", "bokeh.core.has_props.HasProps.__init__",
+           "bokeh.core.has_props.HasProps._overridden_defaults", "bokeh.core.property.instance.InstanceDefault",
+           "bokeh.core.property.wrappers.PropertyValueContainer"),
+          "bench_patches.py: page_build_ms, page_kb", install=lazy_container_defaults),
+    Patch("lazy_freeze", "bokeh", _BOKEH_39,
+          ("bokeh.document.models.DocumentModelManager._push_freeze",
+           "bokeh.document.models.DocumentModelManager.recompute",
+           "bokeh.document.models.DocumentModelManager.invalidate"),
+          "bench_patches.py: update_ms",
+          shape=_sets_in_init("bokeh.document.models.DocumentModelManager", "_freeze_count")),
+    Patch("gc_freeze", "panel", _PANEL_19,
+          ("panel.io.document._garbage_collect", "panel.io.document._panel_last_cleanup",
+           "panel.io.document.GC_DEBOUNCE", "panel.io.application._destroy_document"),
+          "bench_patches.py: gc_pause_max_ms", install=tune_garbage_collector),
+    Patch("gc_often", "python", _PYTHONS, ("gc.callbacks", "gc.freeze"),
+          "bench_patches.py: gc_pause_max_ms", install=collect_often),
+    Patch("loop_has_work", "python", _PYTHONS, ("asyncio.base_events.BaseEventLoop",),
+          "bench_patches.py: typing_p95_s", shape=_sets_in_init("asyncio.base_events.BaseEventLoop", "_ready")),
+    Patch("nodelay", "bokeh", _BOKEH_39, ("bokeh.server.views.ws.WSHandler.open",
+                                           "tornado.websocket.WebSocketHandler.set_nodelay"),
+          "bench_patches.py: keystroke_ms", install=websocket_nodelay),
+    Patch("disconnects", "bokeh", _BOKEH_39, ("bokeh.server.session.ServerSession.unsubscribe",
+                                               "bokeh.server.session.ServerSession.connection_count"),
+          "bench_closed_page.py: closed_stop_s", install=notice_disconnects),
+    Patch("layout_once", "bokeh", _BOKEH_39, ("BokehJS Document._apply_json_patch",
+                                               "BokehJS LayoutDOMView.invalidate_layout"),
+          "bench_frequency_page.py: freq_click_to_page_ms"),
+    Patch("controls_before_render", "bokeh", _BOKEH_39, ("BokehJS ControlView.connect_signals",),
+          "tests/ui/test_patches_in_browser.py: a tab left undrawn in 5 of 12 pages opened from a link", "fix"),
+)}
+
+#: The patches the server applies when it starts (in this order), and those its pages use.
+SERVER_PATCHES = ("component_guard", "teacher_routes", "stable_defaults", "fast_themed_values", "settled_settings",
+                  "lazy_containers", "disconnects", "nodelay")
+#: Applied after the app is loaded (what is loaded then is frozen out of the collector's sight).
+AFTER_LOAD_PATCHES = ("gc_freeze", "gc_often")
+
+_STATUS: dict[str, str] = {}
+
+
+def turned_off() -> set[str]:
+    """The patches ``EHA_PATCHES_OFF`` turns off (a comma-separated list of names, or ``all``)."""
+    import os
+
+    names = {n.strip() for n in os.environ.get("EHA_PATCHES_OFF", "").split(",") if n.strip()}
+    return set(PATCHES) if "all" in names else names
+
+
+def why_not(name: str) -> str:
+    """Why patch ``name`` cannot be used in this process ("" when it can): turned off, a library
+    version it was not written for, or what it replaces not found or of another shape."""
+    patch = PATCHES[name]
+    if name in turned_off():
+        return "turned off by EHA_PATCHES_OFF"
+    if patch.versions is not None:
+        version = installed_version(patch.library)
+        if ".".join(version.split(".")[:2]) not in patch.versions:
+            return f"{patch.library} {version} is not the {' or '.join(patch.versions)} it was written for"
+    if not patch.in_browser:
+        missing = [r for r in patch.replaces if _resolve(r) is _MISSING]
+        if missing:
+            return f"{missing[0]} not found"
+    return patch.shape() if patch.shape is not None else ""
+
+
+def usable(name: str) -> bool:
+    """May patch ``name`` be used here (see :func:`why_not`; decided once per process)?"""
+    status = _STATUS.get(name)
+    if status is None:
+        status = _STATUS[name] = why_not(name) or "usable"
+    return status in ("usable", "applied")
+
+
+def forget_status() -> None:
+    """Decide again which patches are usable (a test that changes ``EHA_PATCHES_OFF``)."""
+    _STATUS.clear()
+
+
+def apply_patches(names, log=None) -> dict[str, str]:
+    """Apply the patches ``names`` that fit this process and return each one's status: "applied",
+    or why it was not (one warning line each in ``log``). Applying one twice does nothing."""
+    import logging
+
+    log = log or logging.getLogger("eha_app")
+    report = {}
+    for name in names:
+        patch = PATCHES[name]
+        why = why_not(name)
+        if not why and patch.install is not None and _STATUS.get(name) != "applied":
+            try:
+                patch.install()
+            except Exception as exc:  # noqa: BLE001 - a library of another shape: the app goes on without it
+                why = f"failed: {type(exc).__name__}: {exc}"
+        if why and _STATUS.get(name) != why:       # once per process and reason
+            consequence = {"speed": "the app works without it, slower", "fix": "what needs it is refused",
+                           "guard": "the server cannot start safely", "test": "changes are not checked"}[patch.kind]
+            log.warning("library patch %s not applied: %s; %s", name, why, consequence)
+        _STATUS[name] = why or "applied"
+        report[name] = why or "applied"
+    return report

@@ -48,6 +48,9 @@ from eha_core.cancel import Cancelled, CancelToken
 from .background import give_way_now
 from .jobs import Job, JobQueue, JobState, default_queue, log_failure, session_name
 
+# what reads Bokeh's and asyncio's internals lives in patches.py, with the check of their shape
+from .patches import holds_lock, lazy_freeze, loop_has_work, note_loop_thread
+
 __all__ = ["SessionRunner", "PageUpdates", "apply_locked", "frozen_models", "held",
            "LOADING_DELAY_S", "served_document", "holds_lock", "locked", "watch", "on_click", "note_loop_thread"]
 
@@ -64,26 +67,6 @@ def served_document():
     if doc is not None and getattr(doc, "session_context", None) is not None:
         return doc
     return None
-
-
-_loop_thread: int | None = None
-
-
-def note_loop_thread() -> None:
-    """Remember the server's event-loop thread (called where a session is made: on that thread)."""
-    global _loop_thread
-    _loop_thread = threading.get_ident()
-
-
-def holds_lock(doc) -> bool:
-    """May ``doc`` be changed here and now? Yes outside a server, and while the page is being built
-    (no browser has it yet); else only on the server's event loop while it holds the document's
-    lock (Bokeh sets ``_pending_writes`` for exactly that time)."""
-    context = getattr(doc, "session_context", None)
-    session = getattr(context, "_session", None)
-    if session is None:
-        return True
-    return threading.get_ident() == _loop_thread and getattr(session, "_pending_writes", None) is not None
 
 
 def locked(fn: Callable) -> Callable:
@@ -108,39 +91,6 @@ def watch(obj, fn: Callable, *names: str):
 def on_click(button, fn: Callable) -> None:
     """``button.on_click(fn)``, ``fn`` run under the page's lock (:func:`locked`)."""
     button.on_click(locked(fn))
-
-
-@contextmanager
-def lazy_freeze(doc):
-    """``doc.models.freeze()`` that recomputes the model graph at the end only if the block changed it.
-
-    Bokeh recomputes a document's set of models (a walk over every property of every model
-    reachable from its roots: 30-60 ms for a page with every tab built) whenever its outermost
-    freeze ends, even when the block only set a text or a data source's columns. A change that adds
-    or removes models calls ``models.invalidate()`` (``Model.trigger``), a new root goes through
-    ``add_root``: the block notes both, and the walk is skipped when neither happened.
-    """
-    models = getattr(doc, "models", None)
-    if models is None or not hasattr(models, "_push_freeze") or models._freeze_count > 0:
-        with (models.freeze() if models is not None else _nothing()):
-            yield
-        return
-    dirty = []
-    roots = list(doc.roots)
-    models.invalidate = lambda: dirty.append(True)     # this block only: the document is locked
-    models._push_freeze()
-    try:
-        yield
-    finally:
-        del models.invalidate                          # back to the class's own
-        models._freeze_count -= 1
-        if models._freeze_count == 0 and (dirty or list(doc.roots) != roots):
-            models.recompute()
-
-
-@contextmanager
-def _nothing():
-    yield
 
 
 @contextmanager
@@ -235,8 +185,6 @@ class PageUpdates:
             self._task = self._loop.create_task(self._work())
 
     def _loop_busy(self) -> bool:
-        from .patches import loop_has_work
-
         return loop_has_work(self._loop)
 
     async def _work(self) -> None:

@@ -17,6 +17,7 @@ import textwrap
 
 import bokeh
 import panel
+import pytest
 
 from eha_app.runtime import patches
 
@@ -26,6 +27,130 @@ def test_the_libraries_are_the_versions_the_patches_were_written_for():
     assert panel.__version__.startswith(patches.WRITTEN_FOR["panel"] + ".")
     assert bokeh.__version__.startswith(patches.WRITTEN_FOR["bokeh"] + ".")
     assert sys.version_info[:2] in patches.PYTHONS
+    # every patch fits what is installed here: the suite runs with all of them
+    assert {name: patches.why_not(name) for name in patches.PATCHES} == dict.fromkeys(patches.PATCHES, "")
+
+
+def test_the_declared_versions_are_the_tested_ones():
+    """pyproject.toml admits the minor versions of Panel and Bokeh the patches were written for and
+    the suite runs on, no other (Panel 1.4-1.8 once passed the install and then could not serve)."""
+    import re
+    from pathlib import Path
+
+    from packaging.requirements import Requirement
+    from packaging.version import Version
+
+    text = (Path(__file__).parents[2] / "pyproject.toml").read_text()
+    dependencies = re.findall(r'^\s*"((?:panel|bokeh)\b[^"]*)",', text, flags=re.M)
+    required = {r.name: r.specifier for r in map(Requirement, dependencies)}
+    assert set(required) == set(patches.WRITTEN_FOR)
+    for library, minor in patches.WRITTEN_FOR.items():
+        major, low = map(int, minor.split("."))
+        spec = required[library]
+        assert Version(f"{minor}.0") in spec and Version(f"{minor}.99") in spec
+        assert Version(f"{major}.{low - 1}.99") not in spec and Version(f"{major}.{low + 1}.0") not in spec
+        assert all(p.versions in (None, (minor,)) for p in patches.PATCHES.values() if p.library == library)
+
+
+@pytest.fixture
+def fresh_status(monkeypatch):
+    monkeypatch.delenv("EHA_PATCHES_OFF", raising=False)
+    patches.forget_status()
+    yield
+    patches.forget_status()
+
+
+def test_a_patch_outside_its_versions_is_not_applied_and_says_so(monkeypatch, caplog, fresh_status):
+    from bokeh.server.views.ws import WSHandler
+
+    real = patches.installed_version
+    monkeypatch.setattr(patches, "installed_version", lambda lib: "3.10.0" if lib == "bokeh" else real(lib))
+    monkeypatch.setattr(WSHandler, "open", WSHandler.open)
+    before = WSHandler.open
+    with caplog.at_level("WARNING", logger="eha_app"):
+        status = patches.apply_patches(["nodelay", "gc_often"])
+        patches.apply_patches(["nodelay"])                      # said once
+    assert status["nodelay"] == "bokeh 3.10.0 is not the 3.9 it was written for"
+    assert WSHandler.open is before
+    lines = [r.getMessage() for r in caplog.records if "nodelay" in r.getMessage()]
+    assert lines == ["library patch nodelay not applied: bokeh 3.10.0 is not the 3.9 it was written for; "
+                     "the app works without it, slower"]
+    # and the run-time readers give way too: no lock is claimed, Bokeh's own freeze is used
+    assert not patches.usable("lock_check") and not patches.usable("lazy_freeze")
+
+
+def test_a_patch_whose_target_moved_is_not_applied(monkeypatch, fresh_status):
+    from bokeh.server.session import ServerSession
+
+    monkeypatch.delattr(ServerSession, "unsubscribe")
+    assert patches.apply_patches(["disconnects"]) == {
+        "disconnects": "bokeh.server.session.ServerSession.unsubscribe not found"}
+    monkeypatch.setattr(patches, "_sets_in_init", patches._sets_in_init)
+    check = patches._sets_in_init("bokeh.server.session.ServerSession", "_pending_writes", "_no_such_thing")
+    assert check() == "bokeh.server.session.ServerSession no longer sets _no_such_thing"
+
+
+def test_a_patch_can_be_turned_off_for_a_benchmark(monkeypatch, fresh_status):
+    monkeypatch.setenv("EHA_PATCHES_OFF", "lazy_freeze, nodelay")
+    assert patches.why_not("nodelay") == "turned off by EHA_PATCHES_OFF"
+    assert not patches.usable("lazy_freeze") and patches.usable("disconnects")
+    monkeypatch.setenv("EHA_PATCHES_OFF", "all")
+    patches.forget_status()
+    assert not any(patches.usable(name) for name in patches.PATCHES)
+
+
+def _served_document():
+    """A document as a Bokeh server holds it for a session (its session context and session)."""
+    import weakref
+
+    from bokeh.document import Document
+    from bokeh.models import Div
+    from bokeh.server.contexts import BokehSessionContext
+    from bokeh.server.session import ServerSession
+
+    doc = Document()
+    div = Div(text="first")
+    doc.add_root(div)
+    context = BokehSessionContext("s", None, doc)
+    doc._session_context = weakref.ref(context)
+    session = ServerSession("s", doc, io_loop=None, token="t")
+    context._set_session(session)
+    session.eha_context = context           # the server holds the context; the document only a weak reference
+    return doc, div, session
+
+
+def test_strict_mode_raises_on_a_change_outside_the_lock(fresh_status):
+    """A served page's model changed outside its lock raises at once (EHA_STRICT=1); the same change
+    under Bokeh's own lock goes through."""
+    doc, div, session = _served_document()
+    patches.note_loop_thread()
+    assert patches.apply_patches(["strict"]) == {"strict": "applied"}
+    with pytest.raises(patches.UnlockedChange, match=r"Div\.text changed outside the page's lock"):
+        div.text = "unlocked"
+
+    async def locked():
+        await session.with_document_locked(lambda: setattr(div, "text", "locked"))
+
+    asyncio.run(locked())
+    assert div.text == "locked"
+
+
+def test_holds_lock_claims_no_lock_it_cannot_see(fresh_status):
+    doc, _, session = _served_document()
+    patches.note_loop_thread()
+    session._pending_writes = []
+    assert patches.holds_lock(doc)                      # Bokeh's lock held, on the loop's thread
+    del session._pending_writes
+    assert not patches.holds_lock(doc)                  # what it reads is missing: not locked
+    del doc.session_context._session
+    assert not patches.holds_lock(doc)
+    doc.session_context._session = None                 # the page being built: nobody else has it
+    assert patches.holds_lock(doc)
+
+    class NotServed:
+        session_context = None
+
+    assert patches.holds_lock(NotServed())
 
 
 def test_the_loop_says_when_it_has_work():
@@ -126,24 +251,6 @@ def test_the_servers_websockets_send_each_frame_at_once(monkeypatch):
 
     WSHandler.open(Handler())
     assert calls == [("nodelay", True), "bokeh's open"]
-
-
-def test_a_pages_message_asks_a_study_to_give_way(monkeypatch):
-    from bokeh.server.views.ws import WSHandler
-
-    from eha_app.runtime import background
-
-    seen = []
-
-    async def bokehs(self, fragment):
-        seen.append(("bokeh", fragment))
-
-    monkeypatch.setattr(WSHandler, "on_message", bokehs)
-    monkeypatch.setattr(background, "give_way_now", lambda: seen.append("give way"))
-    patches.give_way_on_messages()
-    patches.give_way_on_messages()              # twice: one wrapper
-    asyncio.run(WSHandler.on_message(object(), "frame"))
-    assert seen == ["give way", ("bokeh", "frame")]
 
 
 def test_full_collections_come_after_three_young_ones_on_a_thread_of_their_own():
