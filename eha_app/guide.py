@@ -68,7 +68,7 @@ class Guide:
         cards = []
         for i, s in enumerate(self.steps[:4]):
             button = pn.widgets.Button(label="Start here" if i == 0 else f"Go to {s.short}", width=170,
-                                       button_type="primary" if i == 0 else "default",
+                                       color="primary" if i == 0 else "default",
                                        css_classes=[f"eha-start-{s.key}"])
             on_click(button, lambda _e, key=s.key: self.go(key))
             cards.append(pn.Column(pn.pane.HTML(f"<div class='eha-start-step'><b>{html.escape(s.short)}</b><br>"
@@ -87,7 +87,7 @@ class Guide:
                     "padding": "4px 8px"})
         self.where = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-guide-where"],
                                   styles={"font-size": "13px", "color": "#333"})
-        self.next = pn.widgets.Button(label="", width=300, button_type="primary",
+        self.next = pn.widgets.Button(label="", width=300, color="primary",
                                       css_classes=["eha-guide-next"])
         on_click(self.next, lambda _e: self.go_next())
         # wraps at 800 px (the button goes under the text) rather than widening the page

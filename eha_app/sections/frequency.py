@@ -242,7 +242,7 @@ class FrequencyPanel(Section):
         self.handin_button, self.verdict = self.handin.button, self.handin.verdict
         if "beta_e" not in state.hidden:
             self.handin_button.visible = False
-        self.handin_source = pn.widgets.Select(name="βe from", options={v: k for k, v in BACKOUT_SOURCES.items()},
+        self.handin_source = pn.widgets.Select(label="βe from", options={v: k for k, v in BACKOUT_SOURCES.items()},
                                                width=260, visible=self.handin_button.visible,
                                                css_classes=["eha-handin-source"])
         watch(self.handin_source, lambda _e: self._handin_tip(), "value")
