@@ -32,8 +32,12 @@ seen and what was expected, and the last ten actions (:class:`Failure`). The wal
 the seed as far as the server's timing allows: every choice comes from the seeded generator and the
 page's state after it settled.
 
-What each view depends on (read from the tabs' code; only css classes, button labels and field
-names are used here):
+The page's sections (its tabs, sub-tabs and panels) are read from the app's registry
+(``eha_app.sections``: :func:`page_sections`): where each is, its form and its run buttons (each
+section declares them), so that a section registered with one line is walked too: typed into
+(``type-KEY``), run (``run-KEY``), reached through its tab and sub-tab, and in the settings files
+the walk loads. What a view depends on, and a few actions of their own (uploads, the board's list),
+are known here for the sections the app has now:
 
 - ``simulation`` (tab 2): tab 1's parameters and the simulation form's shown fields; re-runs by
   itself when short (its status line says "updating", the view's class stays current);
@@ -94,9 +98,6 @@ FREQ_FIGURES, BOARD_VIEWS = "eha-freq-figures", "eha-board-views"
 PARAM_FORM, SIM_FORM, LSE_FORM, FREQ_FORM = "eha-param-form", "eha-sim-form", "eha-lse-form", "eha-freq-form"
 BOARD_FORM, STUDY_FORM, GB_FORM = "eha-board-form", "eha-study-form", "eha-gb-form"
 LSE_WINDOW, RECORD_WINDOW = "eha-lse-window", "eha-freq-record-window"
-#: what shows that a tab (or a sub-tab of tab 3) has been built
-TAB_READY = {0: PARAM_FORM, 1: "eha-sim-info", 2: "eha-lse-table"}
-SUBTAB_READY = {0: "eha-lse-table", 1: "eha-freq-summary", 2: GB_FORM, 3: BOARD_FORM, 4: STUDY_FORM}
 STATUS_CLASSES = {"eha-empty": "empty", "eha-current": "current", "eha-updating": "updating",
                   "eha-out-of-date": "stale"}
 SIM_BUTTONS = ("Case 1", "Case 2", "Case 3", "Case 4", "All four cases", "Run nonlinear", "Run linearised",
@@ -186,6 +187,42 @@ def normalized(name: str, text) -> object:
     except ValueError:
         return t
     return v if math.isfinite(v) else t
+
+
+# -- the page's sections, as the app registers them ------------------------------------------------------
+
+@dataclass(frozen=True)
+class PageSection:
+    """A section of the page as the walk finds it: its key and title, the css classes of its form and of
+    what shows its content has arrived, the labels of its run buttons, and where it is (its main tab,
+    its sub-tab of that tab or None; a section within another is where that one is)."""
+
+    key: str
+    title: str
+    form_css: str | None
+    content_css: str | None
+    run_buttons: tuple
+    tab: int
+    subtab: int | None = None
+    within: str | None = None
+
+
+def page_sections() -> tuple[PageSection, ...]:
+    """The page's sections in page order, read from the app's registry (``eha_app.sections.SECTIONS``):
+    what the served page is made of, the sections registered after the walker was written included."""
+    registry = _app("SECTIONS", "eha_app.sections")
+    tabs = registry.tabs()
+    out = []
+    for p in registry:
+        top = p
+        while top.within is not None:
+            top = registry.get(top.within)
+        on_tab = [q.key for q in registry.on_tab(top.tab)]
+        form_css = getattr(p.cls, "form_css", None)
+        out.append(PageSection(p.key, p.cls.title, form_css, getattr(p.cls, "content_css", None) or form_css,
+                               tuple(getattr(p.cls, "run_buttons", ())), tabs.index(top.tab),
+                               on_tab.index(top.key) if len(on_tab) > 1 else None, p.within))
+    return tuple(out)
 
 
 # -- the server and its log ---------------------------------------------------------------------------
@@ -748,6 +785,8 @@ class Walker:
         self.joined_as = ""             # the id typed at the gate when the app was shown (an exercise)
         self.student_id = f"s{seed:07d}"
         self.actions_done = 0
+        self.sections = page_sections()
+        self._plan()
         if monitor is not None:
             monitor.walkers.append(self)
 
@@ -843,8 +882,9 @@ class Walker:
         await super(Student, self.s).open(self.timeout)
         # the open tab is built first (a link with tab=3 builds tab 3, not tab 1)
         tab = self.query.get("tab", "").strip()
-        first = int(tab) - 1 if tab in ("2", "3") else 0
-        await self.s.wait_for(lambda: self.s.find(css=TAB_READY[first]), self.o.tab_s, f"tab {first + 1}'s content")
+        first = int(tab) - 1 if tab.isdigit() and 1 <= int(tab) <= len(self.tab_ready) else 0
+        await self.s.wait_for(lambda: self.s.find(css=self.tab_ready[first]), self.o.tab_s,
+                              f"tab {first + 1}'s content")
         self._apply_query()
 
     def _apply_query(self) -> None:
@@ -912,7 +952,7 @@ class Walker:
                                                           spec["kind"], spec["label"])
         build = {
             "tab": lambda: self._make_tab(spec["index"]),
-            "subtab": lambda: self._make_subtab(spec["index"]),
+            "subtab": lambda: self._make_subtab(spec["index"], tab=spec.get("tab")),
             "figure-tab": lambda: self._figure_tab(spec["css"], spec["index"]),
             "type": typed,
             "reset": self._make_reset_tab1,
@@ -952,7 +992,7 @@ class Walker:
             except Exception as exc:  # noqa: BLE001 - the walker's own defect: reported, the walk goes on
                 self.history.append("(choosing an action)")
                 self._walker_error(exc)
-                action = self._make_tab(self.rng.randrange(3))
+                action = self._make_tab(self.rng.randrange(len(self.tab_ready)))
                 self.history.pop()
             await self._do(i, action)
         return self.failures
@@ -1028,37 +1068,75 @@ class Walker:
                     return
 
     # -- choosing --------------------------------------------------------------------------------------
-    #: relative weights of the action kinds
+    #: relative weights of the action kinds; each section's typing (``type-KEY``) and run buttons (``run-KEY``)
+    #: are kinds of their own, weighted here or by the defaults below
     WEIGHTS = {
         "tab": 4, "subtab": 3.5, "figure-tab": 2, "type-tab1": 16, "reset-tab1": 0.8,
-        "type-sim": 7, "sim-button": 6,
-        "type-lse": 4.5, "lse-run": 3, "table4": 1.2, "lse-upload": 2, "lse-window": 1.5, "lse-back": 0.6,
+        "type-simulation": 7, "run-simulation": 6,
+        "type-least_squares": 4.5, "run-least_squares": 4.2, "lse-upload": 2, "lse-window": 1.5, "lse-back": 0.6,
         "lse-mapping": 1.2, "handin": 1.5,
-        "type-freq": 5, "freq-run": 2.2, "record-upload": 2, "record-window": 1.5, "detrend": 1,
-        "record-run": 1.5, "record-mapping": 1.2,
-        "type-gb": 3, "gb-run": 1.5,
+        "type-frequency": 5, "run-frequency": 2.2, "record-upload": 2, "type-record": 1.5, "detrend": 1,
+        "run-record": 1.5, "record-mapping": 1.2,
+        "type-greybox": 3, "run-greybox": 1.5,
         "type-board": 2, "board-tick": 3, "board-rename": 1.5, "board-delete": 0.7, "board-bands": 0.5,
-        "type-study": 2, "study-run": 1, "study-cancel": 1.5,
+        "type-study": 2, "run-study": 1, "study-cancel": 1.5,
         "download": 0.8, "any-button": 2, "settings": 1.5, "report": 0.6, "reload": 1.3, "other-page": 0.5,
     }
-    #: the kinds that press a run button
-    RUNS = ("sim-button", "lse-run", "table4", "freq-run", "record-run", "gb-run", "study-run", "handin")
-    #: where each kind acts: (main tab, tab 3's sub-tab) or None (anywhere: the settings row, the address)
-    WHERE = {"type-tab1": (0, None), "reset-tab1": (0, None), "type-sim": (1, None), "sim-button": (1, None),
-             **{k: (2, 0) for k in ("type-lse", "lse-run", "table4", "lse-upload", "lse-window", "lse-back",
-                                    "lse-mapping", "handin")},
-             **{k: (2, 1) for k in ("type-freq", "freq-run", "record-upload", "record-window", "detrend",
-                                    "record-run", "record-mapping")},
-             **{k: (2, 2) for k in ("type-gb", "gb-run")},
-             **{k: (2, 3) for k in ("type-board", "board-tick", "board-rename", "board-delete", "board-bands")},
-             **{k: (2, 4) for k in ("type-study", "study-run", "study-cancel")}}
+    #: a section's kinds not weighted above
+    TYPE_WEIGHT, RUN_WEIGHT = 3.0, 1.5
+    #: how often a run button is pressed beside its section's others (1 unless said)
+    BUTTON_WEIGHTS = {TABLE4_RUN: 0.4}
+    #: the actions of one section's own parts (its upload, the board's list), by the section they act in
+    #: (tab 1 is the section whose form is PARAM_FORM)
+    SECTION_OF = {**{k: "least_squares" for k in ("lse-upload", "lse-window", "lse-back", "lse-mapping", "handin")},
+                  **{k: "record" for k in ("record-upload", "detrend", "record-mapping")},
+                  **{k: "board" for k in ("board-tick", "board-rename", "board-delete", "board-bands")},
+                  "study-cancel": "study"}
+
+    def _plan(self) -> None:
+        """The walk's kinds of action, their weights and where each acts, from the page's sections."""
+        sections, table = self.sections, type(self).WEIGHTS      # the class's weights (this walk's are set below)
+        tab1 = next((p for p in sections if p.form_css == PARAM_FORM), None)
+        self.tab1_key = tab1.key if tab1 is not None else "parameters"
+        #: what shows that a main tab, or a sub-tab, has been built (a tab opens on its first sub-tab)
+        self.tab_ready = {}
+        self.subtab_ready: dict[tuple, tuple] = {}
+        for p in sections:
+            if p.within is None:
+                self.tab_ready.setdefault(p.tab, p.content_css)
+                if p.subtab is not None:
+                    self.subtab_ready[(p.tab, p.subtab)] = (p.content_css, p.title)
+        place = {p.key: (p.tab, p.subtab) for p in sections}
+        weights = {k: w for k, w in table.items() if not k.startswith(("type-", "run-"))}
+        where = {k: place[key] for k, key in self.SECTION_OF.items() if key in place}
+        weights = {k: w for k, w in weights.items() if k not in self.SECTION_OF or k in where}
+        self.makers = {}
+        for p in sections:
+            if p.key == self.tab1_key:
+                weights["type-tab1"] = table["type-tab1"]
+                where["type-tab1"] = where["reset-tab1"] = place[p.key]
+                continue
+            if p.form_css:
+                kind = f"type-{p.key}"
+                weights[kind], where[kind] = table.get(kind, self.TYPE_WEIGHT), place[p.key]
+                self.makers[kind] = (lambda p=p: self._type_section(p))
+            if p.run_buttons:
+                kind = f"run-{p.key}"
+                weights[kind], where[kind] = table.get(kind, self.RUN_WEIGHT), place[p.key]
+                self.makers[kind] = (lambda p=p: self._run_section(p))
+        if tab1 is None:
+            weights.pop("type-tab1", None)
+            weights.pop("reset-tab1", None)
+        self.WEIGHTS, self.WHERE = weights, where
+        #: the kinds that press a run button
+        self.RUNS = tuple(k for k in weights if k.startswith("run-")) + ("handin",)
+        #: the sections of a settings file, each a table of texts
+        self.settings_sections = tuple(p.key for p in sections)
 
     def _kinds(self) -> list[str]:
         kinds = [k for k in self.WEIGHTS if (not self.o.only or k in self.o.only) and k not in self.o.exclude]
         if not self.o.exercise_hidden:
             kinds = [k for k in kinds if k not in ("handin", "other-page")]
-        else:
-            kinds = [k for k in kinds if k not in ("table4",)]
         return kinds
 
     def choose(self) -> Action:
@@ -1092,7 +1170,7 @@ class Walker:
                 self.pending, self.pending_steps = action, 1
                 return self._navigate(where)
             return action
-        return self._make_tab(self.rng.randrange(3))
+        return self._make_tab(self.rng.randrange(len(self.tab_ready)))
 
     def _at(self, where) -> bool:
         if where is None:
@@ -1103,27 +1181,31 @@ class Walker:
             return False
         if sub is None:
             return True
-        ident = self.s.one("Tabs", css=IDENT_TABS)
+        ident = self._subtabs()
         return (ident is not None and (ident.attributes.get("active") or 0) == sub
-                and self.s.find(css=SUBTAB_READY[sub]))
+                and self.s.find(css=self.subtab_ready[(tab, sub)][0]))
+
+    def _subtabs(self) -> Model | None:
+        """The sub-tabs of the main tab shown now (None: it has none, or they are not built)."""
+        return next((m for m in self.s.find("Tabs", css=IDENT_TABS) if self.s.shown(m)), None)
 
     def _built_tabs(self) -> set:
-        return {i for i, css in TAB_READY.items() if self.s.find(css=css)}
+        return {i for i, css in self.tab_ready.items() if self.s.find(css=css)}
 
     def _navigate(self, where) -> Action:
         tab, sub = where
         tabs = self.s.one("Tabs", css=MAIN_TABS)
         if tabs is None or (tabs.attributes.get("active") or 0) != tab or tab not in self._built_tabs():
             return self._make_tab(tab)
-        return self._make_subtab(sub)
+        return self._make_subtab(sub, tab=tab)
 
     # -- actions ---------------------------------------------------------------------------------------
     def _make(self, kind: str) -> Action | None:
-        maker = getattr(self, "_make_" + kind.replace("-", "_"))
+        maker = self.makers.get(kind) or getattr(self, "_make_" + kind.replace("-", "_"))
         return maker()
 
     def _app_shown(self):
-        return any(self.s.find(css=css) for css in TAB_READY.values())
+        return any(self.s.find(css=css) for css in self.tab_ready.values())
 
     def _gate_action(self) -> Action:
         s = self.s
@@ -1190,7 +1272,7 @@ class Walker:
 
     def _make_tab(self, index: int | None = None) -> Action:
         if index is None:
-            index = self.rng.randrange(3)
+            index = self.rng.randrange(len(self.tab_ready))
         s = self.s
 
         async def show():
@@ -1199,33 +1281,39 @@ class Walker:
                 raise LookupError("no main tabs")
             if (tabs.attributes.get("active") or 0) != index:
                 await s.set_property(tabs, "active", index)
-            await s.wait_for(lambda: s.find(css=TAB_READY[index]), self.o.tab_s, f"tab {index + 1}'s content")
+            await s.wait_for(lambda: s.find(css=self.tab_ready[index]), self.o.tab_s, f"tab {index + 1}'s content")
         return Action("tab", f"show tab {index + 1}", show, spec={"do": "tab", "index": index})
 
-    def _make_subtab(self, index: int | None = None) -> Action | None:
+    def _make_subtab(self, index: int | None = None, *, tab: int | None = None) -> Action | None:
+        places = sorted(self.subtab_ready)
+        if not places:
+            return None
         if index is None:
-            index = self.rng.randrange(5)
+            tab, index = self.rng.choice(places)
+        elif tab is None:
+            tab = places[0][0]          # an action saved before sub-tabs said their tab: the only such tab
+        if (tab, index) not in self.subtab_ready:
+            return None
         s = self.s
-        names = ("least squares", "frequency domain", "grey-box", "model board", "study")
+        ready, title = self.subtab_ready[(tab, index)]
 
         async def show():
-            ident = s.one("Tabs", css=IDENT_TABS)
-            if ident is None or not self._at((2, None)):
-                await self._make_tab(2).run()
-                ident = await s.wait_for_model("Tabs", css=IDENT_TABS, timeout=self.o.tab_s)
+            ident = self._subtabs()
+            if ident is None or not self._at((tab, None)):
+                await self._make_tab(tab).run()
+                await s.wait_for(self._subtabs, self.o.tab_s, f"tab {tab + 1}'s sub-tabs")
+                ident = self._subtabs()
             if (ident.attributes.get("active") or 0) != index:
                 await s.set_property(ident, "active", index)
-            await s.wait_for(lambda: s.find(css=SUBTAB_READY[index]), self.o.tab_s, f"tab 3's {names[index]}")
-        return Action("subtab", f"show tab 3 / {names[index]}", show, spec={"do": "subtab", "index": index})
+            await s.wait_for(lambda: s.find(css=ready), self.o.tab_s, f"tab {tab + 1}'s {title}")
+        return Action("subtab", f"show tab {tab + 1} / {title}", show,
+                      spec={"do": "subtab", "index": index, "tab": tab})
 
     def _make_figure_tab(self) -> Action | None:
-        options = []
-        if self._at((2, 1)):
-            options.append((FREQ_FIGURES, 6))
-        if self._at((2, 3)):
-            options.append((BOARD_VIEWS, 4))
+        options = [(css, n) for css, n in ((FREQ_FIGURES, 6), (BOARD_VIEWS, 4))
+                   if any(self.s.shown(m) for m in self.s.find("Tabs", css=css))]
         if not options:
-            return self._make_subtab(self.rng.choice([1, 3]))
+            return self._make_subtab()
         css, n = self.rng.choice(options)
         return self._figure_tab(css, self.rng.randrange(n))
 
@@ -1394,36 +1482,25 @@ class Walker:
             await self._wait_derived()
         return Action("reset-tab1", "press “Reset to paper defaults”", reset, settle="none", spec={"do": "reset"})
 
-    def _make_type_sim(self):
-        return self._type_in(SIM_FORM, "type-sim", "tab 2")
+    def _type_section(self, p: PageSection) -> Action | None:
+        """Type into section ``p``'s form, once it is there and shown on its tab (the own record's range
+        only once a record is read)."""
+        return self._visible_form(p.form_css, f"type-{p.key}", p.title, tabs=False)
 
-    def _make_type_lse(self):
-        return self._type_in(LSE_FORM, "type-lse", "least squares")
-
-    def _make_type_freq(self):
-        return self._type_in(FREQ_FORM, "type-freq", "frequency")
-
-    def _make_type_board(self):
-        return self._type_in(BOARD_FORM, "type-board", "board")
-
-    def _make_type_gb(self):
-        return self._type_in(GB_FORM, "type-gb", "grey-box")
-
-    def _make_gb_run(self):
-        return self._press(GB_RUN, "gb-run")
-
-    def _make_type_study(self):
-        return self._type_in(STUDY_FORM, "type-study", "study")
+    def _run_section(self, p: PageSection) -> Action | None:
+        """Press one of section ``p``'s run buttons that is there and enabled."""
+        labels = [label for label in p.run_buttons if self._buttons(label)]
+        if not labels:
+            return None
+        label = self.rng.choices(labels, weights=[self.BUTTON_WEIGHTS.get(x, 1.0) for x in labels])[0]
+        return self._press(label, f"run-{p.key}")
 
     def _make_lse_window(self):
         return self._visible_form(LSE_WINDOW, "lse-window", "least squares' range")
 
-    def _make_record_window(self):
-        return self._visible_form(RECORD_WINDOW, "record-window", "record's range")
-
-    def _visible_form(self, css: str, kind: str, label: str):
+    def _visible_form(self, css: str, kind: str, label: str, *, tabs: bool = True):
         component = self.s.one(css=css)
-        if component is None or not self.s.shown(component):
+        if component is None or not self.s.shown(component, tabs=tabs):
             return None
         return self._type_in(css, kind, label)
 
@@ -1486,29 +1563,11 @@ class Walker:
         except StepTimeout:
             pass
 
-    def _make_sim_button(self):
-        return self._press(self.rng.choice(SIM_BUTTONS), "sim-button")
-
-    def _make_lse_run(self):
-        return self._press(LSE_RUN, "lse-run")
-
-    def _make_table4(self):
-        return self._press(TABLE4_RUN, "table4")
-
     def _make_handin(self):
         return self._press(HANDIN, "handin")
 
-    def _make_freq_run(self):
-        return self._press(FREQ_RUN, "freq-run")
-
-    def _make_record_run(self):
-        return self._press(RECORD_RUN, "record-run")
-
     def _make_lse_back(self):
         return self._press(BACK_TO_SIMULATED, "lse-back", settle="quiet")
-
-    def _make_study_run(self):
-        return self._press(STUDY_RUN, "study-run")
 
     def _make_study_cancel(self):
         return self._press(STUDY_CANCEL, "study-cancel")
@@ -1766,14 +1825,13 @@ class Walker:
     # settings and the address ---------------------------------------------------------------------
     def _settings_doc(self) -> dict:
         """The page's settings as “Save settings” writes them (eha_app/settings.py's format)."""
-        doc = {"format": "eha-settings/1", "parameters": dict(self._tab1_texts())}
+        doc = {"format": "eha-settings/1", self.tab1_key: dict(self._tab1_texts())}
         tabs = self.s.one("Tabs", css=MAIN_TABS)
         doc["tab"] = int((tabs.attributes.get("active") or 0) if tabs else 0) + 1
-        for section, css in (("simulation", SIM_FORM), ("least_squares", LSE_FORM), ("frequency", FREQ_FORM),
-                             ("board", BOARD_FORM), ("study", STUDY_FORM)):
-            form = self.s.form_model(css)
+        for p in self.sections:
+            form = self.s.form_model(p.form_css) if p.form_css and p.key != self.tab1_key else None
             if form is not None:
-                doc[section] = {k: str(v) for k, v in (form.attributes.get("values") or {}).items()}
+                doc[p.key] = {k: str(v) for k, v in (form.attributes.get("values") or {}).items()}
         return doc
 
     def _make_settings(self) -> Action | None:
@@ -1787,7 +1845,7 @@ class Walker:
                 if not doc[section]:
                     continue
                 name = self.rng.choice(sorted(doc[section]))
-                if section == "parameters":
+                if section == self.tab1_key:
                     value = self.rng.choice([self._valid({"name": name, "kind": "text"},
                                                          self._default_texts().get(name))] * 2 + list(self._EDGE[:8]))
                 else:
@@ -1801,13 +1859,13 @@ class Walker:
             doc["format"] = "something-else/2"
             data, what = json.dumps(doc).encode(), "another format"
         elif r < 0.85:
-            doc["parameters"] = ["M", 1]
+            doc[self.tab1_key] = ["M", 1]
             data, what = json.dumps(doc).encode(), "parameters as a list"
         elif r < 0.9:
-            doc["parameters"]["M"] = "9" * 300
+            doc[self.tab1_key]["M"] = "9" * 300
             data, what = json.dumps(doc).encode(), "a 300-character value"
         elif r < 0.95:
-            doc["parameters"]["unknown_field"] = "1"
+            doc[self.tab1_key]["unknown_field"] = "1"
             doc["extra"] = {"a": 1}
             data, what = json.dumps(doc).encode(), "unknown fields"
         else:
@@ -1831,8 +1889,6 @@ class Walker:
                       spec={"do": "settings", "filename": filename, "data": base64.b64encode(data).decode(),
                             "what": what})
 
-    SETTINGS_SECTIONS = ("parameters", "simulation", "least_squares", "frequency", "board", "study")
-
     def _settings_file(self, data: bytes) -> dict | None:
         """The settings file as the app should take it (its format: "Save settings"), or None if it
         should refuse the whole file: at most 100 kB, JSON, this format, every section a table of texts
@@ -1845,7 +1901,7 @@ class Walker:
             return None
         if not isinstance(doc, dict) or doc.get("format") != "eha-settings/1":
             return None
-        for section in self.SETTINGS_SECTIONS:
+        for section in self.settings_sections:
             given = doc.get(section) or {}
             if not isinstance(given, dict):
                 return None
@@ -1861,7 +1917,7 @@ class Walker:
 
         if doc is None:
             return
-        params = doc.get("parameters") or {}
+        params = doc.get(self.tab1_key) or {}
         before = self._tab1_texts()
         for name, text in params.items():
             if name in (*PARAM_NAMES, "kp"):
@@ -1892,7 +1948,7 @@ class Walker:
                 await other.set_property(box, "value_input", who)
                 await other.set_property(box, "value", who)
                 await other.click(other.find("Button", css="eha-start")[0])
-                await other.wait_for(lambda: any(other.find(css=c) for c in TAB_READY.values()), self.o.tab_s,
+                await other.wait_for(lambda: any(other.find(css=c) for c in self.tab_ready.values()), self.o.tab_s,
                                      "the other page's app")
                 try:
                     await self.s.wait_for(lambda: self.s.find(css="eha-given-way"), 10, "the first page giving way")
@@ -2399,9 +2455,10 @@ def kinds_table(walkers: list) -> str:
     for w in walkers:
         counts.update(w.counts)
         seconds.update(w.seconds)
-    rows = [f"{'action kind':16s} {'count':>6s} {'s/action':>9s} {'total s':>8s}"]
+    width = max([16, *map(len, counts)])        # a section's kinds are named after its key
+    rows = [f"{'action kind':{width}s} {'count':>6s} {'s/action':>9s} {'total s':>8s}"]
     for kind, n in counts.most_common():
-        rows.append(f"{kind:16s} {n:6d} {seconds[kind] / n:9.2f} {seconds[kind]:8.1f}")
+        rows.append(f"{kind:{width}s} {n:6d} {seconds[kind] / n:9.2f} {seconds[kind]:8.1f}")
     return "\n".join(rows)
 
 

@@ -471,9 +471,9 @@ class Page(pn.viewable.Viewer):
         session.active_tab = active
         watch(self.tabs.tabs, lambda e: setattr(session, "active_tab", e.new), "active")
         # the way through the steps: the start card (on a first visit to tab 1) and the guide line
-        from .guide import Guide
+        from .guide import Guide, guide_steps
 
-        self.guide = Guide(self.show, keys=tuple(p.key for p in session.registry if p.within is None),
+        self.guide = Guide(self.show, steps=guide_steps(session.registry),
                            start=active == 0 and "tab" not in session.query)
         watch(self.tabs.tabs, lambda _e: self._guide_follows(), "active")
         first_tab = names[active]

@@ -17,8 +17,9 @@ from dataclasses import dataclass
 import panel as pn
 
 from .runtime.tasks import on_click
+from .session import SECTIONS, SectionRegistry
 
-__all__ = ["Guide", "STEPS"]
+__all__ = ["Guide", "Step", "guide_steps"]
 
 
 @dataclass(frozen=True)
@@ -32,37 +33,20 @@ class Step:
     go: str
 
 
-#: The stops, in the paper's order (sections' keys; tab 3's sub-tabs are stops of their own).
-STEPS = (
-    Step("parameters", "1. Parameters",
-         "Step 1: the actuator's physical parameters (Table 3) and initial state. P(s), H(s) and the "
-         "linearised model follow as you type.", "1. Parameters"),
-    Step("simulation", "2. Simulation",
-         "Step 2: drive the nonlinear and the linearised model with the paper's four cases (Figs. 2-7) and "
-         "compare them.", "2. Simulation"),
-    Step("least_squares", "3. Least squares",
-         "Step 3, time domain: estimate M, B, A<sub>f</sub>, d<sub>0</sub> and β<sub>e</sub> from the sensors "
-         "under a disturbance (eqs. 15-18, Tables 3-4).", "3. Identification: least squares"),
-    Step("frequency", "3. Transfer function",
-         "Step 3, frequency domain: excite the closed loop, estimate Ĥ(s) (Figs. 8-13) and back out the "
-         "parameters (eqs. 26-27).", "3. Identification: transfer function"),
-    Step("greybox", "3. Grey-box",
-         "Step 3, the nonlinear model: estimate the physical parameters from what is measured (output error, "
-         "as nlgreyest) and compare the three routes side by side.", "3. Identification: grey-box"),
-    Step("board", "3. Model board",
-         "Step 3, comparison: every model you made, on one validation record.", "the model board"),
-    Step("study", "3. Study",
-         "Beyond the paper: repeat an estimation over many seeds to see bias and how honest the intervals are.",
-         "the study over seeds"),
-)
+def guide_steps(registry: SectionRegistry = SECTIONS) -> tuple[Step, ...]:
+    """The stops, in page order (the paper's): every section of the page's tabs with a guide step
+    (:attr:`~eha_app.session.section.Section.guide_step`); tab 3's sub-tabs are stops of their own."""
+    return tuple(Step(p.key, p.cls.guide_step.short, p.cls.guide_step.what, p.cls.guide_step.go)
+                 for p in registry if p.within is None and p.cls.guide_step is not None)
 
 
 class Guide:
-    """The start card and the guide line; ``go(key)`` shows a section (the page's ``show``)."""
+    """The start card and the guide line; ``go(key)`` shows a section (the page's ``show``), one of
+    ``steps`` (:func:`guide_steps`)."""
 
-    def __init__(self, go: Callable[[str], object], *, keys: tuple[str, ...], start: bool = True):
+    def __init__(self, go: Callable[[str], object], *, steps: tuple[Step, ...], start: bool = True):
         self._go = go
-        self.steps = tuple(s for s in STEPS if s.key in keys)
+        self.steps = tuple(steps)
         self.current = self.steps[0].key if self.steps else ""
         # the start card: what the steps are and where to start
         cards = []

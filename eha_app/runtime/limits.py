@@ -2,26 +2,24 @@
 
 The heaviest frequency experiment the form allows (N = 20000 samples at
 Ts = 0.5 s) is 2 x 10000 s of closed-loop simulation, 40 M integration steps:
-tens of seconds of a core that thirty students share. Each request's cost is
-estimated by the core (:func:`eha_core.simulate.simulation_cost` and friends,
-no simulation needed) and refused beyond these limits with a message that says
-what was asked, what is allowed and what to change. ``EHA_MAX_STEPS`` and
-``EHA_MAX_MEMORY_MB`` change them for a server with more to spare.
+tens of seconds of a core that thirty students share. Each section prices the
+run its inputs describe (:meth:`~eha_app.session.section.Section.run_cost`: a
+:class:`RunCost` from the core's estimates, :func:`eha_core.simulate.simulation_cost`
+and friends, no simulation needed), and a run beyond these limits is refused with
+a message that says what was asked, what is allowed and what to change
+(:func:`check_run`). ``EHA_MAX_STEPS`` and ``EHA_MAX_MEMORY_MB`` change them for
+a server with more to spare.
 """
 
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 from eha_core.errors import FieldError, not_allowed
-from eha_core.simulate import DEFAULT_H_MAX, simulation_cost
+from eha_core.simulate import DEFAULT_H_MAX
 
-__all__ = ["max_steps", "max_bytes", "check_cost", "check_simulation", "check_frequency", "check_lse",
-           "check_greybox"]
-
-#: A grey-box estimate simulates its record some 25 times, each with one more evaluation of the model
-#: per estimated parameter (the sensitivities); multiple shooting about three times as much.
-GREYBOX_SIMULATIONS = 25
+__all__ = ["max_steps", "max_bytes", "RunCost", "check_run", "check_cost"]
 
 #: Integration steps per request: about 1.5 s of one core with the compiled kernel.
 DEFAULT_MAX_STEPS = 10_000_000
@@ -50,6 +48,26 @@ def max_bytes() -> int:
     return _env_int("EHA_MAX_MEMORY_MB", DEFAULT_MAX_MEMORY_MB) * 2**20
 
 
+@dataclass(frozen=True)
+class RunCost:
+    """What one run would cost the server, estimated before it is queued: what was asked as the message
+    names it (``asked = value_text``, e.g. ``N × Ts = 20000 × 0.5 s``), the integration steps and the
+    peak memory, the simulated time the steps stand for, and what the student can change (``hint``)."""
+
+    asked: str
+    value_text: str
+    steps: int
+    peak_bytes: int
+    simulated_s: float
+    hint: str
+
+
+def check_run(cost: RunCost | None) -> None:
+    """A :class:`~eha_core.errors.FieldError` when ``cost`` exceeds the limits (None: nothing priced)."""
+    if cost is not None:
+        check_cost(cost.asked, cost.value_text, cost.steps, cost.peak_bytes, cost.simulated_s, cost.hint)
+
+
 def _millions(n: float) -> str:
     return f"{n / 1e6:.3g} M"
 
@@ -70,36 +88,3 @@ def check_cost(name: str, value_text: str, steps: int, peak_bytes: int, simulate
     if peak_bytes > limit_bytes:
         raise FieldError(name, value_text, f"it needs about {peak_bytes / 2**20:.0f} MB of memory and this server "
                          f"allows {limit_bytes / 2**20:.0f} MB per run: {hint}.", context="here")
-
-
-def check_simulation(t_end: float, dt: float, *, n_runs: int = 1) -> None:
-    """The simulation tab's runs (open loop, ``n_runs`` runs of ``t_end`` s)."""
-    cost = simulation_cost(t_end, dt, n_runs=n_runs)
-    check_cost("runs × horizon", f"{n_runs} × {t_end:g} s", cost.steps, cost.peak_bytes, n_runs * t_end,
-               "shorten the horizon")
-
-
-def check_frequency(config) -> None:
-    """The closed-loop experiment (estimation and validation runs, tfest)."""
-    cost = config.cost()
-    duration = config.n_samples * config.ts
-    check_cost("N × Ts", f"{config.n_samples} × {config.ts:g} s", cost.steps, cost.peak_bytes, 2 * duration,
-               "lower N or Ts")
-
-
-def check_lse(t_end: float, estimator: str = "ls") -> None:
-    """The least-squares experiment (simulation and estimation; the instrumental variables' passes too)."""
-    from eha_core.experiments import lse_cost
-
-    cost = lse_cost(t_end, resimulation=True, estimator=estimator)
-    check_cost("least-squares excitation", f"{t_end:g} s", cost.steps, cost.peak_bytes, t_end,
-               "use a shorter excitation")
-
-
-def check_greybox(t_end: float, n_params: int, n_samples: int, n_signals: int, shooting: str = "single") -> None:
-    """A grey-box estimate: its simulations with sensitivities, counted as plain integration steps."""
-    runs = GREYBOX_SIMULATIONS * (3 if shooting == "multiple" else 1)
-    steps = int(t_end / DEFAULT_H_MAX * (1 + n_params) * runs)
-    peak = n_samples * (4 + n_signals) * (1 + n_params) * 8 * 3     # states, sensitivities, the Jacobian
-    check_cost("record length × (1 + parameters)", f"{t_end:g} s × {1 + n_params}", steps, peak, t_end * runs,
-               "estimate fewer parameters at once, or use a shorter record")

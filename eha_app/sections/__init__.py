@@ -1,7 +1,10 @@
 """The page's sections (tabs and panels), registered in page order.
 
 A new panel is one module here and one line below: it is then in the page, in
-settings files, in the page's address and in the session report.
+settings files, in the page's address, in the session report, in the guide (its
+``guide_step``), in the work an exercise keeps for a student who joins again (its
+``kept_work`` and ``restore_work``) and in the random walk of benchmarks/walker.py
+(its ``form_css`` and ``run_buttons``).
 """
 
 from ..session import SECTIONS

@@ -41,7 +41,7 @@ from eha_core.board import (
 from ..render import board_plots
 from ..render.layout import WRAP_TAB_HEADERS, side_by_side
 from ..runtime.tasks import on_click, watch
-from ..session import ReportPart, Section, SectionSnapshot, stale_note
+from ..session import GuideStep, ReportPart, Section, SectionSnapshot, stale_note
 from ..session.form import Field, Form, Group, parse_fields
 from ..session.freshness import ResultView, param_changes
 
@@ -91,6 +91,11 @@ class ModelBoard(Section):
     defaults = BOARD_DEFAULTS
     #: Estimates kept for a board not opened yet (a student deletes one to keep more).
     max_mail = MAX_MODELS
+    guide_step = GuideStep("3. Model board", "Step 3, comparison: every model you made, on one validation record.",
+                           "the model board")
+    form_css = "eha-board-form"
+    # No kept work of its own (Section.kept_work): a student who joins again gets the board filled by the
+    # runs computed again, each posting its model as a click does; names typed, ticks and deletions are not kept.
 
     def __init__(self, session, **kwargs):
         super().__init__(session, **kwargs)
@@ -114,7 +119,7 @@ class ModelBoard(Section):
         self.built = False
         texts = self.initial_texts()
         self.form = Form(spec=[g.to_spec() for g in BOARD_FORM], values=texts, url_defaults=BOARD_DEFAULTS,
-                         width=270, css_classes=["eha-board-form"], margin=(5, 10))
+                         width=270, css_classes=[self.form_css], margin=(5, 10))
         watch(self.form, lambda _e: self._settings_changed(), "values")
         self.bands = pn.widgets.Checkbox(label="95 % bands on the Bode diagram", value=True, width=260,
                                          css_classes=["eha-board-bands"])

@@ -25,10 +25,10 @@ from ..render.tables import (
     estimate_alert,
     freq_summary_html,
 )
-from ..runtime.limits import check_frequency
+from ..runtime.limits import RunCost
 from ..runtime.shared import shared_results
 from ..runtime.tasks import apply_locked, held, on_click, watch
-from ..session import ReportPart, Section, SectionSnapshot, stale_note
+from ..session import GuideStep, KeptWork, ReportPart, RestoreStep, Section, SectionSnapshot, stale_note
 from ..session.form import Field, Form, Group, parse_fields, raised_to_bounds, regrouped, with_lower_bounds
 from ..session.freshness import ResultView
 from .handin import HandInBox
@@ -192,6 +192,12 @@ class FrequencyPanel(Section):
     key = "frequency"
     title = "Transfer function"
     defaults = FREQ_DEFAULTS
+    guide_step = GuideStep(
+        "3. Transfer function", "Step 3, frequency domain: excite the closed loop, estimate Ĥ(s) (Figs. 8-13) and back "
+        "out the parameters (eqs. 26-27).", "3. Identification: transfer function")
+    form_css = "eha-freq-form"
+    content_css = "eha-freq-summary"
+    run_buttons = ("Run experiment and estimate",)
 
     def __init__(self, session, **kwargs):
         super().__init__(session, **kwargs)
@@ -207,7 +213,7 @@ class FrequencyPanel(Section):
         texts = raised_to_bounds(self.initial_texts(), self.fields, ("noise_x", "ts"))
         self.form = Form(spec=[g.to_spec() for g in regrouped(FREQ_FORM, self.fields)], values=texts,
                          url_defaults=FREQ_DEFAULTS, width=270,
-                         css_classes=["eha-freq-form"], margin=(5, 10))
+                         css_classes=[self.form_css], margin=(5, 10))
         watch(self.form, self._on_config, "values")
         self.error = pn.pane.HTML("", visible=False, width=260, css_classes=["eha-error", "eha-error-freq"],
                                   styles={"color": "#b00020", "font-size": "12px"})
@@ -422,7 +428,7 @@ class FrequencyPanel(Section):
             return None
         self.alert.visible = False
         try:
-            check_frequency(cfg)
+            self.check_cost()
         except ValueError as exc:
             self._fail(str(exc))
             return None
@@ -572,6 +578,24 @@ class FrequencyPanel(Section):
     # -- the section's protocol ---------------------------------------------------------------------
     def result_views(self) -> list:
         return [v for k, v in self.views.items() if k != "excitation"]
+
+    def run_cost(self) -> RunCost | None:
+        """The closed-loop experiment (estimation and validation runs, tfest)."""
+        cfg, _ = self.config()
+        if cfg is None:
+            return None
+        cost = cfg.cost()
+        return RunCost("N × Ts", f"{cfg.n_samples} × {cfg.ts:g} s", cost.steps, cost.peak_bytes,
+                       2 * cfg.n_samples * cfg.ts, "lower N or Ts")
+
+    def kept_work(self) -> KeptWork | None:
+        return KeptWork({"views": ["summary"]}) if self.views["summary"].is_current else None
+
+    @classmethod
+    def restore_work(cls, kept: KeptWork, texts) -> list[RestoreStep]:
+        if "summary" not in (kept.run or {}).get("views", ()):
+            return []
+        return [RestoreStep(cls.title, lambda section: section.run())]
 
     def snapshot(self) -> SectionSnapshot:
         return SectionSnapshot(self.key, self.title, self.settings(), stale=self.is_stale(), content=self.result)

@@ -17,6 +17,7 @@ from eha_core.identify.greybox import GREYBOX_PARAMS, GREYBOX_SIGNALS
 from eha_core.param_table import FIELD_INFO
 from eha_core.params import ActuatorParams, ParameterError
 from eha_core.signals import SignalSpecError, parse_signal
+from eha_core.simulate import DEFAULT_H_MAX
 
 from ..render.greybox import (
     GreyBoxFigure,
@@ -28,9 +29,19 @@ from ..render.greybox import (
 )
 from ..render.layout import side_by_side
 from ..render.tables import SCENARIOS
-from ..runtime.limits import check_greybox
+from ..runtime.limits import RunCost
 from ..runtime.tasks import apply_locked, on_click, watch
-from ..session import ReportPart, Section, SectionSnapshot, run_off_notice, stale_note
+from ..runtime.work_store import StoredFile
+from ..session import (
+    GuideStep,
+    KeptWork,
+    ReportPart,
+    RestoreStep,
+    Section,
+    SectionSnapshot,
+    run_off_notice,
+    stale_note,
+)
 from ..session.form import Field, Form, Group, parse_fields, raised_to_bounds, regrouped, with_lower_bounds
 from ..session.freshness import ResultView
 from ..session.state import FIELD_LABELS
@@ -213,12 +224,22 @@ def exercise_fields(conditions) -> dict:
     return with_lower_bounds(_GB_FIELDS, lows, "this exercise's sensor noise")
 
 
+#: A grey-box estimate simulates its record some 25 times, each with one more evaluation of the model
+#: per estimated parameter (the sensitivities); multiple shooting about three times as much.
+GREYBOX_SIMULATIONS = 25
+
+
 class GreyBoxPanel(Section):
     """Grey-box identification of the nonlinear model, and the three routes side by side."""
 
     key = "greybox"
     title = "Grey-box (nonlinear)"
     defaults = GB_DEFAULTS
+    guide_step = GuideStep(
+        "3. Grey-box", "Step 3, the nonlinear model: estimate the physical parameters from what is measured (output "
+        "error, as nlgreyest) and compare the three routes side by side.", "3. Identification: grey-box")
+    form_css = "eha-gb-form"
+    run_buttons = ("Run grey-box estimation",)
 
     def __init__(self, session, **kwargs):
         super().__init__(session, **kwargs)
@@ -233,11 +254,12 @@ class GreyBoxPanel(Section):
         self.last_data = None
         texts = raised_to_bounds(self.initial_texts(), self.fields, _NOISE_FIELDS)
         self.form = Form(spec=[g.to_spec() for g in regrouped(GB_FORM, self.fields)], values=texts,
-                         url_defaults=GB_DEFAULTS, width=270, css_classes=["eha-gb-form"], margin=(5, 10))
+                         url_defaults=GB_DEFAULTS, width=270, css_classes=[self.form_css], margin=(5, 10))
         watch(self.form, self._update_enabled, "values")
         self.table = pn.pane.HTML("<p>Choose what to estimate and press “Run grey-box estimation”.</p>",
                                   sizing_mode="stretch_width", css_classes=["eha-gb-table-pane"])
         self.plot = pn.Column(sizing_mode="stretch_width", css_classes=["eha-gb-plot"])
+        self.figure: GreyBoxFigure | None = None
         self.details = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-gb-details"])
         self.area = pn.Column(self.table, self.plot, self.details, sizing_mode="stretch_width")
         self.view = ResultView("gb", self.area, run_hint="Press “Run grey-box estimation” to update it.")
@@ -389,6 +411,13 @@ class GreyBoxPanel(Section):
         self.alert.visible = True
 
     # -- the run -------------------------------------------------------------------------------------------
+    def _draw(self, data, res) -> None:
+        """The record against the estimate's simulation; the same figures for every run with the same
+        signals (new data, no new Bokeh models to make, send and lay out)."""
+        if self.figure is None or not self.figure.update(data.t, data.signals, res.simulated):
+            self.figure = GreyBoxFigure(data.t, data.signals, res.simulated)
+            self.plot.objects = [pn.pane.Bokeh(self.figure.layout, sizing_mode="stretch_width")]
+
     def run(self):
         from eha_core.identify.greybox import GreyBoxData, greybox_data, identify_greybox
 
@@ -411,8 +440,7 @@ class GreyBoxPanel(Section):
         if own is not None:
             t_end = float(own.t[-1] - own.t[0])
         try:       # what it may cost on a shared server, before it is queued
-            check_greybox(t_end, len(req.names), int(round(t_end * 1000)) + 1 if own is None else own.t.size,
-                          len(req.measured), req.shooting)
+            self.check_cost()
         except ValueError as exc:
             self._fail(str(exc))
             return None
@@ -464,8 +492,7 @@ class GreyBoxPanel(Section):
                     + (f" (and {job.wait_s:.1f} s waiting for the server)" if job.wait_s > 0.05 else "")
                     + f". Record: {html.escape(data.source)}, {data.t.size} samples.</p>" + paper_note)
             self.table.object = self._table_html() + note
-            fig = GreyBoxFigure(data.t, data.signals, res.simulated)
-            self.plot.objects = [pn.pane.Bokeh(fig.layout, sizing_mode="stretch_width")]
+            self._draw(data, res)
             self.details.object = self._details_html()
             for d in self.downloads:
                 d.disabled = False
@@ -510,6 +537,12 @@ class GreyBoxPanel(Section):
             return
         self._upload = (bytes(self.upload.value), upload_name(self.upload.filename))
         self.read_upload()
+
+    def use_file(self, data: bytes, filename: str, mapping: dict | None = None):
+        """Use ``data`` (a file named ``filename``) as the student's record, its columns read with ``mapping``
+        (None: by their names); returns the job that reads it."""
+        self._upload = (data, filename)
+        return self.read_upload(mapping)
 
     def read_upload(self, mapping: dict | None = None):
         """Read the uploaded file (in a worker): t, u and the measured signals; or ask which column is which."""
@@ -612,6 +645,44 @@ class GreyBoxPanel(Section):
     # -- the section's protocol ---------------------------------------------------------------------------
     def result_views(self) -> list:
         return [self.view]
+
+    def run_cost(self) -> RunCost | None:
+        """Its simulations with sensitivities, counted as plain integration steps."""
+        req, errors = self.request()
+        if errors:
+            return None
+        own = self.own_data
+        t_end = req.input_signal()[1] if own is None else float(own.t[-1] - own.t[0])
+        n_samples = int(round(t_end * 1000)) + 1 if own is None else own.t.size
+        n_params = len(req.names)
+        runs = GREYBOX_SIMULATIONS * (3 if req.shooting == "multiple" else 1)
+        steps = int(t_end / DEFAULT_H_MAX * (1 + n_params) * runs)
+        peak = n_samples * (4 + len(req.measured)) * (1 + n_params) * 8 * 3     # states, sensitivities, Jacobian
+        return RunCost("record length × (1 + parameters)", f"{t_end:g} s × {1 + n_params}", steps, peak,
+                       t_end * runs, "estimate fewer parameters at once, or use a shorter record")
+
+    def kept_work(self) -> KeptWork | None:
+        views = ["gb"] if self.view.is_current else []
+        run: dict = {"views": views}
+        upload = None
+        if self.own_data is not None and self._upload is not None:
+            data, name = self._upload
+            mapping = dict(self.own_data_key[2]) if self.own_data_key and self.own_data_key[2] else None
+            upload = StoredFile(self.key, name, data, mapping)
+            run["file"] = name
+        if not views and upload is None:
+            return None
+        return KeptWork(run, upload)
+
+    @classmethod
+    def restore_work(cls, kept: KeptWork, texts) -> list[RestoreStep]:
+        run, upload, steps = kept.run or {}, kept.file, []
+        if upload is not None:
+            steps.append(RestoreStep("", lambda section: section.use_file(upload.data, upload.name, upload.mapping)))
+        # a run on a file that was not kept is not run again on the simulated record instead
+        if "gb" in run.get("views", ()) and (upload is not None or not run.get("file")):
+            steps.append(RestoreStep(cls.title, lambda section: section.run()))
+        return steps
 
     def snapshot(self) -> SectionSnapshot:
         params, lse, backout, gb = self.routes_content()

@@ -21,6 +21,7 @@ from eha_core.experiments import (
     LSE_INPUT_RICH,
     LSE_INPUT_RICH_T_END,
     LSE_SCENARIOS,
+    lse_cost,
     lse_data,
     lse_resimulation,
     run_lse_table,
@@ -40,10 +41,20 @@ from ..render.tables import (
     lse_table_html,
     table4_html,
 )
-from ..runtime.limits import check_lse
+from ..runtime.limits import RunCost
 from ..runtime.shared import shared_results
 from ..runtime.tasks import apply_locked, on_click, watch
-from ..session import ReportPart, Section, SectionSnapshot, run_off_notice, stale_note
+from ..runtime.work_store import StoredFile
+from ..session import (
+    GuideStep,
+    KeptWork,
+    ReportPart,
+    RestoreStep,
+    Section,
+    SectionSnapshot,
+    run_off_notice,
+    stale_note,
+)
 from ..session.form import Field, Form, Group, parse_fields, raised_to_bounds, regrouped, with_lower_bounds
 from ..session.freshness import ResultView
 from ..session.state import FIELD_LABELS
@@ -220,6 +231,12 @@ class LeastSquaresPanel(Section):
     key = "least_squares"
     title = "Least squares"
     defaults = LSE_DEFAULTS
+    guide_step = GuideStep(
+        "3. Least squares", "Step 3, time domain: estimate M, B, A<sub>f</sub>, d<sub>0</sub> and β<sub>e</sub> from "
+        "the sensors under a disturbance (eqs. 15-18, Tables 3-4).", "3. Identification: least squares")
+    form_css = "eha-lse-form"
+    content_css = "eha-lse-table"
+    run_buttons = ("Run least squares", "Run all four scenarios (Table 4)")
 
     def __init__(self, session, **kwargs):
         super().__init__(session, **kwargs)
@@ -237,7 +254,7 @@ class LeastSquaresPanel(Section):
         texts = raised_to_bounds(self.initial_texts(), self.fields, _NOISE_FIELDS)
         self.form = Form(spec=[g.to_spec() for g in regrouped(LSE_FORM, self.fields)], values=texts,
                          url_defaults=LSE_DEFAULTS, width=270,
-                         css_classes=["eha-lse-form"], margin=(5, 10))
+                         css_classes=[self.form_css], margin=(5, 10))
         watch(self.form, self._update_enabled, "values")
         self.table = pn.pane.HTML("<p>Choose a disturbance and run the least squares.</p>",
                                   sizing_mode="stretch_width", css_classes=["eha-lse-table"])
@@ -395,6 +412,12 @@ class LeastSquaresPanel(Section):
             return
         self._upload = (bytes(self.upload.value), upload_name(self.upload.filename))
         self.read_upload()
+
+    def use_file(self, data: bytes, filename: str, mapping: dict | None = None):
+        """Use ``data`` (a file named ``filename``) as the student's data, its columns read with ``mapping``
+        (None: by their names); returns the job that reads it."""
+        self._upload = (data, filename)
+        return self.read_upload(mapping)
 
     def read_upload(self, mapping: dict | None = None):
         """Read the uploaded file (in a worker): use it, or ask which columns are which."""
@@ -555,7 +578,7 @@ class LeastSquaresPanel(Section):
         u, t_end = req.input_signal()
         self.alert.visible = False
         try:
-            check_lse(t_end, req.estimator)
+            self.check_cost()
         except ValueError as exc:
             self._fail(str(exc))
             return None
@@ -697,6 +720,48 @@ class LeastSquaresPanel(Section):
     # -- the section's protocol -----------------------------------------------------------
     def result_views(self) -> list:
         return [self.view, self.table4_view]
+
+    def run_cost(self) -> RunCost | None:
+        """The experiment (simulation, estimation, re-simulation; the instrumental variables' passes too)."""
+        req, errors = self.request()
+        if errors:
+            return None
+        _, t_end = req.input_signal()
+        cost = lse_cost(t_end, resimulation=True, estimator=req.estimator)
+        return RunCost("least-squares excitation", f"{t_end:g} s", cost.steps, cost.peak_bytes, t_end,
+                       "use a shorter excitation")
+
+    def kept_work(self) -> KeptWork | None:
+        views = [name for name, view in (("lse", self.view), ("table4", self.table4_view)) if view.is_current]
+        run: dict = {"views": views}
+        upload = None
+        if self.own_data is not None and self._upload is not None:
+            data, name = self._upload
+            mapping = dict(self.own_data_key[2]) if self.own_data_key and self.own_data_key[2] else None
+            upload = StoredFile(self.key, name, data, mapping)
+            # the file's part is no field of the settings: kept here, put back once the file is read
+            run["window"] = {k: str(self.window_form.values.get(k, "")) for k in ("own_from", "own_to")}
+            run["file"] = name
+        if not views and upload is None:
+            return None
+        return KeptWork(run, upload)
+
+    @classmethod
+    def restore_work(cls, kept: KeptWork, texts) -> list[RestoreStep]:
+        run, upload = kept.run or {}, kept.file
+        views, steps = run.get("views", ()), []
+        if upload is not None:
+            steps.append(RestoreStep("", lambda section: section.use_file(upload.data, upload.name, upload.mapping)))
+            window = run.get("window")
+            if window:
+                steps.append(RestoreStep("", lambda section: section.window_form.set_values(**window)))
+        # a run on a file that was not kept (the class's space for files was full) is not run again on
+        # the simulated sensors instead: that would be another result under the same name
+        if "lse" in views and (upload is not None or not run.get("file")):
+            steps.append(RestoreStep("Least squares", lambda section: section.run()))
+        if "table4" in views:
+            steps.append(RestoreStep("Table 4", lambda section: section.run_all()))
+        return steps
 
     def snapshot(self) -> SectionSnapshot:
         req, _ = self.request()

@@ -14,7 +14,7 @@ from eha_core.param_table import FIELD_INFO
 from ..render.layout import side_by_side
 from ..render.tables import SYMBOLS_HTML, derived_html
 from ..runtime.tasks import on_click, watch
-from ..session import ReportPart, Section, SectionSnapshot
+from ..session import GuideStep, ReportPart, Section, SectionSnapshot
 from ..session.form import Field, Form, Group
 from ..session.state import FIELD_LABELS, FORM_FIELDS, AppState
 
@@ -85,12 +85,16 @@ class ParametersTab(Section):
     key = "parameters"
     title = "Parameters"
     defaults = default_texts()
+    guide_step = GuideStep(
+        "1. Parameters", "Step 1: the actuator's physical parameters (Table 3) and initial state. P(s), H(s) and the "
+        "linearised model follow as you type.", "1. Parameters")
+    form_css = "eha-param-form"
 
     def __init__(self, session, **kwargs):
         super().__init__(session, **kwargs)
         state = self.state
         self.form = Form(spec=[g.to_spec() for g in form_groups(state.hidden)], values=self._texts(), width=250,
-                         url_defaults=default_texts(), css_classes=["eha-param-form"], margin=(5, 10))
+                         url_defaults=default_texts(), css_classes=[self.form_css], margin=(5, 10))
         watch(self.form, self._typed, "values")
         self.reset_button = pn.widgets.Button(label="Reset to paper defaults", color="default", width=250)
         on_click(self.reset_button, self._reset)

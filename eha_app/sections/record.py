@@ -22,7 +22,8 @@ from ..render.formatting import tf_html
 from ..render.glossary import term
 from ..render.tables import estimate_alert, estimation_sentences
 from ..runtime.tasks import apply_locked, on_click, watch
-from ..session import ReportPart, Section, SectionSnapshot, stale_note
+from ..runtime.work_store import StoredFile
+from ..session import KeptWork, ReportPart, RestoreStep, Section, SectionSnapshot, stale_note
 from ..session.form import Field, Form, Group
 from ..session.freshness import ResultView
 from .uploads import ColumnMapping, FileUpload, check_size, download, upload_name
@@ -48,6 +49,9 @@ class RecordPanel(Section):
     key = "record"
     title = "Your own record"
     defaults = RECORD_DEFAULTS
+    #: its range (the detrend is a select beside it); shown once a record is read
+    form_css = "eha-freq-record-window"
+    run_buttons = ("Estimate from your record",)
 
     def __init__(self, session, **kwargs):
         super().__init__(session, **kwargs)
@@ -78,7 +82,7 @@ class RecordPanel(Section):
             Field("rec_from", "from t", "text", unit="s", placeholder="its start", short="from t"),
             Field("rec_to", "to t", "text", unit="s", placeholder="its end", short="to t"),
         )).to_spec()], values={k: texts[k] for k in _WINDOW_FIELDS}, width=270, visible=False,
-            css_classes=["eha-freq-record-window"], margin=(5, 10))
+            css_classes=[self.form_css], margin=(5, 10))
         detrend = texts["rec_detrend"] if texts["rec_detrend"] in DETRENDS.values() else "none"
         self.detrend = pn.widgets.Select(label="remove from u and y", value=detrend, width=260,
                                          options=DETRENDS, visible=False, css_classes=["eha-freq-record-detrend"])
@@ -128,7 +132,13 @@ class RecordPanel(Section):
         self._upload = (bytes(self.upload.value), upload_name(self.upload.filename))
         self.read(None)
 
-    def read(self, mapping: dict | None) -> None:
+    def use_file(self, data: bytes, filename: str, mapping: dict | None = None):
+        """Use ``data`` (a file named ``filename``) as the student's record, its columns read with ``mapping``
+        (None: by their names); returns the job that reads it."""
+        self._upload = (data, filename)
+        return self.read(mapping)
+
+    def read(self, mapping: dict | None):
         """Read the upload in a worker: its t, u, y (or t, r, x, or the mapped columns), or ask for a mapping."""
         from eha_core.data import DataError, columns_text, file_columns, read_data, sample_time
 
@@ -321,6 +331,28 @@ class RecordPanel(Section):
 
     def result_views(self) -> list:
         return [self.view]
+
+    def kept_work(self) -> KeptWork | None:
+        upload = None
+        if self.columns is not None and self._upload is not None:
+            data, name = self._upload
+            upload = StoredFile(self.key, name, data, dict(self._mapping) if self._mapping else None)
+        views = ["freq-record"] if self.view.is_current else []
+        if not views and upload is None:
+            return None
+        return KeptWork({"views": views}, upload)
+
+    @classmethod
+    def restore_work(cls, kept: KeptWork, texts) -> list[RestoreStep]:
+        upload = kept.file
+        if upload is None:
+            return []
+        steps = [RestoreStep("", lambda section: section.use_file(upload.data, upload.name, upload.mapping)),
+                 # reading a record clears its range: the kept one goes back after it
+                 RestoreStep("", lambda section: section.load(texts))]
+        if "freq-record" in (kept.run or {}).get("views", ()):
+            steps.append(RestoreStep(cls.title, lambda section: section.run()))
+        return steps
 
     def snapshot(self) -> SectionSnapshot:
         # the file's columns are never changed in place: a new upload makes new arrays

@@ -14,14 +14,14 @@ from bokeh.models import Div
 
 from eha_core.experiments import PAPER_CASES, run_paper_cases
 from eha_core.signals import ZERO, Chirp, Sine, Square, Step, WhiteNoise
-from eha_core.simulate import runs_to_pandas, simulate_many
+from eha_core.simulate import runs_to_pandas, simulate_many, simulation_cost
 
 from ..render.layout import side_by_side
 from ..render.plots import TimeSeriesGrid
-from ..runtime.limits import check_simulation
+from ..runtime.limits import RunCost
 from ..runtime.shared import shared_results
 from ..runtime.tasks import apply_locked, on_click, watch
-from ..session import ReportPart, Section, SectionSnapshot, stale_note
+from ..session import GuideStep, KeptWork, ReportPart, RestoreStep, Section, SectionSnapshot, stale_note
 from ..session.form import (
     Field,
     Form,
@@ -284,6 +284,14 @@ class SimulationTab(Section):
     key = "simulation"
     title = "Simulation"
     defaults = DEFAULT_TEXTS
+    guide_step = GuideStep(
+        "2. Simulation", "Step 2: drive the nonlinear and the linearised model with the paper's four cases (Figs. 2-7) "
+        "and compare them.", "2. Simulation")
+    form_css = "eha-sim-form"
+    #: its plots' status line, made once the plots are drawn (the form comes before them)
+    content_css = "eha-sim-info"
+    run_buttons = ("Case 1", "Case 2", "Case 3", "Case 4", "All four cases", "Run nonlinear", "Run linearised",
+                   "Compare both")
 
     def __init__(self, session, **kwargs):
         super().__init__(session, **kwargs)
@@ -318,7 +326,7 @@ class SimulationTab(Section):
         texts = raised_to_bounds(texts, self.fields, _SENSOR_FIELDS)
         self.form = Form(spec=[g.to_spec() for g in regrouped(SIMULATION_FORM, self.fields)], values=texts,
                          url_defaults=DEFAULT_TEXTS,
-                         width=270, css_classes=["eha-sim-form"], margin=(5, 10))
+                         width=270, css_classes=[self.form_css], margin=(5, 10))
         watch(self.form, self._typed, "values")
 
         # with several cases and both models (8 traces), one case at a time is legible: the selector
@@ -378,7 +386,9 @@ class SimulationTab(Section):
             # an exercise: the student's actuator is seen through its noisy sensors from the first draw
             # (noise-free curves of it would reach the browser's data, and the hidden values with them)
             self._show(as_measured(with_sensor_noise(runs, req), self.measured), None)
-            self.view.shown(self.run_key("nonlinear"))
+            # what it was drawn from, as run_key says it for valid inputs (run_key is None while tab 1 is
+            # not: a view shown from None would stay current whatever the inputs)
+            self.view.shown((self.state.params, "all", "nonlinear", req.sensor_noise, req.sensor_seed))
         else:
             self._show(runs, None)
             # the paper's Fig. 2 as computed: the four cases, nonlinear, no sensor noise
@@ -516,9 +526,8 @@ class SimulationTab(Section):
         key = self.run_key(model)
         self.last_model = model
         self.alert.visible = False
-        labels, _, _, t_end = build_inputs(req)
         try:
-            check_simulation(t_end, DT, n_runs=len(labels) * len(MODEL_CHOICES[model]))
+            self.check_cost(model=model)
         except ValueError as exc:
             self.alert.object = str(exc)
             self.alert.visible = True
@@ -622,6 +631,37 @@ class SimulationTab(Section):
     # -- the section's protocol -----------------------------------------------------------
     def result_views(self) -> list:
         return [self.view]
+
+    def run_cost(self, *, model: str = "both") -> RunCost | None:
+        """Open-loop runs: every case of the request, with each model of ``model``."""
+        req, errors = self.request()
+        if errors:
+            return None
+        labels, _, _, t_end = build_inputs(req)
+        n_runs = len(labels) * len(MODEL_CHOICES[model])
+        cost = simulation_cost(t_end, DT, n_runs=n_runs)
+        return RunCost("runs × horizon", f"{n_runs} × {t_end:g} s", cost.steps, cost.peak_bytes, n_runs * t_end,
+                       "shorten the horizon")
+
+    def kept_work(self) -> KeptWork | None:
+        # the paper's Fig. 2 is drawn when the tab opens: only a run of the student's own is kept
+        if self.run_count > 1 and self.view.is_current:
+            return KeptWork({"views": ["simulation"], "model": self.last_model, "preset": self.preset})
+        return None
+
+    @classmethod
+    def restore_work(cls, kept: KeptWork, texts) -> list[RestoreStep]:
+        run = kept.run or {}
+        model, preset = run.get("model"), run.get("preset")
+        if model not in MODEL_CHOICES:
+            return []
+
+        def simulate(section):
+            # the case the form held: the four cases' inputs are their own, not the form's
+            section.preset = preset if preset in ("all", "custom", 1, 2, 3, 4) else "custom"
+            section._describe_form()
+            return section.run(model)
+        return [RestoreStep(cls.title, simulate)]
 
     def snapshot(self) -> SectionSnapshot:
         return SectionSnapshot(self.key, self.title, self.settings(), stale=self.is_stale(),

@@ -31,7 +31,7 @@ from ..render.layout import side_by_side
 from ..render.tables import SYMBOLS_HTML, UNITS
 from ..runtime.background import background_process
 from ..runtime.tasks import apply_locked, on_click, pages_busy, served_document, watch
-from ..session import ReportPart, Section, SectionSnapshot
+from ..session import GuideStep, ReportPart, Section, SectionSnapshot
 from ..session.form import Field, Form, Group, parse_fields
 from ..session.state import FIELD_LABELS
 
@@ -163,6 +163,12 @@ class StudyPanel(Section):
     key = "study"
     title = "Study over seeds"
     defaults = STUDY_DEFAULTS
+    guide_step = GuideStep(
+        "3. Study", "Beyond the paper: repeat an estimation over many seeds to see bias and how honest the intervals "
+        "are.", "the study over seeds")
+    form_css = "eha-study-form"
+    run_buttons = ("Run the study",)
+    # No kept work (Section.kept_work): a study is closed in an exercise, the only place work is kept.
 
     def __init__(self, session, **kwargs):
         super().__init__(session, **kwargs)
@@ -178,7 +184,7 @@ class StudyPanel(Section):
         self.figure: StudyFigure | None = None
         texts = self.initial_texts()
         self.form = Form(spec=[g.to_spec() for g in STUDY_FORM], values=texts, url_defaults=STUDY_DEFAULTS,
-                         width=270, css_classes=["eha-study-form"], margin=(5, 10))
+                         width=270, css_classes=[self.form_css], margin=(5, 10))
         watch(self.form, lambda _e: self._update_enabled(), "values")
         self.button = pn.widgets.Button(label="Run the study", color="primary", width=260,
                                         css_classes=["eha-run-study"])

@@ -2,14 +2,16 @@
 
 A reload, a closed laptop or a restart of the server must not cost a student their afternoon:
 in an exercise (only there: outside one nothing is stored), a page's :class:`WorkKeeper` saves
-the session's settings, which results were on the page and the records the student uploaded
-(:mod:`eha_app.runtime.work_store`), and when the student joins again with the same id, it
-types the settings back in, reads their records again and runs again what had a result. The
-runs are deterministic (the same inputs and seeds give the same numbers) and go through the
-session's runner like a click: a restored student waits their turn in the fair queue like
-everyone else. They run one after another, each once the previous one is on the page: the
-session's runner keeps one waiting job per session, and a second request would replace the
-first.
+the session's settings and what each section keeps of its last run (its
+:meth:`~eha_app.session.section.Section.kept_work`: which results were on the page, the record
+the student gave it) in the exercise's database (:mod:`eha_app.runtime.work_store`). When the
+student joins again with the same id, it types the settings back in, and each section takes the
+steps that bring its work back (its :meth:`~eha_app.session.section.Section.restore_work`: read
+its record again, run again what had a result), in page order. The runs are deterministic (the
+same inputs and seeds give the same numbers) and go through the session's runner like a click:
+a restored student waits their turn in the fair queue like everyone else. They run one after
+another, each once the previous one is on the page: the session's runner keeps one waiting job
+per session, and a second request would replace the first.
 
 Saves follow the page's changes without costing it: a run that ends or an input that changes
 starts a timer, and the page is read (under its lock) and written (on the store's own thread)
@@ -31,8 +33,8 @@ import panel as pn
 from ..runtime.handins import StoreError
 from ..runtime.jobs import JobState
 from ..runtime.tasks import apply_locked, served_document
-from ..runtime.work_store import MAX_WORK_FILE_BYTES, StoredFile, Work, WorkStore, submit
-from ..session import SettingsError
+from ..runtime.work_store import MAX_WORK_FILE_BYTES, Work, WorkStore, submit
+from ..session import KeptWork, SettingsError
 from ..session.form import Form
 
 __all__ = ["WorkKeeper", "keep_work"]
@@ -53,51 +55,6 @@ def keep_work(session, note: Callable[[str], None]) -> WorkKeeper | None:
     keeper = WorkKeeper(session, note)
     keeper.restore()
     return keeper
-
-
-# -- what each section keeps: its results to run again and its uploads ----------------------------
-
-def _current(view) -> bool:
-    return view.status == "current"
-
-
-def _kept_simulation(section) -> tuple[dict | None, StoredFile | None]:
-    # the paper's Fig. 2 is drawn when the tab opens: only a run of the student's own is kept
-    if section.run_count > 1 and _current(section.view):
-        preset = section.preset
-        return {"views": ["simulation"], "model": section.last_model, "preset": preset}, None
-    return None, None
-
-
-def _kept_least_squares(section) -> tuple[dict | None, StoredFile | None]:
-    views = [name for name, view in (("lse", section.view), ("table4", section.table4_view)) if _current(view)]
-    upload = None
-    entry: dict = {"views": views}
-    if section.own_data is not None and section._upload is not None:
-        data, name = section._upload
-        mapping = dict(section.own_data_key[2]) if section.own_data_key and section.own_data_key[2] else None
-        upload = StoredFile(section.key, name, data, mapping)
-        entry["window"] = {k: str(section.window_form.values.get(k, "")) for k in ("own_from", "own_to")}
-    return (entry if views or upload is not None else None), upload
-
-
-def _kept_frequency(section) -> tuple[dict | None, StoredFile | None]:
-    return ({"views": ["summary"]} if _current(section.views["summary"]) else None), None
-
-
-def _kept_record(section) -> tuple[dict | None, StoredFile | None]:
-    upload = None
-    if section.columns is not None and section._upload is not None:
-        data, name = section._upload
-        upload = StoredFile(section.key, name, data, dict(section._mapping) if section._mapping else None)
-    views = ["freq-record"] if _current(section.view) else []
-    return ({"views": views} if views or upload is not None else None), upload
-
-
-#: The sections whose results and uploads are kept (the study and the model board are not: the
-#: study is closed in an exercise, and the board is filled again by the runs it was sent).
-_KEPT = {"simulation": _kept_simulation, "least_squares": _kept_least_squares, "frequency": _kept_frequency,
-         "record": _kept_record}
 
 
 class WorkKeeper:
@@ -205,53 +162,26 @@ class WorkKeeper:
         self._next(steps)
 
     def _steps(self, work: Work, settings: dict) -> list[tuple[str, Callable]]:
-        """What brings the kept results back, in page order: ``(title, step)``, a step returning the
-        job it started (None: nothing to wait for)."""
+        """What brings the kept results back, in page order: each section's steps (its ``restore_work``),
+        as ``(title, step)``, a step returning the job it started (None: nothing to wait for)."""
         session, runs = self.session, work.runs
         files = {f.slot: f for f in work.files}
         steps: list[tuple[str, Callable]] = []
-        sim = runs.get("simulation")
-        if sim and sim.get("model") in ("nonlinear", "linear", "both"):
-            def simulate():
-                section = session.build("simulation")
-                preset = sim.get("preset")
-                section.preset = preset if preset in ("all", "custom", 1, 2, 3, 4) else "custom"
-                section._describe_form()
-                return section.run(sim["model"])
-            steps.append(("Simulation", simulate))
-        lse, upload = runs.get("least_squares"), files.get("least_squares")
-        if lse or upload:
-            lse = lse or {}
-            if upload is not None:
-                def read_lse(upload=upload):
-                    section = session.build("least_squares")
-                    section._upload = (upload.data, upload.name)
-                    return section.read_upload(upload.mapping)
-                steps.append(("", read_lse))
-                if lse.get("window"):
-                    window = lse["window"]
-                    steps.append(("", lambda: session.build("least_squares").window_form.set_values(**window)))
-            if "lse" in lse.get("views", ()):
-                steps.append(("Least squares", lambda: session.build("least_squares").run()))
-            if "table4" in lse.get("views", ()):
-                steps.append(("Table 4", lambda: session.build("least_squares").run_all()))
-        if "summary" in (runs.get("frequency") or {}).get("views", ()):
-            steps.append(("Transfer function", lambda: session.build("frequency").run()))
-        rec, rec_upload = runs.get("record"), files.get("record")
-        if rec_upload is not None:
-            def record():
-                session.build("frequency")
-                return session.section("record")
-            def read_record(upload=rec_upload):
-                section = record()
-                section._upload = (upload.data, upload.name)
-                return section.read(upload.mapping)
-            steps.append(("", read_record))
-            # reading a record clears its range: the kept one goes back after it
-            steps.append(("", lambda: record().load(settings.get("record") or {})))
-            if "freq-record" in (rec or {}).get("views", ()):
-                steps.append(("Your own record", lambda: record().run()))
+        for p in session.registry:
+            run, upload = runs.get(p.key), files.get(p.key)
+            if not run and upload is None:
+                continue
+            texts = settings.get(p.key)
+            if not isinstance(texts, dict):
+                texts = session.settings_of(p.key)      # the page's own (its address won over the kept ones)
+            kept = KeptWork(run if isinstance(run, dict) else None, upload)
+            for step in p.cls.restore_work(kept, {k: str(v) for k, v in texts.items()}):
+                steps.append((step.title, partial(self._take, p.key, step.do)))
         return steps
+
+    def _take(self, key: str, do: Callable) -> object:
+        """One step of a section's restoring, on the section (made now if it never was)."""
+        return do(self.session.build(key))
 
     def _next(self, steps: list) -> None:
         """Take the steps in turn, each once the previous one's job is handled on the page."""
@@ -354,19 +284,20 @@ class WorkKeeper:
         session = self.session
         runs, files, size = {}, [], 0
         for section in session.built():
-            kept = _KEPT.get(section.key)
+            kept = section.kept_work()
             if kept is None:
                 continue
-            entry, upload = kept(section)
+            upload = kept.file
             if upload is not None:
+                upload = dataclasses.replace(upload, slot=section.key)     # one file per section, under its key
                 if size + len(upload.data) > MAX_WORK_FILE_BYTES:
                     log.info("a student's upload %r is not kept: their uploads pass %d MB", upload.name,
                              MAX_WORK_FILE_BYTES // 10**6)
                 else:
                     size += len(upload.data)
                     files.append(upload)
-            if entry is not None:
-                runs[section.key] = entry
+            if kept.run is not None:
+                runs[section.key] = dict(kept.run)
         return Work(self.student, session.settings_bytes(), runs, tuple(files))
 
     def save(self) -> None:

@@ -8,8 +8,11 @@ page order in :data:`~eha_app.session.section.SECTIONS`.
 
 from .section import (
     SECTIONS,
+    GuideStep,
+    KeptWork,
     Placement,
     ReportPart,
+    RestoreStep,
     Section,
     SectionRegistry,
     SectionSnapshot,
@@ -18,6 +21,6 @@ from .section import (
 )
 from .session import MAX_SETTINGS_BYTES, SETTINGS_FORMAT, Session, SessionSnapshot, SettingsError
 
-__all__ = ["Session", "SessionSnapshot", "Section", "SectionSnapshot", "ReportPart", "Placement",
-           "SectionRegistry", "SECTIONS", "SettingsError", "SETTINGS_FORMAT", "MAX_SETTINGS_BYTES", "stale_note",
-           "run_off_notice"]
+__all__ = ["Session", "SessionSnapshot", "Section", "SectionSnapshot", "ReportPart", "GuideStep", "KeptWork",
+           "RestoreStep", "Placement", "SectionRegistry", "SECTIONS", "SettingsError", "SETTINGS_FORMAT",
+           "MAX_SETTINGS_BYTES", "stale_note", "run_off_notice"]

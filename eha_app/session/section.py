@@ -11,17 +11,29 @@ the session a small protocol:
 - :meth:`Section.snapshot`: what it shows, taken under the page's lock, as an
   immutable :class:`SectionSnapshot` that a worker may read;
 - :meth:`Section.report`: its part of the session report, drawn from a
-  snapshot (in a worker, off the page).
+  snapshot (in a worker, off the page);
+- :attr:`Section.guide_step`: its stop on the guide's way through the steps
+  (None: the guide passes it by);
+- :meth:`Section.kept_work` and :meth:`Section.restore_work`: what an exercise
+  keeps of its last run for a student who joins again (a reload, a restart of the
+  server), and the steps that compute it again (:mod:`eha_app.sections.work`);
+- :meth:`Section.run_cost`: what the run its inputs describe would cost the
+  server, checked against the server's limits before it is queued
+  (:meth:`Section.check_cost`);
+- :attr:`Section.form_css`, :attr:`Section.content_css` and
+  :attr:`Section.run_buttons`: how its form, its content and its run buttons are
+  found on the page (a browser test, the random walk of ``benchmarks/walker.py``).
 
 The registry (:data:`SECTIONS`) holds every section in page order with where it
 goes: a main tab, a sub-tab of one, or inside another section. Settings, the
-address and the report iterate it: a new panel is one module and one
-``SECTIONS.register(...)`` line (see ``eha_app/sections/__init__.py``).
+address, the report, the guide, the kept work and the random walk iterate it: a
+new panel is one module and one ``SECTIONS.register(...)`` line (see
+``eha_app/sections/__init__.py``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -31,7 +43,11 @@ import param
 
 from eha_core.errors import not_allowed
 
-__all__ = ["Section", "SectionSnapshot", "ReportPart", "Placement", "SectionRegistry", "SECTIONS", "stale_note"]
+from ..runtime.limits import RunCost, check_run
+from ..runtime.work_store import StoredFile
+
+__all__ = ["Section", "SectionSnapshot", "ReportPart", "GuideStep", "KeptWork", "RestoreStep", "Placement",
+           "SectionRegistry", "SECTIONS", "stale_note"]
 
 
 @dataclass(frozen=True)
@@ -55,6 +71,38 @@ class ReportPart:
     title: str
     html: str
     figures: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class GuideStep:
+    """A section's stop on the guide's way through the steps: its short name in the guide's trail,
+    what is done there (HTML, the guide line's sentence) and the label of the button that leads to it
+    ("Next: ..."). The guide (:mod:`eha_app.guide`) stops at every section that has one, in page order."""
+
+    short: str
+    what: str
+    go: str
+
+
+@dataclass(frozen=True)
+class KeptWork:
+    """What a section keeps of its last run for a student who joins an exercise again: ``run``, what its
+    :meth:`Section.restore_work` needs to compute the results again (JSON: ``{"views": [...], ...}``;
+    None: no result, only the file), and ``file``, the file the student gave it (its bytes, name and
+    column mapping; its ``slot`` is the section's key)."""
+
+    run: Mapping[str, Any] | None = None
+    file: StoredFile | None = None
+
+
+@dataclass(frozen=True)
+class RestoreStep:
+    """One step that brings a section's kept work back: ``do(section)`` (the section, made when the step
+    is taken) returns the job it started (None: nothing to wait for); ``title`` names the result it
+    brings back in the page's note ("" for a step on the way, such as reading a file)."""
+
+    title: str
+    do: Callable[[Any], Any]
 
 
 def run_off_notice(label: str, *, tab1_valid: bool, errors: Mapping[str, str], waiting: bool,
@@ -99,6 +147,14 @@ class Section(pn.viewable.Viewer):
     defaults: ClassVar[Mapping[str, str]] = {}
     #: At most this many posts wait for the section before it is made (None: no limit).
     max_mail: ClassVar[int | None] = None
+    #: Its stop on the guide's way through the steps (None: the guide passes it by).
+    guide_step: ClassVar[GuideStep | None] = None
+    #: The CSS class of its form (the one that holds its :attr:`defaults`' fields; None: no form) and of
+    #: what shows its content has arrived (None: its form): how a test or a random walk finds them.
+    form_css: ClassVar[str | None] = None
+    content_css: ClassVar[str | None] = None
+    #: The labels of the buttons that compute its results.
+    run_buttons: ClassVar[tuple[str, ...]] = ()
 
     result = param.Parameter(default=None, doc="the section's last result (an immutable result of the core)")
 
@@ -156,6 +212,30 @@ class Section(pn.viewable.Viewer):
     def receive(self, item) -> None:
         """Take what another section posted to this one (:meth:`Session.post`)."""
         raise TypeError(f"section {self.key!r} takes nothing from other sections (got {type(item).__name__})")
+
+    # -- the work kept for a student who joins again (an exercise) ----------------------------------
+    def kept_work(self) -> KeptWork | None:
+        """What to keep of the section's last run (None: nothing); read under the page's lock after each
+        run and change. A result is worth keeping only while it is current: its inputs are then the
+        settings kept beside it, and computing it again gives the same numbers."""
+        return None
+
+    @classmethod
+    def restore_work(cls, kept: KeptWork, texts: Mapping[str, str]) -> list[RestoreStep]:
+        """The steps that bring ``kept`` back, in order, on a page whose settings were typed in already
+        (``texts``: the section's own). Each step runs once the job of the one before is on the page."""
+        return []
+
+    # -- what a run costs the server -------------------------------------------------------------------
+    def run_cost(self, **how) -> RunCost | None:
+        """What the run its inputs describe would cost the server (``how``: which of its runs, for a
+        section with several; None: nothing worth pricing, or inputs that do not make a run)."""
+        return None
+
+    def check_cost(self, **how) -> None:
+        """A :class:`~eha_core.errors.FieldError` that says what to change when the run is beyond the
+        server's limits (:mod:`eha_app.runtime.limits`): checked before it is queued."""
+        check_run(self.run_cost(**how))
 
     # -- before it is made ---------------------------------------------------------------------
     @classmethod

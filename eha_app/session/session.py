@@ -128,12 +128,16 @@ class Session(param.Parameterized):
         return [self._built[p.key] for p in self.registry if p.key in self._built]
 
     def build(self, key: str) -> Section:
-        """The section ``key``, made now (with the sections within it) if it never was. Call under the
-        page's lock (it makes Bokeh models)."""
+        """The section ``key``, made now (with the sections within it, or with the one it is within) if
+        it never was. Call under the page's lock (it makes Bokeh models)."""
         section = self._built.get(key)
         if section is not None:
             return section
         placement = self.registry.get(key)
+        if placement.within is not None and placement.within not in self._built:
+            # a section within another is laid out (and given its settings) by that one: made with it
+            self.build(placement.within)
+            return self._built[key]
         with frozen_models():
             section = placement.cls(self)
             self._built[key] = section

@@ -331,6 +331,20 @@ def test_every_record_of_the_students_actuator_is_measured_through_noisy_sensors
     assert all(r.label.endswith("+ sensor noise") for r in sim.results) and len(sim.results) == 8
 
 
+def test_tab_2_opened_while_tab_1_is_not_valid_marks_its_first_draw_out_of_date(exercise):
+    """In an exercise tab 2's first draw is the student's actuator through its sensors; opened while a
+    field of tab 1 is not valid, it is drawn from the last valid values and marked so (it said current;
+    found by the random walk, seed 9 with --exercise)."""
+    page = create_app(AppState())
+    page.gate.student_id.value = "ada"
+    page.gate.start()
+    page.session.state.set_text("p1_0", "inf")
+    sim = page.show("simulation")
+    assert sim.results and sim.view.status == "stale"
+    page.session.state.set_text("p1_0", "0")
+    assert sim.view.status in ("current", "updating")
+
+
 def test_the_reveal_shows_each_student_their_truth_and_errors_and_no_one_elses(tmp_path, monkeypatch):
     ex = Exercise.new(hide=("M", "beta_e"), roster=[("s1", "Ada"), ("s2", "Alan")], feedback="after-deadline",
                       deadline="2100-01-01T00:00", secret="7c" * 32)

@@ -188,6 +188,20 @@ def test_multiple_shooting_from_the_form_ends_where_output_error_does(ran):
     type_into(gb.form, gb_shooting="single")
 
 
+def test_a_second_run_updates_the_same_figures(ran):
+    """A run shown again changes the figures' data, not their models (no new Bokeh models to build,
+    send and lay out)."""
+    session, gb = ran
+    figure, pane = gb.figure, gb.plot.objects[0]
+    before = {s: np.array(src.data["s"]) for s, src in figure.sources.items()}
+    type_into(gb.form, gb_seed="7")
+    assert gb.run().state == "done"
+    assert gb.figure is figure and gb.plot.objects[0] is pane
+    after = {s: np.array(src.data["s"]) for s, src in figure.sources.items()}
+    assert any(not np.allclose(before[s], after[s]) for s in before)
+    type_into(gb.form, gb_seed="0")
+
+
 def test_a_run_too_large_for_a_shared_server_is_refused_before_it_is_queued():
     session = Session(AppState())
     gb = session.build("greybox")

@@ -195,3 +195,120 @@ def test_a_reloaded_address_wins_over_the_kept_settings(exercise):
     assert moved.session.state.texts["Dc"] == "120" and moved.session.settings()["least_squares"]["lse_seed"] == "9"
     lse3 = moved.session.section("least_squares")
     assert lse3 is None or lse3.result is None                      # tab 1 differs: nothing is run again
+
+
+def test_the_grey_box_result_comes_back_after_a_rejoin(exercise):
+    """The grey-box is one of an exercise's hand-in routes: its result comes back like the least squares',
+    and can be handed in from the page the student joined again on."""
+    _, path = exercise
+    page = join("s1")
+    gb = page.show("greybox")
+    gb.form.set_values(gb_params="M, B", gb_seed="4")
+    gb.run()
+    assert gb.result.success and gb.view.is_current
+    estimates = dict(gb.result.estimates)
+    assert WorkStore(HandIns(path)).load("s1").runs["greybox"] == {"views": ["gb"]}
+
+    again = join("s1")
+    gb2 = again.session.section("greybox")
+    assert gb2 is not None and gb2.view.is_current and gb2.form.values["gb_seed"] == "4"
+    assert dict(gb2.result.estimates) == estimates                     # to the last digit
+    assert "results of Grey-box (nonlinear)" in again.settings_note.object
+    assert not gb2.handin_button.disabled
+    assert "GB" in [m.name for m in again.session.mail("board")]      # the board was sent it again
+
+
+def _renamed(data: bytes, old: bytes, new: bytes) -> bytes:
+    """The CSV with its header's column ``old`` called ``new`` (a file whose columns need the mapping)."""
+    head, rest = data.split(b"\n", 1)
+    assert old in head.split(b",")
+    return b",".join(new if c == old else c for c in head.split(b",")) + b"\n" + rest
+
+
+def test_every_result_comes_back_after_a_restart_of_the_server(exercise):
+    """A new server process: nothing but the exercise's database is shared (a new store on the same
+    file, no result computed by the old process). The simulation, the least squares, the transfer
+    function, the own record with its range and the grey-box on the student's file with its columns
+    come back, each with the same numbers."""
+    from eha_app.runtime import exercise_file, work_store
+    from eha_app.runtime.shared import shared_results
+
+    _, path = exercise
+    page = join("s1")
+    sim = page.show("simulation")
+    sim.set_inputs(t_end="2")
+    sim.run("both")
+    lse = page.show("least_squares")
+    lse.form.set_values(lse_seed="3")
+    lse.run()
+    freq = page.show("frequency")
+    freq.form.set_values(n_samples="2000")
+    freq.run()
+    rec = page.session.section("record")
+    rec.upload.param.update(filename="loop.csv", value=freq.data_bytes("csv"))
+    rec.window_form.set_values(rec_from="0.5")
+    rec.run()
+    gb = page.show("greybox")
+    gb.form.set_values(gb_params="M, B", gb_seed="2")
+    gb.run()
+    record = _renamed(gb.data_bytes(), b"x[m]", b"pos[m]")
+    gb.upload.param.update(filename="rig.csv", value=record)
+    assert gb.column_mapping.waiting                                 # x is not found by its name
+    gb.column_mapping.selects["x"].value = "pos[m]"
+    gb.column_mapping.button.clicks += 1
+    assert gb.own_data is not None
+    gb.run()
+    assert all(v.is_current for v in (sim.view, lse.view, freq.views["summary"], rec.view, gb.view))
+    assert "rig.csv" in gb.table.object
+    shown = {"simulation": [r.x.copy() for r in sim.results], "least_squares": dict(lse.result.estimates),
+             "frequency": freq.result.estimate.den.copy(), "record": rec.result.estimate.den.copy(),
+             "greybox": dict(gb.result.estimates)}
+    work_store.drain()
+    page.give_way()                               # the old server's page is gone
+
+    # the restart: a new process reads the exercise and opens its database afresh, and has computed nothing
+    exercise_file._exercise_at.cache_clear()
+    shared_results.clear()
+    again = join("s1")
+    assert again.session.state.handins is not page.session.state.handins
+    s = again.session
+    sim2, lse2, freq2 = s.section("simulation"), s.section("least_squares"), s.section("frequency")
+    rec2, gb2 = s.section("record"), s.section("greybox")
+    assert all(v.is_current for v in (sim2.view, lse2.view, freq2.views["summary"], rec2.view, gb2.view))
+    assert [r.x.tolist() for r in sim2.results] == [x.tolist() for x in shown["simulation"]]
+    assert dict(lse2.result.estimates) == shown["least_squares"]
+    assert np.array_equal(freq2.result.estimate.den, shown["frequency"])
+    assert np.array_equal(rec2.result.estimate.den, shown["record"]) and rec2.window_form.values["rec_from"] == "0.5"
+    assert gb2.own_data is not None and gb2.own_data_key[0] == "rig.csv" and "rig.csv" in gb2.table.object
+    assert dict(gb2.result.estimates) == shown["greybox"]
+    note = again.settings_note.object
+    for title in ("Simulation", "Least squares", "Transfer function", "Your own record", "Grey-box (nonlinear)"):
+        assert title in note, title
+    kept = WorkStore(HandIns(path)).load("s1")
+    assert sorted((f.slot, f.name) for f in kept.files) == [("greybox", "rig.csv"), ("record", "loop.csv")]
+    assert [f.mapping["x"] for f in kept.files if f.slot == "greybox"] == ["pos[m]"]
+
+
+def test_a_run_on_a_file_that_was_not_kept_is_not_run_again_on_simulated_data(tmp_path, monkeypatch):
+    """A file past the class's space for kept files is not kept: its run is not computed again on the
+    simulated sensors (another result under the same name); the settings still come back."""
+    ex = Exercise.new(hide=HIDE, roster=[("s1", "Ada")], title="Lab 3", secret="5a" * 32, kept_uploads_mb=0)
+    path = tmp_path / "class.json"
+    ex.save(path)
+    monkeypatch.setenv("EHA_EXERCISE", str(path))
+    page = join("s1")
+    gb = page.show("greybox")
+    gb.form.set_values(gb_params="M, B")
+    gb.run()
+    gb.upload.param.update(filename="rig.csv", value=gb.data_bytes())
+    gb.run()
+    assert gb.own_data is not None and gb.view.is_current and "rig.csv" in gb.table.object
+    assert "Your file rig.csv is used on this page but not kept for a reload" in page.settings_note.object
+    kept = WorkStore(HandIns(path)).load("s1")
+    assert kept.files == () and kept.runs["greybox"] == {"views": ["gb"], "file": "rig.csv"}
+
+    again = join("s1")
+    gb2 = again.session.section("greybox")
+    assert gb2 is None or gb2.result is None
+    assert again.session.settings()["greybox"]["gb_params"] == "M, B"
+    assert "settings of" in again.settings_note.object and "results of" not in again.settings_note.object
