@@ -24,7 +24,7 @@ The last line reads
     patches=<applied by eha serve> page_build_ms=<all on> page_build_ms_model_patches_off=<...> ratio=<off/on> \
     gc_pause_max_ms=<on> ...=<off> open_p95=<on> open_p95_all_off=<...> closed_stop_s=<on> ...=<off>
 
-Run:  python benchmarks/bench_patches.py [--students 10] [--part 1|2|all]
+Run:  python benchmarks/bench_patches.py [--students 10] [--part 1|2|all] [--rounds 3]
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ import argparse
 import json
 import os
 import re
+import statistics
 import subprocess
 import sys
 from pathlib import Path
@@ -132,14 +133,20 @@ def served(script: str, args: list[str], off: str) -> dict:
     return fields(lines[-1])
 
 
-def part1() -> dict:
+def part1(rounds: int) -> dict:
+    """Every configuration once per round, the rounds one after the other (a machine's drift falls on
+    every configuration alike); the median of the rounds."""
     configs = {"all on": "", **{f"{n} off": n for n in (*MODEL_PATCHES, "lazy_freeze", "gc_freeze", "gc_often")},
                "model patches off": ",".join(MODEL_PATCHES), "gc patches off": "gc_freeze,gc_often"}
+    runs: dict[str, list[dict]] = {label: [] for label in configs}
+    for _ in range(rounds):
+        for label, off in configs.items():
+            runs[label].append(in_process(off))
     out = {}
     print(f"{'configuration':28s} {'page_build_ms':>13s} {'page_kb':>8s} {'update_ms':>9s} {'gc_pause_max_ms':>15s} "
-          f"{'gc_full_total_ms':>16s}", flush=True)
-    for label, off in configs.items():
-        r = out[label] = in_process(off)
+          f"{'gc_full_total_ms':>16s}   (median of {rounds} rounds)", flush=True)
+    for label, results in runs.items():
+        r = out[label] = {k: statistics.median(x[k] for x in results) for k in results[0]}
         print(f"{label:28s} {r['page_build_ms']:13.1f} {r['page_kb']:8.0f} {r['update_ms']:9.2f} "
               f"{r['gc_pause_max_ms']:15.1f} {r['gc_full_total_ms']:16.1f}", flush=True)
     return out
@@ -167,10 +174,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--students", type=int, default=10)
     ap.add_argument("--part", choices=("1", "2", "all"), default="all")
+    ap.add_argument("--rounds", type=int, default=3, help="part 1: rounds over every configuration (default 3)")
     args = ap.parse_args(argv)
     last = []
     if args.part in ("1", "all"):
-        p1 = part1()
+        p1 = part1(args.rounds)
         on = p1["all on"]
         last.append(f"page_build_ms={on['page_build_ms']:.1f}")
         for key, config in (("page_build_ms", "model patches off"), ("page_kb", "lazy_containers off"),
