@@ -248,7 +248,11 @@ def test_a_record_with_other_column_names_is_mapped(closed_loop):
     direct = _upload_record(Session(AppState()).build("frequency"), closed_loop.data_bytes("mat"),
                             "loop.mat")
     direct.run()                                                        # the .mat export, read by name
-    np.testing.assert_allclose(record.result.estimate.den, direct.result.estimate.den, rtol=1e-6)
+    # two iterative estimates of records that differ by the mm rounding: each stops within ~3e-4 standard
+    # errors of the minimum (tol = 1e-10; they differ by up to 2e-5 of one, 3e-7 relative, with OpenBLAS's kernels)
+    e, f = record.result.estimate, direct.result.estimate
+    assert e.den[0] == f.den[0] == 1.0
+    np.testing.assert_array_less(np.abs(e.den[1:] - f.den[1:]), 1e-3 * f.param_std[:f.n_poles])
     settings = json.loads(record.estimate_bytes("json"))["settings"]
     assert settings["columns"] == {"t": "time", "u": "cmd", "y": "pos[mm]"} and settings["file"] == "lab.csv"
 

@@ -170,7 +170,11 @@ def test_oe_fit_from_perturbed_start_matches_tfest():
     assert plain.success, plain.message
     # same criterion: both reach the same minimum
     assert plain.cost == pytest.approx(full.cost, rel=1e-6)
-    np.testing.assert_allclose(plain.den, full.den, rtol=1e-5)
+    # each stops when its cost falls by < tol = 1e-10 of itself: within ~sqrt(tol N) = 3e-4 standard errors
+    # of the minimum (with OpenBLAS's kernels they differ by 5e-6 to 9e-5 of one, up to 2e-6 relative)
+    assert plain.den[0] == full.den[0] == 1.0
+    np.testing.assert_array_less(np.abs(_theta(plain.num, plain.den) - _theta(full.num, full.den)),
+                                 1e-3 * full.param_std)
     assert plain.fit_percent == pytest.approx(
         fit_percent(y, simulate_tf(plain.num, plain.den, u, TS)), abs=1e-9)
 
