@@ -88,6 +88,9 @@ def test_invalid_inputs_disable_runs():
 
 
 def test_a_failing_computation_is_shown_and_the_session_keeps_working(monkeypatch):
+    from eha_app.runtime.shared import shared_results
+
+    shared_results.clear()          # computed here, not taken from an earlier test's identical run
     s = AppState()
     tab = Session(s).build("simulation")
     import eha_app.sections.simulation as sim
