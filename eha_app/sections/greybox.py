@@ -31,7 +31,6 @@ from ..render.layout import side_by_side
 from ..render.tables import SCENARIOS
 from ..runtime.limits import RunCost
 from ..runtime.tasks import apply_locked, on_click, watch
-from ..runtime.work_store import StoredFile
 from ..session import (
     GuideStep,
     KeptWork,
@@ -47,7 +46,16 @@ from ..session.freshness import ResultView
 from ..session.state import FIELD_LABELS
 from .handin import HandInBox
 from .least_squares import EXCITATIONS
-from .uploads import ColumnMapping, FileUpload, check_size, download, file_source, known_on_file, upload_name
+from .uploads import (
+    ColumnMapping,
+    FileUpload,
+    check_size,
+    download,
+    file_source,
+    kept_upload,
+    known_on_file,
+    upload_name,
+)
 
 __all__ = ["GreyBoxPanel", "GreyBoxRequest", "GB_FORM", "GB_DEFAULTS", "parse_greybox"]
 
@@ -664,12 +672,9 @@ class GreyBoxPanel(Section):
     def kept_work(self) -> KeptWork | None:
         views = ["gb"] if self.view.is_current else []
         run: dict = {"views": views}
-        upload = None
-        if self.own_data is not None and self._upload is not None:
-            data, name = self._upload
-            mapping = dict(self.own_data_key[2]) if self.own_data_key and self.own_data_key[2] else None
-            upload = StoredFile(self.key, name, data, mapping)
-            run["file"] = name
+        upload = kept_upload(self.key, self._upload, self.own_data, self.own_data_key)
+        if upload is not None:
+            run["file"] = upload.name
         if not views and upload is None:
             return None
         return KeptWork(run, upload)

@@ -44,7 +44,6 @@ from ..render.tables import (
 from ..runtime.limits import RunCost
 from ..runtime.shared import shared_results
 from ..runtime.tasks import apply_locked, on_click, watch
-from ..runtime.work_store import StoredFile
 from ..session import (
     GuideStep,
     KeptWork,
@@ -59,7 +58,16 @@ from ..session.form import Field, Form, Group, parse_fields, raised_to_bounds, r
 from ..session.freshness import ResultView
 from ..session.state import FIELD_LABELS
 from .handin import HandInBox
-from .uploads import ColumnMapping, FileUpload, check_size, download, file_source, known_on_file, upload_name
+from .uploads import (
+    ColumnMapping,
+    FileUpload,
+    check_size,
+    download,
+    file_source,
+    kept_upload,
+    known_on_file,
+    upload_name,
+)
 
 __all__ = ["LeastSquaresPanel", "LseRequest", "LSE_FORM", "LSE_DEFAULTS", "parse_lse"]
 
@@ -734,14 +742,11 @@ class LeastSquaresPanel(Section):
     def kept_work(self) -> KeptWork | None:
         views = [name for name, view in (("lse", self.view), ("table4", self.table4_view)) if view.is_current]
         run: dict = {"views": views}
-        upload = None
-        if self.own_data is not None and self._upload is not None:
-            data, name = self._upload
-            mapping = dict(self.own_data_key[2]) if self.own_data_key and self.own_data_key[2] else None
-            upload = StoredFile(self.key, name, data, mapping)
+        upload = kept_upload(self.key, self._upload, self.own_data, self.own_data_key)
+        if upload is not None:
             # the file's part is no field of the settings: kept here, put back once the file is read
             run["window"] = {k: str(self.window_form.values.get(k, "")) for k in ("own_from", "own_to")}
-            run["file"] = name
+            run["file"] = upload.name
         if not views and upload is None:
             return None
         return KeptWork(run, upload)

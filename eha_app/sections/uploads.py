@@ -16,7 +16,7 @@ from eha_core.errors import FieldError
 
 from ..runtime.tasks import on_click
 
-__all__ = ["MAX_UPLOAD_BYTES", "FileUpload", "check_size", "upload_name", "ColumnMapping", "download",
+__all__ = ["MAX_UPLOAD_BYTES", "kept_upload", "FileUpload", "check_size", "upload_name", "ColumnMapping", "download",
            "known_on_file", "file_source"]
 
 #: An upload larger than this is refused, in the page before it is sent and by the server
@@ -61,6 +61,20 @@ def known_on_file(state, estimated=()):
     return params, (f"<p class='eha-note eha-paper-values'>Your file is not your actuator's experiment: the hidden "
                     f"{values} {'is' if len(named) == 1 else 'are'} taken at the paper's value"
                     f"{'' if len(named) == 1 else 's'}, not your actuator's.</p>")
+
+
+def kept_upload(key: str, upload, own_data, own_data_key):
+    """The file section ``key`` ran its result on, as an exercise keeps it for a student who joins
+    again (a :class:`~eha_app.runtime.work_store.StoredFile` with its column mapping), or None when it
+    ran on the simulated sensors. ``upload``: the file as given, ``(bytes, name)``; ``own_data`` and
+    ``own_data_key``: what was read of it, and under which ``(name, size, mapping)``."""
+    from ..runtime.work_store import StoredFile
+
+    if own_data is None or upload is None:
+        return None
+    data, name = upload
+    mapping = dict(own_data_key[2]) if own_data_key and own_data_key[2] else None
+    return StoredFile(key, name, data, mapping)
 
 
 def file_source(name: str, data: bytes) -> dict:
