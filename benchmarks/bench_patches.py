@@ -12,17 +12,22 @@ Part 1, in a process of its own per configuration (no server):
   page_kb         memory a page keeps (tracemalloc), mean of 3 pages
   update_ms       a result shown on a page with every tab built: one text changed in a frozen
                   document (the model graph recomputed, or not), median of 40
-  gc_pause_ms     building 24 pages kept open (a class): the longest pause of the garbage collector,
-                  and the sum of the full collections' pauses
+  gc_pause_max_ms building 24 pages kept open (a class): the longest pause of the garbage
+                  collector (and gc_full_total_ms, the sum of the full collections' pauses)
+
+Each configuration runs once per round (``--rounds``, default 3), the rounds one after the other;
+the median of the rounds is printed.
 
 Part 2, a served class of ``--students`` (``bench_classroom.py --distinct``) per configuration:
 every step's p95, the observer's typing p95 and the server's CPU per student; and
-``bench_closed_page.py`` for the closed page (``disconnects``).
+``bench_closed_page.py`` for the closed page (``disconnects``). "all off" leaves the two security
+guards on (``EHA_PATCHES_OFF`` never turns them off).
 
-The last line reads
+The last line gives each figure with every patch on, then with the patch (or group) it justifies
+turned off (and, for part 1, their ratio):
 
-    patches=<applied by eha serve> page_build_ms=<all on> page_build_ms_model_patches_off=<...> ratio=<off/on> \
-    gc_pause_max_ms=<on> ...=<off> open_p95=<on> open_p95_all_off=<...> closed_stop_s=<on> ...=<off>
+    page_build_ms=<on> page_build_ms_model_patches_off=<off> ratio=<off/on> page_kb_... update_ms_...
+    gc_pause_max_ms_... open_p95=<on> open_p95_all_off=<off> ... closed_stop_s_disconnects_off=<off>
 
 Run:  python benchmarks/bench_patches.py [--students 10] [--part 1|2|all] [--rounds 3]
 """

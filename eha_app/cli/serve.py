@@ -153,6 +153,10 @@ def run(args) -> int:
 
     if not ENTRY_POINT.exists():
         raise UsageError(f"the app entry point {ENTRY_POINT} is missing: reinstall the package")
+    # the library patches this server cannot do without, checked before anything starts
+    refusal = _patch_refusal(shared=args.num_procs > 1 or args.share_port)
+    if refusal:
+        return _refuse(refusal)
     if not args.share_port:
         check_port_free(args.address, args.port)
     argv = serve_argv(port=args.port, address=args.address, num_procs=1,
@@ -204,21 +208,27 @@ def _serve_here(args, argv: list[str]) -> int:
     """Serve in this process (one of ``--num-procs`` when ``--share-port``) with Panel's command line
     ``argv``, the server's changes of its libraries installed first."""
     from eha_app.app import warm_up
-    from eha_app.runtime.patches import AFTER_LOAD_PATCHES, SERVER_PATCHES, apply_patches, guard_paths
+    from eha_app.runtime.patches import (
+        AFTER_LOAD_PATCHES,
+        GUARDS,
+        READ_PATCHES,
+        SERVER_PATCHES,
+        apply_patches,
+        guard_paths,
+        unknown_turned_off,
+    )
     from eha_app.runtime.serving import first_answer, refuse_oversized
     from eha_app.runtime.teacher_access import route, watch_token
 
     # the libraries' internals this server changes, each checked against the installed versions and
     # what it replaces (eha_app/runtime/patches.py); one line says which were applied
-    status = apply_patches(("shared_port",) if args.share_port else ())
-    if args.share_port and status["shared_port"] != "applied":
-        return _refuse("--num-procs above 1 needs the shared_port patch, which does not fit this Bokeh: "
-                       "serve with --num-procs 1, or install bokeh 3.9")
-    status.update(apply_patches(SERVER_PATCHES))
-    unsafe = [n for n in ("component_guard", "teacher_routes") if status[n] != "applied"]
-    if unsafe:
-        return _refuse(f"the {' and '.join(unsafe)} check cannot be installed on this Panel/Bokeh: the server "
-                       "would not be safe to open to a class (see the warning above); install panel 1.9 and bokeh 3.9")
+    for name in unknown_turned_off():
+        print(f"eha serve: EHA_PATCHES_OFF names {name!r}, which is no patch: nothing turned off for it",
+              file=sys.stderr)
+    status = apply_patches((("shared_port",) if args.share_port else ()) + SERVER_PATCHES + READ_PATCHES)
+    failed = [n for n in (*GUARDS, *(("shared_port",) if args.share_port else ())) if status[n] != "applied"]
+    if failed:
+        return _refuse(f"the {failed[0]} patch failed to install ({status[failed[0]]}): see the warning above")
     # an address too long to serve gets 414 (not a closed connection), before anything else reads it;
     # then /teacher answers the teacher only (and 404 without an exercise)
     guard_paths(first_answer(refuse_oversized, route))
@@ -236,15 +246,29 @@ def _serve_here(args, argv: list[str]) -> int:
 
 
 def _say_patches(status: dict[str, str]) -> None:
-    """One line on stderr: the library patches applied (and how many were not; a warning each above)."""
-    from eha_app.runtime.patches import usable
-
-    for name in ("lock_check", "lazy_freeze", "loop_has_work", "layout_once", "controls_before_render"):
-        status.setdefault(name, "applied" if usable(name) else "not applied")
+    """One line on stderr: the library patches applied, and those not (a warning each above says why)."""
     applied = [n for n, s in status.items() if s == "applied"]
     others = [n for n, s in status.items() if s != "applied"]
     print(f"eha serve: library patches applied: {', '.join(applied) or 'none'}"
           + (f"; not applied: {', '.join(others)}" if others else ""), file=sys.stderr, flush=True)
+
+
+def _patch_refusal(*, shared: bool) -> str:
+    """Why this server must not start with the installed Panel and Bokeh ("" when it may): its two
+    security guards do not fit them, or several processes would have to share a port without the
+    patch that lets them."""
+    from eha_app.runtime.patches import GUARDS, why_not
+
+    for name in GUARDS:
+        why = why_not(name)
+        if why:
+            return (f"the {name} security check cannot be installed ({why}): the server would not be safe "
+                    "to open to a class; install panel 1.9 and bokeh 3.9")
+    why = why_not("shared_port") if shared else ""
+    if why:
+        return (f"--num-procs above 1 needs the shared_port patch ({why}): serve with --num-procs 1, "
+                "or install bokeh 3.9")
+    return ""
 
 
 def _refuse(message: str) -> int:

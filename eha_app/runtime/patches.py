@@ -135,7 +135,8 @@ __all__ = ["COMPONENT_PACKAGES", "WRITTEN_FOR", "component_allowed", "refuse_for
            "bind_port_shared", "guard_paths", "cache_stable_defaults", "fast_themed_values", "settle_settings",
            "SETTLED_SETTINGS", "lazy_container_defaults", "tune_garbage_collector", "collect_often", "on_disconnect",
            "notice_disconnects", "websocket_nodelay", "note_loop_thread", "holds_lock", "lazy_freeze", "Patch",
-           "PATCHES", "SERVER_PATCHES", "AFTER_LOAD_PATCHES", "apply_patches", "usable", "why_not",
+           "PATCHES", "SERVER_PATCHES", "AFTER_LOAD_PATCHES", "READ_PATCHES", "GUARDS", "apply_patches",
+           "unknown_turned_off", "usable", "why_not",
            "installed_version", "turned_off", "forget_status"]
 
 #: The library versions these changes were written against (pyproject.toml admits these minor
@@ -1052,16 +1053,32 @@ SERVER_PATCHES = ("component_guard", "teacher_routes", "stable_defaults", "fast_
                   "lazy_containers", "disconnects", "nodelay")
 #: Applied after the app is loaded (what is loaded then is frozen out of the collector's sight).
 AFTER_LOAD_PATCHES = ("gc_freeze", "gc_often")
+#: Read where they are used (a page's lock, its freeze, the event loop) or pasted into the page for
+#: the browser: checked when the server starts, like the others.
+READ_PATCHES = ("lock_check", "lazy_freeze", "loop_has_work", "layout_once", "controls_before_render")
+#: Without these the server does not start (it would not be safe to open to a class).
+GUARDS = ("component_guard", "teacher_routes")
 
 _STATUS: dict[str, str] = {}
 
 
 def turned_off() -> set[str]:
-    """The patches ``EHA_PATCHES_OFF`` turns off (a comma-separated list of names, or ``all``)."""
+    """The patches ``EHA_PATCHES_OFF`` turns off (a comma-separated list of names, or ``all``); the
+    security guards are never turned off (a server without them would not start)."""
     import os
 
     names = {n.strip() for n in os.environ.get("EHA_PATCHES_OFF", "").split(",") if n.strip()}
-    return set(PATCHES) if "all" in names else names
+    if "all" in names:
+        names = set(PATCHES)
+    return {n for n in names if n in PATCHES and PATCHES[n].kind != "guard"}
+
+
+def unknown_turned_off() -> list[str]:
+    """The names in ``EHA_PATCHES_OFF`` that are no patch (a typo turns nothing off)."""
+    import os
+
+    names = [n.strip() for n in os.environ.get("EHA_PATCHES_OFF", "").split(",") if n.strip()]
+    return [n for n in names if n != "all" and n not in PATCHES]
 
 
 def why_not(name: str) -> str:
@@ -1102,9 +1119,13 @@ def apply_patches(names, log=None) -> dict[str, str]:
     log = log or logging.getLogger("eha_app")
     report = {}
     for name in names:
+        known = _STATUS.get(name)
+        if known is not None and known != "usable":
+            report[name] = known                    # decided already in this process (and said so)
+            continue
         patch = PATCHES[name]
         why = why_not(name)
-        if not why and patch.install is not None and _STATUS.get(name) != "applied":
+        if not why and patch.install is not None:
             try:
                 patch.install()
             except Exception as exc:  # noqa: BLE001 - a library of another shape: the app goes on without it

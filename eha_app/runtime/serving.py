@@ -351,7 +351,7 @@ def supervise(child_argv: list[str], n: int, *, env: dict | None = None, restart
     def start(k):
         procs[k] = subprocess.Popen(child_argv, env=env)
 
-    def stop(*_args):
+    def stop(*_args, code: int = 0):
         for p in procs:
             if p is not None and p.poll() is None:
                 p.terminate()
@@ -362,7 +362,7 @@ def supervise(child_argv: list[str], n: int, *, env: dict | None = None, restart
                     p.wait(timeout=max(0.1, deadline - time.monotonic()))
                 except subprocess.TimeoutExpired:
                     p.kill()
-        raise SystemExit(0)
+        raise SystemExit(code)
 
     signal.signal(signal.SIGTERM, stop)
     for k in range(n):
@@ -372,6 +372,11 @@ def supervise(child_argv: list[str], n: int, *, env: dict | None = None, restart
             time.sleep(0.5)
             for k, p in enumerate(procs):
                 code = p.poll()
+                if code == 2:
+                    # it refused to serve (its reason is on stderr above): another start would refuse too
+                    print(f"eha serve: process {k + 1} of {n} refused to start; stopping", file=sys.stderr,
+                          flush=True)
+                    stop(code=2)
                 if code is not None:
                     print(f"eha serve: process {k + 1} of {n} exited with code {code}; restarting it",
                           file=sys.stderr, flush=True)
