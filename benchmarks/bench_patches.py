@@ -161,7 +161,7 @@ CLASS_STEPS = ("open", "param", "tab2", "compare", "tab3", "lse", "freqtab", "fr
 
 
 def part2(students: int) -> dict:
-    configs = {"all on": "", "nodelay off": "nodelay", "loop_has_work off": "loop_has_work",
+    configs = {"all on": "", "loop_has_work off": "loop_has_work",
                "model patches off": ",".join(MODEL_PATCHES), "all off": "all"}
     out = {}
     keys = [f"{s}_p95" for s in CLASS_STEPS] + ["observer_p95", "cpu_per_student", "peak_mb", "errors"]
@@ -193,7 +193,7 @@ def main(argv=None) -> int:
     if args.part in ("2", "all"):
         p2 = part2(args.students)
         for key, config in (("open_p95", "all off"), ("retype_p95", "all off"), ("cpu_per_student", "all off"),
-                            ("open_p95", "model patches off"), ("observer_p95", "nodelay off"),
+                            ("open_p95", "model patches off"), ("observer_p95", "loop_has_work off"),
                             ("closed_stop_s", "disconnects off")):
             on = p2["closed page, all on" if key == "closed_stop_s" else "all on"].get(key)
             off = p2[f"closed page, {config}" if key == "closed_stop_s" else config].get(key)

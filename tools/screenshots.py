@@ -1,4 +1,4 @@
-"""Screenshots of each tab after a run, as a student sees them (1366 x 768).
+"""Screenshots of each tab after a run, as a student sees them (1366 x 768, or ``--width``).
 
 Serves the app, drives Debian's headless Chromium with Playwright and writes
 PNGs to assets/screenshots/. Run:  python tools/screenshots.py [--out DIR]
@@ -41,6 +41,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--out", default=str(ROOT / "assets" / "screenshots"))
     ap.add_argument("--chromium", default="/usr/bin/chromium")
+    ap.add_argument("--width", type=int, default=1366, help="the window's width in px (800: a small laptop)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -53,7 +54,7 @@ def main(argv=None):
         wait_served(url)
         with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=args.chromium, args=ARGS)
-            page = browser.new_page(viewport={"width": 1366, "height": 768})
+            page = browser.new_page(viewport={"width": args.width, "height": 768})
             page.goto(url)
             page.wait_for_selector("text=Reset to paper defaults", timeout=60_000)
             page.wait_for_selector(".eha-derived >> text=Transfer functions", timeout=60_000)

@@ -59,12 +59,6 @@ Is the event loop busy? (CPython 3.10-3.13 ``asyncio.BaseEventLoop._ready``)
     queue of CPython's own loops, chosen by the loop's type, and calls any
     other loop (uvloop) idle, which only makes the page updates less polite.
 
-A message's frames sent at once (Bokeh 3.9, ``bokeh.server.views.ws.WSHandler.open``)
-    Bokeh writes each message as three or more websocket frames and leaves Nagle's algorithm on:
-    a frame could wait for the browser's delayed acknowledgement of the one before (up to 40 ms
-    on Linux, 200 ms on Windows). :func:`websocket_nodelay` turns it off when a connection opens,
-    as tornado's documentation advises for websockets (``set_nodelay``).
-
 One port, several processes (Bokeh 3.9, ``bokeh.server.server.bind_sockets``)
     ``eha serve --num-procs N`` runs N processes on one port with
     ``SO_REUSEPORT``, so that Linux spreads the students evenly (Bokeh's own
@@ -134,7 +128,7 @@ __all__ = ["COMPONENT_PACKAGES", "WRITTEN_FOR", "component_allowed", "refuse_for
            "CONTROLS_BEFORE_RENDER_JS", "loop_has_work",
            "bind_port_shared", "guard_paths", "cache_stable_defaults", "fast_themed_values", "settle_settings",
            "SETTLED_SETTINGS", "lazy_container_defaults", "tune_garbage_collector", "collect_often", "on_disconnect",
-           "notice_disconnects", "websocket_nodelay", "note_loop_thread", "holds_lock", "lazy_freeze", "Patch",
+           "notice_disconnects", "note_loop_thread", "holds_lock", "lazy_freeze", "Patch",
            "PATCHES", "SERVER_PATCHES", "AFTER_LOAD_PATCHES", "READ_PATCHES", "GUARDS", "apply_patches",
            "unknown_turned_off", "usable", "why_not",
            "installed_version", "turned_off", "forget_status"]
@@ -812,36 +806,6 @@ def collect_often() -> None:
     gc.callbacks.append(after_young)
 
 
-# -- a page's messages sent at once -------------------------------------------------------------------
-
-def websocket_nodelay() -> None:
-    """Send each of the server's websocket frames at once (``TCP_NODELAY``).
-
-    Bokeh 3.9 writes a message as three or more websocket frames (header, metadata, content,
-    buffers: ``bokeh.protocol.message.Message.send``), each a write of its own, and neither Bokeh
-    nor Panel turns off Nagle's algorithm on the connection (tornado leaves it on unless the
-    handler calls :meth:`tornado.websocket.WebSocketHandler.set_nodelay`). The second frame then
-    waited for the browser to acknowledge the first, which a receiver delays by up to 40 ms on
-    Linux (200 ms on Windows): a keystroke's answer took 57 ms instead of 15 on the same server,
-    one in two. Called once a connection is open, in Bokeh's ``WSHandler.open``.
-    """
-    from bokeh.server.views.ws import WSHandler
-
-    if getattr(WSHandler.open, "_eha_nodelay", False):
-        return
-    original = WSHandler.open
-
-    def open(self, *args, **kwargs):
-        try:
-            self.set_nodelay(True)
-        except Exception:  # noqa: BLE001 - a connection already closing: nothing to speed up
-            pass
-        return original(self, *args, **kwargs)
-
-    open._eha_nodelay = True
-    WSHandler.open = open
-
-
 # -- a page's connection closing -----------------------------------------------------------------------
 
 def on_disconnect(doc, fn) -> None:
@@ -1008,39 +972,37 @@ PATCHES: dict[str, Patch] = {p.name: p for p in (
           ("bokeh.core.property.descriptors.PropertyDescriptor._get_default",
            "bokeh.core.property.descriptors.PropertyDescriptor.has_unstable_default",
            "bokeh.core.has_props.HasProps.themed_values"),
-          "bench_patches.py: page_build_ms", install=cache_stable_defaults),
+          "bench_patches.py page_build_ms: 689 ms, 814 without it (x1.18)", install=cache_stable_defaults),
     Patch("fast_themed_values", "bokeh", _BOKEH_39, ("bokeh.core.has_props.HasProps.themed_values",),
-          "bench_patches.py: page_build_ms", install=fast_themed_values),
+          "bench_patches.py page_build_ms: 689 ms, 718 without it (x1.04, the smallest)", install=fast_themed_values),
     Patch("settled_settings", "bokeh", _BOKEH_39,
           tuple(f"bokeh.settings.settings.{n}" for n in (*SETTLED_SETTINGS, "perform_error_diagnostics")),
-          "bench_patches.py: page_build_ms", install=settle_settings),
+          "bench_patches.py page_build_ms: 689 ms, 754 without it (x1.09)", install=settle_settings),
     Patch("lazy_containers", "bokeh", _BOKEH_39,
           ("bokeh.model.util.visit_immediate_value_references",
            "bokeh.model.util.visit_value_and_its_immediate_references",
            "bokeh.core.has_props.HasProps.query_properties_with_values", "bokeh.core.has_props.HasProps.__init__",
            "bokeh.core.has_props.HasProps._overridden_defaults", "bokeh.core.property.instance.InstanceDefault",
            "bokeh.core.property.wrappers.PropertyValueContainer"),
-          "bench_patches.py: page_build_ms, page_kb", install=lazy_container_defaults),
+          "bench_patches.py page_build_ms: 689 ms, 841 without it (x1.22); page_kb 7823, 10845 without",
+          install=lazy_container_defaults),
     Patch("lazy_freeze", "bokeh", _BOKEH_39,
           ("bokeh.document.models.DocumentModelManager._push_freeze",
            "bokeh.document.models.DocumentModelManager.recompute",
            "bokeh.document.models.DocumentModelManager.invalidate"),
-          "bench_patches.py: update_ms",
+          "bench_patches.py update_ms: 0.02 ms, 12.4 without it",
           shape=_sets_in_init("bokeh.document.models.DocumentModelManager", "_freeze_count")),
     Patch("gc_freeze", "panel", _PANEL_19,
           ("panel.io.document._garbage_collect", "panel.io.document._panel_last_cleanup",
            "panel.io.document.GC_DEBOUNCE", "panel.io.application._destroy_document"),
-          "bench_patches.py: gc_pause_max_ms", install=tune_garbage_collector),
+          "bench_patches.py gc_pause_max_ms: 4.6 ms, 815 without it", install=tune_garbage_collector),
     Patch("gc_often", "python", _PYTHONS, ("gc.callbacks", "gc.freeze"),
-          "bench_patches.py: gc_pause_max_ms", install=collect_often),
+          "bench_patches.py gc_pause_max_ms: 4.6 ms, 18.2 without it", install=collect_often),
     Patch("loop_has_work", "python", _PYTHONS, ("asyncio.base_events.BaseEventLoop",),
           "bench_patches.py: typing_p95_s", shape=_sets_in_init("asyncio.base_events.BaseEventLoop", "_ready")),
-    Patch("nodelay", "bokeh", _BOKEH_39, ("bokeh.server.views.ws.WSHandler.open",
-                                           "tornado.websocket.WebSocketHandler.set_nodelay"),
-          "bench_patches.py: keystroke_ms", install=websocket_nodelay),
     Patch("disconnects", "bokeh", _BOKEH_39, ("bokeh.server.session.ServerSession.unsubscribe",
                                                "bokeh.server.session.ServerSession.connection_count"),
-          "bench_closed_page.py: closed_stop_s", install=notice_disconnects),
+          "bench_closed_page.py closed_stop_s: 0.02 s, 4.39 without it", install=notice_disconnects),
     Patch("layout_once", "bokeh", _BOKEH_39, ("BokehJS Document._apply_json_patch",
                                                "BokehJS LayoutDOMView.invalidate_layout"),
           "bench_frequency_page.py: freq_click_to_page_ms"),
@@ -1050,7 +1012,7 @@ PATCHES: dict[str, Patch] = {p.name: p for p in (
 
 #: The patches the server applies when it starts (in this order), and those its pages use.
 SERVER_PATCHES = ("component_guard", "teacher_routes", "stable_defaults", "fast_themed_values", "settled_settings",
-                  "lazy_containers", "disconnects", "nodelay")
+                  "lazy_containers", "disconnects")
 #: Applied after the app is loaded (what is loaded then is frozen out of the collector's sight).
 AFTER_LOAD_PATCHES = ("gc_freeze", "gc_often")
 #: Read where they are used (a page's lock, its freeze, the event loop) or pasted into the page for

@@ -61,19 +61,19 @@ def fresh_status(monkeypatch):
 
 
 def test_a_patch_outside_its_versions_is_not_applied_and_says_so(monkeypatch, caplog, fresh_status):
-    from bokeh.server.views.ws import WSHandler
+    from bokeh.server.session import ServerSession
 
     real = patches.installed_version
     monkeypatch.setattr(patches, "installed_version", lambda lib: "3.10.0" if lib == "bokeh" else real(lib))
-    monkeypatch.setattr(WSHandler, "open", WSHandler.open)
-    before = WSHandler.open
+    monkeypatch.setattr(ServerSession, "unsubscribe", ServerSession.unsubscribe)
+    before = ServerSession.unsubscribe
     with caplog.at_level("WARNING", logger="eha_app"):
-        status = patches.apply_patches(["nodelay", "gc_often"])
-        patches.apply_patches(["nodelay"])                      # said once
-    assert status["nodelay"] == "bokeh 3.10.0 is not the 3.9 it was written for"
-    assert WSHandler.open is before
-    lines = [r.getMessage() for r in caplog.records if "nodelay" in r.getMessage()]
-    assert lines == ["library patch nodelay not applied: bokeh 3.10.0 is not the 3.9 it was written for; "
+        status = patches.apply_patches(["disconnects", "loop_has_work"])
+        patches.apply_patches(["disconnects"])                  # said once
+    assert status == {"disconnects": "bokeh 3.10.0 is not the 3.9 it was written for", "loop_has_work": "applied"}
+    assert ServerSession.unsubscribe is before
+    lines = [r.getMessage() for r in caplog.records if "disconnects" in r.getMessage()]
+    assert lines == ["library patch disconnects not applied: bokeh 3.10.0 is not the 3.9 it was written for; "
                      "the app works without it, slower"]
     # and the run-time readers give way too: no lock is claimed, Bokeh's own freeze is used
     assert not patches.usable("lock_check") and not patches.usable("lazy_freeze")
@@ -91,9 +91,9 @@ def test_a_patch_whose_target_moved_is_not_applied(monkeypatch, fresh_status):
 
 
 def test_a_patch_can_be_turned_off_for_a_benchmark(monkeypatch, fresh_status):
-    monkeypatch.setenv("EHA_PATCHES_OFF", "lazy_freeze, nodelay")
-    assert patches.why_not("nodelay") == "turned off by EHA_PATCHES_OFF"
-    assert not patches.usable("lazy_freeze") and patches.usable("disconnects")
+    monkeypatch.setenv("EHA_PATCHES_OFF", "lazy_freeze, disconnects")
+    assert patches.why_not("disconnects") == "turned off by EHA_PATCHES_OFF"
+    assert not patches.usable("lazy_freeze") and patches.usable("gc_freeze")
     monkeypatch.setenv("EHA_PATCHES_OFF", "all, component_guard, lazy_freze")
     patches.forget_status()
     # every patch but the security guards (a server without them does not start); a typo is named
@@ -231,28 +231,6 @@ def test_the_teacher_paths_are_answered_before_bokehs_routes(monkeypatch, tmp_pa
     assert handler(f"/teacher?token={token}")[0] == "_Login"
     assert handler("/teacher/ws", teacher_access.cookie_value(token))[0] == "WSHandler"
     assert handler("/eha")[0] == "DocHandler"
-
-
-def test_the_servers_websockets_send_each_frame_at_once(monkeypatch):
-    """Bokeh writes a message as several frames (the reason for the patch); a connection opened by
-    Bokeh's handler turns Nagle's algorithm off before Bokeh's own opening."""
-    import inspect
-
-    from bokeh.protocol.message import Message
-    from bokeh.server.views.ws import WSHandler
-
-    assert inspect.getsource(Message.send).count("write_message(") >= 3
-    calls = []
-    monkeypatch.setattr(WSHandler, "open", lambda self: calls.append("bokeh's open"))
-    patches.websocket_nodelay()
-    patches.websocket_nodelay()                 # twice: one wrapper
-
-    class Handler:
-        def set_nodelay(self, value):
-            calls.append(("nodelay", value))
-
-    WSHandler.open(Handler())
-    assert calls == [("nodelay", True), "bokeh's open"]
 
 
 def test_full_collections_come_after_three_young_ones_on_a_thread_of_their_own():
