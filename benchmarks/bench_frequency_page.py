@@ -160,7 +160,10 @@ def run(url: str, args) -> list[dict]:
         page.locator(".bk-header .bk-tab", has_text="3. Identification").first.click()
         page.locator(".bk-tab", has_text="Frequency domain").first.click()
         page.wait_for_selector(".eha-run-freq button", timeout=60_000)
-        seed_box = page.locator(".eha-freq-form input").nth(1)
+        # the seed is among the excitation's details, folded when the tab opens
+        seed_box = page.locator(".eha-freq-form #eha-input-freq_seed")
+        if not seed_box.is_visible():
+            page.locator(".eha-freq-form summary", has_text="Excitation details").click()
         button = page.get_by_role("button", name="Run experiment and estimate")
 
         def one_run(seed: int) -> dict:
