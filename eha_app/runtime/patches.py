@@ -371,8 +371,8 @@ def lazy_freeze(doc):
     patch turned off: ``EHA_PATCHES_OFF=lazy_freeze``) gets Bokeh's own freeze.
     """
     models = getattr(doc, "models", None)
-    if (models is None or not _lazy_freeze_fits(models) or models._freeze_count > 0
-            or not usable("lazy_freeze")):
+    # (usable: Bokeh's model manager has the freeze internals, checked once per process)
+    if models is None or not usable("lazy_freeze") or models._freeze_count > 0:
         with (models.freeze() if models is not None else _nothing()):
             yield
         return
@@ -387,10 +387,6 @@ def lazy_freeze(doc):
         models._freeze_count -= 1
         if models._freeze_count == 0 and (dirty or list(doc.roots) != roots):
             models.recompute()
-
-
-def _lazy_freeze_fits(models) -> bool:
-    return all(hasattr(models, name) for name in ("_push_freeze", "_freeze_count", "recompute", "invalidate"))
 
 
 @contextmanager

@@ -54,6 +54,7 @@ from .uploads import (
     file_source,
     kept_upload,
     known_on_file,
+    read_kept,
     upload_name,
 )
 
@@ -683,7 +684,7 @@ class GreyBoxPanel(Section):
     def restore_work(cls, kept: KeptWork, texts) -> list[RestoreStep]:
         run, upload, steps = kept.run or {}, kept.file, []
         if upload is not None:
-            steps.append(RestoreStep("", lambda section: section.use_file(upload.data, upload.name, upload.mapping)))
+            steps.append(read_kept(upload))
         # a run on a file that was not kept is not run again on the simulated record instead
         if "gb" in run.get("views", ()) and (upload is not None or not run.get("file")):
             steps.append(RestoreStep(cls.title, lambda section: section.run()))

@@ -66,6 +66,7 @@ from .uploads import (
     file_source,
     kept_upload,
     known_on_file,
+    read_kept,
     upload_name,
 )
 
@@ -756,7 +757,7 @@ class LeastSquaresPanel(Section):
         run, upload = kept.run or {}, kept.file
         views, steps = run.get("views", ()), []
         if upload is not None:
-            steps.append(RestoreStep("", lambda section: section.use_file(upload.data, upload.name, upload.mapping)))
+            steps.append(read_kept(upload))
             window = run.get("window")
             if window:
                 steps.append(RestoreStep("", lambda section: section.window_form.set_values(**window)))

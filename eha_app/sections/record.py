@@ -26,7 +26,7 @@ from ..runtime.work_store import StoredFile
 from ..session import KeptWork, ReportPart, RestoreStep, Section, SectionSnapshot, stale_note
 from ..session.form import Field, Form, Group
 from ..session.freshness import ResultView
-from .uploads import ColumnMapping, FileUpload, check_size, download, upload_name
+from .uploads import ColumnMapping, FileUpload, check_size, download, read_kept, upload_name
 
 __all__ = ["RecordPanel", "RECORD_COLUMNS"]
 
@@ -347,7 +347,7 @@ class RecordPanel(Section):
         upload = kept.file
         if upload is None:
             return []
-        steps = [RestoreStep("", lambda section: section.use_file(upload.data, upload.name, upload.mapping)),
+        steps = [read_kept(upload),
                  # reading a record clears its range: the kept one goes back after it
                  RestoreStep("", lambda section: section.load(texts))]
         if "freq-record" in (kept.run or {}).get("views", ()):

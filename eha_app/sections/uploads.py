@@ -16,8 +16,8 @@ from eha_core.errors import FieldError
 
 from ..runtime.tasks import on_click
 
-__all__ = ["MAX_UPLOAD_BYTES", "kept_upload", "FileUpload", "check_size", "upload_name", "ColumnMapping", "download",
-           "known_on_file", "file_source"]
+__all__ = ["MAX_UPLOAD_BYTES", "kept_upload", "read_kept", "FileUpload", "check_size", "upload_name",
+           "ColumnMapping", "download", "known_on_file", "file_source"]
 
 #: An upload larger than this is refused, in the page before it is sent and by the server
 #: (the same limit as the data reader's; the server's websocket takes a file this size).
@@ -75,6 +75,14 @@ def kept_upload(key: str, upload, own_data, own_data_key):
     data, name = upload
     mapping = dict(own_data_key[2]) if own_data_key and own_data_key[2] else None
     return StoredFile(key, name, data, mapping)
+
+
+def read_kept(upload):
+    """The restore step that gives a section back the file it kept (``upload``, a
+    :class:`~eha_app.runtime.work_store.StoredFile`): its ``use_file``, with the kept column mapping."""
+    from ..session import RestoreStep
+
+    return RestoreStep("", lambda section: section.use_file(upload.data, upload.name, upload.mapping))
 
 
 def file_source(name: str, data: bytes) -> dict:
