@@ -154,7 +154,7 @@ def _lags_phrase(n: int, n_lags: int, allowed: int, inside: bool) -> str:
 
 
 def _verdict(test: str, lags: np.ndarray, values: np.ndarray, bound: float, n_samples: int,
-             false_alarm: float) -> CorrelationVerdict:
+             false_alarm: float, remedy: str = "try more poles or a delay") -> CorrelationVerdict:
     n_lags = int(values.size)
     outside = np.abs(values) > bound
     n_out = int(outside.sum())
@@ -180,7 +180,7 @@ def _verdict(test: str, lags: np.ndarray, values: np.ndarray, bound: float, n_sa
                         "(closed-loop data), or of a model that responds before its input.")
         else:
             sentence = (f"The residuals are correlated with the input ({counts}, {where}): the model misses "
-                        "dynamics — try more poles or a delay.")
+                        f"dynamics — {remedy}.")
     else:
         title = "Autocorrelation of the residuals"
         if passed:
@@ -195,13 +195,16 @@ def _verdict(test: str, lags: np.ndarray, values: np.ndarray, bound: float, n_sa
                               far_bound=float(far_bound), sentence=sentence)
 
 
-def assess_residuals(analysis, *, false_alarm=0.05) -> ResidualAssessment:
+def assess_residuals(analysis, *, false_alarm=0.05, remedy: str = "try more poles or a delay") -> ResidualAssessment:
     """Verdicts of the whiteness and independence tests of a residual analysis.
 
     Parameters
     ----------
     analysis : ResidualAnalysis
         From :func:`eha_core.identify.validate.residual_analysis`.
+    remedy : str
+        What the sentence advises when the residuals follow the input (the model misses dynamics):
+        for a transfer function, more poles or a delay.
     false_alarm : float
         The chance, per test, of failing white residuals that the rule
         accepts (default 0.05): the count part is set at it, the far-lag part
@@ -239,7 +242,7 @@ def assess_residuals(analysis, *, false_alarm=0.05) -> ResidualAssessment:
     keep = lags != 0   # lag 0 of an autocorrelation is 1 by definition
     whiteness = _verdict("whiteness", lags[keep], auto[keep], bound, n, false_alarm)
     independence = _verdict("independence", np.asarray(analysis.cross_lags),
-                            np.asarray(analysis.cross_correlation, dtype=float), bound, n, false_alarm)
+                            np.asarray(analysis.cross_correlation, dtype=float), bound, n, false_alarm, remedy)
     return ResidualAssessment(whiteness=whiteness, independence=independence,
                               passed=whiteness.passed and independence.passed, false_alarm=false_alarm,
                               n_samples=n)

@@ -93,7 +93,10 @@ class GreyBoxData:
     controller (Ts = the sample time), a known load ``d`` [N] (None: none), and the measured signals
     (``signals``: name -> samples, SI, any of x, v, p1, p2). ``intersample``: how the open-loop command
     moves between its samples, linearly (foh: a smooth signal sampled) or held (zoh: a DAC's output);
-    held by half a sample too long, a 2 Hz sine at 1 kHz moves x by 50 µm, five times 30 dB noise."""
+    held by half a sample too long, a 2 Hz sine at 1 kHz moves x by 50 µm, five times 30 dB noise.
+    ``noise``: the sensors' σ per measured signal (SI; 0 for a noise-free one) when it is known, which the
+    estimate's noise check compares its residuals with; None: not stated, the check then compares them
+    with the record's own sample-to-sample scatter."""
 
     t: np.ndarray
     u: np.ndarray | None
@@ -103,6 +106,7 @@ class GreyBoxData:
     kp: float | None = None
     source: str = "data"
     intersample: str = "foh"
+    noise: dict | None = None
 
     def __post_init__(self):
         t = np.asarray(self.t, dtype=float).ravel()
@@ -127,6 +131,12 @@ class GreyBoxData:
             y = np.asarray(y, dtype=float).ravel()
             if y.size != t.size or not np.all(np.isfinite(y)):
                 raise not_allowed(name, y.size, f"give {t.size} finite samples, one per time")
+        if self.noise is not None:
+            for name, sigma in self.noise.items():
+                if name not in self.signals or not (isinstance(sigma, (int, float)) and math.isfinite(sigma)
+                                                    and sigma >= 0):
+                    raise not_allowed("noise", f"{name}={sigma}", "give a σ >= 0 (SI) for signals of the record")
+            object.__setattr__(self, "noise", {k: float(v) for k, v in self.noise.items()})
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "signals", {k: np.asarray(v, dtype=float).ravel() for k, v in self.signals.items()})
 
@@ -185,7 +195,8 @@ def greybox_data(params: ActuatorParams, u: Signal | None = None, *, t_end: floa
         sigma = float((noise or {}).get(name, 0.0))
         signals[name] = y + sigma * rng.standard_normal(y.size) if sigma > 0 else y.copy()
     return GreyBoxData(t=run.t, u=None if r is not None else run.u, r=run.r if r is not None else None, kp=kp,
-                       d=run.d, signals=signals, source=f"simulated, seed {seed}")
+                       d=run.d, signals=signals, source=f"simulated, seed {seed}",
+                       noise={name: float((noise or {}).get(name, 0.0)) for name in measured})
 
 
 # -- the model with its sensitivities -----------------------------------------------------------------
@@ -210,6 +221,25 @@ class _Setup:
     def z_of(self, params: ActuatorParams) -> np.ndarray:
         return np.array([math.log(param_value(params, n)) if lg else param_value(params, n) / LINEAR_SCALE[n]
                          for n, lg in zip(self.names, self.log, strict=True)])
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each parameter's physical range (:func:`~eha_core.identify._greybox_checks.estimate_range`) in
+        the scaled terms the optimiser moves in."""
+        from ._greybox_checks import estimate_range
+
+        lo, hi = [], []
+        for n, lg in zip(self.names, self.log, strict=True):
+            a, b = estimate_range(n)
+            lo.append(math.log(a) if lg else a / LINEAR_SCALE[n])
+            hi.append(math.log(b) if lg else b / LINEAR_SCALE[n])
+        return np.array(lo), np.array(hi)
+
+    def clip(self, z: np.ndarray) -> np.ndarray:
+        """``z`` moved just inside the physical ranges (an initial guess outside them starts at their end)."""
+        lo, hi = self.bounds
+        room = 1e-6 * np.maximum(1.0, np.abs(hi - lo))
+        return np.clip(z, lo + room, hi - room)
 
 
 def param_value(params: ActuatorParams, name: str) -> float:
@@ -397,6 +427,15 @@ class GreyBoxResult:
     message: str = ""
     measured: tuple[str, ...] = ()
     extras: dict = field(default_factory=dict)
+    checks: tuple = ()
+    advice: tuple[str, ...] = ()
+    strategy: str = ""
+    held_bias: dict = field(default_factory=dict)
+
+    @property
+    def failed_checks(self) -> tuple:
+        """The checks the estimate failed (:class:`~eha_core.identify._greybox_checks.FitCheck`)."""
+        return tuple(c for c in self.checks if not c.passed)
 
     def to_dict(self) -> dict:
         """The estimate, its statistics and fits as plain JSON-able values."""
@@ -406,7 +445,9 @@ class GreyBoxResult:
                                 for i, a in enumerate(self.names)},
                 "fit": dict(self.fit), "noise_std": dict(self.noise_std), "held": list(self.held),
                 "identifiability": [s for _, s in self.identifiability], "success": self.success,
-                "message": self.message, "nfev": self.nfev, "time_s": self.time_s}
+                "message": self.message, "checks": [c.to_dict() for c in self.checks], "advice": list(self.advice),
+                "strategy": self.strategy, "held_bias": {h: dict(v) for h, v in self.held_bias.items()},
+                "nfev": self.nfev, "time_s": self.time_s}
 
 
 def _check_request(data, names, measured, guess):
@@ -435,9 +476,9 @@ def _check_request(data, names, measured, guess):
 
 
 def identify_greybox(data: GreyBoxData, params=("M", "B", "Af", "beta_e"), *, measured=None,
-                     guess: ActuatorParams | None = None, shooting: str = "single", segments: int | None = None,
+                     guess: ActuatorParams | None = None, shooting: str = "auto", segments: int | None = None,
                      max_nfev: int = 60, hold_unidentifiable: bool = True,
-                     cancel: CancelToken | None = None) -> GreyBoxResult:
+                     cancel: CancelToken | None = None, progress=None) -> GreyBoxResult:
     """Estimate ``params`` of the nonlinear model from ``data`` (output error; see the module).
 
     Parameters
@@ -450,71 +491,261 @@ def identify_greybox(data: GreyBoxData, params=("M", "B", "Af", "beta_e"), *, me
         The signals compared; default every signal of the record.
     guess : ActuatorParams, optional
         The initial values and the values of everything not estimated; default the paper's.
-    shooting : {'single', 'multiple'}
-        ``"multiple"``: first multiple shooting over ``segments`` pieces of the record, for a
-        poor initial guess or a long record, then output error from where it ended (the
-        estimate and its statistics are output error's).
+    shooting : {'auto', 'single', 'multiple'}
+        ``"auto"`` (default): single shooting over a growing start of the record (1 s, 3 s, ...,
+        each fit starting where the last ended), then over all of it; when that estimate fails its
+        checks, multiple shooting from the guess too, and the better of the two. ``"single"``:
+        single shooting over the whole record from the guess. ``"multiple"``: first multiple
+        shooting over ``segments`` pieces of the record, then output error from where it ended
+        (the estimate and its statistics are output error's).
     segments : int, optional
         Pieces of multiple shooting, at least 2 and 20 samples each; default one per second.
     max_nfev : int
-        Most model evaluations of each Levenberg-Marquardt run
-        (:func:`scipy.optimize.least_squares`'s ``max_nfev``).
+        Most model evaluations of each fit (:func:`scipy.optimize.least_squares`'s ``max_nfev``).
     hold_unidentifiable : bool
         Hold at the guess the parameters the data do not determine there (:func:`identifiability`),
         and say so in the result; False estimates them all.
     cancel : eha_core.cancel.CancelToken, optional
         Checked before every simulation of the model; raises :class:`~eha_core.cancel.Cancelled` when set.
+    progress : callable, optional
+        ``progress(text)`` at each stage of the estimate (what it is doing now, in words).
     """
     t_start = time.perf_counter()
     names = tuple(params)
     measured = tuple(measured) if measured is not None else tuple(s for s in GREYBOX_SIGNALS if s in data.signals)
     guess = guess if guess is not None else ActuatorParams()
     _check_request(data, names, measured, guess)
+    if shooting not in SHOOTING:
+        raise not_allowed("shooting", shooting, f"use {', '.join(SHOOTING)}")
+    tell = progress if progress is not None else (lambda _text: None)
     rows = [_SIGNAL_INDEX[s] for s in measured]
     y_meas = np.stack([data.signals[s] for s in measured], axis=1)
-    sigma = np.array([noise_guess(data.signals[s]) for s in measured])
-    sigma = np.maximum(sigma, 1e-9 * (np.std(y_meas, axis=0) + 1e-30))
+    scatter = np.array([noise_guess(data.signals[s]) for s in measured])
+    sigma = np.maximum(scatter, 1e-9 * (np.std(y_meas, axis=0) + 1e-30))
+    tell("which parameters the record determines at the initial guess")
     held, sentences = _held_at_guess(data, names, guess, rows, sigma, hold_unidentifiable, cancel)
     free = tuple(n for n in names if n not in held)
     if not free:
         raise ComputationError("the data determine none of the parameters asked: "
                                + "; ".join(s for _, s in sentences))
     setup = _Setup(free, tuple(n not in LINEAR_SCALE for n in free), guess, data)
-    if shooting not in ("single", "multiple"):
-        raise not_allowed("shooting", shooting, "use single or multiple")
-    ms_nfev = 0
-    if shooting == "multiple":
-        n_seg = segments if segments is not None else max(2, round(float(data.t[-1] - data.t[0])))
+    problem = _Problem(setup, data, measured, rows, y_meas, sigma, scatter, max_nfev, cancel)
+    tries, steps = [], []
+    if shooting != "multiple":
+        z0, nfev0 = setup.clip(setup.z_of(guess)), 0
+        if shooting == "auto":
+            z0, nfev0, grown = _grow(problem, z0, tell)
+            steps.append(f"single shooting over the first {grown} of the record, then all of it" if grown else
+                         "single shooting")
+        else:
+            steps.append("single shooting")
+        tell("single shooting over the whole record")
+        tries.append(_attempt(problem, z0, nfev0, steps[-1]))
+    if shooting == "multiple" or (shooting == "auto" and not tries[-1].passed):
+        if tries:
+            tell("the checks failed: multiple shooting from the initial guess")
+        n_seg = segments if segments is not None else max(2, min(round(float(data.t[-1] - data.t[0])),
+                                                                  data.t.size // 20))
         if not (isinstance(n_seg, int) and 2 <= n_seg <= data.t.size // 20):
             raise not_allowed("segments", n_seg, f"a whole number in [2, {data.t.size // 20}] (20 samples each)")
         z_ms, ms_nfev = _multiple_shooting(setup, data, measured, rows, y_meas, sigma, n_seg, max_nfev, cancel)
-        setup = _Setup(free, setup.log, setup.params_at(z_ms), data)
-    z, sigma, sol, nfev, njev, out, sout = _fit(setup, data, rows, y_meas, sigma, max_nfev, cancel)
-    nfev += ms_nfev
-    est_params = setup.params_at(z)
-    J = _weighted_jacobian(sout, rows, sigma)
-    estimates, std_errors, ci95, corr = _statistics(J, setup, est_params, names, held, guess)
-    unbounded = [n for n in free if not all(math.isfinite(c) for c in ci95[n])]
-    fit = {}
-    for k, s in enumerate(measured):
-        y, yh = y_meas[:, k], out[:, rows[k]]
-        denom = np.linalg.norm(y - y.mean())
-        fit[s] = float(100.0 * (1.0 - np.linalg.norm(y - yh) / denom)) if denom > 0 else math.nan
+        steps.append(f"multiple shooting over {n_seg} segments, then single shooting from its end")
+        tries.append(_attempt(problem, setup.clip(z_ms), ms_nfev, steps[-1]))
+    best = min(tries, key=lambda a: (not a.passed, a.cost))
+    tell("the estimate's statistics")
+    return _result(problem, best, names, held, guess, sentences, tries, time.perf_counter() - t_start)
+
+
+#: The fitting strategies: ``auto`` (single shooting over a growing record, multiple shooting when its
+#: checks fail), ``single`` (single shooting over the whole record from the guess), ``multiple``.
+SHOOTING = ("auto", "single", "multiple")
+#: The growing record of ``auto``: its first piece [s], each next one this many times longer.
+_GROW_FIRST_S, _GROW_FACTOR = 1.0, 3.0
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """What every fit of one estimate shares: the parameters, the record and the weights."""
+    setup: _Setup
+    data: GreyBoxData
+    measured: tuple
+    rows: list
+    y_meas: np.ndarray
+    sigma: np.ndarray            # the first weights: each signal's noise from the record's scatter
+    scatter: np.ndarray          # that scatter itself (before the floor of sigma)
+    max_nfev: int
+    cancel: object
+
+
+@dataclass(frozen=True)
+class _Attempt:
+    """One way to the estimate and where it ended: the scaled estimate, the weights the fit ended with,
+    the simulation and sensitivities there, the checks and the cost in the first weights (which
+    compares attempts)."""
+    z: np.ndarray
+    sigma: np.ndarray
+    optimiser_success: bool
+    optimiser_message: str
+    nfev: int
+    njev: int
+    out: np.ndarray
+    sout: np.ndarray
+    checks: tuple
+    cost: float
+    how: str
+
+    @property
+    def passed(self) -> bool:
+        return all(c.passed for c in self.checks)
+
+
+def _grow(problem: _Problem, z: np.ndarray, tell) -> tuple[np.ndarray, int, str]:
+    """Single shooting over a growing start of the record (1 s, 3 s, 9 s, ...), each piece's estimate the
+    next one's start: a short record's cost has a wide basin (a wrong parameter has not yet had time to
+    drift the simulation a whole cycle away from the data), and each longer one starts near its
+    minimum. Returns the scaled estimate, the simulations spent and the lengths fitted (text)."""
+    data = problem.data
+    span = float(data.t[-1] - data.t[0])
+    nfev, lengths = 0, []
+    length = _GROW_FIRST_S
+    while length * 1.5 < span:
+        n = int(round(length / data.ts))
+        part = _segment(data, 0, n)
+        tell(f"single shooting over the first {length:g} s of {span:g} s")
+        setup = _Setup(problem.setup.names, problem.setup.log, problem.setup.base, part)
+        z, _, sol, used, _, _, _ = _fit(setup, part, problem.rows, problem.y_meas[:n + 1], problem.sigma,
+                                        problem.max_nfev, problem.cancel, start=z, repeat=False)
+        nfev += used
+        lengths.append(f"{length:g} s")
+        length *= _GROW_FACTOR
+    return z, nfev, ", ".join(lengths)
+
+
+def _attempt(problem: _Problem, z0: np.ndarray, nfev0: int, how: str) -> _Attempt:
+    """The fit over the whole record from ``z0`` and its checks."""
+    from . import _greybox_checks as C
+
+    p = problem
+    z, sigma, sol, nfev, njev, out, sout = _fit(p.setup, p.data, p.rows, p.y_meas, p.sigma, p.max_nfev, p.cancel,
+                                                start=z0)
+    resid = p.y_meas - out[:, p.rows]
+    cost = float(np.sum((resid / p.sigma) ** 2))
+    stated = p.data.noise is not None and all(s in p.data.noise for s in p.measured)
+    reference = {s: (p.data.noise[s] if stated else float(p.scatter[k])) for k, s in enumerate(p.measured)}
+    got = {s: float(np.sqrt(np.mean(resid[:, k] ** 2))) for k, s in enumerate(p.measured)}
+    spans = {s: float(np.ptp(p.y_meas[:, k])) for k, s in enumerate(p.measured)}
+    lower, upper = p.setup.bounds
+    est = p.setup.params_at(z)
+    values = {n: param_value(est, n) for n in p.setup.names}
+    J = _weighted_jacobian(sout, p.rows, sigma)
+    at_bound = C.bounds_check(p.setup.names, z, lower, upper, values, _in_units)
+    inner = [j for j, n in enumerate(p.setup.names) if n not in at_bound.about]
+    checks = (
+        C.FitCheck("optimiser", bool(sol.success), "the optimiser converged" if sol.success else
+                   f"the optimiser did not converge: {sol.message}"),
+        C.noise_check(got, reference, stated, spans, _in_units),
+        C.whiteness_check({s: resid[:, k] for k, s in enumerate(p.measured)}, spans),
+        at_bound,
+        C.rank_check(J[:, inner], [p.setup.names[j] for j in inner]) if inner else
+        C.FitCheck("rank", True, "every estimate is at a bound"),
+    )
+    return _Attempt(z, sigma, bool(sol.success), str(sol.message), nfev + nfev0, njev, out, sout, checks, cost, how)
+
+
+def _in_units(name: str, value: float) -> str:
+    """``value`` (SI) of a signal or parameter in the unit a user reads it in."""
+    from ..param_table import FIELD_INFO
+
+    signal_units = {"x": ("mm", 1e-3), "v": ("mm/s", 1e-3), "p1": ("MPa", 1e6), "p2": ("MPa", 1e6)}
+    if name in signal_units:
+        unit, scale = signal_units[name]
+    elif name in FIELD_INFO:
+        unit, scale = FIELD_INFO[name].display_unit, FIELD_INFO[name].display_scale
+    else:
+        return f"{value:.3g}"
+    return f"{value / scale:.3g} {unit}"
+
+
+def _result(problem: _Problem, best: _Attempt, names, held, guess, sentences, tries, time_s) -> GreyBoxResult:
+    """The result of the attempt ``best``: statistics where its checks passed, and what happened."""
+    from . import _greybox_checks as C
     from .assessment import assess_residuals
     from .validate import residual_analysis
 
-    e = y_meas[:, 0] - out[:, rows[0]]
+    p, setup, data = problem, problem.setup, problem.data
+    est_params = setup.params_at(best.z)
+    J = _weighted_jacobian(best.sout, p.rows, best.sigma)
+    estimates, std_errors, ci95, corr = _statistics(J, setup, est_params, names, held, guess)
+    unbounded = [n for n in setup.names if not all(math.isfinite(c) for c in ci95[n])]
+    fit = {}
+    for k, s in enumerate(p.measured):
+        y, yh = p.y_meas[:, k], best.out[:, p.rows[k]]
+        denom = np.linalg.norm(y - y.mean())
+        fit[s] = float(100.0 * (1.0 - np.linalg.norm(y - yh) / denom)) if denom > 0 else math.nan
+    e = p.y_meas[:, 0] - best.out[:, p.rows[0]]
     assessment = assess_residuals(residual_analysis(e, data.u if data.u is not None else data.r,
-                                                    max_lag=min(25, e.size - 1)))
-    # (a Jacobian that is not finite has no singular values: its statistics said unbounded already)
-    after = identifiability(J, free, **_context(out, data, est_params)) if np.all(np.isfinite(J)) else []
+                                                    max_lag=min(25, e.size - 1)), remedy=GREYBOX_REMEDY)
+    at_bound = next(c for c in best.checks if c.name == "bounds").about
+    inner = [j for j, n in enumerate(setup.names) if n not in at_bound]
+    after = (identifiability(J[:, inner], [setup.names[j] for j in inner], **_context(best.out, data, est_params))
+             if inner and np.all(np.isfinite(J)) else [])
+    bound_sentences = [((n,), f"{n} ended at a bound of its range: the fit pushed it there (see the checks)")
+                       for n in at_bound]
+    success = best.passed and not unbounded
+    checks = best.checks
+    if unbounded and best.passed:
+        checks = checks + (C.FitCheck("rank", False, _unbounded_message(unbounded, best.optimiser_message),
+                                      tuple(unbounded)),)
+    bias = {}
+    if held:
+        bias = _held_bias(problem, est_params, held, J, best.sigma, estimates)
+    failed = [c for c in checks if not c.passed]
+    what_to_try = C.advice(checks, shooting_tried=any("multiple" in a.how for a in tries), measured=p.measured,
+                           names=names)
+    message = ("the estimate passed its checks: the optimiser converged, the residuals are the sensors' noise and "
+               "white, no estimate is at a bound, the Jacobian has full rank" if success else
+               "the estimate may be wrong: " + "; ".join(c.says for c in failed) + ". Try: " + "; ".join(what_to_try))
+    extras = {"optimiser_success": best.optimiser_success, "optimiser_message": best.optimiser_message,
+              "attempts": [{"how": a.how, "passed": a.passed, "cost": a.cost, "nfev": a.nfev} for a in tries]}
+    if not success:
+        # the intervals of a fit whose own checks failed describe a minimum that may not be the answer:
+        # kept for who wants to look, never shown as intervals
+        extras["ci95_unchecked"] = dict(ci95)
+        extras["std_errors_unchecked"] = dict(std_errors)
+        ci95 = {n: (math.nan, math.nan) for n in names}
+        std_errors = {n: math.nan for n in names}
+        corr = np.full_like(corr, np.nan)
     return GreyBoxResult(
         names=names, estimates=estimates, std_errors=std_errors, ci95=ci95, correlation=corr, fit=fit,
-        noise_std={s: float(sigma[k]) for k, s in enumerate(measured)}, params=est_params, simulated=out,
-        assessment=assessment, identifiability=tuple(sentences) + tuple(after), held=held, nfev=nfev,
-        iterations=njev, time_s=time.perf_counter() - t_start, success=bool(sol.success) and not unbounded,
-        message=_unbounded_message(unbounded, str(sol.message)) if unbounded else str(sol.message),
-        measured=measured, extras={"optimiser_success": bool(sol.success)})
+        noise_std={s: float(best.sigma[k]) for k, s in enumerate(p.measured)}, params=est_params,
+        simulated=best.out, assessment=assessment,
+        identifiability=tuple(sentences) + tuple(after) + tuple(bound_sentences), held=held,
+        nfev=sum(a.nfev for a in tries), iterations=sum(a.njev for a in tries), time_s=time_s, success=success,
+        message=message, measured=p.measured, extras=extras, checks=checks, advice=what_to_try,
+        strategy="; then ".join(a.how for a in tries), held_bias=bias)
+
+
+def _held_bias(problem: _Problem, est_params, held, J_free, sigma, estimates) -> dict:
+    """How each held parameter, if 10 % off, moves the estimates (one more simulation, at the estimate,
+    with the held parameters' sensitivities)."""
+    from . import _greybox_checks as C
+
+    setup = problem.setup
+    log_held = [h for h in held if h not in LINEAR_SCALE]
+    if not log_held:
+        return {}
+    try:
+        _, s_held = simulate_with_sensitivities(est_params, log_held, problem.data, cancel=problem.cancel)
+    except ComputationError:
+        return {}
+    J_held = _weighted_jacobian(s_held, problem.rows, sigma)
+    scale = [None if lg else LINEAR_SCALE[n] for n, lg in zip(setup.names, setup.log, strict=True)]
+    return C.held_bias(J_free, J_held, setup.names, log_held, scale, estimates)
+
+
+#: What the residual tests advise when a grey-box model's residuals follow the input.
+GREYBOX_REMEDY = ("a local minimum (try multiple shooting or another start), a parameter held at a wrong value, or "
+                  "physics the model lacks (a load it does not know, another intersample behaviour)")
 
 
 def _context(states, data, params) -> dict:
@@ -537,9 +768,10 @@ def _held_at_guess(data, names, guess, rows, sigma, hold, cancel):
     return tuple(dict.fromkeys(who[-1] for who, _ in found)), found
 
 
-def _fit(setup, data, rows, y_meas, sigma, max_nfev, cancel):
-    """Levenberg-Marquardt with the sensitivities' Jacobian; the noise σ re-estimated from the residuals
-    and the fit repeated once if they moved by more than 20 %."""
+def _fit(setup, data, rows, y_meas, sigma, max_nfev, cancel, *, start=None, repeat=True):
+    """A trust-region Gauss-Newton fit within the physical ranges (scipy's ``trf`` with bounds) with the
+    sensitivities' Jacobian, from ``start`` (default the setup's guess); with ``repeat``, the noise σ
+    re-estimated from the residuals and the fit repeated once if they moved by more than 20 %."""
     from scipy.optimize import least_squares
 
     cache = {}
@@ -571,13 +803,19 @@ def _fit(setup, data, rows, y_meas, sigma, max_nfev, cancel):
         out, sout = model(z, True)
         return np.zeros((y_meas.size, len(setup.names))) if out is None else _weighted_jacobian(sout, rows, sigma)
 
-    z = setup.z_of(setup.base)
+    z = setup.clip(setup.z_of(setup.base) if start is None else start)
+    bounds = setup.bounds
     nfev = njev = 0
-    for _ in range(2):
-        sol = least_squares(fun, z, jac=jac, args=(sigma,), method="lm", max_nfev=max_nfev, xtol=1e-8, ftol=1e-8)
+    for _ in range(2 if repeat else 1):
+        with np.errstate(over="ignore", invalid="ignore"):    # a trial step far off: its cost is inf, refused
+            sol = least_squares(fun, z, jac=jac, args=(sigma,), method=_METHOD,
+                                bounds=bounds if _METHOD != "lm" else (-np.inf, np.inf), max_nfev=max_nfev,
+                                xtol=1e-8, ftol=1e-8)
         z, nfev, njev = sol.x, nfev + sol.nfev, njev + (sol.njev or 0)
+        if _METHOD == "lm":
+            z = setup.clip(z)
         out, _ = model(z, False)
-        if out is None:
+        if out is None or not repeat:
             break
         new_sigma = np.maximum(np.sqrt(np.mean((out[:, rows] - y_meas) ** 2, axis=0)),
                                1e-12 * (np.std(y_meas, axis=0) + 1e-30))
@@ -587,8 +825,20 @@ def _fit(setup, data, rows, y_meas, sigma, max_nfev, cancel):
             break
     out, sout = model(z, True)
     if out is None:
-        raise ComputationError("the model cannot be simulated at the estimate")
+        # where the optimiser ended the model does not simulate (it ran to a corner no actuator has): the
+        # attempt ends where it started, said not converged, and its checks say the rest
+        from types import SimpleNamespace
+
+        z = setup.clip(setup.z_of(setup.base) if start is None else start)
+        out, sout = model(z, True)
+        if out is None:
+            raise ComputationError("the model cannot be simulated at the start of the fit")
+        sol = SimpleNamespace(success=False, message="the model could not be simulated where the optimiser ended",
+                              x=z, nfev=sol.nfev, njev=sol.njev)
     return z, sigma, sol, nfev, njev, out, sout
+
+
+_METHOD = "trf"
 
 
 def _segment(data: GreyBoxData, a: int, b: int) -> GreyBoxData:
@@ -597,7 +847,7 @@ def _segment(data: GreyBoxData, a: int, b: int) -> GreyBoxData:
         return None if x is None else np.asarray(x)[a:b + 1]
     return GreyBoxData(t=data.t[a:b + 1], u=cut(data.u), r=cut(data.r), kp=data.kp, d=cut(data.d),
                        signals={k: v[a:b + 1] for k, v in data.signals.items()}, intersample=data.intersample,
-                       source=data.source)
+                       source=data.source, noise=data.noise)
 
 
 def _shooting_start(setup, data, bounds, measured, cancel) -> np.ndarray:
@@ -662,9 +912,9 @@ def _multiple_shooting(setup, data, measured, rows, y_meas, sigma, segments, max
         if key not in cache:
             cache.clear()
             check(cancel)
-            p = setup.params_at(w[:P])
             runs = []
             try:
+                p = setup.params_at(w[:P])
                 for i, part in enumerate(parts):
                     start = None if i == 0 else w[P + 4 * (i - 1):P + 4 * i] * STATE_SCALE
                     runs.append(simulate_with_sensitivities(p, setup.names, part, log=setup.log, initial=start,
@@ -695,10 +945,15 @@ def _multiple_shooting(setup, data, measured, rows, y_meas, sigma, segments, max
         return (np.zeros((n_rows, n_free)) if runs is None else
                 _shooting_jacobian(runs, bounds, rows, sigma, weight, P, n_rows, n_free))
 
-    w0 = np.concatenate([setup.z_of(setup.base), _shooting_start(setup, data, bounds, measured, cancel)])
+    w0 = np.concatenate([setup.clip(setup.z_of(setup.base)), _shooting_start(setup, data, bounds, measured, cancel)])
     if max_nfev == 0:                       # the problem itself, for a check of its Jacobian
         return fun, jac, w0
-    sol = least_squares(fun, w0, jac=jac, method="lm", max_nfev=max_nfev, xtol=1e-8, ftol=1e-8)
+    lo, hi = setup.bounds             # the parameters within their physical ranges, the states free
+    free_states = np.full(w0.size - P, np.inf)
+    with np.errstate(over="ignore", invalid="ignore"):
+        sol = least_squares(fun, w0, jac=jac, method="trf", bounds=(np.concatenate([lo, -free_states]),
+                                                                      np.concatenate([hi, free_states])),
+                            max_nfev=max_nfev, xtol=1e-8, ftol=1e-8)
     return sol.x[:P], sol.nfev
 
 
