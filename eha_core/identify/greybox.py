@@ -55,7 +55,7 @@ import math
 import sys
 import time
 import weakref
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -65,11 +65,15 @@ from ..model import PARAM_INDEX, pack_params
 from ..params import ActuatorParams
 from ..signals import ZERO, Signal
 
-__all__ = ["GREYBOX_PARAMS", "GREYBOX_SIGNALS", "GreyBoxData", "GreyBoxResult", "greybox_data", "identify_greybox",
-           "simulate_with_sensitivities", "identifiability", "noise_guess", "param_value", "LINEAR_SCALE"]
+__all__ = ["GREYBOX_PARAMS", "GREYBOX_SIGNALS", "INTERSAMPLE", "SHOOTING", "read_intersample", "GreyBoxData",
+           "GreyBoxResult", "greybox_data", "identify_greybox", "simulate_with_sensitivities", "identifiability",
+           "noise_guess", "param_value", "LINEAR_SCALE"]
 
 #: What can be estimated: the model's parameters and the initial state.
 GREYBOX_PARAMS = ("M", "B", "Af", "beta_e", "Kq1", "Kq2", "L0", "k_f", "d0", "x0", "v0", "p1_0", "p2_0")
+#: How the input moves between samples: read from the record (:func:`read_intersample`), linearly (foh)
+#: or held (zoh).
+INTERSAMPLE = ("read", "foh", "zoh")
 #: The signals a record may hold besides the input.
 GREYBOX_SIGNALS = ("x", "v", "p1", "p2")
 _STATE_INDEX = {"x0": 0, "v0": 1, "p1_0": 2, "p2_0": 3}
@@ -92,7 +96,8 @@ class GreyBoxData:
     [V] in open loop, or the reference ``r`` [m] with the gain ``kp`` [V/m] under the sampled P
     controller (Ts = the sample time), a known load ``d`` [N] (None: none), and the measured signals
     (``signals``: name -> samples, SI, any of x, v, p1, p2). ``intersample``: how the open-loop command
-    moves between its samples, linearly (foh: a smooth signal sampled) or held (zoh: a DAC's output);
+    moves between its samples, linearly (foh: a smooth signal sampled) or held (zoh: a DAC's output), or
+    ``read`` (the default) from the record by :func:`identify_greybox` (:func:`read_intersample`);
     held by half a sample too long, a 2 Hz sine at 1 kHz moves x by 50 µm, five times 30 dB noise.
     ``noise``: the sensors' σ per measured signal (SI; 0 for a noise-free one) when it is known, which the
     estimate's noise check compares its residuals with; None: not stated, the check then compares them
@@ -105,7 +110,7 @@ class GreyBoxData:
     r: np.ndarray | None = None
     kp: float | None = None
     source: str = "data"
-    intersample: str = "foh"
+    intersample: str = "read"
     noise: dict | None = None
 
     def __post_init__(self):
@@ -120,8 +125,9 @@ class GreyBoxData:
                                                      "(closed loop), one of them")
         if self.r is not None and not (self.kp and math.isfinite(self.kp) and self.kp > 0):
             raise not_allowed("kp", self.kp, "a closed-loop record needs the controller gain kp > 0 [V/m]")
-        if self.intersample not in ("foh", "zoh"):
-            raise not_allowed("intersample", self.intersample, "use foh (the command varies linearly between "
+        if self.intersample not in INTERSAMPLE:
+            raise not_allowed("intersample", self.intersample, "use read (from the record), foh (the command varies "
+                                                               "linearly between "
                                                                "samples) or zoh (it is held, as by a DAC)")
         if not self.signals:
             raise not_allowed("signals", "(none)", f"give at least one measured signal of {', '.join(GREYBOX_SIGNALS)}")
@@ -195,7 +201,7 @@ def greybox_data(params: ActuatorParams, u: Signal | None = None, *, t_end: floa
         sigma = float((noise or {}).get(name, 0.0))
         signals[name] = y + sigma * rng.standard_normal(y.size) if sigma > 0 else y.copy()
     return GreyBoxData(t=run.t, u=None if r is not None else run.u, r=run.r if r is not None else None, kp=kp,
-                       d=run.d, signals=signals, source=f"simulated, seed {seed}",
+                       d=run.d, signals=signals, source=f"simulated, seed {seed}", intersample="foh",
                        noise={name: float((noise or {}).get(name, 0.0)) for name in measured})
 
 
@@ -336,6 +342,26 @@ def _inputs(data: GreyBoxData):
         _INPUTS[data] = (h, sub, ctrl_every, n_steps, n_out, u_st, _stage_samples(d_sig, "d", h, n_steps), r_st,
                          ctrl, kp)
     return _INPUTS[data]
+
+
+def read_intersample(data: GreyBoxData) -> tuple[str | None, str]:
+    """How ``data``'s open-loop input moves between samples, as far as its samples tell: ``("zoh", why)``
+    when it is piecewise constant over runs of samples (a command held longer than the record's sample
+    time: at least half of the steps repeat the last value), ``(None, why)`` when the samples cannot
+    tell (a held command changes at every sample just as a smooth one does); a closed-loop record's
+    reference is held by the controller. The record's own ``intersample`` when it is not ``read``."""
+    if data.intersample != "read":
+        return data.intersample, "as the record states"
+    if data.u is None:
+        return "zoh", "the sampled controller holds its command"
+    du = np.diff(np.asarray(data.u, dtype=float))
+    moves = np.abs(du) > 1e-12 * (float(np.max(np.abs(data.u))) + 1e-300)
+    if moves.any() and np.mean(~moves) >= 0.5:
+        runs = du.size / max(int(moves.sum()), 1)
+        return "zoh", f"u is piecewise constant in the record (it changes once every {runs:.3g} samples): held"
+    if not moves.any():
+        return "foh", "u is constant"
+    return None, "the samples of u cannot tell whether it was held or linear between them"
 
 
 def noise_guess(y: np.ndarray) -> float:
@@ -518,16 +544,23 @@ def identify_greybox(data: GreyBoxData, params=("M", "B", "Af", "beta_e"), *, me
     if shooting not in SHOOTING:
         raise not_allowed("shooting", shooting, f"use {', '.join(SHOOTING)}")
     tell = progress if progress is not None else (lambda _text: None)
+    read, read_why = read_intersample(data)
+    unread = data
+    data = replace(data, intersample=read or "foh")
     rows = [_SIGNAL_INDEX[s] for s in measured]
     y_meas = np.stack([data.signals[s] for s in measured], axis=1)
     scatter = np.array([noise_guess(data.signals[s]) for s in measured])
     sigma = np.maximum(scatter, 1e-9 * (np.std(y_meas, axis=0) + 1e-30))
     tell("which parameters the record determines at the initial guess")
     held, sentences = _held_at_guess(data, names, guess, rows, sigma, hold_unidentifiable, cancel)
+    first_sentences = list(sentences)
     free = tuple(n for n in names if n not in held)
     if not free:
         raise ComputationError("the data determine none of the parameters asked: "
                                + "; ".join(s for _, s in sentences))
+    if read is None:
+        data, read_why = _intersample_by_fit(unread, free, guess, rows, y_meas, sigma, max_nfev, cancel, read_why,
+                                             tell)
     setup = _Setup(free, tuple(n not in LINEAR_SCALE for n in free), guess, data)
     problem = _Problem(setup, data, measured, rows, y_meas, sigma, scatter, max_nfev, cancel)
     tries, steps = [], []
@@ -540,7 +573,19 @@ def identify_greybox(data: GreyBoxData, params=("M", "B", "Af", "beta_e"), *, me
         else:
             steps.append("single shooting")
         tell("single shooting over the whole record")
-        tries.append(_attempt(problem, z0, nfev0, steps[-1]))
+        tries.append(_attempt(problem, z0, nfev0, steps[-1], held))
+    if held and shooting == "auto" and not tries[-1].passed:
+        # held at the guess, where the record hardly moves with it, a parameter may still be determined
+        # nearer the truth; held at a wrong value it biases the rest: estimated with them, the fit may pass
+        freed, held = held, ()
+        setup = _Setup(names, tuple(n not in LINEAR_SCALE for n in names), guess, data)
+        problem = _Problem(setup, data, measured, rows, y_meas, sigma, scatter, max_nfev, cancel)
+        tell(f"the checks failed with {', '.join(freed)} held: estimating {'it' if len(freed) == 1 else 'them'} too")
+        z0, nfev0, grown = _grow(problem, setup.clip(setup.z_of(guess)), tell)
+        tries.append(_attempt(problem, z0, nfev0, f"{', '.join(freed)} estimated too (held at the guess, the fit "
+                                                  "failed its checks)", held))
+        sentences = [((n,), f"{n} was not determined at the initial guess, but held there the fit failed its checks: "
+                            "it is estimated with the rest") for n in freed]
     if shooting == "multiple" or (shooting == "auto" and not tries[-1].passed):
         if tries:
             tell("the checks failed: multiple shooting from the initial guess")
@@ -550,10 +595,35 @@ def identify_greybox(data: GreyBoxData, params=("M", "B", "Af", "beta_e"), *, me
             raise not_allowed("segments", n_seg, f"a whole number in [2, {data.t.size // 20}] (20 samples each)")
         z_ms, ms_nfev = _multiple_shooting(setup, data, measured, rows, y_meas, sigma, n_seg, max_nfev, cancel)
         steps.append(f"multiple shooting over {n_seg} segments, then single shooting from its end")
-        tries.append(_attempt(problem, setup.clip(z_ms), ms_nfev, steps[-1]))
+        tries.append(_attempt(problem, setup.clip(z_ms), ms_nfev, steps[-1], held))
     best = min(tries, key=lambda a: (not a.passed, a.cost))
     tell("the estimate's statistics")
-    return _result(problem, best, names, held, guess, sentences, tries, time.perf_counter() - t_start)
+    if best.held != held:
+        sentences = list(first_sentences)
+    res = _result(best.problem, best, names, best.held, guess, sentences, tries, time.perf_counter() - t_start)
+    res.extras["intersample"] = {"used": best.problem.data.intersample, "how": read_why}
+    return res
+
+
+def _intersample_by_fit(data, free, guess, rows, y_meas, sigma, max_nfev, cancel, why, tell):
+    """The record with the intersample behaviour that explains its first seconds better: the samples do
+    not say how u moved between them, and a held command read as linear biases B by tens of per cent.
+    Both are fitted over the first :data:`_GROW_FIRST_S` s (the whole record when shorter) from the
+    guess; the lower cost wins. Returns the record and the sentence that says how it was read."""
+    n = min(data.t.size - 1, int(round(_GROW_FIRST_S / data.ts)))
+    costs = {}
+    for how in ("foh", "zoh"):
+        tell(f"u {'linear' if how == 'foh' else 'held'} between samples: how well it explains the record")
+        part = _segment(replace(data, intersample=how), 0, n)
+        setup = _Setup(free, tuple(f not in LINEAR_SCALE for f in free), guess, part)
+        z, _, _, _, _, out, _ = _fit(setup, part, rows, y_meas[:n + 1], sigma, max_nfev, cancel, repeat=False)
+        costs[how] = float(np.sum(((y_meas[:n + 1] - out[:, rows]) / sigma) ** 2))
+    how = min(costs, key=costs.get)
+    other = "zoh" if how == "foh" else "foh"
+    words = {"foh": "linear", "zoh": "held"}
+    return replace(data, intersample=how), (f"{why}: u taken as {words[how]} between samples, which explains the "
+                                            f"first {n * data.ts:g} s better (cost {costs[how]:.6g} against "
+                                            f"{costs[other]:.6g} with u {words[other]})")
 
 
 #: The fitting strategies: ``auto`` (single shooting over a growing record, multiple shooting when its
@@ -593,6 +663,8 @@ class _Attempt:
     checks: tuple
     cost: float
     how: str
+    problem: _Problem
+    held: tuple
 
     @property
     def passed(self) -> bool:
@@ -621,7 +693,7 @@ def _grow(problem: _Problem, z: np.ndarray, tell) -> tuple[np.ndarray, int, str]
     return z, nfev, ", ".join(lengths)
 
 
-def _attempt(problem: _Problem, z0: np.ndarray, nfev0: int, how: str) -> _Attempt:
+def _attempt(problem: _Problem, z0: np.ndarray, nfev0: int, how: str, held: tuple) -> _Attempt:
     """The fit over the whole record from ``z0`` and its checks."""
     from . import _greybox_checks as C
 
@@ -649,7 +721,8 @@ def _attempt(problem: _Problem, z0: np.ndarray, nfev0: int, how: str) -> _Attemp
         C.rank_check(J[:, inner], [p.setup.names[j] for j in inner]) if inner else
         C.FitCheck("rank", True, "every estimate is at a bound"),
     )
-    return _Attempt(z, sigma, bool(sol.success), str(sol.message), nfev + nfev0, njev, out, sout, checks, cost, how)
+    return _Attempt(z, sigma, bool(sol.success), str(sol.message), nfev + nfev0, njev, out, sout, checks, cost, how,
+                    problem, tuple(held))
 
 
 def _in_units(name: str, value: float) -> str:
