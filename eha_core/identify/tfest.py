@@ -37,13 +37,18 @@ Two stages, as MATLAB does it, each in a module of its own:
    discretised for it), so a fixed delay changes neither stage's
    consistency. With ``input_delay="estimate"`` the whole-sample part is
    searched first (ARX losses as MATLAB's ``delayest``, then SRIVC around
-   the best and, a few iterations per delay, over the whole range, since
-   the cost can have several local minima over the delay;
-   :mod:`eha_core.identify._delay_search`), and the output-error stage
-   refines ``tau`` with the coefficients from the best models of the lowest
-   few local minima: it joins the parameter vector (bounded to
-   ``[0, max_delay]``); its standard error (``input_delay_std``) and the
-   coefficients' covariance come from the joint Jacobian.
+   the best and, a few iterations per delay, over the whole range, from the
+   default starts too at a few delays, since the cost can have several
+   local minima over the delay; :mod:`eha_core.identify._delay_search`),
+   and the output-error stage refines ``tau`` with the coefficients from
+   the best models of the lowest few local minima: it joins the parameter
+   vector (bounded to ``[0, max_delay]``); its standard error
+   (``input_delay_std``) and the coefficients' covariance come from the
+   joint Jacobian. The answer is checked: a noise variance markedly above
+   that of a long linear model of the record (``noise_floor``, which fits
+   any delay) sends the search round again with the default starts at every
+   delay, and an answer still above it has ``success`` False, the message
+   saying what to try (``optimizer_success`` keeps the optimiser's flag).
 
 4. **Intersample behaviour** (``intersample``, MATLAB's ``InterSample``):
    the input held between samples (``"zoh"``) or linear between them
@@ -73,6 +78,8 @@ imported at module import; ``TFEstimate.tf`` imports python-control lazily.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from .._checks import not_allowed, positive_integer, positive_number
@@ -80,7 +87,7 @@ from ..cancel import CancelToken
 from ._ctmodels import as_pair, as_tf, as_ts, check_delay, check_intersample
 from ._ctmodels import fit_percent as fit_percent  # re-exported: the same fit as validate.compare's
 from ._ctmodels import simulate_tf as simulate_tf  # re-exported: callers and the examples import it from here
-from ._delay_search import delay_candidates
+from ._delay_search import above_floor, delay_candidates, noise_floor
 from ._oe_criterion import OutputError, parameter_scale
 from ._oe_refine import estimate_result, failed_estimate, oe_refine
 from ._srivc import default_lambdas, srivc_candidates
@@ -280,7 +287,10 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
     -------
     TFEstimate
         Estimate, fit, statistics, diagnostics. ``success`` is False (with a
-        ``message``) when the estimation fails; no exception is raised then.
+        ``message``) when the estimation fails, or when an estimated delay's
+        answer fits markedly worse than a long linear model of the record
+        (the search may have ended in a local minimum; ``optimizer_success``
+        is the optimiser's own flag); no exception is raised then.
 
     Raises
     ------
@@ -344,20 +354,46 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
             "simulation): is the input exciting enough?", nit_total, 0,
             None if estimate_delay else fixed_delay, intersample,
         )
-    candidates.sort(key=lambda c: c[1])
+    criterion.nfev = 0
+    result = _estimate_from(criterion, candidates, basins, n, m, ts_f, refine, n_refine, max_nfev, tol, nit_total)
+    result = replace(result, optimizer_success=result.success)
+    if not estimate_delay:
+        return result
+    floor, lags = noise_floor(u_arr, y_arr, n, int(np.floor(max_delay_s / ts_f + 1e-10)), estimate_offset)
+    if above_floor(result.noise_variance, floor, y_arr):
+        # the answer may be a local minimum: search again with the default starts at every delay swept
+        wider, nit_wider, wider_basins = delay_candidates(criterion, m, starts, start_names, max_iter, tol,
+                                                          everywhere=True)
+        nit_total += nit_wider
+        again = _estimate_from(criterion, wider, wider_basins, n, m, ts_f, refine, n_refine, max_nfev, tol,
+                               nit_total) if wider else result
+        if again.cost < result.cost:
+            result = replace(again, optimizer_success=again.success,
+                             message=again.message + "; found by a second search with the default starts at "
+                                                     "every delay, the first one's variance being above the floor")
+        else:
+            result = replace(result, nit_srivc=nit_total, nfev_oe=criterion.nfev)
+    return _checked_against_floor(result, floor, lags, ts_f, y_arr)
+
+
+def _estimate_from(criterion, candidates, basins, n, m, ts_f, refine, n_refine, max_nfev, tol, nit_total):
+    """The estimate from SRIVC's candidates: the best few (and the delay search's ``basins``) refined.
+
+    Several SRIVC starts can converge to different models (the output-error
+    criterion may have several minima, e.g. a slow drift of a nonlinear
+    plant mimicked by a slow pole, versus the plant's resonance): the best
+    ``n_refine`` distinct candidates are refined, and the lowest cost kept.
+    ``success`` is the kept stage's own flag.
+    """
+    candidates = sorted(candidates, key=lambda c: c[1])
     best = candidates[0]
     srivc_theta, srivc_cost, srivc_converged, start_name, srivc_nit = best
     srivc_msg = (f"SRIVC {'converged' if srivc_converged else 'did not converge'} in "
                  f"{srivc_nit} iterations from {start_name}")
     if not refine:
-        criterion.nfev = 0
         return estimate_result(criterion, srivc_theta, n, m, ts_f, srivc_converged,
                                 srivc_msg + "; output-error refinement skipped", "srivc",
                                 nit_total, srivc_theta, srivc_cost)
-    # The output-error criterion can have several minima (e.g. a slow drift of a
-    # nonlinear plant mimicked by a slow pole, versus the plant's resonance):
-    # refine the best distinct SRIVC candidates and keep the lowest cost.
-    criterion.nfev = 0
     refined = []
     to_refine = _distinct(candidates, n_refine, n, m, criterion.scale)
     # an estimated delay: the best model at each of the lowest local minima of
@@ -383,6 +419,29 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
                             f"{srivc_msg}; output error: {oe_msg_last}; kept the SRIVC estimate "
                             f"(cost {srivc_cost:.4g} < output error {cost_oe:.4g})",
                             "srivc", nit_total, srivc_theta, srivc_cost)
+
+
+def _checked_against_floor(result: TFEstimate, floor: float, lags: int, ts: float, y: np.ndarray) -> TFEstimate:
+    """``result`` with its ``noise_floor``, and not a success when its noise variance is far above it.
+
+    An estimated delay's result is compared with :func:`~eha_core.identify._delay_search.noise_floor`,
+    the residual variance of a long linear model of the record that fits any
+    delay within its lags: a noise variance well above it
+    (:func:`~eha_core.identify._delay_search.above_floor`) says the delay
+    search (even the second, wider one) ended in a local minimum, or the
+    model lacks poles or zeros.
+    """
+    result = replace(result, noise_floor=floor)
+    if not above_floor(result.noise_variance, floor, y):
+        return result
+    ratio = result.noise_variance / floor
+    return replace(result, success=False, message=(
+        f"{result.message}; the optimum may be local: the residual variance {result.noise_variance:.4g} is "
+        f"{ratio:.3g} times that of a long linear model of the record ({lags} input lags, any delay up to "
+        f"{lags * ts:.4g} s: "
+        f"{floor:.4g}), so the delay search may have ended in a local minimum (here {result.input_delay:.4g} s) "
+        f"or the model needs more poles or zeros; try a longer record or a richer input, a max_delay that "
+        f"bounds the delay you expect, the delay fixed (input_delay in s) if you know it, or more poles or zeros"))
 
 
 def _distinct(candidates, k: int, n: int, m: int, scale=parameter_scale):

@@ -88,6 +88,18 @@ class TFEstimate:
         ``"zoh"`` (the input held between samples) or ``"foh"`` (linear
         between them): the option the estimate was made with, and
         :meth:`simulate`'s default.
+    optimizer_success : bool or None
+        The kept stage's own stop: SRIVC converged, or ``least_squares``
+        reported success (None when not recorded). ``success`` is this and
+        the estimator's checks of the answer: with an estimated delay, a
+        ``noise_variance`` not markedly above ``noise_floor``
+        (:func:`~eha_core.identify._delay_search.above_floor`).
+    noise_floor : float or None
+        With an estimated delay, the residual variance of a long linear
+        model of the record that fits any delay within its lags
+        (:func:`~eha_core.identify._delay_search.noise_floor`): a
+        ``noise_variance`` far above it says the delay search ended in a
+        local minimum (or the model lacks poles or zeros). None otherwise.
     """
 
     num: np.ndarray
@@ -117,6 +129,8 @@ class TFEstimate:
     input_delay: float = 0.0
     input_delay_std: float | None = None
     intersample: str = "zoh"
+    optimizer_success: bool | None = None
+    noise_floor: float | None = None
 
     @property
     def tf(self):
@@ -150,7 +164,9 @@ class TFEstimate:
                 "n_poles": int(self.n_poles), "n_zeros": int(self.n_zeros),
                 "input_delay": float(self.input_delay),
                 "input_delay_std": None if self.input_delay_std is None else float(self.input_delay_std),
-                "intersample": self.intersample}
+                "intersample": self.intersample,
+                "optimizer_success": None if self.optimizer_success is None else bool(self.optimizer_success),
+                "noise_floor": None if self.noise_floor is None else float(self.noise_floor)}
 
     def simulate(self, u, ts=None, initial_state=None, input_offset=None, intersample=None) -> np.ndarray:
         """Exact response to ``u`` sampled at ``ts`` (default: ``self.ts``), delayed by ``input_delay``.
