@@ -259,6 +259,14 @@ def greybox_summary_text(res) -> str:
                      f"{lo:.3f}-{hi:.3f} in 99 % of studies of {res.n_completed} seeds")
         lines.append("CRB: the Cramer-Rao bound, the smallest std an unbiased estimator can have here; std/CRB near 1: "
                      "the estimator uses the data's information")
+    if res.n_failed:
+        lines.append(f"failed: {res.n_failed} seeds whose estimate failed its own checks (residuals, noise, bounds, "
+                     "rank) or could not be computed; they are not in the statistics")
+    if res.without_hold is not None:
+        w = res.without_hold
+        cover = ", ".join(f"{k} {num(w['coverage'].get(k), 0, '.3f')}" for k in cfg.params)
+        lines.append(f"without holding (every parameter estimated, the same seeds): coverage {cover} "
+                     f"({w['n_completed']} completed, {w['n_failed']} failed)")
     return "\n".join(lines)
 
 

@@ -180,8 +180,8 @@ def advice(checks, *, shooting_tried: bool, measured, names) -> tuple[str, ...]:
         out.append(f"hold {', '.join(at)} at a known value, or estimate {'it' if len(at) == 1 else 'them'} from a "
                    "record that excites it")
     if "rank" in failed:
-        out.append("estimate fewer parameters, or measure more signals" + ("" if {"p1", "p2"} <= set(measured)
-                                                                             else " (the pressures p1, p2)"))
+        out.append("estimate fewer parameters (hold one at a known value), or measure more signals"
+                   + ("" if {"p1", "p2"} <= set(measured) else " (the pressures p1, p2)"))
     return tuple(dict.fromkeys(out))
 
 

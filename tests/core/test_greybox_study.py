@@ -125,3 +125,16 @@ def test_the_study_module_runs_the_same_grey_box_seeds_in_parts():
         StudyConfig("greybox", disturbance="white:10")
     with pytest.raises(ValueError, match="greybox = 3 is not allowed"):
         StudyConfig("greybox", greybox=3)
+
+
+def test_a_study_whose_estimator_holds_a_parameter_also_shows_the_coverage_without_the_hold():
+    # from x alone over 2 s B is not determined at the paper's values: held there in every seed
+    held = run_greybox_study(GreyBoxStudyConfig(n_seeds=3, t_end=2.0, measured=("x",)), workers=1)
+    assert held.held["B"] == 3 and held.without_hold is not None
+    assert set(held.without_hold["coverage"]) == set(held.config.params)
+    assert held.without_hold["n_completed"] + held.without_hold["n_failed"] == 3
+    free = run_greybox_study(GreyBoxStudyConfig(n_seeds=3, t_end=2.0, measured=("x",), hold=False), workers=1)
+    assert free.without_hold is None and free.held["B"] == 0
+    assert free.coverage == held.without_hold["coverage"]
+    d = json.loads(json.dumps(held.to_dict()))
+    assert d["without_hold"]["coverage"]["M"] == held.without_hold["coverage"]["M"]
