@@ -104,7 +104,7 @@ SIM_BUTTONS = ("Case 1", "Case 2", "Case 3", "Case 4", "All four cases", "Run no
                "Compare both")
 LSE_RUN, TABLE4_RUN, HANDIN = "Run least squares", "Run all four scenarios (Table 4)", "Hand in these estimates"
 FREQ_RUN, RECORD_RUN = "Run experiment and estimate", "Estimate from your record"
-GB_RUN = "Run grey-box estimation"
+GB_RUN, GB_CANCEL = "Run grey-box estimation", "Cancel the estimation"
 STUDY_RUN, STUDY_CANCEL = "Run the study", "Cancel"
 RESET, REPORT, BACK_TO_SIMULATED, USE_COLUMNS = ("Reset to paper defaults", "Report of this session",
                                                   "Back to simulated data", "Use these columns")
@@ -1077,7 +1077,7 @@ class Walker:
         "lse-mapping": 1.2, "handin": 1.5,
         "type-frequency": 5, "run-frequency": 2.2, "record-upload": 2, "type-record": 1.5, "detrend": 1,
         "run-record": 1.5, "record-mapping": 1.2,
-        "type-greybox": 3, "run-greybox": 1.5,
+        "type-greybox": 3, "run-greybox": 1.5, "gb-cancel": 1.2,
         "type-board": 2, "board-tick": 3, "board-rename": 1.5, "board-delete": 0.7, "board-bands": 0.5,
         "type-study": 2, "run-study": 1, "study-cancel": 1.5,
         "download": 0.8, "any-button": 2, "settings": 1.5, "report": 0.6, "reload": 1.3, "other-page": 0.5,
@@ -1091,7 +1091,7 @@ class Walker:
     SECTION_OF = {**{k: "least_squares" for k in ("lse-upload", "lse-window", "lse-back", "lse-mapping", "handin")},
                   **{k: "record" for k in ("record-upload", "detrend", "record-mapping")},
                   **{k: "board" for k in ("board-tick", "board-rename", "board-delete", "board-bands")},
-                  "study-cancel": "study"}
+                  "study-cancel": "study", "gb-cancel": "greybox"}
 
     def _plan(self) -> None:
         """The walk's kinds of action, their weights and where each acts, from the page's sections."""
@@ -1571,6 +1571,9 @@ class Walker:
 
     def _make_study_cancel(self):
         return self._press(STUDY_CANCEL, "study-cancel")
+
+    def _make_gb_cancel(self):
+        return self._press(GB_CANCEL, "gb-cancel")
 
     def _make_report(self):
         return self._press(REPORT, "report")
@@ -2101,6 +2104,10 @@ class Walker:
                               f"{why_tab1}, the study form {'has errors' if study else 'is valid'}, "
                               f"{'a study is running' if running else 'no study running'}")
             out[STUDY_CANCEL] = (running, "a study is running" if running else "no study running")
+        gb_bar = s.one(css="eha-gb-progress-bar")
+        if gb_bar is not None:
+            running = bool(gb_bar.attributes.get("visible"))
+            out[GB_CANCEL] = (running, "a grey-box estimate is running" if running else "no grey-box estimate running")
         for label in (RESET, REPORT):
             out[label] = (True, "always")
         return out

@@ -124,10 +124,14 @@ def check_input_file(option: str, path: str | None) -> None:
 
 
 def json_text(data) -> str:
-    """JSON of results holding numpy values."""
-    from eha_app.render.formatting import json_default
+    """JSON of results holding numpy values; a NaN or an infinity (a value not given) is ``null``.
 
-    return json.dumps(data, indent=2, default=json_default)
+    >>> " ".join(json_text({"ci95": [float("nan"), 1.5]}).split())
+    '{ "ci95": [ null, 1.5 ] }'
+    """
+    from eha_app.render.formatting import json_default, json_safe
+
+    return json.dumps(json_safe(data), indent=2, default=json_default, allow_nan=False)
 
 
 def _poly_text(coeffs) -> str:

@@ -45,6 +45,10 @@ def add_parser(idsub) -> None:
     gb.add_argument("--intersample", default="foh", help="how u moves between samples: foh (linearly, default) or "
                                                          "zoh (held, a DAC's output)")
     gb.add_argument("--seed", type=int, default=0, help="seed of the noise (default 0)")
+    gb.add_argument("--shooting", default="auto", metavar="HOW",
+                    help="how the record is simulated: auto (default: the first 1 s, 3 s, ... of the record, then "
+                         "all of it; multiple shooting when that estimate fails its checks), single (the whole "
+                         "record from the start values) or multiple (multiple shooting, then the whole record)")
     gb.add_argument("--json", action="store_true", help="print JSON (default: a table)")
     gb.set_defaults(handler=run_greybox)
 
@@ -85,7 +89,7 @@ def _record(args, names, measured, truth):
 
 
 def run_greybox(args) -> int:
-    from eha_core.identify.greybox import GREYBOX_PARAMS, GREYBOX_SIGNALS
+    from eha_core.identify.greybox import GREYBOX_PARAMS, GREYBOX_SIGNALS, SHOOTING
     from eha_core.params import ActuatorParams
 
     names = _names("--params", args.params, GREYBOX_PARAMS)
@@ -96,6 +100,8 @@ def run_greybox(args) -> int:
         raise refused("--t-end", args.t_end, f"use a record length in (0, {MAX_GREYBOX_T_END:g}] s")
     if args.intersample not in ("foh", "zoh"):
         raise refused("--intersample", args.intersample, "use foh or zoh")
+    if args.shooting not in SHOOTING:
+        raise refused("--shooting", args.shooting, f"use {', '.join(SHOOTING)}")
     check_input_file("--data", args.data)
     given = parse_params(args.param)
     # without data the --param values are the plant's truth and the estimate starts from the paper's;
@@ -106,7 +112,7 @@ def run_greybox(args) -> int:
     from eha_core.identify.greybox import identify_greybox
 
     try:
-        res = identify_greybox(data, names, measured=measured, guess=guess)
+        res = identify_greybox(data, names, measured=measured, guess=guess, shooting=args.shooting)
     except FieldError as exc:
         raise as_option(exc, {"params": "--params", "measured": "--measured", "record": "--t-end"}) from None
     out = res.to_dict()
@@ -118,17 +124,63 @@ def run_greybox(args) -> int:
         return 0 if res.success else 1
     print(f"grey-box (output error) from {', '.join(measured)} of {data.source}: {res.nfev} simulations with "
           f"sensitivities, {res.time_s:.2f} s")
-    head = f"{'':8s}{'estimate':>14s}{'std error':>12s}   95 % interval" + ("       true" if truth else "")
-    print(head)
-    for n in names:
-        lo, hi = res.ci95[n]
-        true = f"{getattr(truth, n):>14.6g}" if truth is not None and hasattr(truth, n) else ""
-        print(f"{n:8s}{res.estimates[n]:14.6g}{res.std_errors[n]:12.4g}   [{lo:.6g}, {hi:.6g}]{true}")
+    if res.strategy:
+        print(f"strategy: {res.strategy}")
+    print(table_text(res, names, truth))
     print("fit: " + ", ".join(f"{s} {v:.2f} %" for s, v in res.fit.items()))
     for _, sentence in res.identifiability:
         print(f"identifiability: {sentence}")
-    if res.held:
-        print(f"held at the initial value: {', '.join(res.held)}")
+    for n in res.held:
+        print(f"held: {held_line(res, n)}")
+    print("checks:")
+    for c in res.checks:
+        print(f"  {'✓' if c.passed else '✗'} {c.name}: {c.says}")
+    if res.advice:
+        print("try:")
+        for a in res.advice:
+            print(f"  - {a}")
     if not res.success:
         print(f"eha identify greybox: warning: {res.message}", file=sys.stderr)
     return 0 if res.success else 1
+
+
+#: What the table prints for a value the estimate does not give (it failed its checks).
+NOT_GIVEN = "—"
+
+
+def table_text(res, names, truth=None) -> str:
+    """The estimates as a table: estimate, standard error, 95 % interval (and the truth of a simulated
+    record). An estimate that failed its checks has no standard error or interval (the core gives none,
+    and they would read as if they held): "—" and a line saying why; a held parameter and one at a bound
+    of its range say so."""
+    bound = {n for c in res.failed_checks if c.name == "bounds" for n in c.about}
+    lines = [(f"{'':8s}{'estimate':>14s}{'std error':>12s}   " + (f"{'95 % interval':<26s}{'true':>14s}" if truth
+                                                                     else "95 % interval"))]
+    for n in names:
+        lo, hi = res.ci95[n]
+        true = f"{getattr(truth, n):>14.6g}" if truth is not None and hasattr(truth, n) else ""
+        if n in res.held:
+            se, ci = f"{NOT_GIVEN:>12s}", "held at the initial value"
+        elif res.success and math.isfinite(lo) and math.isfinite(hi):
+            se, ci = f"{res.std_errors[n]:12.4g}", f"[{lo:.6g}, {hi:.6g}]"
+        else:
+            se, ci = f"{NOT_GIVEN:>12s}", "at the bound of its range" if n in bound else NOT_GIVEN
+        lines.append(f"{n:8s}{res.estimates[n]:14.6g}{se}   {ci:<26s}{true}".rstrip())
+    if not res.success:
+        lines.append("no standard error or interval is given: the estimate failed its checks (below)")
+    return "\n".join(lines)
+
+
+def held_line(res, name: str) -> str:
+    """A held parameter, its value and how it moves the estimates if it is 10 % off (the core's
+    ``held_bias``): ``B held at 1500; if it is 10 % off, M moves by +4.1 %, Af by -2.0 %``."""
+    from eha_app.render.formatting import pct_short
+    from eha_core.param_table import FIELD_INFO
+
+    unit = FIELD_INFO[name].unit if name in FIELD_INFO else "SI"
+    text = f"{name} held at {res.estimates[name]:.6g} {unit}"
+    moves = [(m, v) for m, v in (res.held_bias.get(name) or {}).items() if math.isfinite(v)]
+    if moves:
+        text += "; if it is 10 % off, " + ", ".join(f"{m} {'moves ' if k == 0 else ''}by {pct_short(v)}"
+                                                     for k, (m, v) in enumerate(moves))
+    return text

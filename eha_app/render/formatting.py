@@ -6,7 +6,8 @@ import math
 
 import numpy as np
 
-__all__ = ["num_html", "pct_text", "poly_html", "tf_html", "poles_html", "table_html", "json_default"]
+__all__ = ["num_html", "pct_text", "poly_html", "tf_html", "poles_html", "table_html", "json_default",
+           "json_safe", "pct_short"]
 
 
 def num_html(x: float, digits: int = 4) -> str:
@@ -33,6 +34,19 @@ def pct_text(fraction: float, digits: int = 2) -> str:
     if float(text) == 0:
         text = "+" + text[1:]
     return text + " %"
+
+
+def pct_short(fraction: float) -> str:
+    """A small relative change as a signed percentage with the digits it needs: one decimal from 0.1 %,
+    one significant digit below (a change of 0.003 % is not "+0.0 %").
+
+    >>> pct_short(0.0412), pct_short(-0.02), pct_short(-3.1e-5), pct_short(0.0)
+    ('+4.1 %', '-2.0 %', '-0.003 %', '+0 %')
+    """
+    p = 100 * fraction
+    if p == 0:
+        return "+0 %"
+    return (f"{p:+.1f}" if abs(p) >= 0.095 else f"{p:+.1g}") + " %"
 
 
 def poly_html(coeffs, var: str = "s") -> str:
@@ -94,3 +108,24 @@ def json_default(obj):
     if isinstance(obj, tuple):
         return list(obj)
     raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+def json_safe(obj):
+    """``obj`` with every number JSON can hold as it is and every NaN or infinity as None (JSON's
+    ``null``: ``json.dumps`` would write ``NaN``, which is no JSON and which strict readers refuse);
+    numpy values as Python's.
+
+    >>> json_safe({"ci95": (float("nan"), 2.0), "n": np.int64(3), "r": np.array([1.0, np.inf])})
+    {'ci95': [None, 2.0], 'n': 3, 'r': [1.0, None]}
+    """
+    if isinstance(obj, dict):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return json_safe(obj.tolist())
+    if isinstance(obj, (np.floating, np.integer, np.bool_)):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj

@@ -14,12 +14,12 @@ from bokeh.models import ColumnDataSource, LegendItem
 from eha_core.experiments import PAPER_TABLE4
 from eha_core.param_table import FIELD_INFO
 
-from .formatting import num_html, pct_text, table_html
+from .formatting import num_html, pct_short, pct_text, table_html
 from .plots import CASE_COLORS, FIGURE_WIDTH, _f32, _figure, _lean, _legend_above, decimate
 from .tables import SCENARIOS, SYMBOLS_HTML, UNITS
 
-__all__ = ["greybox_table_html", "correlation_html", "identifiability_html", "verdicts_html", "routes_html",
-           "GreyBoxFigure", "SIGNAL_DISPLAY", "ROUTE_PARAMS"]
+__all__ = ["greybox_table_html", "checks_html", "held_text", "at_bound", "correlation_html", "identifiability_html",
+           "verdicts_html", "routes_html", "GreyBoxFigure", "SIGNAL_DISPLAY", "ROUTE_PARAMS"]
 
 #: How each measured signal is drawn: its title, axis label and the factor from SI.
 SIGNAL_DISPLAY = {"x": ("Position", "x [mm]", 1e3), "v": ("Velocity", "v [mm/s]", 1e3),
@@ -41,29 +41,73 @@ def _name(name: str) -> str:
     return SYMBOLS_HTML.get(name, html.escape(name))
 
 
+def at_bound(res) -> tuple[str, ...]:
+    """The parameters whose estimate ended at a bound of its range (the core's bounds check)."""
+    return tuple(n for c in res.failed_checks if c.name == "bounds" for n in c.about)
+
+
+def held_text(res, name: str) -> str:
+    """A held parameter's row: its value and how it moves the estimates if it is 10 % off (the core's
+    ``held_bias``), e.g. "held at the initial value, 1500 N s/m; if it is 10 % off, M moves by +4.1 %, Af by
+    -2.0 %"."""
+    text = f"held at the initial value, {_num(res.estimates[name])} {_unit(name)}"
+    moves = [(m, v) for m, v in (res.held_bias.get(name) or {}).items() if math.isfinite(v)]
+    if moves:
+        parts = [f"{_name(m)} {'moves ' if k == 0 else ''}by {pct_short(v)}" for k, (m, v) in enumerate(moves)]
+        text += "; if it is 10 % off, " + ", ".join(parts)
+    return text
+
+
+def checks_html(res) -> str:
+    """Whether the estimate holds, from its own checks (the core's ``checks``): an alert with each failed
+    check and what to try, or one line of the checks passed; and how it was fitted (``strategy``)."""
+    how = (f"<p class='eha-note eha-gb-strategy'>How it was fitted: {html.escape(res.strategy)}.</p>"
+           if res.strategy else "")
+    if res.success:
+        passed = "; ".join(html.escape(c.says) for c in res.checks)
+        return (f"<p class='eha-gb-checks eha-gb-passed'><span class='eha-ok'>Checks passed ✓</span> {passed}.</p>"
+                + how) if passed else how
+    failed = res.failed_checks
+    found = "".join(f"<li>{html.escape(c.says)}</li>" for c in failed) or f"<li>{html.escape(res.message)}</li>"
+    tries = "".join(f"<li>{html.escape(a)}</li>" for a in res.advice)
+    return ("<div class='eha-gb-checks eha-gb-failed' role='alert'><b>This estimate may be wrong</b>: it failed "
+            f"{'its check' if len(failed) == 1 else 'its checks'}, so no interval, standard error or correlation is "
+            f"given.<ul class='eha-gb-found'>{found}</ul>"
+            + (f"<b>What to try</b><ul class='eha-gb-advice'>{tries}</ul>" if tries else "") + "</div>" + how)
+
+
 def greybox_table_html(res, nominal, *, hidden=(), scenario: str | None = None, own_record: bool = False) -> str:
     """Each estimated parameter: estimate, 95 % interval, standard error, the nominal (tab 1) value and
-    the difference, and the paper's least-squares number of the same case (Table 4) where it gives one.
+    the difference, and the paper's least-squares number of the same case (Table 4) where it gives one;
+    above them, whether the estimate passed its checks (:func:`checks_html`). An estimate that failed
+    them has no interval or standard error (the core gives none); a parameter at a bound of its range
+    and one held at its initial value say so in their row, the held one with the bias it can cause.
 
     ``nominal``: tab 1's :class:`~eha_core.params.ActuatorParams` (the plant the record came from);
     ``hidden``: an exercise's hidden parameters (no nominal value, difference or paper column);
     ``own_record``: the student's file (nothing is known to compare with)."""
     known = not own_record
     paper = PAPER_TABLE4.get(scenario) if known and not hidden and scenario in PAPER_TABLE4 else None
+    bound = at_bound(res)
     rows = []
     for n in res.names:
         v, lo_hi, se = res.estimates[n], res.ci95[n], res.std_errors[n]
         row = [f"{_name(n)} [{_unit(n)}]", _num(v)]
+        given = n not in res.held and res.success and all(math.isfinite(c) for c in lo_hi)
         if n in res.held:
-            row += ["held at the initial value", ""]
-        else:
+            row += [f"<span class='eha-gb-held-row'>{held_text(res, n)}</span>", ""]
+        elif n in bound:
+            row += ["<span class='eha-warn eha-gb-at-bound'>at the bound of its range</span>", "—"]
+        elif given:
             row += [f"[{_num(lo_hi[0])}, {_num(lo_hi[1])}]", _num(se)]
+        else:
+            row += ["<span class='eha-gb-no-interval'>—</span>", "—"]
         if known:
             if n in hidden:
                 row += ["hidden", ""]
             else:
                 nom = _nominal(nominal, n)
-                inside = n not in res.held and lo_hi[0] <= nom <= lo_hi[1]
+                inside = given and lo_hi[0] <= nom <= lo_hi[1]
                 diff = "" if nom == 0 else pct_text(v / nom - 1, 3)
                 mark = " <span class='eha-ok'>covers ✓</span>" if inside else ""
                 row += [_num(nom), diff + mark]
@@ -77,10 +121,9 @@ def greybox_table_html(res, nominal, *, hidden=(), scenario: str | None = None, 
               + (["paper (least squares)"] if paper is not None else []))
     fits = ", ".join(f"{SIGNAL_DISPLAY[s][1].split(' ')[0]} {f:.2f} %" for s, f in res.fit.items())
     note = (f"<p class='eha-note eha-gb-fit'>Fit of the simulated signals to the measured ones (NRMSE, as MATLAB's "
-            f"compare): {fits}. {res.nfev} simulations with sensitivities, {res.time_s:.2f} s"
-            + ("" if res.success else f"; <span class='eha-warn'>{html.escape(res.message)}</span>") + ".</p>")
-    return ("<div class='eha-table-scroll'>" + table_html(header, rows, cls="eha-table eha-gb-table") + "</div>"
-            + note)
+            f"compare): {fits}. {res.nfev} simulations with sensitivities, {res.time_s:.2f} s.</p>")
+    return (checks_html(res) + "<div class='eha-table-scroll'>" + table_html(header, rows, cls="eha-table eha-gb-table")
+            + "</div>" + note)
 
 
 def _nominal(params, name: str) -> float:
@@ -90,9 +133,18 @@ def _nominal(params, name: str) -> float:
 
 
 def correlation_html(res) -> str:
-    """The estimates' correlation matrix; |r| > 0.9 (the data hardly separate the two) highlighted."""
+    """The estimates' correlation matrix; |r| > 0.9 (the data hardly separate the two) highlighted. Only
+    when it means something: an estimate that failed its checks, or one whose estimated parameters'
+    correlations are not all finite, gets a sentence saying why there is none."""
     names = [n for n in res.names]
     c = np.asarray(res.correlation, dtype=float)
+    free = [i for i, n in enumerate(names) if n not in res.held]
+    if not res.success:
+        return ("<p class='eha-note eha-gb-corr-hidden'>Not shown: the estimate failed its checks, so the "
+                "correlations of its estimates describe a minimum that may not be the answer.</p>")
+    if c.shape != (len(names), len(names)) or not np.all(np.isfinite(c[np.ix_(free, free)])):
+        return ("<p class='eha-note eha-gb-corr-hidden'>Not shown: the data do not bound every estimate, so their "
+                "correlations are not defined.</p>")
     rows = []
     for i, a in enumerate(names):
         cells = [f"<b>{_name(a)}</b>"]
@@ -167,13 +219,19 @@ def _tf_cell(backout, n, truth):
     return "only B + 2k<sub>f</sub>A<sub>f</sub>/π (below)"
 
 
+#: What a grey-box estimate that failed its checks says beside its value in the side-by-side table.
+_MAY_BE_WRONG = "<br><small class='eha-warn eha-gb-may-be-wrong'>may be wrong (failed its checks)</small>"
+
+
 def _gb_cell(gb, n, truth):
     if gb is None:
         return "<i>not run</i>"
     if n not in gb.estimates:
         return "not estimated"
     held = n in gb.held
-    return _cell(gb.estimates[n], None if held else gb.ci95[n], truth) + ("<br><small>held</small>" if held else "")
+    ci = None if held or not gb.success else gb.ci95[n]
+    return (_cell(gb.estimates[n], ci, truth) + ("<br><small>held</small>" if held else "")
+            + ("" if gb.success or held else _MAY_BE_WRONG))
 
 
 def _damping_row(params, lse, backout, gb, hidden) -> list:
@@ -195,7 +253,7 @@ def _damping_row(params, lse, backout, gb, hidden) -> list:
         row.append("–")         # a hidden value the run held, not estimated: never shown
     else:
         p = gb.params
-        row.append(_cell(p.B + 2 * p.k_f * p.Af / math.pi, None, truth))
+        row.append(_cell(p.B + 2 * p.k_f * p.Af / math.pi, None, truth) + ("" if gb.success else _MAY_BE_WRONG))
     return row
 
 

@@ -39,7 +39,7 @@ from eha_core.reproduction import REPRODUCTION_STEPS, STATES, Reproduction, repr
 from eha_core.simulate import runs_to_pandas
 
 from . import plots
-from .formatting import json_default, num_html, table_html
+from .formatting import json_default, json_safe, num_html, table_html
 from .tables import CSS, SYMBOLS_HTML, backout_html, derived_html, freq_summary_html, lse_table_html, table4_html
 
 __all__ = ["ReportResult", "build_report", "differences_from_paper", "SECTIONS"]
@@ -275,7 +275,9 @@ def build_report(out_dir: str | Path, *, seed: int = 0,
                  divs, script, _bokeh_js(), routes)
     path = out / "report.html"
     path.write_text(page, encoding="utf-8")
-    (data_dir / "results.json").write_text(json.dumps(numbers, indent=2, default=json_default), encoding="utf-8")
+    # (a failed estimate's missing numbers are NaN: JSON has null for them, not the NaN it does not know)
+    (data_dir / "results.json").write_text(json.dumps(json_safe(numbers), indent=2, default=json_default,
+                                                      allow_nan=False), encoding="utf-8")
     seconds = step.done() if isinstance(step, _Progress) else float("nan")
     return ReportResult(path=path, seconds=seconds, numbers=numbers, reproduction=r)
 

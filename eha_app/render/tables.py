@@ -50,6 +50,11 @@ h4 { margin: 12px 0 4px 0; }
 .eha-out-of-date { opacity: 0.4; filter: grayscale(0.7); }
 .eha-updating { box-shadow: -3px 0 0 0 #8ab4f8; }
 abbr.eha-term { text-decoration: underline dotted; cursor: help; }
+.eha-gb-failed { background: #fdecea; border-left: 4px solid #b00020; color: #3d0008; font-size: 13px;
+                 padding: 4px 10px; margin: 4px 0 8px 0; overflow-wrap: anywhere; }
+.eha-gb-failed ul { margin: 2px 0 4px 0; padding-left: 18px; }
+.eha-gb-passed { font-size: 13px; margin: 4px 0; }
+.eha-gb-no-interval { color: #666; }
 .eha-stale-note { background: #fff4e5; border-left: 4px solid #e08a00; color: #5a3b00; font-size: 13px;
                   padding: 2px 8px; }
 """

@@ -51,7 +51,7 @@ from .jobs import Job, JobQueue, JobState, default_queue, log_failure, session_n
 # what reads Bokeh's and asyncio's internals lives in patches.py, with the check of their shape
 from .patches import holds_lock, lazy_freeze, loop_has_work, note_loop_thread
 
-__all__ = ["SessionRunner", "PageUpdates", "apply_locked", "frozen_models", "held",
+__all__ = ["SessionRunner", "PageUpdates", "PageProgress", "apply_locked", "frozen_models", "held",
            "LOADING_DELAY_S", "served_document", "holds_lock", "locked", "watch", "on_click", "note_loop_thread"]
 
 log = logging.getLogger("eha_app")
@@ -234,6 +234,65 @@ def apply_locked(fn: Callable[[], None], doc=None) -> None:
         fn()
         return
     _updates.submit(doc, fn)
+
+
+class PageProgress:
+    """A computation's progress on its page: call it from the worker thread, as often as the work
+    likes; ``show(*args)`` runs on the session's document (:func:`apply_locked`: under its lock, in
+    turn with the other pages' changes) with the latest arguments, at most ``hz`` times a second.
+
+    A report held back by that limit is not lost: it is shown when the interval has passed (a timer
+    of the event loop, not another thread), so the page never says a stage is running long after it
+    ended. :meth:`close` (on the page, once the result is shown) drops any update still on its way.
+    Without a server (tests, a notebook) every report is shown at once, in the calling thread.
+    """
+
+    def __init__(self, show: Callable[..., None], *, hz: float = 4.0, doc=None):
+        self._show = show
+        self._min_s = 1.0 / hz
+        self._doc = doc if doc is not None else served_document()
+        self._lock = threading.Lock()
+        self._latest: tuple | None = None
+        self._pending = False           # an update is on its way to the page: it will show the latest
+        self._shown_at = -float("inf")
+        self._closed = False
+
+    def __call__(self, *args) -> None:
+        if self._doc is None:
+            if not self._closed:
+                self._show(*args)
+            return
+        with self._lock:
+            if self._closed:
+                return
+            self._latest = args
+            if self._pending:
+                return
+            self._pending = True
+            wait_s = self._shown_at + self._min_s - time.perf_counter()
+        if wait_s > 0:
+            doc = self._doc
+            # the timer is set on the event loop's thread (Bokeh's documents are not thread-safe)
+            try:
+                doc.add_next_tick_callback(lambda: doc.add_timeout_callback(
+                    lambda: apply_locked(self._flush, doc), max(1, int(wait_s * 1000))))
+            except Exception:  # noqa: BLE001 - the session is closing: nobody to show it to
+                pass
+        else:
+            apply_locked(self._flush, self._doc)
+
+    def _flush(self) -> None:
+        with self._lock:
+            args, self._pending = self._latest, False
+            self._shown_at = time.perf_counter()
+            if self._closed or args is None:
+                return
+        self._show(*args)
+
+    def close(self) -> None:
+        """Show nothing more (the result, a failure or a cancel is on the page now)."""
+        with self._lock:
+            self._closed = True
 
 
 def _message(exc: BaseException) -> str:

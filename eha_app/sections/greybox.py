@@ -19,6 +19,7 @@ from eha_core.params import ActuatorParams, ParameterError
 from eha_core.signals import SignalSpecError, parse_signal
 from eha_core.simulate import DEFAULT_H_MAX
 
+from ..render.formatting import json_safe
 from ..render.greybox import (
     GreyBoxFigure,
     correlation_html,
@@ -30,7 +31,7 @@ from ..render.greybox import (
 from ..render.layout import side_by_side
 from ..render.tables import SCENARIOS
 from ..runtime.limits import RunCost
-from ..runtime.tasks import apply_locked, on_click, watch
+from ..runtime.tasks import PageProgress, apply_locked, on_click, watch
 from ..session import (
     GuideStep,
     KeptWork,
@@ -78,6 +79,11 @@ def _guess_field(n: str) -> Field:
                  tip=f"the estimate starts here ({info.description}); the paper's value by default")
 
 
+#: How the estimate simulates the record (the core's ``shooting``), as the form offers it.
+SHOOTING_OPTIONS = (("auto", "automatic: a growing record, multiple shooting when the checks fail"),
+                    ("single", "the whole record (output error)"), ("multiple", "multiple shooting, then the whole"))
+
+
 def _display(n: str, value: float) -> str:
     return f"{value / FIELD_INFO[n].display_scale:.6g}"
 
@@ -99,9 +105,11 @@ GB_FORM = (Group("Grey-box estimation", (
           tip="none, sine:AMP[:FREQ_HZ], white:SIGMA, or any signal of the simulation, e.g. sine:500:2+noise:100:1"),
     Field("gb_seed", "noise seed", "integer", lo=0, hi=10**6, short="noise seed"),
     Field("gb_shooting", "simulation", "select", short="simulation",
-          options=(("single", "the whole record (output error)"), ("multiple", "multiple shooting, then the whole")),
-          tip="multiple shooting cuts the record into 1 s segments whose initial states are estimated too, joined "
-              "by continuity: a wider basin for a poor initial guess, at several times the cost"),
+          options=SHOOTING_OPTIONS,
+          tip="automatic fits the first 1 s, 3 s, ... of the record, each from the last, then all of it, and "
+              "tries multiple shooting only when that estimate fails its checks; multiple shooting cuts the "
+              "record into 1 s segments whose initial states are estimated too, joined by continuity: a wider "
+              "basin for a poor initial guess, at several times the cost"),
 )), Group("Sensor noise (simulated measurements)", (
     Field("gb_noise_x", "σ of x", "number", unit="mm", lo=0.0, hi=10.0, short="σ x",
           tip="white Gaussian noise added to the position sensor, drawn from the noise seed"),
@@ -113,7 +121,7 @@ GB_FORM = (Group("Grey-box estimation", (
                                             collapsible=True, collapsed=True))
 GB_DEFAULTS = {"gb_params": "M, B, Af, beta_e", "gb_measured": "x, p1, p2", "gb_excitation": "paper",
                "gb_u": "sine:6:2", "gb_t_end": "5",
-               "gb_scenario": "none", "gb_custom": "sine:1000:3", "gb_seed": "0", "gb_shooting": "single",
+               "gb_scenario": "none", "gb_custom": "sine:1000:3", "gb_seed": "0", "gb_shooting": "auto",
                "gb_noise_x": "0.01",
                "gb_noise_v": "0", "gb_noise_p": "0.05",
                **{f"gb_guess_{n}": _display(n, getattr(_PAPER, n)) for n in GUESS_PARAMS}}
@@ -136,7 +144,7 @@ class GreyBoxRequest:
     guess: tuple[tuple[str, float], ...] = ()                 # SI, of GUESS_PARAMS
     u_text: str = "sine:6:2"
     t_end: float = 5.0
-    shooting: str = "single"
+    shooting: str = "auto"
 
     def measurement_noise(self) -> dict[str, float]:
         sx, sv, sp = self.noise
@@ -209,7 +217,7 @@ def parse_greybox(texts: dict, fields: dict | None = None, *, measurable=GREYBOX
                          custom=texts.get("gb_custom", ""), seed=values.get("gb_seed", 0),
                          noise=tuple(float(values.get(k, 0.0)) for k in _NOISE_FIELDS), guess=guess,
                          u_text=texts.get("gb_u", ""), t_end=float(values.get("gb_t_end", 5.0)),
-                         shooting=values.get("gb_shooting", "single"))
+                         shooting=values.get("gb_shooting", "auto"))
     if "gb_custom" not in hidden and not errors.get("gb_custom"):
         try:
             parse_signal(req.disturbance_spec(), name="custom d(t)", seed=req.seed, hold_s=1e-3)
@@ -236,6 +244,14 @@ def exercise_fields(conditions) -> dict:
 #: A grey-box estimate simulates its record some 25 times, each with one more evaluation of the model
 #: per estimated parameter (the sensitivities); multiple shooting about three times as much.
 GREYBOX_SIMULATIONS = 25
+#: Each strategy's simulations as a share of :data:`GREYBOX_SIMULATIONS`. ``auto`` is single shooting
+#: (its first fits over the record's first seconds start the whole record's fit near its minimum) plus
+#: the chance that its checks fail and it goes on to multiple shooting (x3): counted as 1.5, so that a
+#: server's limit refuses what a likely escalation could not finish, without refusing every run as if
+#: it escalated.
+SHOOTING_COST = {"single": 1.0, "auto": 1.5, "multiple": 3.0}
+#: At most this many progress updates a second reach the page.
+_PROGRESS_HZ = 4.0
 
 
 class GreyBoxPanel(Section):
@@ -281,7 +297,17 @@ class GreyBoxPanel(Section):
         self.button = pn.widgets.Button(label="Run grey-box estimation", color="primary", width=260,
                                         css_classes=["eha-run-gb"])
         on_click(self.button, lambda _e: self.run())
-        self.handin = HandInBox(self, "greybox", self._handin_estimates, label="Hand in the grey-box estimates")
+        # a run's progress (the core's stage, in words) and its cancel, as the study's
+        self.cancel_button = pn.widgets.Button(label="Cancel the estimation", width=260, disabled=True,
+                                               css_classes=["eha-cancel-gb"])
+        on_click(self.cancel_button, lambda _e: self.cancel())
+        self.progress = pn.indicators.Progress(value=-1, active=False, width=260, visible=False,
+                                               css_classes=["eha-gb-progress-bar"])
+        self.progress_text = pn.pane.HTML("", width=270, visible=False, css_classes=["eha-gb-progress"])
+        self._job = None                    # the last run asked for
+        self._token = None                  # the cancel token of the run computing
+        self.handin = HandInBox(self, "greybox", self._handin_estimates, label="Hand in the grey-box estimates",
+                                refusal=self._handin_refusal)
         self.handin_button, self.verdict = self.handin.button, self.handin.verdict
         # the student's own record (CSV or .mat): t, u and the measured signals
         self.own_data = None
@@ -394,6 +420,10 @@ class GreyBoxPanel(Section):
         if self.result_context.get("own_record") and not self.handin.takes_files:
             self.handin.set_tip(False, "a hand-in comes from your actuator's experiment, not from a file")
             return
+        why = self._handin_refusal()
+        self.handin.show_refusal(why)
+        if why:
+            return
         names = ", ".join(FIELD_LABELS.get(n, n) for n in self.state.hidden
                           if n in self.result.estimates and n not in self.result.held)
         if not names:
@@ -466,7 +496,11 @@ class GreyBoxPanel(Section):
                            "measured": list(req.measured)} if self.conditions is not None else {})
         scenario = req.scenario if req.excitation == "paper" and req.scenario != "custom" and own is None else None
 
+        # the core's stage, from the worker: a few updates a second reach the page
+        stage = PageProgress(self._show_stage, hz=_PROGRESS_HZ)
+
         def compute(token):
+            self._token = token         # the cancel button's way to the running estimate
             if own is not None:
                 data = GreyBoxData(t=own.t, u=own.u, signals={s: own.signals[s] for s in req.measured},
                                    source=own.source)
@@ -475,7 +509,7 @@ class GreyBoxPanel(Section):
                 noise = {s: v for s, v in req.measurement_noise().items() if s in req.measured}
                 data = greybox_data(params, u, t_end=t_end, d=d, noise=noise, seed=req.seed, measured=req.measured)
             res = identify_greybox(data, req.names, measured=req.measured, guess=guess, shooting=req.shooting,
-                                   cancel=token)
+                                   cancel=token, progress=stage)
             model = None
             if res.success:
                 # a nonlinear model of the actuator: the board closes its loop, simulates it on its
@@ -511,8 +545,44 @@ class GreyBoxPanel(Section):
             if model is not None:
                 apply_locked(partial(self.session.post, "board", model))
 
-        return self.runner.run("grey-box estimation", compute, show, fail=self._fail, busy=[self.area],
-                               note=self._note)
+        self._running(True)
+        self._show_stage("starting")
+        job = self._job = self.runner.run("grey-box estimation", compute, show, fail=self._fail, busy=[self.area],
+                                          note=self._note, cancelled=partial(self._cancelled, stage))
+        self.runner.then(job, partial(self._ended, stage))
+        return job
+
+    def _cancelled(self, stage: PageProgress, _job) -> None:
+        stage.close()
+        self.progress_text.object = ("<span class='eha-note eha-gb-cancelled'>The grey-box estimation was cancelled"
+                                     + ("; the table shows the previous result" if self.result is not None else "")
+                                     + ".</span>")
+        self.progress_text.visible = True
+
+    def _ended(self, stage: PageProgress, job) -> None:
+        """Whatever the run's end (shown, failed, cancelled, replaced by a newer request): it is over."""
+        stage.close()
+        if job is self._job:
+            self._running(False)
+            if job.state != "cancelled":
+                self.progress_text.visible = False
+
+    def cancel(self) -> None:
+        """Stop the grey-box estimation: a waiting one never starts, a running one stops at its next
+        simulation; the table keeps the previous result."""
+        for token in (self._token, self._job.token if self._job is not None else None):
+            if token is not None:
+                token.cancel("the grey-box estimation was cancelled")
+
+    def _running(self, on: bool) -> None:
+        self.cancel_button.disabled = not on
+        self.progress.active = on
+        self.progress.visible = on
+
+    def _show_stage(self, text: str) -> None:
+        """The run's stage under the button (the core's sentence: what it is doing now)."""
+        self.progress_text.object = f"<span class='eha-note'>{html.escape(text[:1].upper() + text[1:])}…</span>"
+        self.progress_text.visible = True
 
     def _table_html(self) -> str:
         c = self.result_context
@@ -630,7 +700,8 @@ class GreyBoxPanel(Section):
 
         out = self.result.to_dict()
         out["source"] = self.last_data.source if self.last_data is not None else ""
-        return json.dumps(out, indent=1).encode()
+        # a value the estimate does not give (an interval of one that failed its checks) is null, not NaN
+        return json.dumps(json_safe(out), indent=1, allow_nan=False).encode()
 
     # -- the hand-in ----------------------------------------------------------------------------------------
     def _handin_estimates(self):
@@ -648,6 +719,16 @@ class GreyBoxPanel(Section):
         settings["_conditions"] = dict(self.last_conditions)
         return estimates, settings
 
+    def _handin_refusal(self) -> str | None:
+        """Why the last result cannot be handed in (None: it can): an estimate that failed its checks may
+        be wrong, and a hand-in is scored as if it were the student's measurement."""
+        res = self.result
+        if res is None or res.success:
+            return None
+        found = "; ".join(c.says for c in res.failed_checks) or res.message
+        again = f", e.g. {res.advice[0]}" if res.advice else ""
+        return f"this estimate failed its checks: {found} — run it again{again}"
+
     def hand_in(self):
         return self.handin.hand_in()
 
@@ -664,7 +745,7 @@ class GreyBoxPanel(Section):
         t_end = req.input_signal()[1] if own is None else float(own.t[-1] - own.t[0])
         n_samples = int(round(t_end * 1000)) + 1 if own is None else own.t.size
         n_params = len(req.names)
-        runs = GREYBOX_SIMULATIONS * (3 if req.shooting == "multiple" else 1)
+        runs = GREYBOX_SIMULATIONS * SHOOTING_COST.get(req.shooting, 1.0)
         steps = int(t_end / DEFAULT_H_MAX * (1 + n_params) * runs)
         peak = n_samples * (4 + len(req.measured)) * (1 + n_params) * 8 * 3     # states, sensitivities, Jacobian
         return RunCost("record length × (1 + parameters)", f"{t_end:g} s × {1 + n_params}", steps, peak,
@@ -713,7 +794,8 @@ class GreyBoxPanel(Section):
         return ReportPart("Grey-box identification (the nonlinear model)", body, figures)
 
     def __panel__(self):
-        controls = pn.Column(self.form, self.notice, self.button, self.handin_button, self.verdict, self.upload_note,
+        controls = pn.Column(self.form, self.notice, self.button, self.cancel_button, self.progress, self.progress_text,
+                             self.handin_button, self.verdict, self.upload_note,
                              self.upload, self.mapping, self.simulated_button,
                              pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"), self.queue_note, width=280)
         explain = pn.pane.HTML(

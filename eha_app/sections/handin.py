@@ -39,8 +39,11 @@ class HandInBox:
     None (nothing to hand in yet), ``tip()`` the button's tooltip as the section sees it."""
 
     def __init__(self, section, method: str, estimates: Callable[[], tuple[dict, dict] | None], *,
-                 label: str = "Hand in these estimates"):
+                 label: str = "Hand in these estimates", refusal: Callable[[], str | None] | None = None):
         self.section, self.method, self.estimates = section, method, estimates
+        # why the section's result cannot be handed in (None: it can), e.g. an estimate that failed its checks
+        self.refusal = refusal if refusal is not None else (lambda: None)
+        self._refusal_shown = False
         state = section.state
         allowed = bool(state.hidden) and (state.exercise is None or method in state.exercise.conditions.methods)
         self.button = pn.widgets.Button(label=label, color="warning", width=260, css_classes=["eha-handin"],
@@ -59,9 +62,27 @@ class HandInBox:
         if self.button.description != tip:
             self.button.description = tip
 
+    def show_refusal(self, why: str | None) -> None:
+        """Say beside the button why the result cannot be handed in, and disable it (None: it can; a
+        refusal shown before is taken away)."""
+        if why:
+            self.set_tip(False, why)
+            self.verdict.object = (f"<div class='eha-verdict-box eha-handin-refused'><span class='eha-warn'>Cannot be "
+                                   f"handed in: {html.escape(why)}.</span></div>")
+            self.verdict.visible = True
+            self._refusal_shown = True
+        elif self._refusal_shown:
+            self.verdict.visible = False
+            self.verdict.object = ""
+            self._refusal_shown = False
+
     def hand_in(self):
         """Store the section's estimates as a hand-in; show what the feedback rule allows."""
         s = self.section.state
+        why = self.refusal()
+        if why and s.hidden:
+            self.show_refusal(why)
+            return None
         got = self.estimates()
         if got is None or not s.hidden:
             return None
@@ -99,6 +120,7 @@ class HandInBox:
 
         def show(out, _job):
             verdicts, refused, count, shows = out
+            self._refusal_shown = False         # the verdict pane says this hand-in's outcome now
             if refused:
                 self.verdict.object = (f"<div class='eha-verdict-box eha-handin-refused'><span class='eha-warn'>"
                                        f"Not handed in: {html.escape(refused)}.</span></div>")

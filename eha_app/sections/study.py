@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import dataclasses
 import html
-import time
 from functools import partial
 
 import numpy as np
@@ -30,7 +29,7 @@ from ..render.formatting import num_html
 from ..render.layout import side_by_side
 from ..render.tables import SYMBOLS_HTML, UNITS
 from ..runtime.background import background_process
-from ..runtime.tasks import apply_locked, on_click, pages_busy, served_document, watch
+from ..runtime.tasks import PageProgress, apply_locked, on_click, pages_busy, served_document, watch
 from ..session import GuideStep, ReportPart, Section, SectionSnapshot
 from ..session.form import Field, Form, Group, parse_fields
 from ..session.state import FIELD_LABELS
@@ -286,7 +285,6 @@ class StudyPanel(Section):
         part = dataclasses.replace(cfg, first_seed=first,
                                    n_seeds=min(self.CHUNK_SEEDS[cfg.kind], total - done_before))
         doc = served_document()
-        last = [0.0]
         queue = self.study_runner.queue
 
         def class_at_work() -> bool:
@@ -296,12 +294,11 @@ class StudyPanel(Section):
             # p95 with a study running beside, 4 classes of 30 pooled)
             return queue.requests_pending() or pages_busy()
 
+        # the seeds done, from the worker: a few updates a second reach the page
+        shown = PageProgress(lambda done: self._show_progress(done_before + done, total), hz=_PROGRESS_HZ, doc=doc)
+
         def progress(done, _part_total):
-            now = time.perf_counter()
-            if now - last[0] < 1.0 / _PROGRESS_HZ:
-                return
-            last[0] = now
-            apply_locked(lambda: self._show_progress(done_before + done, total), doc)
+            shown(done)
 
         def compute(token):
             self._token = token         # the cancel button's way to the running part
@@ -312,6 +309,7 @@ class StudyPanel(Section):
                                              give_way=class_at_work if doc is not None else None)
 
         def show(result, job):
+            shown.close()
             self._parts.append(result)
             done = done_before + result.n_completed
             if done < total and not self._stopped and not result.cancelled:
@@ -325,6 +323,7 @@ class StudyPanel(Section):
             self._running(False)
 
         def fail(message):
+            shown.close()
             self.status.object = f"<span class='eha-warn'>The study failed: {html.escape(message)}</span>"
             if not self._parts:
                 self._show_earlier("The study failed before its first seeds were done.")
