@@ -191,7 +191,9 @@ class Session(param.Parameterized):
         """Every input of the session as a settings file holds it: texts as typed, by section."""
         out: dict[str, Any] = {"format": SETTINGS_FORMAT, "tab": self.active_tab + 1}
         for p in self.registry:
-            out[p.key] = self.settings_of(p.key)
+            # a text longer than a field may hold is refused where it is typed, and a file holding it is
+            # refused whole: left out, the rest of the settings (and a student's kept work) still loads
+            out[p.key] = {k: v for k, v in self.settings_of(p.key).items() if not too_long(str(v))}
         return out
 
     def settings_bytes(self) -> bytes:

@@ -59,6 +59,20 @@ def test_a_bad_value_in_a_settings_file_gets_the_typed_message():
     assert "u amplitude = 99 is not allowed" in sim.form.errors["u_amplitude"]
 
 
+def test_a_text_too_long_for_its_field_is_left_out_of_the_settings_so_the_rest_still_loads():
+    # typed into a field it is refused there; saved, it made the whole file (and a student's kept work,
+    # saved the same way) unloadable
+    a = create_app(AppState())
+    sim = a.session.build("simulation")
+    typed(sim.form, u_amplitude="9" * 201, d_seed="7")
+    assert sim.form.errors["u_amplitude"]
+    blob = a.session.settings_bytes()
+    assert "u_amplitude" not in json.loads(blob)["simulation"]
+    b = create_app(AppState())
+    b.session.load_settings(blob)
+    assert b.session.build("simulation").form.values["d_seed"] == "7"
+
+
 @pytest.mark.parametrize("content, message", [(b"{", "it is not JSON"), (b"{}", "not a settings file")])
 def test_a_file_that_is_not_settings_is_refused(content, message):
     with pytest.raises(SettingsError, match=message):
