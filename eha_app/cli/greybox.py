@@ -42,8 +42,9 @@ def add_parser(idsub) -> None:
                     "x=0.01mm,v=1mm/s,p=0.05MPa (default x=0.01mm,p=0.05MPa; none for noise-free)")
     gb.add_argument("--t-end", type=float, default=10.0, help=f"simulated record length [s] (default 10, at most "
                                                               f"{MAX_GREYBOX_T_END:g})")
-    gb.add_argument("--intersample", default="foh", help="how u moves between samples: foh (linearly, default) or "
-                                                         "zoh (held, a DAC's output)")
+    gb.add_argument("--intersample", default="read", help="with --data: how u moves between samples: read (from "
+                                                          "the record, default), foh (linearly) or zoh (held, a "
+                                                          "DAC's output)")
     gb.add_argument("--seed", type=int, default=0, help="seed of the noise (default 0)")
     gb.add_argument("--shooting", default="auto", metavar="HOW",
                     help="how the record is simulated: auto (default: the first 1 s, 3 s, ... of the record, then "
@@ -98,8 +99,8 @@ def run_greybox(args) -> int:
         raise refused("--seed", args.seed, "use a whole number >= 0")
     if not (math.isfinite(args.t_end) and 0 < args.t_end <= MAX_GREYBOX_T_END):
         raise refused("--t-end", args.t_end, f"use a record length in (0, {MAX_GREYBOX_T_END:g}] s")
-    if args.intersample not in ("foh", "zoh"):
-        raise refused("--intersample", args.intersample, "use foh or zoh")
+    if args.intersample not in ("read", "foh", "zoh"):
+        raise refused("--intersample", args.intersample, "use read, foh or zoh")
     if args.shooting not in SHOOTING:
         raise refused("--shooting", args.shooting, f"use {', '.join(SHOOTING)}")
     check_input_file("--data", args.data)
@@ -122,26 +123,32 @@ def run_greybox(args) -> int:
     if args.json:
         print(json_text(out))
         return 0 if res.success else 1
-    print(f"grey-box (output error) from {', '.join(measured)} of {data.source}: {res.nfev} simulations with "
-          f"sensitivities, {res.time_s:.2f} s")
-    if res.strategy:
-        print(f"strategy: {res.strategy}")
-    print(table_text(res, names, truth))
-    print("fit: " + ", ".join(f"{s} {v:.2f} %" for s, v in res.fit.items()))
-    for _, sentence in res.identifiability:
-        print(f"identifiability: {sentence}")
-    for n in res.held:
-        print(f"held: {held_line(res, n)}")
-    print("checks:")
-    for c in res.checks:
-        print(f"  {'✓' if c.passed else '✗'} {c.name}: {c.says}")
-    if res.advice:
-        print("try:")
-        for a in res.advice:
-            print(f"  - {a}")
+    print(report_text(res, names, measured, data, truth, from_file=bool(args.data)))
     if not res.success:
         print(f"eha identify greybox: warning: {res.message}", file=sys.stderr)
     return 0 if res.success else 1
+
+
+def report_text(res, names, measured, data, truth, *, from_file: bool) -> str:
+    """The estimate as the command line prints it: how it was fitted, the table, the fits, what the data
+    determine, the held parameters and their bias, each check and what to try."""
+    lines = [f"grey-box (output error) from {', '.join(measured)} of {data.source}: {res.nfev} simulations with "
+             f"sensitivities, {res.time_s:.2f} s"]
+    if res.strategy:
+        lines.append(f"strategy: {res.strategy}")
+    if from_file and "intersample" in res.extras:
+        how = res.extras["intersample"]
+        lines.append(f"u between samples: {'linear' if how['used'] == 'foh' else 'held'} ({how['how']})")
+    lines.append(table_text(res, names, truth))
+    lines.append("fit: " + ", ".join(f"{s} {v:.2f} %" for s, v in res.fit.items()))
+    lines += [f"identifiability: {sentence}" for _, sentence in res.identifiability]
+    lines += [f"held: {held_line(res, n)}" for n in res.held]
+    lines.append("checks:")
+    lines += [f"  {'✓' if c.passed else '✗'} {c.name}: {c.says}" for c in res.checks]
+    if res.advice:
+        lines.append("try:")
+        lines += [f"  - {a}" for a in res.advice]
+    return "\n".join(lines)
 
 
 #: What the table prints for a value the estimate does not give (it failed its checks).
