@@ -21,3 +21,16 @@ def _stop_the_studies_child():
 
     if background._default is not None:
         background._default.shutdown()
+
+
+@pytest.fixture
+def lab_exercise(tmp_path, monkeypatch):
+    """A lab whose four main parameters are hidden, each student's own, served by the app (EHA_EXERCISE):
+    (the exercise, its file)."""
+    from eha_core.exercise import Exercise
+
+    ex = Exercise.new(hide=("M", "B", "Af", "beta_e"), vary=0.25, tolerance=0.05, title="Lab 3", secret="5a" * 32)
+    path = tmp_path / "class.json"
+    ex.save(path)
+    monkeypatch.setenv("EHA_EXERCISE", str(path))
+    return ex, path

@@ -15,7 +15,6 @@ from eha_app.render.greybox import correlation_html, greybox_table_html, routes_
 from eha_app.runtime.handins import HandIns
 from eha_app.session import Session
 from eha_app.session.state import AppState
-from eha_core.exercise import Exercise
 
 #: A start far from the paper's actuator (M x3, B x0.1, Af x0.2, βe x0.3) from x alone, over the whole record
 #: at once: the fit ends in a local minimum with B at the bound of its range.
@@ -205,19 +204,10 @@ def test_cancel_stops_a_run_and_keeps_the_previous_result():
     assert gb.run().state == "done" and gb.result is not before
 
 
-@pytest.fixture
-def exercise(tmp_path, monkeypatch):
-    ex = Exercise.new(hide=("M", "B", "Af", "beta_e"), vary=0.25, tolerance=0.05, title="Lab 3", secret="5a" * 32)
-    path = tmp_path / "class.json"
-    ex.save(path)
-    monkeypatch.setenv("EHA_EXERCISE", str(path))
-    return ex, path
-
-
-def test_an_estimate_that_failed_its_checks_is_not_handed_in(exercise):
+def test_an_estimate_that_failed_its_checks_is_not_handed_in(lab_exercise):
     from eha_app.app import create_app
 
-    ex, path = exercise
+    ex, path = lab_exercise
     page = create_app(AppState())
     page.gate.student_id.value = "ada"
     page.gate.start()

@@ -8,7 +8,6 @@ from eha_app.render.formatting import num_html
 from eha_app.runtime.handins import HandIns
 from eha_app.session import Session
 from eha_app.session.state import AppState
-from eha_core.exercise import Exercise
 
 
 def type_into(form, **texts):
@@ -132,19 +131,10 @@ def test_the_three_routes_side_by_side_and_in_the_report():
     assert num_html(gb.result.estimates["Af"], 5) in text
 
 
-@pytest.fixture
-def exercise(tmp_path, monkeypatch):
-    ex = Exercise.new(hide=("M", "B", "Af", "beta_e"), vary=0.25, tolerance=0.05, title="Lab 3", secret="5a" * 32)
-    path = tmp_path / "class.json"
-    ex.save(path)
-    monkeypatch.setenv("EHA_EXERCISE", str(path))
-    return ex, path
-
-
-def test_the_hand_in_in_an_exercise_stores_method_greybox(exercise):
+def test_the_hand_in_in_an_exercise_stores_method_greybox(lab_exercise):
     from eha_app.app import create_app
 
-    ex, path = exercise
+    ex, path = lab_exercise
     page = create_app(AppState())
     page.gate.student_id.value = "ada"
     page.gate.start()
