@@ -88,6 +88,21 @@ class Signal:
     def __call__(self, t) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
 
+    def discontinuities(self, t_end: float, start: float = 0.0) -> np.ndarray | None:
+        """The times in [start, t_end] where the signal may jump or its slope may (sorted).
+
+        The simulator stops its integrator at each of them, so that no step straddles one.
+        None when they are not known (a signal that does not say, a user's function of t).
+
+        Parameters
+        ----------
+        t_end : float
+            End of the interval [s].
+        start : float
+            Start of the interval [s].
+        """
+        return None
+
     def __add__(self, other: Signal) -> Signal:
         if not isinstance(other, Signal):
             return NotImplemented
@@ -114,6 +129,9 @@ class Constant(Signal):
 
     def __call__(self, t):
         return np.full(np.shape(t), float(self.value))
+
+    def discontinuities(self, t_end, start=0.0):
+        return np.empty(0)
 
     @property
     def spec(self):
@@ -142,6 +160,9 @@ class Sine(Signal):
         t = np.asarray(t, dtype=float)
         return self.amplitude * np.sin(2.0 * np.pi * self.freq_hz * t + self.phase) + self.offset
 
+    def discontinuities(self, t_end, start=0.0):
+        return np.empty(0)
+
     @property
     def spec(self):
         s = f"sine:{_g(self.amplitude)}:{_g(self.freq_hz)}"
@@ -169,6 +190,10 @@ class Step(Signal):
         t = np.asarray(t, dtype=float)
         return np.where(t >= self.t0, self.amplitude, self.initial).astype(float)
 
+    def discontinuities(self, t_end, start=0.0):
+        jumps = self.amplitude != self.initial and start <= self.t0 <= t_end
+        return np.array([float(self.t0)]) if jumps else np.empty(0)
+
     @property
     def spec(self):
         if self.initial:  # the grammar's step starts from 0: a constant carries the level before t0
@@ -192,6 +217,14 @@ class Square(Signal):
         t = np.asarray(t, dtype=float)
         phase = np.mod(t * self.freq_hz, 1.0)
         return np.where(phase < 0.5, self.amplitude, -self.amplitude) + self.offset
+
+    def discontinuities(self, t_end, start=0.0):
+        if self.amplitude == 0:
+            return np.empty(0)
+        # the edges, every half period
+        half = 0.5 / self.freq_hz
+        k = np.arange(max(0, math.ceil(start / half - 1e-9)), math.floor(t_end / half + 1e-9) + 1)
+        return k * half
 
     @property
     def spec(self):
@@ -218,6 +251,9 @@ class Chirp(Signal):
         t = np.asarray(t, dtype=float)
         k = (self.f1_hz - self.f0_hz) / self.t1
         return self.amplitude * np.sin(2.0 * np.pi * (self.f0_hz * t + 0.5 * k * t * t))
+
+    def discontinuities(self, t_end, start=0.0):
+        return np.empty(0)
 
     @property
     def spec(self):
@@ -254,6 +290,13 @@ class WhiteNoise(Signal):
         k = np.maximum(k, 0)
         first, draws = self._draws(int(k.min()), int(k.max()))
         return self.sigma * draws[k - first]
+
+    def discontinuities(self, t_end, start=0.0):
+        if self.sigma == 0:
+            return np.empty(0)
+        # a new sample every hold_s
+        k = np.arange(max(0, math.ceil(start / self.hold_s - 1e-9)), math.floor(t_end / self.hold_s + 1e-9) + 1)
+        return k * self.hold_s
 
     def _draws(self, k_lo: int, k_hi: int) -> tuple[int, np.ndarray]:
         """``(first, draws)``: draws ``first .. k_hi`` of the stream, ``first <= k_lo``.
@@ -342,6 +385,13 @@ class Sampled(Signal):
         idx = np.searchsorted(self.t, t + 1e-12 * max(1.0, abs(self.t[-1])), side="right") - 1
         return self.values[np.clip(idx, 0, self.t.size - 1)]
 
+    def discontinuities(self, t_end, start=0.0):
+        # held: the value jumps at a sample that changes it; interpolated: the slope may jump at any sample
+        t = self.t
+        if self.hold == "zoh":
+            t = np.concatenate([t[:1], t[1:][np.diff(self.values) != 0]])
+        return t[(t >= start) & (t <= t_end)]
+
     @property
     def spec(self):
         return f"<{self.name}: {self.t.size} samples>"
@@ -360,6 +410,13 @@ class Sum(Signal):
         for s in self.terms:
             out = out + s(t)
         return out
+
+    def discontinuities(self, t_end, start=0.0):
+        # those of every term (a jump of one term may cancel another's: the answer errs on the safe side)
+        parts = [s.discontinuities(t_end, start) for s in self.terms]
+        if any(p is None for p in parts):
+            return None
+        return np.unique(np.concatenate(parts)) if parts else np.empty(0)
 
     @property
     def spec(self):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -31,7 +32,12 @@ def test_noise_free_estimates_are_exact_not_failing(runs):
     lo, hi = const.ci95["B"]
     assert not lo <= 1500.0 <= hi
     assert read_all(harm)["d_sin"].kind == "estimated" and read_all(harm)["d_sin"].ok is None
-    assert "exact" in read_estimate(const, "B").sentence and "off by 0.0033 %" in read_estimate(const, "B").sentence
+    sentence = read_estimate(const, "B").sentence
+    off_percent = float(re.search(r"off by ([0-9.]+) %", sentence).group(1))
+    # B's error without noise is the regressors' discretisation error, 0.0038 % on this simulated record. The
+    # record's own error moves it: the fixed-step RK4's record (2.7e-7 of v's range from the adaptive
+    # integrator's, RK4's stated error) gave 0.0033 %, so it is known to 0.0005 %
+    assert "exact" in sentence and off_percent == pytest.approx(0.0038, abs=5e-4), sentence
 
 
 def test_negative_friction_is_impossible_whatever_its_interval(runs):
