@@ -91,6 +91,9 @@ def test_a_study_in_the_child_is_the_studys_own_at_the_lowest_priority(child):
 
 
 def test_a_cancel_crosses_to_the_child_and_keeps_the_seeds_done(child):
+    # the child compiles the simulator's kernels on its first seeds (seconds on a fresh clone, whose numba
+    # cache is empty): warmed first, so that the cancel falls among seeds, not in the compiler
+    child.call(run_study, StudyConfig("lse", n_seeds=2), workers=1)
     token = CancelToken()
     threading.Timer(0.3, token.cancel, args=("the page was closed",)).start()
     res = child.call(run_study, StudyConfig("lse", n_seeds=1000), workers=1, cancel=token)
