@@ -85,7 +85,10 @@ def test_time_domain_identification_fills_the_table(session):
     text = table.inner_text()
     for row in ("M [kg]", "B [N s/m]", "βe [Pa]", "95 % interval"):
         assert row in text
-    assert "4000" in text and "-0.003 %" in text
+    # B's relative error on the paper's noise-free record: -0.0038 % (the least squares' own, eq. 15; a
+    # simulator 3e-7 less accurate made it -0.0033 %), shown to three decimals
+    b_row = next(line for line in text.splitlines() if line.startswith("B [N s/m]"))
+    assert "4000" in text and b_row.split("\t")[3] in ("-0.003 %", "-0.004 %"), b_row
 
 
 def test_two_sessions_do_not_see_each_other(new_session):
