@@ -531,9 +531,7 @@ class GreyBoxPanel(Section):
             self.last_settings, self.last_conditions = run_settings, run_conditions
             self.result_context = {"scenario": scenario, "own_record": own is not None, "params": params}
             self.result_source = own_source if own is not None else {"kind": "simulated"}
-            note = (f"<p class='eha-note'>Simulated and estimated in {job.run_s:.1f} s"
-                    + (f" (and {job.wait_s:.1f} s waiting for the server)" if job.wait_s > 0.05 else "")
-                    + f". Record: {html.escape(data.source)}, {data.t.size} samples.</p>" + paper_note)
+            note = _run_note(job, data, res, own is not None) + paper_note
             self.table.object = self._table_html() + note
             self._draw(data, res)
             self.details.object = self._details_html()
@@ -823,3 +821,16 @@ def _details(res) -> str:
     return ("<h4>What the data determine</h4>" + identifiability_html(res)
             + "<h4>Correlation of the estimates</h4>" + correlation_html(res)
             + "<h4>Residual tests</h4>" + verdicts_html(res))
+
+
+def _run_note(job, data, res, own_record: bool) -> str:
+    """Under the table: how long the run took, the record, and for a student's own file how u was taken to
+    move between its samples (the file does not say) and why."""
+    note = (f"<p class='eha-note'>Simulated and estimated in {job.run_s:.1f} s"
+            + (f" (and {job.wait_s:.1f} s waiting for the server)" if job.wait_s > 0.05 else "")
+            + f". Record: {html.escape(data.source)}, {data.t.size} samples.</p>")
+    how = res.extras.get("intersample") if own_record else None
+    if how:
+        note += (f"<p class='eha-note eha-gb-intersample'>u between samples: "
+                 f"{'linear' if how['used'] == 'foh' else 'held'} ({html.escape(how['how'])}).</p>")
+    return note

@@ -106,6 +106,8 @@ def test_the_students_own_record_with_the_column_mapping():
     gb.run()
     assert gb.result.success and "rig.csv" in gb.table.object and "nominal" not in gb.table.object
     assert abs(gb.result.estimates["M"] / truth.M - 1) < 0.01
+    # the file does not say how u moved between its samples: the page says what was read and why
+    assert "u between samples: linear (the samples of u cannot tell" in gb.table.object
     gb.use_simulated()
     assert gb.own_data is None
 
