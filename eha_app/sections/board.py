@@ -117,6 +117,7 @@ class ModelBoard(Section):
         self.figures: dict = {}
         self._panes: dict = {}
         self.built = False
+        self._batching = False          # models arriving together (receive_many): one job, one list
         texts = self.initial_texts()
         self.form = Form(spec=[g.to_spec() for g in BOARD_FORM], values=texts, url_defaults=BOARD_DEFAULTS,
                          width=270, css_classes=[self.form_css], margin=(5, 10))
@@ -134,6 +135,8 @@ class ModelBoard(Section):
                                                      sizing_mode="stretch_width")) for title, key in _VIEWS),
                                  dynamic=False, sizing_mode="stretch_width", css_classes=["eha-board-views"],
                                  stylesheets=[WRAP_TAB_HEADERS])
+        # only the view in sight is drawn: the others when their tab is opened
+        watch(self.view_tabs, lambda _e: self.refresh(), "active")
         self.area = pn.Column(self.view_tabs, sizing_mode="stretch_width")
         self.record_view = ResultView("board-record", self.area,
                                       run_hint="The board updates it by itself in a moment.")
@@ -171,6 +174,17 @@ class ModelBoard(Section):
         """An estimate posted by another section; its ``name`` is its kind's prefix (``"LS"``)."""
         self.add(dataclasses.replace(model, name=self.next_name(model.name)))
 
+    def receive_many(self, items: list) -> None:
+        """The estimates made before the board was first shown: their views in one job, one list."""
+        self._batching = True
+        try:
+            for item in items:
+                self.receive(item)
+        finally:
+            self._batching = False
+        self._compute_missing()
+        self._rebuild_list()
+
     def add(self, model: BoardModel) -> BoardEntry | None:
         """Put ``model`` on the board, ticked if it is stable (an unstable one's curves would flatten the
         others'); its views are computed in a worker."""
@@ -183,8 +197,9 @@ class ModelBoard(Section):
         self.entries.append(entry)
         self.note.object = ("" if stable else f"<span class='eha-warn'>{html.escape(model.name)} is unstable: "
                                               "it is on the board unticked.</span>")
-        self._compute_missing()
-        self._rebuild_list()
+        if not self._batching:
+            self._compute_missing()
+            self._rebuild_list()
         return entry
 
     def _compute_missing(self) -> None:
@@ -442,8 +457,19 @@ class ModelBoard(Section):
         """The step of r [m] the step view draws."""
         return (self.parsed()[0].get("board_step") or 10.0) * 1e-3
 
+    def shown_view(self) -> str:
+        """The key of the view whose tab is open (``fit``, ``bode``, ``step``, ``pz``)."""
+        return _VIEWS[self.view_tabs.active][1]
+
+    def show_view(self, key: str):
+        """Open the view ``key``'s tab (as a click on it does) and return its figure (None if it has
+        nothing to draw yet)."""
+        self.view_tabs.active = [k for _, k in _VIEWS].index(key)
+        return self.figures.get(key)
+
     def refresh(self) -> None:
-        """Redraw every view from the cached curves of the ticked models (no computation)."""
+        """Redraw the view in sight from the cached curves of the ticked models (no computation); the
+        others are drawn when their tab is opened, and the tables kept current."""
         if not self.built:
             return
         entries = self.ticked()
@@ -454,8 +480,11 @@ class ModelBoard(Section):
                  "bode": bool(drawn), "step": bool(drawn), "pz": bool(drawn)}
         # a view with nothing to draw shows a line instead of its figure (kept for later): Bokeh
         # cannot range a figure without data, and says so in the browser's console
+        shown = self.shown_view()
         for key, cls in (("fit", board_plots.BoardFitFigure), ("bode", board_plots.BoardBodeFigure),
                          ("step", board_plots.BoardStepFigure), ("pz", board_plots.PoleZeroFigure)):
+            if key != shown:
+                continue
             if not ready[key]:
                 self._slots[key].objects = [pn.pane.HTML(
                     "<p class='eha-note'>" + ("Computing…" if entries else "Tick a model to draw it.") + "</p>")]

@@ -213,6 +213,12 @@ class Section(pn.viewable.Viewer):
         """Take what another section posted to this one (:meth:`Session.post`)."""
         raise TypeError(f"section {self.key!r} takes nothing from other sections (got {type(item).__name__})")
 
+    def receive_many(self, items: list) -> None:
+        """Take what was posted before the section was made, all at once (a section whose every
+        :meth:`receive` starts work may start it once for all)."""
+        for item in items:
+            self.receive(item)
+
     # -- the work kept for a student who joins again (an exercise) ----------------------------------
     def kept_work(self) -> KeptWork | None:
         """What to keep of the section's last run (None: nothing); read under the page's lock after each

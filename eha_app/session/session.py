@@ -144,8 +144,9 @@ class Session(param.Parameterized):
             self._pending.pop(key, None)
             for inner in self.registry.within(key):
                 self.build(inner.key)
-            for item in self._mail.pop(key, []):
-                section.receive(item)
+            mail = self._mail.pop(key, [])
+            if mail:
+                section.receive_many(mail)
         for fn in list(self._on_built):
             fn(section)
         return section

@@ -612,6 +612,14 @@ def reference_roots(num, den, *, ts=None, name="reference") -> PoleZeroMap:
 # ---------------------------------------------------------------------------
 # Bode band
 # ---------------------------------------------------------------------------
+def _quantiles(values: np.ndarray, q) -> np.ndarray:
+    """``np.nanquantile(values, q, axis=0)``: the same numbers, but vectorised when nothing is NaN
+    (numpy's nanquantile goes column by column, 20x slower for a band of 400 draws x 600 frequencies)."""
+    if np.isnan(values).any():
+        return np.nanquantile(values, q, axis=0)
+    return np.quantile(values, q, axis=0)
+
+
 def bode_band(estimate, w, *, level=0.95, n_draws=400, seed=0) -> BodeBand:
     """Pointwise confidence band of an estimate's magnitude and phase.
 
@@ -686,8 +694,8 @@ def bode_band(estimate, w, *, level=0.95, n_draws=400, seed=0) -> BodeBand:
     phase = np.degrees(np.angle(response))
     phase = nominal.phase_deg[None, :] + (phase - nominal.phase_deg[None, :] + 180.0) % 360.0 - 180.0
     q = [(1.0 - level) / 2.0, (1.0 + level) / 2.0]
-    mag_q = np.nanquantile(magnitude, q, axis=0)
-    phase_q = np.nanquantile(phase, q, axis=0)
+    mag_q = _quantiles(magnitude, q)
+    phase_q = _quantiles(phase, q)
     unstable = int(np.sum(np.any(_batch_roots(np.hstack([np.ones((n_draws, 1)), draws[:, :n]])).real > 0, axis=1)))
     return BodeBand(
         w=nominal.w,

@@ -26,7 +26,7 @@ def test_the_references_are_there_and_compared_on_the_validation_record(tab):
     fits = {e.name: board.fits[e.key].fit_percent for e in board.entries}
     assert 60 < fits["H(s) eq. 24"] < 95                       # the linearised model misses the friction
     assert board.record_view.status == "current"
-    fig = board.figures["fit"]
+    fig = board.show_view("fit")
     assert len(fig.models.data["xs"]) == 1                     # only the ticked one is drawn
     assert "H(s) eq. 24" in fig.legend.text and "Ĥ paper" not in fig.legend.text
     assert "H(s) eq. 24" in board.tables["fit"].object and "validation record" in board.tables["fit"].object
@@ -51,15 +51,15 @@ def test_estimates_land_on_the_board_and_tick_rename_delete(tab):
     np.testing.assert_allclose(ls1.model.den, board.entries[0].model.den, rtol=1e-4)
     assert board.views[r1.key].band is not None and board.views[ls1.key].band is None
     assert board.fits[r1.key].fit_percent > 85
-    bode = board.figures["bode"]
+    bode = board.show_view("bode")
     assert len(bode.curves.data["xs"]) == 3 and len(bode.mag_band.data["xs"]) == 1
     board.tick(board.entries[0], False)
     assert len(bode.curves.data["xs"]) == 2 and "H(s) eq. 24" not in bode.legend.text
     board.rename(r1, "my record")
-    assert "my record" in board.figures["step"].legend.text and "my record" in board.tables["fit"].object
+    assert "my record" in board.show_view("step").legend.text and "my record" in board.tables["fit"].object
     board.delete(ls1)
     assert _names(board) == ["H(s) eq. 24", "Ĥ paper", "my record"]
-    assert len(board.figures["pz"].poles.data["x"]) == 3        # R1's three poles only
+    assert len(board.show_view("pz").poles.data["x"]) == 3        # R1's three poles only
     board.delete(board.entries[0])                             # a reference stays
     assert len(board.entries) == 3
 
@@ -74,7 +74,7 @@ def test_a_weakly_determined_pole_is_shown_not_hidden(tab):
                                      estimate=e, ts=0.01))
     flagged = [r for r in tab.section("board").views[entry.key].pz.poles if r.weakly_determined]
     assert len(flagged) == 1 and -500 < flagged[0].location.real < -300     # the pole near -385 rad/s
-    pz = tab.section("board").figures["pz"]
+    pz = tab.section("board").show_view("pz")
     assert len(pz.flagged.data["x"]) == 1 and "weakly determined" in pz.note.text
     assert len(pz.nyquist.data["x"]) > 0 and "π/Ts = 314 rad/s" in pz.note.text
     # three real poles: their regions are intervals of the real axis (drawn as bars), not ellipses
@@ -88,7 +88,7 @@ def test_step_table_figures_are_the_cores(tab):
     table = board.tables["step"].object
     assert f"{view.step.info.rise_time_s:.3g}" in table and f"{board.plant.info.rise_time_s:.3g}" in table
     board.form.values = {**board.form.values, "board_step": "20"}
-    assert board.figures["step"].reference.location == pytest.approx(20.0)
+    assert board.show_view("step").reference.location == pytest.approx(20.0)
     board.form.values = {**board.form.values, "board_step": "-1"}
     assert board.form.errors["board_step"] == "step of r = -1 is not allowed: must lie in [0.01, 200] mm"
 
@@ -160,3 +160,29 @@ def test_a_model_of_a_previous_actuator_is_marked_with_the_change(tab):
     assert table.count("eha-board-other-actuator") == 1
     tab.state.set_text("M", "4000")
     assert "another actuator" not in board.tables["fit"].object
+
+
+def test_only_the_view_in_sight_is_drawn_the_others_when_opened(tab):
+    """A view whose tab is not open costs nothing: its figure is made and filled when it is opened."""
+    board = tab.section("board")
+    assert set(board.figures) == {"fit"}
+    bode = board.show_view("bode")
+    assert set(board.figures) == {"fit", "bode"} and len(bode.curves.data["xs"]) == 1
+    board.tick(board.entries[1], True)                          # Ĥ paper
+    assert len(bode.curves.data["xs"]) == 2
+    fit = board.figures["fit"]
+    assert len(fit.models.data["xs"]) == 1                     # out of sight: not redrawn
+    assert board.show_view("fit") is fit and len(fit.models.data["xs"]) == 2
+    assert "Ĥ paper" in board.tables["fit"].object             # the tables are kept current throughout
+
+
+def test_estimates_made_before_the_board_is_opened_land_together():
+    session = Session(AppState())
+    session.build("least_squares").run()
+    session.build("frequency").run()
+    session.build("greybox").run()
+    board = session.build("board")
+    assert _names(board) == ["H(s) eq. 24", "Ĥ paper", "LS1", "H1", "GB1"]
+    assert all(e.key in board.views and e.key in board.fits for e in board.entries)
+    rows = board.list.objects
+    assert len(rows) == 5 and all("eha-board-name" in r.objects[0].objects[2].css_classes for r in rows)
