@@ -12,6 +12,8 @@ Part 1, in a process of its own per configuration (no server):
   page_kb         memory a page keeps (tracemalloc), mean of 3 pages
   update_ms       a result shown on a page with every tab built: one text changed in a frozen
                   document (the model graph recomputed, or not), median of 40
+  graph_ms        a change that adds a model (a new figure, tooltip or pane) on a page with every tab
+                  built, in a frozen document: the document's models found again, median of 40
   gc_pause_max_ms building 24 pages kept open (a class): the longest pause of the garbage
                   collector (and gc_full_total_ms, the sum of the full collections' pauses)
 
@@ -52,7 +54,7 @@ IN_PROCESS = r"""
 import gc, json, statistics, sys, time, tracemalloc
 import panel as pn
 from bokeh.document import Document
-from bokeh.models import Div
+from bokeh.models import Column, Div
 from panel.io.state import set_curdoc
 from eha_app.runtime.patches import AFTER_LOAD_PATCHES, SERVER_PATCHES, apply_patches, lazy_freeze
 from eha_app.app import create_app, warm_up
@@ -94,6 +96,14 @@ for k in range(40):
     with lazy_freeze(doc):
         div.text = str(k + 1)
     update.append(time.perf_counter() - t0)
+column = Column()
+doc.add_root(column)
+graph = []
+for k in range(40):
+    t0 = time.perf_counter()
+    with lazy_freeze(doc):
+        column.children = [Div(text=str(k))]
+    graph.append(time.perf_counter() - t0)
 kept.clear()
 
 pauses, full = [], []
@@ -110,7 +120,8 @@ gc.callbacks.insert(0, timing)
 klass = [page() for _ in range(24)]
 gc.callbacks.remove(timing)
 print(json.dumps({"page_build_ms": 1000 * statistics.median(build), "page_kb": page_kb,
-                  "update_ms": 1000 * statistics.median(update), "gc_pause_max_ms": 1000 * max(pauses or [0]),
+                  "update_ms": 1000 * statistics.median(update),
+                  "graph_ms": 1000 * statistics.median(graph), "gc_pause_max_ms": 1000 * max(pauses or [0]),
                   "gc_full_total_ms": 1000 * sum(full)}))
 """
 
@@ -141,18 +152,20 @@ def served(script: str, args: list[str], off: str) -> dict:
 def part1(rounds: int) -> dict:
     """Every configuration once per round, the rounds one after the other (a machine's drift falls on
     every configuration alike); the median of the rounds."""
-    configs = {"all on": "", **{f"{n} off": n for n in (*MODEL_PATCHES, "lazy_freeze", "gc_freeze", "gc_often")},
+    configs = {"all on": "", **{f"{n} off": n for n in (*MODEL_PATCHES, "lazy_freeze", "incremental_graph", "gc_freeze",
+                                                     "gc_often")},
                "model patches off": ",".join(MODEL_PATCHES), "gc patches off": "gc_freeze,gc_often"}
     runs: dict[str, list[dict]] = {label: [] for label in configs}
     for _ in range(rounds):
         for label, off in configs.items():
             runs[label].append(in_process(off))
     out = {}
-    print(f"{'configuration':28s} {'page_build_ms':>13s} {'page_kb':>8s} {'update_ms':>9s} {'gc_pause_max_ms':>15s} "
+    print(f"{'configuration':28s} {'page_build_ms':>13s} {'page_kb':>8s} {'update_ms':>9s} {'graph_ms':>8s} "
+          f"{'gc_pause_max_ms':>15s} "
           f"{'gc_full_total_ms':>16s}   (median of {rounds} rounds)", flush=True)
     for label, results in runs.items():
         r = out[label] = {k: statistics.median(x[k] for x in results) for k in results[0]}
-        print(f"{label:28s} {r['page_build_ms']:13.1f} {r['page_kb']:8.0f} {r['update_ms']:9.2f} "
+        print(f"{label:28s} {r['page_build_ms']:13.1f} {r['page_kb']:8.0f} {r['update_ms']:9.2f} {r['graph_ms']:8.2f} "
               f"{r['gc_pause_max_ms']:15.1f} {r['gc_full_total_ms']:16.1f}", flush=True)
     return out
 
@@ -187,7 +200,8 @@ def main(argv=None) -> int:
         on = p1["all on"]
         last.append(f"page_build_ms={on['page_build_ms']:.1f}")
         for key, config in (("page_build_ms", "model patches off"), ("page_kb", "lazy_containers off"),
-                            ("update_ms", "lazy_freeze off"), ("gc_pause_max_ms", "gc patches off")):
+                            ("update_ms", "lazy_freeze off"), ("graph_ms", "incremental_graph off"),
+                            ("gc_pause_max_ms", "gc patches off")):
             off = p1[config][key]
             last.append(f"{key}_{config.replace(' ', '_')}={off:.2f} ratio={off / max(on[key], 1e-9):.2f}")
     if args.part in ("2", "all"):
