@@ -217,7 +217,7 @@ def _serve_here(args, argv: list[str]) -> int:
         guard_paths,
         unknown_turned_off,
     )
-    from eha_app.runtime.serving import first_answer, refuse_oversized
+    from eha_app.runtime.serving import first_answer, one_blas_thread, refuse_oversized
     from eha_app.runtime.teacher_access import route, watch_token
 
     # the libraries' internals this server changes, each checked against the installed versions and
@@ -235,6 +235,8 @@ def _serve_here(args, argv: list[str]) -> int:
     if os.environ.get("EHA_EXERCISE"):
         watch_token()           # the dashboard's token read off the event loop, from now on
     sys.argv = argv + _oauth_argv(args)
+    # the students' runs are the parallel work (the workers): a BLAS thread pool beside each only spins
+    one_blas_thread()
     warm_up()                   # the kernels and the identification code loaded before the first page
     # what is loaded so far frozen out of the collector's sight, and full collections small and often
     status.update(apply_patches(AFTER_LOAD_PATCHES))

@@ -638,6 +638,8 @@ def _intersample_by_fit(data, free, guess, rows, y_meas, sigma, max_nfev, cancel
 SHOOTING = ("auto", "single", "multiple")
 #: The growing record of ``auto``: its first piece [s], each next one this many times longer.
 _GROW_FIRST_S, _GROW_FACTOR = 1.0, 3.0
+#: The tolerance (scipy's ``xtol``, ``ftol``) of the growing record's pieces before the whole record's.
+_GROW_TOL = 1e-4
 
 
 @dataclass(frozen=True)
@@ -692,8 +694,10 @@ def _grow(problem: _Problem, z: np.ndarray, tell) -> tuple[np.ndarray, int, str]
         part = _segment(data, 0, n)
         tell(f"single shooting over the first {length:g} s of {span:g} s")
         setup = _Setup(problem.setup.names, problem.setup.log, problem.setup.base, part)
+        # a piece's estimate is only the next one's start: to a few parts in 10^4 (the whole record's fit
+        # ends at the same minimum from there, in as many steps as from the exact one)
         z, _, sol, used, _, _, _ = _fit(setup, part, problem.rows, problem.y_meas[:n + 1], problem.sigma,
-                                        problem.max_nfev, problem.cancel, start=z, repeat=False)
+                                        problem.max_nfev, problem.cancel, start=z, repeat=False, tol=_GROW_TOL)
         nfev += used
         lengths.append(f"{length:g} s")
         length *= _GROW_FACTOR
@@ -852,10 +856,11 @@ def _held_at_guess(data, names, guess, rows, sigma, hold, cancel):
     return tuple(dict.fromkeys(who[-1] for who, _ in found)), found
 
 
-def _fit(setup, data, rows, y_meas, sigma, max_nfev, cancel, *, start=None, repeat=True):
+def _fit(setup, data, rows, y_meas, sigma, max_nfev, cancel, *, start=None, repeat=True, tol=1e-8):
     """A trust-region Gauss-Newton fit within the physical ranges (scipy's ``trf`` with bounds) with the
     sensitivities' Jacobian, from ``start`` (default the setup's guess); with ``repeat``, the noise σ
-    re-estimated from the residuals and the fit repeated once if they moved by more than 20 %."""
+    re-estimated from the residuals and the fit repeated once if they moved by more than 20 %. ``tol``:
+    scipy's ``xtol`` and ``ftol`` (a looser one where the fit only gives the next one its start)."""
     from scipy.optimize import least_squares
 
     cache = {}
@@ -894,7 +899,7 @@ def _fit(setup, data, rows, y_meas, sigma, max_nfev, cancel, *, start=None, repe
         with np.errstate(over="ignore", invalid="ignore"):    # a trial step far off: its cost is inf, refused
             sol = least_squares(fun, z, jac=jac, args=(sigma,), method=_METHOD,
                                 bounds=bounds if _METHOD != "lm" else (-np.inf, np.inf), max_nfev=max_nfev,
-                                xtol=1e-8, ftol=1e-8)
+                                xtol=tol, ftol=tol)
         z, nfev, njev = sol.x, nfev + sol.nfev, njev + (sol.njev or 0)
         if _METHOD == "lm":
             z = setup.clip(z)
