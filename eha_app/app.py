@@ -470,6 +470,9 @@ class Page(pn.viewable.Viewer):
                              css_class="eha-main-tabs")
         session.active_tab = active
         watch(self.tabs.tabs, lambda e: setattr(session, "active_tab", e.new), "active")
+        # what no one is looking at waits: a section out of sight defers its work until it is shown
+        session.sight = self._in_sight
+        watch(self.tabs.tabs, lambda _e: session.sight_changed(), "active")
         # the way through the steps: the start card (on a first visit to tab 1) and the guide line
         from .guide import Guide, guide_steps
 
@@ -640,7 +643,22 @@ class Page(pn.viewable.Viewer):
             return self.session.build(placements[0].key)
         sub = SubTabs(self.session, placements)
         watch(sub.lazy.tabs, lambda _e: self._guide_follows(), "active")
+        watch(sub.lazy.tabs, lambda _e: self.session.sight_changed(), "active")
         return sub
+
+    def _in_sight(self, key: str) -> bool:
+        """Is section ``key`` on show: its tab open and, on a tab of sub-tabs, its sub-tab?"""
+        if self.tabs is None:
+            return False
+        placement = self.session.registry.get(key)
+        while placement.within is not None:
+            placement = self.session.registry.get(placement.within)
+        if self.tabs.active_name != placement.tab:
+            return False
+        content = self.tabs.built.get(placement.tab)
+        if isinstance(content, SubTabs):
+            return content.keys.get(content.lazy.active_name) == placement.key
+        return True
 
     def show(self, key: str):
         """Show section ``key`` (its tab and sub-tab), made now if needed; returns it."""

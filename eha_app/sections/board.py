@@ -198,7 +198,10 @@ class ModelBoard(Section):
         self.note.object = ("" if stable else f"<span class='eha-warn'>{html.escape(model.name)} is unstable: "
                                               "it is on the board unticked.</span>")
         if not self._batching:
-            self._compute_missing()
+            if self.session.in_sight(self.key):
+                self._compute_missing()
+            else:                       # its curves once the board is on show
+                self.session.when_in_sight(self.key, self._compute_missing)
             self._rebuild_list()
         return entry
 
@@ -323,6 +326,15 @@ class ModelBoard(Section):
             self._compute_missing()     # the steps of the models of the plant, at the new height
 
     def _plant_changed(self) -> None:
+        if not self.session.in_sight(self.key):
+            # tab 1 changed while the board is not on show: it is computed again once it is (a student
+            # typing on tab 1 recomputes nothing here), and says meanwhile that it is out of date
+            keys = self.record_inputs()
+            if self.built and keys != (self.record_key, self.plant_key):
+                self.record_view.inputs_changed(keys, why="" if keys is not None else
+                                                "a parameter on tab 1 is not valid")
+            self.session.when_in_sight(self.key, self._plant_changed)
+            return
         self._references()
         self._controller_changed()
         self._compute_missing()

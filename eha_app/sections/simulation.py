@@ -442,6 +442,11 @@ class SimulationTab(Section):
         req, _ = self.request()
         labels, _, _, t_end = build_inputs(req)
         quick = len(labels) * len(MODEL_CHOICES[self.last_model]) * t_end <= AUTO_RUN_MAX_SECONDS
+        if quick and not self.session.in_sight(self.key):
+            # not on show (tab 1 is being typed into): marked out of date, and run again once shown
+            self.view.inputs_changed(key)
+            self.session.when_in_sight(self.key, self._inputs_changed)
+            return
         job = self.run(self.last_model, auto=True) if quick else None
         self.view.inputs_changed(key, updating=job is not None)
 

@@ -81,6 +81,9 @@ class Session(param.Parameterized):
         self._pending: dict[str, dict[str, str]] = {}
         self._mail: dict[str, list] = {}
         self._on_built: list[Callable[[Section], None]] = []
+        # which sections the student can see (set by the page; without one every section is in sight)
+        self.sight: Callable[[str], bool] | None = None
+        self._out_of_sight: dict[str, list[Callable[[], None]]] = {}
         if not list(self.registry):
             raise RuntimeError("no section is registered: import eha_app.sections (the page's sections) first")
 
@@ -112,12 +115,32 @@ class Session(param.Parameterized):
         self._built.clear()
         self._mail.clear()
         self._on_built.clear()
+        self._out_of_sight.clear()
         # the sections watch the state: its watchers would keep every section (and its upload) alive
         for kinds in list(self.state.param.watchers.values()):
             for watchers in list(kinds.values()):
                 for w in list(watchers):
                     self.state.param.unwatch(w)
         self.state.forget_secrets()
+
+    # -- what is in sight --------------------------------------------------------------------------
+    def in_sight(self, key: str) -> bool:
+        """Is section ``key`` on show (its tab and sub-tab open)? Always, without a page."""
+        return self.sight is None or self.sight(key)
+
+    def when_in_sight(self, key: str, fn: Callable[[], None]) -> None:
+        """Call ``fn`` (once, under the lock) when section ``key`` is next shown: work for a view no one
+        is looking at waits until someone does (a change of tab 1 recomputes the board once it is shown,
+        not at every keystroke while tab 1 is). Asking again for the same ``fn`` asks once."""
+        waiting = self._out_of_sight.setdefault(key, [])
+        if fn not in waiting:
+            waiting.append(fn)
+
+    def sight_changed(self) -> None:
+        """The page showed another tab or sub-tab: what waited for a section now in sight runs."""
+        for key in [k for k in self._out_of_sight if self.in_sight(k)]:
+            for fn in self._out_of_sight.pop(key):
+                fn()
 
     def section(self, key: str) -> Section | None:
         """The section ``key`` if it was made (shown), else None."""

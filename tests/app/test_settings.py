@@ -39,7 +39,11 @@ def test_saved_settings_load_into_another_session():
     b_sim = b.session.build("simulation")                      # one tab built, the others later
     assert b.session.load_settings(blob) == []
     assert b.session.state.params.M == 6000.0 and b.session.state.kp == 20.0
-    assert b_sim.form.values["u_amplitude"] == "3" and b_sim.results[0].label.startswith("u = 3 sin")
+    assert b_sim.form.values["u_amplitude"] == "3"
+    assert b_sim.view.status == "stale"                        # run again once tab 2 is on show
+    b.show("simulation")
+    assert b_sim.results[0].label.startswith("u = 3 sin") and b_sim.view.status == "current"
+    b.tabs.tabs.active = 0                                     # back where a was
     b_ident = b.session                    # built from the loaded values
     assert b_ident.build("least_squares").form.values["lse_model"] == "harmonic"
     assert b_ident.build("frequency").form.values["signal_type"] == "prbs"
