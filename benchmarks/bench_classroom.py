@@ -17,6 +17,29 @@ workflow of a lab:
   retype   back to tab 1 and type M again, every tab now built with results; done when the derived
            values change
 
+``--exercise`` runs the graded lab instead: for each class size a fresh exercise
+(``eha exercise new --roster``, its defaults: M, B, Af and βe hidden, each
+student's actuator their own, the default sensor noise, all three routes, 3
+hand-ins) in a temporary folder with its hand-in database, served with ``eha
+serve --exercise``. Every session (the observer too) has a roster entry and
+joins with its own code. The steps:
+
+  open     open the page, type the join code and press "Start"; done when tab 1's fields arrived
+  param    type L0 (the chamber length; M is hidden, not on tab 1), each student a value of their own
+  tab2 ... freq   as above
+  gbtab    show tab 3's "Grey-box (nonlinear)"
+  gb       "Run grey-box estimation" with the page's settings; done when the table arrived. An estimate
+           that failed its checks (the red "may be wrong" box) is done, and counted: gb_ok=K/N passed
+  board    show "Model board" (built then, with the estimates made before); done when its fit and step
+           tables show every route's model (LS1, H1, GB1 when the grey-box passed its checks)
+  handin   "Hand in the grey-box estimates"; when the grey-box failed its checks that button is off and
+           the least squares' are handed in instead; done when the verdict shows. handin_ok=K/N: the
+           hand-ins stored (the route and the verdicts "k of 4 within tolerance" are printed under the step)
+  retype   back to tab 1, type L0 again
+
+``--churn`` works with it too (a roster of K); ``--url`` does not (the benchmark makes the exercise and
+serves it), nor ``--hog`` (an exercise offers no study).
+
 Between steps a barrier: every student finishes (or times out, ``--timeout``,
 an error) before the next step; within a step each starts at a random moment
 of the first ``--spread`` seconds ("everyone clicks within a second"). One
@@ -33,12 +56,16 @@ processes) and the client's own CPU time. The last line is
     sessions=N errors=E open_p95=… param_p95=… … retype_p95=… slowest=STEP typing_p95_worst_step=…
     peak_mb=… cpu_per_student=… freq_ok=K/N observer_p95=…
 
+(with ``--exercise`` also gbtab_p95, gb_p95, board_p95 and handin_p95 among the steps, and gb_ok=K/N
+handin_ok=K/N handin_lse=J before observer_p95: J of the hand-ins came from the least squares)
+
 for the largest N (typing_p95_worst_step: the observer's p95 in the step where it was slowest;
 cpu_per_student: the server's CPU seconds over the steps / N; E counts failed or timed-out steps, the server's ERROR
 replies, broken connections and failed observer changes).
 
 ``--distinct`` gives each student values of M of their own: no two runs alike, nothing the
-server can share (it computes a run once for the students with the same inputs).
+server can share (it computes a run once for the students with the same inputs). An exercise is
+always so (each student's actuator and L0 their own).
 
 ``--hog study`` (or ``spam``) runs the largest class twice in the same run, without and then with
 one more student who runs a 500-seed study throughout (or presses the study's run and cancel
@@ -54,6 +81,8 @@ the server's memory every 50 sessions and after the server discarded them.
 
     python benchmarks/bench_classroom.py                        # 1, 10, 30 students
     python benchmarks/bench_classroom.py --sessions 1,10 --procs 2
+    python benchmarks/bench_classroom.py --exercise --sessions 1,30
+    python benchmarks/bench_classroom.py --exercise --sessions 30 --num-procs 2
     python benchmarks/bench_classroom.py --url http://127.0.0.1:8080/eha --sessions 30 --server-pid 1234
     python benchmarks/bench_classroom.py --sessions 30 --steps open,param,compare --json class.json
     python benchmarks/bench_classroom.py --sessions 30 --hog study --hog-repeats 3
@@ -69,6 +98,7 @@ import math
 import os
 import re
 import resource
+import shutil
 import signal
 import socket
 import subprocess
@@ -79,9 +109,35 @@ from pathlib import Path
 
 # run as a script, this file's folder is on the path: the client is a sibling module
 if __package__:
-    from .classroom_client import HOGS, STEP_NAMES, STEPS, ClassResult, Student, do_step, run_class, wait_served
+    from .classroom_client import (
+        EXERCISE_OBSERVER_VALUES,
+        EXERCISE_PARAM,
+        EXERCISE_STEPS,
+        HOGS,
+        STEP_NAMES,
+        STEPS,
+        ClassResult,
+        Student,
+        do_step,
+        exercise_texts,
+        run_class,
+        wait_served,
+    )
 else:
-    from classroom_client import HOGS, STEP_NAMES, STEPS, ClassResult, Student, do_step, run_class, wait_served
+    from classroom_client import (
+        EXERCISE_OBSERVER_VALUES,
+        EXERCISE_PARAM,
+        EXERCISE_STEPS,
+        HOGS,
+        STEP_NAMES,
+        STEPS,
+        ClassResult,
+        Student,
+        do_step,
+        exercise_texts,
+        run_class,
+        wait_served,
+    )
 
 ROOT = Path(__file__).resolve().parents[1]
 _TICK = os.sysconf("SC_CLK_TCK")
@@ -153,15 +209,18 @@ class Server:
     ``eha serve`` already passes ``--unused-session-lifetime 4000
     --check-unused-sessions 1000`` to Panel (eha_app/runtime/serving.py): a closed page's
     session is discarded about 5 s later, which the churn mode relies on.
+
+    ``exercise``: an exercise file to serve (``--exercise``; its hand-in database is made beside it).
     """
 
-    def __init__(self, procs: int = 1):
+    def __init__(self, procs: int = 1, exercise: str | Path | None = None):
         self.port = free_port()
         fd, self.log_path = tempfile.mkstemp(prefix="eha-serve-", suffix=".log")
         self.log = os.fdopen(fd, "w+")
-        eha = Path(sys.executable).with_name("eha")
-        cmd = ([str(eha)] if eha.exists() else [sys.executable, "-m", "eha_app.cli"])
+        cmd = eha_command()
         cmd += ["serve", "--port", str(self.port), "--address", "127.0.0.1", "--num-procs", str(procs)]
+        if exercise is not None:
+            cmd += ["--exercise", str(Path(exercise).resolve())]
         self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT)
         self.tree = ProcTree(self.proc.pid)
         self.url = f"http://127.0.0.1:{self.port}/eha"
@@ -218,6 +277,31 @@ class Server:
             Path(self.log_path).unlink(missing_ok=True)
 
 
+def eha_command() -> list[str]:
+    """How to run ``eha`` from this Python (the venv's script, else the module)."""
+    eha = Path(sys.executable).with_name("eha")
+    return [str(eha)] if eha.exists() else [sys.executable, "-m", "eha_app.cli"]
+
+
+def make_exercise(folder: Path, n: int, extra: tuple = ("observer",)) -> tuple[Path, dict]:
+    """A class exercise in ``folder`` as a teacher makes one: ``eha exercise new --roster`` with its
+    defaults, a roster of students s1..sN and the sessions ``extra`` (the observer). Returns the
+    file and each session's join code by its name in :func:`run_class` ("student 1", ..., "observer")."""
+    folder.mkdir(parents=True, exist_ok=True)
+    ids = [(f"s{i + 1}", f"student {i + 1}") for i in range(n)] + [(e, e) for e in extra]
+    roster = folder / "roster.csv"
+    roster.write_text("id,name\n" + "".join(f"{sid},{name.title()}\n" for sid, name in ids), encoding="utf-8")
+    path = folder / "class.json"
+    out = subprocess.run([*eha_command(), "exercise", "new", "--roster", str(roster), "--out", str(path)],
+                         cwd=ROOT, capture_output=True, text=True, check=False)
+    if out.returncode != 0:
+        raise RuntimeError(f"eha exercise new failed ({out.returncode}): {(out.stderr or out.stdout)[-1000:]}")
+    from eha_core.exercise import Exercise
+
+    ex = Exercise.load(path)
+    return path, {name: ex.join_code(sid) for sid, name in ids}
+
+
 def _ppid(pid: int) -> int | None:
     """The parent of ``pid`` (None if it is gone): an orphaned fork of ours is re-parented to 1."""
     try:
@@ -247,8 +331,65 @@ def client_cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
+def step_label(step: str, param: str = "M") -> str:
+    """The step's name in the table (the parameter typed named as it is)."""
+    label = STEP_NAMES.get(step, step)
+    return label.replace("change M", f"change {param}") if param != "M" else label
+
+
+def _counted(values) -> str:
+    """"a x3, b" from a list: each value once, with how often it came, the commonest first."""
+    counts: dict = {}
+    for v in values:
+        counts[v] = counts.get(v, 0) + 1
+    return ", ".join(f"{k}{f' x{c}' if c > 1 else ''}" for k, c in sorted(counts.items(), key=lambda kv: -kv[1]))
+
+
+def report_details(r: ClassResult, step: str, out=print) -> dict:
+    """What the exercise's steps noted beside their times (the grey-box's checks, the board's models, the
+    hand-ins' routes and verdicts), printed under the step's row; returned as counts."""
+    done = [o for o in r.steps.get(step, []) if o.seconds is not None]
+    if step == "gb":
+        failed = [o for o in done if o.detail.get("checks") == "failed"]
+        out(f"    checks: {len(done) - len(failed)} passed, {len(failed)} failed (\"may be wrong\")")
+        says = [re.sub(r"[-+]?\d[\d.,·e+-]*", "#", o.detail.get("says", ""))[:160] for o in failed]
+        for k, line in enumerate(_counted(says).split(", ") if says else []):
+            if k == 2:
+                out("      ...")
+                break
+            out(f"      failed: {line}")
+        return {"passed": len(done) - len(failed), "failed": len(failed),
+                "failed_students": [o.student for o in failed]}
+    if step == "board":
+        models = [o.detail.get("models", "") for o in done]
+        if models:
+            out(f"    models on the board (* ticked): {_counted(models)[:300]}")
+        return {"models": models}
+    if step == "handin":
+        routes = [o.detail.get("route", "?") for o in done]
+        stored = sum(1 for o in done if o.detail.get("handed_in"))
+        within = [o.detail.get("within", "-") for o in done if o.detail.get("handed_in")]
+        missed = [name for o in done for name in o.detail.get("missed", [])]
+        out(f"    handed in: {stored} of {len(done)} (from the {_counted(routes) or '-'}); "
+            f"within tolerance: {_counted(within) or '-'}"
+            + (f"; outside it: {_counted(missed)}" if missed else ""))
+        for o in done:
+            if not o.detail.get("handed_in"):
+                out(f"      not handed in, e.g. {o.student}: {o.detail.get('says', '')[:200]}")
+                break
+        for o in done:
+            if o.detail.get("route") == "lse":
+                out(f"      the least squares', e.g. {o.student}: the grey-box's button said "
+                    f"\"{o.detail.get('refused', '')[:200]}\"")
+                break
+        return {"handed_in": stored, "lse": routes.count("lse"), "greybox": routes.count("greybox"),
+                "within": within, "missed": missed}
+    return {}
+
+
 def report(r: ClassResult, extra: dict, out=print) -> dict:
     n = r.sessions
+    param = extra.get("param", "M")
     out(f"\n== {n} student{'s' if n != 1 else ''} ({extra['server']}) ==")
     out(f"{'step':22s} {'p50':>6s} {'p95':>6s} {'max':>6s} {'ok':>7s} {'err':>4s} {'msgs/st':>7s} "
         f"{'kB/st':>7s} {'srvCPU':>6s} {'obs95':>6s} {'wall':>6s}")
@@ -262,7 +403,7 @@ def report(r: ClassResult, extra: dict, out=print) -> dict:
         obs = [o.delay for o in r.observer if o.step == step and o.delay is not None]
         cpu = extra["server_cpu"].get(step)
         wall = r.step_wall.get(step, (0, 0))
-        out(f"{STEP_NAMES.get(step, step):22s} {fmt(pct(t, 50))} {fmt(pct(t, 95))} {fmt(max(t) if t else None)} "
+        out(f"{step_label(step, param):22s} {fmt(pct(t, 50))} {fmt(pct(t, 95))} {fmt(max(t) if t else None)} "
             f"{r.ok(step):>3d}/{len(outs):<3d} {len(errs):>4d} {fmt(sum(msgs) / len(msgs) if msgs else None, 7, 1)} "
             f"{fmt(sum(kb) / len(kb) if kb else None, 7, 0)} {fmt(cpu, 6, 1)} {fmt(pct(obs, 95))} "
             f"{fmt(wall[1] - wall[0])}")
@@ -275,13 +416,15 @@ def report(r: ClassResult, extra: dict, out=print) -> dict:
                 out(f"    ... and {len(shown) - 3} other message(s)")
                 break
             out(f"    error{f' (x{count})' if count > 1 else ''}: {msg}")
+        details = report_details(r, step, out)
         summary["steps"][step] = {"p50": pct(t, 50), "p95": pct(t, 95), "max": max(t) if t else None,
                                   "ok": r.ok(step), "n": len(outs), "errors": errs,
                                   "messages_per_student": sum(msgs) / len(msgs) if msgs else None,
-                                  "kB_per_student": sum(kb) / len(kb) if kb else None, "server_cpu_s": cpu}
+                                  "kB_per_student": sum(kb) / len(kb) if kb else None, "server_cpu_s": cpu,
+                                  "details": details}
     obs_err = [o for o in r.observer if o.error]
     if r.observer:
-        out(f"{'observer typing M':22s} {fmt(pct(obs_all, 50))} {fmt(pct(obs_all, 95))} "
+        out(f"{'observer typing ' + param:22s} {fmt(pct(obs_all, 50))} {fmt(pct(obs_all, 95))} "
             f"{fmt(max(obs_all) if obs_all else None)} {len(obs_all):>7d} {len(obs_err):>4d}   "
             f"(every 2 s, all steps)")
     if r.upstreams:
@@ -329,11 +472,17 @@ def summary_line(s: dict) -> str:
     worst = max(steps, key=lambda k: p95(k) if not math.isnan(p95(k)) else -1) if steps else "-"
     typing = [v for v in s.get("observer_p95_by_step", {}).values() if v is not None and not math.isnan(v)]
     mem = (s.get("memory_mb") or {}).get("peak", float("nan"))
+    exercise = ""
+    if "gb" in s["steps"]:
+        exercise += f"gb_ok={s['steps']['gb']['details'].get('passed', 0)}/{s['sessions']} "
+    if "handin" in s["steps"]:
+        handin = s["steps"]["handin"]["details"]
+        exercise += f"handin_ok={handin.get('handed_in', 0)}/{s['sessions']} handin_lse={handin.get('lse', 0)} "
     return (f"sessions={s['sessions']} errors={s['errors']} "
             + " ".join(f"{k}_p95={p95(k):.2f}" for k in s["steps"])
             + f" slowest={worst} typing_p95_worst_step={max(typing) if typing else float('nan'):.2f} "
             f"peak_mb={mem:.0f} cpu_per_student={s.get('cpu_per_student', float('nan')):.2f} "
-            f"freq_ok={freq.get('ok', 0)}/{s['sessions']} observer_p95={s['observer_p95']:.2f}")
+            f"freq_ok={freq.get('ok', 0)}/{s['sessions']} {exercise}observer_p95={s['observer_p95']:.2f}")
 
 
 # -- modes -------------------------------------------------------------------------------------
@@ -354,7 +503,7 @@ def _ratios(a_runs: list, b_runs: list, steps, label_a: str, label_b: str, both_
         r95 = b95 / a95 if a95 else float("nan")
         if s not in ("open", "param"):
             worst = max(worst, r50, r95, *((1 / r50, 1 / r95) if both_ways and r50 and r95 else ()))
-        print(f"  {STEP_NAMES.get(s, s):28s} p50 {a50:.3f} -> {b50:.3f} ({r50:.2f}x)   "
+        print(f"  {step_label(s):28s} p50 {a50:.3f} -> {b50:.3f} ({r50:.2f}x)   "
               f"p95 {a95:.3f} -> {b95:.3f} ({r95:.2f}x)   [{label_a} -> {label_b}, {len(a)} / {len(b)} students]")
     return worst
 
@@ -391,8 +540,21 @@ def compare_hog(args, steps, largest: dict, largest_data: dict, raw: list) -> No
 
 
 def run_one(n: int, args, steps, hog: str | None = None, seed: int | None = None) -> tuple[dict, dict]:
-    server = None if args.url else Server(args.procs)
+    folder, path, exercise = None, None, {}
+    if getattr(args, "exercise", False):
+        # a fresh exercise (roster, secret, hand-in database) for every class: nothing of one class in the next
+        folder = Path(tempfile.mkdtemp(prefix="eha-bench-exercise-"))
+        path, codes = make_exercise(folder, n, ("observer",))
+        exercise = {"codes": codes, "param": EXERCISE_PARAM, "texts": exercise_texts,
+                    "observer_values": EXERCISE_OBSERVER_VALUES}
+    try:
+        server = None if args.url else Server(args.procs, exercise=path)
+    except BaseException:
+        if folder:
+            shutil.rmtree(folder, ignore_errors=True)
+        raise
     tree = server.tree if server else _tree_of(args.server_pid)
+    problems = None
     try:
         url = args.url or server.url
         before = tree.memory_mb()[0] if tree else None
@@ -411,7 +573,8 @@ def run_one(n: int, args, steps, hog: str | None = None, seed: int | None = None
         result = asyncio.run(run_class(url, n, steps, spread=args.spread, timeout=args.timeout,
                                        observer=not args.no_observer, seed=args.seed if seed is None else seed,
                                        on_step=on_step,
-                                       observer_period=args.observer_period, distinct=args.distinct, hog=hog))
+                                       observer_period=args.observer_period, distinct=args.distinct, hog=hog,
+                                       **exercise))
         c1, w1 = client_cpu(), time.perf_counter()
         memory = None
         if tree:
@@ -421,9 +584,15 @@ def run_one(n: int, args, steps, hog: str | None = None, seed: int | None = None
     finally:
         if server:
             server.stop(keep_log=bool(problems))
+        if folder:
+            shutil.rmtree(folder, ignore_errors=True)
     label = args.url or f"eha serve --num-procs {args.procs}"
-    label += (", each student their own M" if args.distinct else "") + (f", with a {hog} hog" if hog else "")
-    extra = {"server": label, "server_cpu": server_cpu,
+    if folder:
+        label += f" --exercise (a roster of {n} + the observer, each their own code, actuator and {EXERCISE_PARAM})"
+    else:
+        label += ", each student their own M" if args.distinct else ""
+    label += f", with a {hog} hog" if hog else ""
+    extra = {"server": label, "server_cpu": server_cpu, "param": exercise.get("param", "M"),
              "memory": memory, "log_problems": problems, "client_cpu": c1 - c0, "wall": w1 - w0,
              "log_path": server.log_path if server else None}
     summary = report(result, extra)
@@ -431,8 +600,9 @@ def run_one(n: int, args, steps, hog: str | None = None, seed: int | None = None
                      "log_problems": problems}
 
 
-async def churn(url: str, tree: ProcTree | None, k: int, steps, timeout: float) -> list:
-    """Open and close ``k`` sessions, 10 at a time; the server's RSS as it goes."""
+async def churn(url: str, tree: ProcTree | None, k: int, steps, timeout: float, codes: dict | None = None) -> list:
+    """Open and close ``k`` sessions, 10 at a time; the server's RSS as it goes. ``codes``: an exercise's
+    join codes by name ("student 1", ...: one each, since a code opened again closes its first page)."""
     def rss():
         return tree.memory_mb()[0] if tree else float("nan")
     rows = []
@@ -442,7 +612,12 @@ async def churn(url: str, tree: ProcTree | None, k: int, steps, timeout: float) 
     done = 0
     t0 = time.perf_counter()
     while done < k:
-        batch = [Student(url, name=f"s{done + i + 1}", timeout=timeout) for i in range(min(10, k - done))]
+        batch = [Student(url, name=f"s{done + i + 1}", timeout=timeout,
+                         **({"code": codes[f"student {done + i + 1}"], "param_name": EXERCISE_PARAM} if codes else {}))
+                 for i in range(min(10, k - done))]
+        for i, st in enumerate(batch):
+            if codes:
+                st.param_text, st.retype_text = exercise_texts(done + i)
         for step in steps:
             outs = await asyncio.gather(*(do_step(s, step, timeout) for s in batch), return_exceptions=True)
             errors += sum(isinstance(o, BaseException) for o in outs)
@@ -476,9 +651,21 @@ def _sizes_and_steps(args) -> tuple[list[int], list[str]]:
         sizes = []
     if not sizes or min(sizes) < 1:
         raise ValueError(f"--sessions = {args.sessions} is not allowed: use e.g. 1,10,30")
-    steps = [s.strip() for s in (args.steps or ",".join(STEPS)).split(",") if s.strip()]
-    if not steps or any(s not in STEPS for s in steps) or steps[0] != "open":
-        raise ValueError(f"--steps = {args.steps} is not allowed: start with open, then any of {','.join(STEPS[1:])}")
+    exercise = getattr(args, "exercise", False)
+    # the grey-box, the board and their tab need no exercise; a hand-in does
+    allowed = EXERCISE_STEPS if exercise else (*STEPS, *(s for s in EXERCISE_STEPS if s not in STEPS + ("handin",)))
+    steps = [s.strip() for s in (args.steps or ",".join(EXERCISE_STEPS if exercise else STEPS)).split(",")
+             if s.strip()]
+    if not steps or any(s not in allowed for s in steps) or steps[0] != "open":
+        raise ValueError(f"--steps = {args.steps} is not allowed: start with open, then any of "
+                         f"{','.join(s for s in allowed if s != 'open')}"
+                         + ("" if exercise else " (handin: with --exercise)"))
+    if exercise and getattr(args, "hog", None):
+        raise ValueError(f"--hog = {args.hog} is not allowed with --exercise: an exercise offers no study (its "
+                         "estimates would be drawn against the true values)")
+    if exercise and args.url:
+        raise ValueError(f"--url = {args.url} is not allowed with --exercise: it serves a fresh exercise of its own "
+                         "for every class size")
     if args.server_pid and not args.url:
         raise ValueError(f"--server-pid = {args.server_pid} is not allowed: it is only for --url")
     if args.server_pid and not re.fullmatch(r"\d+(,\d+)*", args.server_pid.replace(" ", "")):
@@ -494,13 +681,18 @@ def main(argv=None) -> int:
                     "eha serve, fresh for each size)")
     ap.add_argument("--server-pid", help="with --url: the server's pid(s), comma-separated (e.g. each backend "
                     "behind nginx), for memory and CPU; their children are counted too")
-    ap.add_argument("--procs", type=int, default=1, help="--num-procs for eha serve (default 1)")
+    ap.add_argument("--procs", "--num-procs", dest="procs", type=int, default=1, help="--num-procs for eha serve "
+                    "(default 1)")
+    ap.add_argument("--exercise", action="store_true", help="the graded lab: a fresh exercise per class size (eha "
+                    "exercise new's defaults, a roster of the students and the observer), served with eha serve "
+                    f"--exercise; each session joins with its own code; steps {','.join(EXERCISE_STEPS)}")
     ap.add_argument("--spread", type=float, default=1.0, help="students start a step within this many "
                     "seconds (default 1)")
     ap.add_argument("--timeout", type=float, default=180.0, help="a step not done after this is an error "
                     "[s] (default 180)")
     ap.add_argument("--steps", default=None, help=f"subset of {','.join(STEPS)} (starting with "
-                    "open; a run step shows its tab itself)")
+                    "open; a run step shows its tab itself); also gbtab,gb,board, and with --exercise handin "
+                    "(default there: all of those)")
     ap.add_argument("--no-observer", action="store_true", help="no observer session")
     ap.add_argument("--seed", type=int, default=0, help="of the random start offsets")
     ap.add_argument("--json", help="write every raw timing to this file")
@@ -524,7 +716,8 @@ def main(argv=None) -> int:
         print(f"bench_classroom: error: {exc}", file=sys.stderr)
         return 2
     print(f"machine: {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; server: "
-          f"{args.url or f'eha serve --num-procs {args.procs}'}; spread {args.spread:g} s, timeout {args.timeout:g} s")
+          f"{args.url or f'eha serve --num-procs {args.procs}'}{' --exercise' if args.exercise else ''}; "
+          f"spread {args.spread:g} s, timeout {args.timeout:g} s")
     if not args.churn:
         print("columns: seconds per student (p50 p95 max); ok/students; errors; Bokeh messages and kB the server "
               "sent each student during the step;\n         the server's CPU seconds; the observer's p95 delay "
@@ -532,14 +725,21 @@ def main(argv=None) -> int:
 
     if args.churn:
         churn_steps = steps if args.steps else ["open", "param", "tab2"]
-        server = None if args.url else Server(args.procs)
-        tree = server.tree if server else _tree_of(args.server_pid)
-        c0 = client_cpu()
+        folder, path, codes = None, None, None
+        if args.exercise:
+            folder = Path(tempfile.mkdtemp(prefix="eha-bench-exercise-"))
+            path, codes = make_exercise(folder, args.churn, ())
+        server = None
         try:
-            rows = asyncio.run(churn(args.url or server.url, tree, args.churn, churn_steps, args.timeout))
+            server = None if args.url else Server(args.procs, exercise=path)
+            tree = server.tree if server else _tree_of(args.server_pid)
+            c0 = client_cpu()
+            rows = asyncio.run(churn(args.url or server.url, tree, args.churn, churn_steps, args.timeout, codes))
         finally:
             if server:
                 server.stop()
+            if folder:
+                shutil.rmtree(folder, ignore_errors=True)
         print(f"client CPU: {client_cpu() - c0:.1f} s")
         if args.json:
             Path(args.json).write_text(json.dumps({"churn": rows}, indent=1, default=str))

@@ -41,6 +41,16 @@ result), finding models by type, css class and label, never by id; it waits
 for a tab's content to arrive before it presses its buttons (tabs are built
 when first shown). When the UI changes, that class is what to adapt.
 
+In a class exercise (``eha serve --exercise FILE`` with a roster) the page
+first shows a gate: a student made with ``code=`` types their join code into
+``.eha-join-code`` and presses "Start" (``.eha-start``) as part of opening, and
+types a parameter tab 1 still shows (``param_name``; M, B, Af and βe are
+hidden there by default). The exercise's steps (:data:`EXERCISE_STEPS`) go on
+from the frequency experiment to the grey-box estimation (an estimate that
+fails its checks counts as done, noted in :attr:`Outcome.detail`), the model
+board (done when its tables show every route's model) and a hand-in (the
+grey-box's, or the least squares' when the grey-box's is refused).
+
 :func:`run_class` (async) / :func:`run_students` drive N students through the
 steps together, with an optional observer typing every 2 s; the tests and
 ``bench_classroom.py`` use them.
@@ -69,6 +79,9 @@ from tornado.httpclient import AsyncHTTPClient, HTTPRequest
 from tornado.websocket import websocket_connect
 
 __all__ = [
+    "EXERCISE_OBSERVER_VALUES",
+    "EXERCISE_PARAM",
+    "EXERCISE_STEPS",
     "STEPS",
     "STEP_NAMES",
     "ClassResult",
@@ -80,6 +93,7 @@ __all__ = [
     "StepTimeout",
     "Student",
     "StudentSession",
+    "exercise_texts",
     "run_class",
     "run_students",
 ]
@@ -590,6 +604,16 @@ class Student(StudentSession):
     MAIN_TABS = "eha-main-tabs"
     IDENT_TABS = "eha-ident-tabs"
     FORM = "eha-param-form"
+    #: Tab 3's sub-tabs, in their order on the page.
+    LSE_SUBTAB, FREQ_SUBTAB, GB_SUBTAB, BOARD_SUBTAB, STUDY_SUBTAB = range(5)
+
+    def __init__(self, url: str, *, code: str | None = None, param_name: str = "M", **kwargs):
+        super().__init__(url, **kwargs)
+        self.code = code                    # an exercise's join code, typed into the gate when opening
+        self.param_name = param_name        # the field of tab 1 the steps "param" and "retype" type into
+        # the routes whose estimate this session made (LS, H, GB: their names' prefixes on the model board)
+        self.posted: set[str] = set()
+        self.detail: dict = {}              # what the last step noted beside its time (see do_step)
 
     def _one(self, what: str, found: list[Model]) -> Model:
         if not found:
@@ -598,11 +622,39 @@ class Student(StudentSession):
 
     async def open(self, timeout: float | None = None) -> float:
         """Open the page; returns the seconds until tab 1's fields arrived (the
-        server sends the page's frame first and its first tab right after)."""
+        server sends the page's frame first and its first tab right after). With
+        a join ``code``: the gate's code typed and "Start" pressed in between."""
         t0 = time.perf_counter()
         await super().open(timeout)
+        if self.code is not None:
+            await self.join(self.code, timeout)
         await self.wait_for_model(css=self.FORM, timeout=timeout)
         return time.perf_counter() - t0
+
+    async def join(self, code: str, timeout: float | None = None) -> None:
+        """An exercise's gate: type ``code`` into ``.eha-join-code`` as BokehJS does (``value_input``, then
+        ``value`` on Enter) and press "Start"; :class:`StepFailed` with the gate's message if it refuses."""
+        box = await self.wait_for_model("TextInput", css="eha-join-code", timeout=timeout)
+        e0 = len(self.errors)
+        await self.set_property(box, "value_input", code)
+        await self.set_property(box, "value", code)
+        start = self._one("button 'Start'", self.find("Button", css="eha-start", label="Start"))
+        message = self.find(css="eha-error-student")
+        before = message[0].text() if message else ""
+        await self.click(start)
+
+        def joined():
+            if self.find(css=self.FORM):
+                return True
+            refused = [e for e in self.errors[e0:] if e.startswith("server ERROR")]
+            if refused:             # the code or the press never reached the gate: no page will come
+                raise StepFailed(f"{self.name}: the join was not applied: {refused[0][:200]}")
+            now = message[0].text() if message else ""
+            if now != before and now.strip():
+                raise StepFailed(f"{self.name}: the gate refused the code: {re.sub('<[^>]+>', ' ', now)[:200]}")
+            return False
+
+        await self.wait_for(joined, timeout, "tab 1 after the join code")
 
     def pane(self, css: str) -> Model:
         return self._one(f"pane .{css}", self.find(css=css))
@@ -746,6 +798,7 @@ class Student(StudentSession):
         await self.press_and_wait("Run least squares", "eha-lse-table",
                                   lambda m, before: m.text() != before and "<table" in m.text(),
                                   "eha-lse-alert", timeout)
+        self.posted.add("LS")
         return time.perf_counter() - t0
 
     async def start_study(self, seeds: int, timeout: float | None = None, kind: str | None = None) -> None:
@@ -773,7 +826,139 @@ class Student(StudentSession):
                                             lambda m, before: m.text() != before, "eha-freq-alert", timeout)
         if "Ĥ(s)" not in text:
             raise StepFailed(f"{self.name}: the summary has no estimate: {re.sub('<[^>]+>', ' ', text)[:200]}")
+        self.posted.add("H")
         return time.perf_counter() - t0
+
+    async def show_greybox(self, timeout: float | None = None) -> float:
+        """Tab 3's inner tab "Grey-box (nonlinear)"; done when its run button arrived."""
+        t0 = time.perf_counter()
+        await self.show_tab(2, self.IDENT_TABS, timeout)
+        await self.show_subtab(self.IDENT_TABS, self.GB_SUBTAB, "eha-run-gb", timeout)
+        return time.perf_counter() - t0
+
+    async def greybox(self, timeout: float | None = None) -> float:
+        """Tab 3's grey-box panel, "Run grey-box estimation" with the page's settings; done when
+        ``.eha-gb-table-pane`` holds a new table (an alert "... failed" is :class:`StepFailed`). An
+        estimate that failed its checks (the red "may be wrong" box) is done too: ``detail["checks"]``
+        says "passed" or "failed" (then ``detail["says"]``: the box's words)."""
+        t0 = time.perf_counter()
+        await self.show_greybox(timeout)
+        _, text = await self.press_and_wait("Run grey-box estimation", "eha-gb-table-pane",
+                                            lambda m, before: m.text() != before and "<table" in m.text(),
+                                            "eha-gb-alert", timeout)
+        seconds = time.perf_counter() - t0
+        failed = re.search(r"<div[^>]*eha-gb-failed.*?</div>", text, re.S)
+        if failed or "eha-gb-failed" in text:
+            self.detail["checks"] = "failed"
+            self.detail["says"] = _plain_text(failed.group(0) if failed else text)[:300]
+        else:
+            self.detail["checks"] = "passed"
+            self.posted.add("GB")           # only an estimate that passed its checks goes to the board
+        return seconds
+
+    def tip(self, widget: Model) -> str:
+        """A widget's tooltip (Panel's ``description``, sent as the button's ``tooltip``: a Tooltip whose content
+        is an HTML model), as words."""
+        value = widget.get("tooltip", widget.get("description"))
+        for _ in range(3):                  # description -> Tooltip -> its content -> the HTML's parts
+            if isinstance(value, dict) and set(value) == {"id"}:
+                model = self.models.get(value["id"])
+                value = None if model is None else model.get("content", model.get("html"))
+            elif isinstance(value, list):
+                value = " ".join(v for v in value if isinstance(v, str))
+        return _plain_text(value) if isinstance(value, str) else ""
+
+    def board_entries(self) -> list[tuple[str, bool]]:
+        """The model board's list: (name, ticked) of each entry, in its order."""
+        out = []
+        for box in self.find("TextInput", css="eha-board-name"):
+            key = next((c[len("eha-board-name-"):] for c in box.css if c.startswith("eha-board-name-")), None)
+            tick = self.find(css=f"eha-board-tick-{key}") if key is not None else []
+            out.append((str(box.get("value") or ""), bool(tick and tick[0].get("active"))))
+        return out
+
+    async def model_board(self, timeout: float | None = None) -> float:
+        """Tab 3's "Model board" (built when first shown, with the estimates made before); done when its
+        list holds a model of every route this session ran (:attr:`posted`: LS1, H1, GB1) and the fit and
+        step tables show a row for each ticked one, with the nonlinear plant's step. A warning of the board
+        that something failed is :class:`StepFailed`. ``detail["models"]``: the entries, ticked marked *."""
+        t0 = time.perf_counter()
+        await self.show_tab(2, self.IDENT_TABS, timeout)
+        await self.show_subtab(self.IDENT_TABS, self.BOARD_SUBTAB, "eha-board-list", timeout)
+
+        def row(name: str) -> str:
+            return f"■</span> {html.escape(name)}</td>"
+
+        def ready():
+            note = self.find(css="eha-board-note")
+            if note and "failed" in note[0].text():
+                raise StepFailed(f"{self.name}: {_plain_text(note[0].text())[:300]}")
+            entries = self.board_entries()
+            made = [(n, t) for n, t in entries if re.fullmatch(r"(LS|H|GB)\d+", n)]
+            if any(not any(re.fullmatch(rf"{p}\d+", n) for n, _ in made) for p in self.posted):
+                return None
+            fits, steps = self.find(css="eha-board-fit-table"), self.find(css="eha-board-step-table")
+            if not fits or not steps:
+                return None
+            fit, step = fits[0].text(), steps[0].text()
+            if "nonlinear plant" not in step or any(row(n) not in fit or row(n) not in step for n, t in made if t):
+                return None
+            return entries
+
+        entries = await self.wait_for(ready, timeout, f"the model board's tables ({', '.join(sorted(self.posted))})")
+        seconds = time.perf_counter() - t0
+        self.detail["models"] = ",".join(n + ("*" if t else "") for n, t in entries)
+        return seconds
+
+    async def hand_in(self, timeout: float | None = None) -> float:
+        """The exercise's hand-in: the grey-box's ("Hand in the grey-box estimates" on its sub-tab); if
+        that button is off (the estimate failed its checks, or there is none), the least squares' ("Hand
+        in these estimates" on sub-tab 0). Done when a ``.eha-verdict`` pane shows new text.
+        ``detail``: ``route`` (greybox or lse), ``handed_in`` (the store took it), ``within`` ("4/4": the
+        verdicts), ``missed`` (the parameters outside their tolerance), ``refused`` (why the grey-box's
+        button was off), ``says`` (a refusal's words)."""
+        t0 = time.perf_counter()
+        await self.show_greybox(timeout)
+        route = "greybox"
+        button = self.button("Hand in the grey-box estimates")
+        if button.get("disabled") or button.get("visible") is False:
+            self.detail["refused"] = self.tip(button)[:300]
+            route = "lse"
+            await self.show_subtab(self.IDENT_TABS, self.LSE_SUBTAB, "eha-lse-table", timeout)
+            button = self.button("Hand in these estimates")
+            if button.get("disabled") or button.get("visible") is False:
+                raise StepFailed(f"{self.name}: nothing to hand in: the grey-box's button is off "
+                                 f"({self.detail['refused'][:150]}), and the least squares' "
+                                 f"({self.tip(button)[:150]})")
+        panes = self.find(css="eha-verdict")
+        before = {m.id: (m.get("visible"), m.text()) for m in panes}
+        await self.click(button)
+
+        def verdict():
+            for m in panes:
+                now = (m.get("visible"), m.text())
+                if now != before[m.id] and now[0] and now[1].strip():
+                    return now[1]
+            return None
+
+        text = await self.wait_for(verdict, timeout, f"the verdict of the {route} hand-in")
+        seconds = time.perf_counter() - t0
+        self.detail["route"] = route
+        self.detail["handed_in"] = "<b>Handed in</b>" in text
+        within = re.search(r"(\d+) of (\d+) within tolerance", _plain_text(text))
+        if within:
+            self.detail["within"] = f"{within.group(1)}/{within.group(2)}"
+            # the parameters outside their tolerance (✗), by their symbols on the page (M, B, A f, β e)
+            self.detail["missed"] = [_plain_text(item).split(" =")[0].split(" not handed in")[0]
+                                     for item in re.findall(r"<li>(.*?)</li>", text, re.S) if "✗" in item]
+        if not self.detail["handed_in"]:
+            self.detail["says"] = _plain_text(text)[:300]
+        return seconds
+
+
+def _plain_text(markup: str) -> str:
+    """HTML as one line of its words."""
+    return " ".join(html.unescape(re.sub(r"<[^>]+>", " ", markup)).split())
 
 
 def _run_count(text: str) -> int:
@@ -786,10 +971,26 @@ def _run_count(text: str) -> int:
 #: The workflow, in order. The "show" steps are a first visit of a tab (built then); a
 #: run step shows its tab itself if no "show" step came before.
 STEPS = ("open", "param", "tab2", "compare", "tab3", "lse", "freqtab", "freq", "retype")
+#: The graded lab of an exercise (a roster's join codes): the workflow on to the grey-box estimation,
+#: the model board and a hand-in, then the parameter typed again with every tab built.
+EXERCISE_STEPS = ("open", "param", "tab2", "compare", "tab3", "lse", "freqtab", "freq", "gbtab", "gb", "board",
+                  "handin", "retype")
 STEP_NAMES = {"open": "open the page", "param": "change M (tab 1)", "tab2": "show tab 2 (first)",
               "compare": '"Compare both"', "tab3": "show tab 3 (first)", "lse": "least squares",
               "freqtab": "show frequency tab", "freq": "frequency experiment",
-              "retype": "change M, every tab built"}
+              "gbtab": "show grey-box tab", "gb": "grey-box estimation", "board": "model board (first)",
+              "handin": "hand in", "retype": "change M, every tab built"}
+#: In an exercise M, B, Af and βe are hidden (not on tab 1): the steps type the chamber length L0 [mm]
+#: instead, which tab 1's derived values follow (as Dc, dc and p1(0) do; kp and the valve's do not).
+EXERCISE_PARAM = "L0"
+EXERCISE_OBSERVER_VALUES = ("330", "335")
+
+
+def exercise_texts(i: int) -> tuple[str, str]:
+    """What the i-th student (from 0) of an exercise types into L0 at "param" and at "retype" [mm]: values
+    of their own, none another student or the observer types (up to 250 students)."""
+    return f"{305 + 0.1 * i:.1f}", f"{295 - 0.1 * i:.1f}"
+
 #: What the hog does (``run_class(hog=...)``): a 500-seed study (pressed again when it ends), or a
 #: press every 0.3 s of whichever of "Run the study" and "Cancel" is on.
 HOGS = ("study", "spam")
@@ -797,15 +998,16 @@ OBSERVER_VALUES = ("5000", "5500")
 
 
 async def do_step(student: Student, step: str, timeout: float | None = None) -> float:
-    """One step of the workflow for one student; returns its seconds."""
+    """One step of the workflow (:data:`STEPS`, :data:`EXERCISE_STEPS`) for one student; returns its
+    seconds. What a step notes beside (the grey-box's checks, the hand-in's route) is in ``student.detail``."""
     if step == "open":
         return await student.open(timeout)
     if step == "param":
-        return await student.change_parameter("M", student.param_text, timeout)
+        return await student.change_parameter(student.param_name, student.param_text, timeout)
     if step == "retype":
         # tab 1 once every tab holds results: each section hears of the change
         await student.show_tab(0, "eha-derived", timeout)
-        return await student.change_parameter("M", student.retype_text, timeout)
+        return await student.change_parameter(student.param_name, student.retype_text, timeout)
     if step == "tab2":
         return await student.show_simulation(timeout)
     if step == "compare":
@@ -818,7 +1020,15 @@ async def do_step(student: Student, step: str, timeout: float | None = None) -> 
         return await student.show_frequency(timeout)
     if step == "freq":
         return await student.frequency_experiment(timeout)
-    raise ValueError(f"step = {step} is not allowed: use one of {', '.join(STEPS)}")
+    if step == "gbtab":
+        return await student.show_greybox(timeout)
+    if step == "gb":
+        return await student.greybox(timeout)
+    if step == "board":
+        return await student.model_board(timeout)
+    if step == "handin":
+        return await student.hand_in(timeout)
+    raise ValueError(f"step = {step} is not allowed: use one of {', '.join(EXERCISE_STEPS)}")
 
 
 @dataclass
@@ -834,6 +1044,7 @@ class Outcome:
     bytes: int              # websocket bytes (all frames; the page's HTML for "open")
     server_errors: list = field(default_factory=list)   # ERROR replies during the step
     by_type: dict = field(default_factory=dict)         # those messages by type (ACK, OK, PATCH-DOC, ...)
+    detail: dict = field(default_factory=dict)          # what the step noted (Student.detail), e.g. checks
 
 
 @dataclass
@@ -860,6 +1071,11 @@ class ClassResult:
     def times(self, step: str) -> list:
         return [o.seconds for o in self.steps.get(step, []) if o.seconds is not None]
 
+    def noted(self, step: str, key: str, value=True) -> int:
+        """How many students did ``step`` and noted ``key`` = ``value`` (e.g. ``noted("gb", "checks",
+        "passed")``)."""
+        return sum(1 for o in self.steps.get(step, []) if o.seconds is not None and o.detail.get(key) == value)
+
     def errors(self, step: str) -> list:
         out = []
         for o in self.steps.get(step, []):
@@ -881,9 +1097,11 @@ class ClassResult:
 
 
 async def _observe(url: str, result: ClassResult, current: list, stop: asyncio.Event, ready: asyncio.Event,
-                   t_class: float, timeout: float, period: float) -> None:
-    """The observer of :func:`run_class`: types into M every ``period`` seconds until ``stop``."""
-    o = Student(url, name="observer", timeout=timeout)
+                   t_class: float, timeout: float, period: float, code: str | None = None, param: str = "M",
+                   values: tuple = OBSERVER_VALUES) -> None:
+    """The observer of :func:`run_class`: types ``values`` alternately into ``param`` every ``period``
+    seconds until ``stop`` (``code``: its join code in an exercise)."""
+    o = Student(url, name="observer", timeout=timeout, code=code, param_name=param)
     try:
         await o.open(timeout)
     except Exception as exc:  # noqa: BLE001 - recorded
@@ -898,7 +1116,7 @@ async def _observe(url: str, result: ClassResult, current: list, stop: asyncio.E
             at = time.perf_counter() - t_class
             step = current[0]
             try:
-                delay = await o.change_parameter("M", OBSERVER_VALUES[k % 2], timeout)
+                delay = await o.change_parameter(param, values[k % 2], timeout)
                 result.observer.append(ObserverSample(step, at, delay))
             except Exception as exc:  # noqa: BLE001 - recorded
                 result.observer.append(ObserverSample(step, at, None, f"{type(exc).__name__}: {exc}"))
@@ -917,10 +1135,10 @@ async def _observe(url: str, result: ClassResult, current: list, stop: asyncio.E
 
 
 async def _hog(url: str, kind: str, stop: asyncio.Event, ready: asyncio.Event, timeout: float,
-               log: list, t_class: float = 0.0) -> None:
+               log: list, t_class: float = 0.0, code: str | None = None) -> None:
     """One more student who takes what the app lets one student take: ``kind`` of :data:`HOGS`.
     ``log`` gets each press ("run at 12.3 s": seconds since ``t_class``) and an error."""
-    h = Student(url, name="hog", timeout=timeout)
+    h = Student(url, name="hog", timeout=timeout, code=code)
     try:
         await h.open(timeout)
         if kind == "study":
@@ -956,6 +1174,7 @@ async def _act(student: Student, step: str, start: float, timeout: float) -> Out
     types0 = dict(student.by_type)
     await asyncio.sleep(start)
     seconds, error = None, None
+    student.detail = {}
     try:
         seconds = await do_step(student, step, timeout)
     except Exception as exc:  # noqa: BLE001 - every failure is a result here
@@ -965,13 +1184,28 @@ async def _act(student: Student, step: str, start: float, timeout: float) -> Out
     new_errors = [e for e in student.errors[e0:] if not e.startswith("connection")]
     by_type = {k: v - types0.get(k, 0) for k, v in student.by_type.items() if v != types0.get(k, 0)}
     return Outcome(student.name, step, round(start, 4), seconds, error, student.messages_in - m0,
-                   student.bytes_in - b0, new_errors, by_type)
+                   student.bytes_in - b0, new_errors, by_type, dict(student.detail))
+
+
+def _students(url: str, n: int, timeout: float, codes: dict, param: str,
+              texts: Callable[[int], tuple[str, str]] | None, distinct: bool) -> list[Student]:
+    """The class of :func:`run_class`: "student 1", ..., each with their code and what they type."""
+    students = [Student(url, name=f"student {i + 1}", timeout=timeout, code=codes.get(f"student {i + 1}"),
+                        param_name=param) for i in range(n)]
+    for i, st in enumerate(students):
+        if texts is not None:
+            st.param_text, st.retype_text = texts(i)
+        elif distinct:
+            st.param_text, st.retype_text = str(6000 + 7 * i), str(6500 + 7 * i)
+    return students
 
 
 async def run_class(url: str, n: int, steps=STEPS, *, spread: float = 1.0, timeout: float = 180.0,
                     observer: bool = True, observer_period: float = 2.0, seed: int = 0,
                     on_step: Callable[[str, str], Any] | None = None, distinct: bool = False,
-                    hog: str | None = None) -> ClassResult:
+                    hog: str | None = None, codes: dict | None = None, param: str = "M",
+                    texts: Callable[[int], tuple[str, str]] | None = None,
+                    observer_values: tuple = OBSERVER_VALUES) -> ClassResult:
     """N students through ``steps`` together: within a step each starts at a random moment of the
     first ``spread`` seconds; the next step starts when all are done (or timed out). An observer
     session, opened first and not counted, types into M every ``observer_period`` seconds and
@@ -979,15 +1213,18 @@ async def run_class(url: str, n: int, steps=STEPS, *, spread: float = 1.0, timeo
     called around each step (the benchmark samples the server's CPU time there). ``distinct``:
     each student types values of M of their own (no two runs alike, nothing for the server to
     share). ``hog``: one more student, started before the class and not counted, doing ``hog``
-    (:data:`HOGS`) throughout."""
+    (:data:`HOGS`) throughout.
+
+    An exercise: ``codes`` maps each session's name ("student 1", ..., "observer", "hog") to its join
+    code; ``param`` is the field of tab 1 every session types into (the observer ``observer_values``),
+    ``texts(i)`` what student i (from 0) types at "param" and "retype" (:data:`EXERCISE_PARAM`,
+    :func:`exercise_texts`, :data:`EXERCISE_OBSERVER_VALUES`)."""
     steps = list(steps)
     if not steps or steps[0] != "open":
         raise ValueError(f"steps = {','.join(steps)} is not allowed: the first step must be open")
     rng = random.Random(seed)
-    students = [Student(url, name=f"student {i + 1}", timeout=timeout) for i in range(n)]
-    if distinct:
-        for i, st in enumerate(students):
-            st.param_text, st.retype_text = str(6000 + 7 * i), str(6500 + 7 * i)
+    codes = codes or {}
+    students = _students(url, n, timeout, codes, param, texts, distinct)
     if hog is not None and hog not in HOGS:
         raise ValueError(f"hog = {hog} is not allowed: use one of {', '.join(HOGS)}")
     result = ClassResult(n, {s: [] for s in steps}, [], {}, [])
@@ -998,11 +1235,13 @@ async def run_class(url: str, n: int, steps=STEPS, *, spread: float = 1.0, timeo
     obs_task = None
     if observer:
         obs_task = asyncio.ensure_future(
-            _observe(url, result, current, stop, obs_ready, t_class, timeout, observer_period))
+            _observe(url, result, current, stop, obs_ready, t_class, timeout, observer_period,
+                     code=codes.get("observer"), param=param, values=observer_values))
     on_step = on_step or (lambda _step, _when: None)
     hog_task, hog_ready = None, asyncio.Event()
     if hog is not None:
-        hog_task = asyncio.ensure_future(_hog(url, hog, stop, hog_ready, timeout, result.hog_log, t_class))
+        hog_task = asyncio.ensure_future(_hog(url, hog, stop, hog_ready, timeout, result.hog_log, t_class,
+                                              code=codes.get("hog")))
     try:
         if obs_task is not None:
             await obs_ready.wait()
