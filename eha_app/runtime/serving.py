@@ -220,6 +220,10 @@ def one_blas_thread() -> list[str]:
         from threadpoolctl import threadpool_info, threadpool_limits
     except ImportError:
         return []
+    # a library is limited only once it is loaded: scipy's own OpenBLAS comes with scipy.linalg
+    import numpy  # noqa: F401
+    import scipy.linalg  # noqa: F401
+
     threadpool_limits(limits=1, user_api="blas")
     return [lib["internal_api"] for lib in threadpool_info() if lib.get("user_api") == "blas"]
 

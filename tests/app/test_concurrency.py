@@ -100,11 +100,14 @@ def test_one_student_clicking_four_times_gets_one_result_and_the_others_theirs()
 def test_a_server_process_gives_each_blas_library_one_thread():
     """The students' runs are a server's parallel work: numpy's and scipy's OpenBLAS get one thread each
     (their own pool only spun beside the workers), in a process of its own here as in `eha serve`."""
-    script = ("import json, numpy, scipy.linalg\n"
+    # as `eha serve` starts: numpy loaded (the core), scipy.linalg (its own OpenBLAS) not yet
+    script = ("import json, sys\n"
+              "import eha_core.params\n"
               "from threadpoolctl import threadpool_info\n"
               "from eha_app.runtime.serving import one_blas_thread\n"
               "before = [i['num_threads'] for i in threadpool_info() if i['user_api'] == 'blas']\n"
               "names = one_blas_thread()\n"
+              "import scipy.linalg, scipy.optimize\n"
               "after = [i['num_threads'] for i in threadpool_info() if i['user_api'] == 'blas']\n"
               "print(json.dumps([names, before, after]))\n")
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120,
@@ -112,4 +115,4 @@ def test_a_server_process_gives_each_blas_library_one_thread():
     assert done.returncode == 0, done.stderr[-2000:]
     names, before, after = json.loads(done.stdout.strip().splitlines()[-1])
     assert names and set(names) <= {"openblas", "mkl", "blis"}
-    assert len(after) == len(before) == len(names) and after == [1] * len(after) and max(before) == 2
+    assert len(after) == len(names) and after == [1] * len(after) and max(before) == 2
