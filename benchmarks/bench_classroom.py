@@ -30,8 +30,9 @@ joins with its own code. The steps:
   gbtab    show tab 3's "Grey-box (nonlinear)"
   gb       "Run grey-box estimation" with the page's settings; done when the table arrived. An estimate
            that failed its checks (the red "may be wrong" box) is done, and counted: gb_ok=K/N passed
-  board    show "Model board" (built then, with the estimates made before); done when its fit and step
-           tables show every route's model (LS1, H1, GB1 when the grey-box passed its checks)
+  board    show "Model board" (built then, with the estimates made before); done when the view it opens
+           on, the fit on the validation record, shows every route's model in its table (LS1, H1, GB1
+           when the grey-box passed its checks); its other views are computed when their tabs are opened
   handin   "Hand in the grey-box estimates"; when the grey-box failed its checks that button is off and
            the least squares' are handed in instead; done when the verdict shows. handin_ok=K/N: the
            hand-ins stored (the route and the verdicts "k of 4 within tolerance" are printed under the step)

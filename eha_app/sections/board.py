@@ -37,6 +37,7 @@ from eha_core.board import (
     reference_models,
     validation_record,
 )
+from eha_core.errors import ComputationError
 
 from ..render import board_plots
 from ..render.layout import WRAP_TAB_HEADERS, side_by_side
@@ -118,6 +119,11 @@ class ModelBoard(Section):
         self._panes: dict = {}
         self.built = False
         self._batching = False          # models arriving together (receive_many): one job, one list
+        # On a page, the views out of sight are computed when first shown: opening the board computes the
+        # validation record and the fits (its first view); the Bode diagrams, steps and poles (and the
+        # nonlinear plant's step) wait for their tabs. Without a page everything is computed.
+        self._views_wanted = session.sight is None
+        self._plant_wanted = session.sight is None
         texts = self.initial_texts()
         self.form = Form(spec=[g.to_spec() for g in BOARD_FORM], values=texts, url_defaults=BOARD_DEFAULTS,
                          width=270, css_classes=[self.form_css], margin=(5, 10))
@@ -136,7 +142,7 @@ class ModelBoard(Section):
                                  dynamic=False, sizing_mode="stretch_width", css_classes=["eha-board-views"],
                                  stylesheets=[WRAP_TAB_HEADERS])
         # only the view in sight is drawn: the others when their tab is opened
-        watch(self.view_tabs, lambda _e: self.refresh(), "active")
+        watch(self.view_tabs, lambda _e: self._view_opened(), "active")
         self.area = pn.Column(self.view_tabs, sizing_mode="stretch_width")
         self.record_view = ResultView("board-record", self.area,
                                       run_hint="The board updates it by itself in a moment.")
@@ -205,19 +211,32 @@ class ModelBoard(Section):
             self._rebuild_list()
         return entry
 
+    def _view_opened(self) -> None:
+        """A view's tab was opened: what it needs is computed the first time, then it is drawn."""
+        key = self.shown_view()
+        if key != "fit" and not self._views_wanted:
+            self._views_wanted = True
+            self._compute_missing()
+        if key == "step" and not self._plant_wanted:
+            self._plant_wanted = True
+            self.update_record()
+        self.refresh()
+
     def _compute_missing(self) -> None:
-        """What is missing, in one job: the views of every model that has none, and its fit on the
-        current record (a model that has views but no fit gets only the fit). A newer request
-        replaces a waiting one, and takes its models along."""
+        """What is missing, in one job: the views of every model that has none (once a view that draws
+        them was opened), and its fit on the current record. A newer request replaces a waiting one,
+        and takes its models along."""
         if not self.built:
             return
         record = self.record
         amplitude = self.amplitude()
-        # a model of the plant steps as the nonlinear loop does: its step is the board's height's
-        todo = [(e, e.model, e.key not in self.views or self._step_stale(e, amplitude))
-                for e in self.entries if e.key not in self._failed
-                and (e.key not in self.views or self._step_stale(e, amplitude)
-                     or (record is not None and e.key not in self.fits))]
+
+        def needs_views(e) -> bool:
+            # a model of the plant steps as the nonlinear loop does: its step is the board's height's
+            return self._views_wanted and (e.key not in self.views or self._step_stale(e, amplitude))
+
+        todo = [(e, e.model, needs_views(e)) for e in self.entries if e.key not in self._failed
+                and (needs_views(e) or (record is not None and e.key not in self.fits))]
         if not todo:
             return
 
@@ -382,23 +401,27 @@ class ModelBoard(Section):
                                             else "a parameter on tab 1 is not valid")
             return
         record_key, plant_key = keys
-        if (record_key, plant_key) == (self.record_key, self.plant_key):
+        if self._current(keys):
             self._mark_record()
             return
         self.record_view.inputs_changed(keys, updating=True)
         if record_key != self.record_key:
             self._run_record(record_key)
-        if plant_key != self.plant_key:
+        if plant_key != self.plant_key and self._plant_wanted:
             self._run_plant(plant_key)
+
+    def _current(self, keys) -> bool:
+        """Are the record (and the plant's step, once the step view was opened) those of ``keys``?"""
+        return keys[0] == self.record_key and (not self._plant_wanted or keys[1] == self.plant_key)
 
     def _mark_record(self) -> None:
         keys = self.record_inputs()
-        if keys is not None and keys == (self.record_key, self.plant_key):
+        if keys is not None and self._current(keys):
             self.record_view.shown(keys)
 
     def _run_record(self, key) -> None:
         params, kp, seed = key
-        models = [(e, e.model) for e in self.entries if e.key in self.views]
+        models = [(e, e.model) for e in self.entries if e.key not in self._failed]
         noise_x, disturbance = self._measured()
 
         def compute(token):
@@ -488,7 +511,7 @@ class ModelBoard(Section):
         amplitude = self.amplitude()
         drawn = [e for e in entries if e.key in self.views]
         # a figure is made with its first data: an empty one makes Bokeh complain it cannot range it
-        ready = {"fit": self.record is not None and any(e.key in self.fits for e in drawn),
+        ready = {"fit": self.record is not None and any(e.key in self.fits for e in entries),
                  "bode": bool(drawn), "step": bool(drawn), "pz": bool(drawn)}
         # a view with nothing to draw shows a line instead of its figure (kept for later): Bokeh
         # cannot range a figure without data, and says so in the browser's console
@@ -530,15 +553,18 @@ class ModelBoard(Section):
 
     def snapshot(self) -> SectionSnapshot:
         entries = tuple(dataclasses.replace(e) for e in self.ticked())
+        noise_x, _ = self._measured()
         content = BoardSnapshot(entries, dict(self.views), dict(self.fits), self.record, self.record_key, self.plant,
-                                self.amplitude(), bool(self.bands.value), self.state.kp)
+                                self.amplitude(), bool(self.bands.value), self.state.kp,
+                                self.state.params if self.state.valid else None, noise_x)
         return SectionSnapshot(self.key, self.title, self.settings(), stale=self.is_stale(), content=content)
 
     @classmethod
     def report(cls, snapshot: SectionSnapshot, hidden=()) -> ReportPart | None:
         b = snapshot.content
-        if b is None or not b.entries or not b.views:
+        if b is None or not b.entries:
             return None
+        b = b.complete()
         parts = {"board_fit": board_plots.BoardFitFigure(), "board_bode": board_plots.BoardBodeFigure(),
                  "board_step": board_plots.BoardStepFigure(), "board_pz": board_plots.PoleZeroFigure()}
         parts["board_fit"].update(b.record, list(b.entries), b.fits)
@@ -578,6 +604,26 @@ class BoardSnapshot:
     amplitude: float
     bands: bool
     kp: float
+    params: object = None       # tab 1's actuator (None when not valid), for the plant's step
+    noise_x: float = 0.0
+
+    def complete(self) -> BoardSnapshot:
+        """The snapshot with the views a page computes only when their tab is opened (the Bode diagram,
+        the steps, the poles; the nonlinear plant's step): the report draws every view. In the
+        report's worker."""
+        views, plant = dict(self.views), self.plant
+        for e in self.entries:
+            if e.key not in views:
+                try:
+                    views[e.key] = model_views(e.model, amplitude_m=self.amplitude)
+                except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+                    continue                # its row says it could not be drawn, as on the page
+        if plant is None and self.params is not None:
+            try:
+                plant = nonlinear_step(self.params, self.kp, self.amplitude, noise_x=self.noise_x)
+            except (ValueError, ArithmeticError, ComputationError):
+                plant = None
+        return dataclasses.replace(self, views=views, plant=plant)
 
 
 def fit_table(entries, record, fits, record_key, kp: float, hidden=()) -> str:

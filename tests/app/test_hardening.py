@@ -152,6 +152,7 @@ def _every_job(page, nan_upload: bytes, round_: int):
         record.upload.filename, record.upload.value = "loop2.csv", freq.data_bytes("csv") + b"\n"
     record.run()
     board = page.show("board")                                    # on show: it computes as tab 1 changes
+    board.show_view("step")                                       # the views and the plant's step too
     session.state.set_text("kp", str(10 + round_))               # the board's record and step again
     board.fits.clear()                                            # every model's fit again: the views' job
     board._compute_missing()

@@ -37,3 +37,30 @@ def test_without_a_page_every_section_is_in_sight():
     key = board.record_key
     session.state.set_text("M", "7000")
     assert session.in_sight("board") and board.record_key != key and board.record_key[0].M == 7000
+
+
+def test_the_board_computes_each_view_when_its_tab_is_first_opened_and_the_report_has_them_all():
+    page = create_app(AppState())
+    page.show("least_squares").run()
+    page.show("frequency").run()
+    board = page.show("board")                                      # opens on the fit on the validation record
+    models = list(board.entries)
+    assert all(e.key in board.fits for e in models) and board.record is not None
+    assert board.views == {} and board.plant is None and set(board.figures) == {"fit"}
+    assert board.record_view.status == "current"
+    bode = board.show_view("bode")
+    assert set(board.views) == {e.key for e in models} and board.plant is None
+    assert len(bode.curves.data["xs"]) == len(board.ticked())
+    board.show_view("step")
+    assert board.plant is not None and "nonlinear plant" in board.tables["step"].object
+    assert board.record_view.status == "current"
+    # a page that never opened them: the report draws every view all the same
+    other = create_app(AppState())
+    other.show("least_squares").run()
+    fresh = other.show("board")
+    assert fresh.views == {} and fresh.plant is None
+    part = type(fresh).report(fresh.snapshot())
+    assert {"board_fit", "board_bode", "board_step", "board_pz"} <= set(part.figures)
+    assert "nonlinear plant" in part.html
+    complete = fresh.snapshot().content.complete()
+    assert set(complete.views) == {e.key for e in complete.entries} and complete.plant is not None
