@@ -46,7 +46,8 @@ are known here for the sections the app has now:
 - ``freq-*`` (data, fit, bode, validation, residuals, summary): tab 1's parameters and Kp and the
   frequency form; ``freq-excitation`` only the form's excitation fields (a preview, re-run by itself);
 - ``freq-record``: the student's record, its range and trend, and the form's model settings;
-- ``board-record``: tab 1's parameters and Kp and the board's form (re-run by itself).
+- ``board-record``: tab 1's parameters and Kp and the board's form (re-run by itself; its step height only
+  once the board's step view was opened on the page: the board computes steps from then on).
 
 Run it against a running server, or let it start one::
 
@@ -1053,6 +1054,7 @@ class Walker:
     async def _reopen(self, query: dict | None = None, *, why: str = "a new page opens after a lost one") -> None:
         """A new page (with ``query``, else the last address); if it does not open, one without an address
         (the student clears it), so that one page that cannot open does not end the walk."""
+        self.board_step_opened = False          # a new page: the board's step view not opened yet
         for attempt in (self.query if query is None else query, {}):
             try:
                 await self.s.close()
@@ -1325,6 +1327,8 @@ class Walker:
 
         async def show():
             await s.set_property(tabs, "active", index)
+            if css == BOARD_VIEWS and index == 2:
+                self.board_step_opened = True   # the board computes its steps from now on (see signature)
         return Action("figure-tab", f"show {css.replace('eha-', '')} tab {index + 1}", show,
                       spec={"do": "figure-tab", "css": css, "index": index})
 
@@ -2173,6 +2177,9 @@ class Walker:
             tab1, values = self._tab1_key(with_kp), self._values(form)
             if tab1 is None or values is None or self._form_errors(form):
                 return None
+            if view == "board-record" and not getattr(self, "board_step_opened", False):
+                # the board computes the steps (of board_step's height) once its step view was opened
+                values = {k: v for k, v in values.items() if k != "board_step"}
             return tab1, tuple(values.items())
         if view == "lse":
             tab1, values = self._tab1_key(False), self._values(LSE_FORM)
