@@ -349,8 +349,8 @@ class ModelBoard(Section):
             # tab 1 changed while the board is not on show: it is computed again once it is (a student
             # typing on tab 1 recomputes nothing here), and says meanwhile that it is out of date
             keys = self.record_inputs()
-            if self.built and keys != (self.record_key, self.plant_key):
-                self.record_view.inputs_changed(keys, why="" if keys is not None else
+            if self.built and (keys is None or not self._current(keys)):
+                self.record_view.inputs_changed(self._view_keys(keys), why="" if keys is not None else
                                                 "a parameter on tab 1 is not valid")
             self.session.when_in_sight(self.key, self._plant_changed)
             return
@@ -404,11 +404,16 @@ class ModelBoard(Section):
         if self._current(keys):
             self._mark_record()
             return
-        self.record_view.inputs_changed(keys, updating=True)
+        self.record_view.inputs_changed(self._view_keys(keys), updating=True)
         if record_key != self.record_key:
             self._run_record(record_key)
         if plant_key != self.plant_key and self._plant_wanted:
             self._run_plant(plant_key)
+
+    def _view_keys(self, keys):
+        """What the board's results are computed from, as its out-of-date mark compares them: the plant's
+        step (its height) only once the step view was opened (None: the inputs are not valid)."""
+        return None if keys is None else (keys[0], keys[1] if self._plant_wanted else None)
 
     def _current(self, keys) -> bool:
         """Are the record (and the plant's step, once the step view was opened) those of ``keys``?"""
@@ -417,7 +422,7 @@ class ModelBoard(Section):
     def _mark_record(self) -> None:
         keys = self.record_inputs()
         if keys is not None and self._current(keys):
-            self.record_view.shown(keys)
+            self.record_view.shown(self._view_keys(keys))
 
     def _run_record(self, key) -> None:
         params, kp, seed = key
@@ -448,7 +453,7 @@ class ModelBoard(Section):
         def fail(message):
             self.note.object = (f"<span class='eha-warn'>The validation record failed: {html.escape(message)}"
                                 "</span>")
-            self.record_view.inputs_changed(self.record_inputs(), why="the validation record failed")
+            self.record_view.inputs_changed(self._view_keys(self.record_inputs()), why="the validation record failed")
 
         self.record_runner.run("board: validation record", compute, show, fail=fail)
 
