@@ -13,8 +13,11 @@ response with its figures (and the nonlinear plant's under the same
 controller), and the poles and zeros with their 95 % regions. Models can be
 renamed and deleted.
 
-The core computes each model's curves once, in a worker, when it is added
-(:func:`eha_core.board.model_views`); ticking only replaces the views' data.
+The core computes each model's curves once, in a worker (:func:`eha_core.board.model_views`);
+ticking only replaces the views' data. On a page, work waits until someone looks: the board computes
+the view it opens on (the fit on the validation record) when it is shown, the Bode diagram, steps and
+poles (and the nonlinear plant's step) when their tabs are first opened, and a change of tab 1 while
+the board is not on show when it is shown again (it says meanwhile that it is out of date).
 """
 
 from __future__ import annotations
