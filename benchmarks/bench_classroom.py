@@ -108,37 +108,23 @@ import tempfile
 import time
 from pathlib import Path
 
-# run as a script, this file's folder is on the path: the client is a sibling module
-if __package__:
-    from .classroom_client import (
-        EXERCISE_OBSERVER_VALUES,
-        EXERCISE_PARAM,
-        EXERCISE_STEPS,
-        HOGS,
-        STEP_NAMES,
-        STEPS,
-        ClassResult,
-        Student,
-        do_step,
-        exercise_texts,
-        run_class,
-        wait_served,
-    )
-else:
-    from classroom_client import (
-        EXERCISE_OBSERVER_VALUES,
-        EXERCISE_PARAM,
-        EXERCISE_STEPS,
-        HOGS,
-        STEP_NAMES,
-        STEPS,
-        ClassResult,
-        Student,
-        do_step,
-        exercise_texts,
-        run_class,
-        wait_served,
-    )
+# run as a script (python benchmarks/bench_classroom.py) the project's folder is not on the path: put it there
+if not __package__:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchmarks.classroom_client import (  # noqa: E402 - after the path is set
+    EXERCISE_OBSERVER_VALUES,
+    EXERCISE_PARAM,
+    EXERCISE_STEPS,
+    HOGS,
+    STEP_NAMES,
+    STEPS,
+    ClassResult,
+    Student,
+    do_step,
+    exercise_texts,
+    run_class,
+    wait_served,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 _TICK = os.sysconf("SC_CLK_TCK")

@@ -998,37 +998,23 @@ HOGS = ("study", "spam")
 OBSERVER_VALUES = ("5000", "5500")
 
 
+#: The steps that are one action of :class:`Student` (its method's name).
+_ACTIONS = {"open": "open", "tab2": "show_simulation", "compare": "compare_both", "tab3": "show_identification",
+            "lse": "least_squares", "freqtab": "show_frequency", "freq": "frequency_experiment",
+            "gbtab": "show_greybox", "gb": "greybox", "board": "model_board", "handin": "hand_in"}
+
+
 async def do_step(student: Student, step: str, timeout: float | None = None) -> float:
     """One step of the workflow (:data:`STEPS`, :data:`EXERCISE_STEPS`) for one student; returns its
     seconds. What a step notes beside (the grey-box's checks, the hand-in's route) is in ``student.detail``."""
-    if step == "open":
-        return await student.open(timeout)
     if step == "param":
         return await student.change_parameter(student.param_name, student.param_text, timeout)
     if step == "retype":
         # tab 1 once every tab holds results: each section hears of the change
         await student.show_tab(0, "eha-derived", timeout)
         return await student.change_parameter(student.param_name, student.retype_text, timeout)
-    if step == "tab2":
-        return await student.show_simulation(timeout)
-    if step == "compare":
-        return await student.compare_both(timeout)
-    if step == "tab3":
-        return await student.show_identification(timeout)
-    if step == "lse":
-        return await student.least_squares(timeout)
-    if step == "freqtab":
-        return await student.show_frequency(timeout)
-    if step == "freq":
-        return await student.frequency_experiment(timeout)
-    if step == "gbtab":
-        return await student.show_greybox(timeout)
-    if step == "gb":
-        return await student.greybox(timeout)
-    if step == "board":
-        return await student.model_board(timeout)
-    if step == "handin":
-        return await student.hand_in(timeout)
+    if step in _ACTIONS:
+        return await getattr(student, _ACTIONS[step])(timeout)
     raise ValueError(f"step = {step} is not allowed: use one of {', '.join(EXERCISE_STEPS)}")
 
 

@@ -646,13 +646,18 @@ class Page(pn.viewable.Viewer):
         watch(sub.lazy.tabs, lambda _e: self.session.sight_changed(), "active")
         return sub
 
+    def _placed(self, key: str):
+        """The placement of section ``key`` on the page (of the section it is within, if any)."""
+        placement = self.session.registry.get(key)
+        while placement.within is not None:
+            placement = self.session.registry.get(placement.within)
+        return placement
+
     def _in_sight(self, key: str) -> bool:
         """Is section ``key`` on show: its tab open and, on a tab of sub-tabs, its sub-tab?"""
         if self.tabs is None:
             return False
-        placement = self.session.registry.get(key)
-        while placement.within is not None:
-            placement = self.session.registry.get(placement.within)
+        placement = self._placed(key)
         if self.tabs.active_name != placement.tab:
             return False
         content = self.tabs.built.get(placement.tab)
@@ -662,9 +667,7 @@ class Page(pn.viewable.Viewer):
 
     def show(self, key: str):
         """Show section ``key`` (its tab and sub-tab), made now if needed; returns it."""
-        placement = self.session.registry.get(key)
-        while placement.within is not None:
-            placement = self.session.registry.get(placement.within)
+        placement = self._placed(key)
         self.tabs.tabs.active = self.tabs.names.index(placement.tab)
         content = self.tabs.build(placement.tab)
         if isinstance(content, SubTabs):

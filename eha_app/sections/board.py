@@ -121,7 +121,6 @@ class ModelBoard(Section):
         self.figures: dict = {}
         self._panes: dict = {}
         self.built = False
-        self._batching = False          # models arriving together (receive_many): one job, one list
         # On a page, the views out of sight are computed when first shown: opening the board computes the
         # validation record and the fits (its first view); the Bode diagrams, steps and poles (and the
         # nonlinear plant's step) wait for their tabs. Without a page everything is computed.
@@ -179,24 +178,21 @@ class ModelBoard(Section):
         """H1, H2, ... LS1, ...: a short name per kind, in the order the estimates were made."""
         return f"{prefix}{next(self._counters.setdefault(prefix, itertools.count(1)))}"
 
-    def receive(self, model: BoardModel) -> None:
+    def receive(self, model: BoardModel, *, settle: bool = True) -> None:
         """An estimate posted by another section; its ``name`` is its kind's prefix (``"LS"``)."""
-        self.add(dataclasses.replace(model, name=self.next_name(model.name)))
+        self.add(dataclasses.replace(model, name=self.next_name(model.name)), settle=settle)
 
     def receive_many(self, items: list) -> None:
         """The estimates made before the board was first shown: their views in one job, one list."""
-        self._batching = True
-        try:
-            for item in items:
-                self.receive(item)
-        finally:
-            self._batching = False
+        for item in items:
+            self.receive(item, settle=False)
         self._compute_missing()
         self._rebuild_list()
 
-    def add(self, model: BoardModel) -> BoardEntry | None:
+    def add(self, model: BoardModel, *, settle: bool = True) -> BoardEntry | None:
         """Put ``model`` on the board, ticked if it is stable (an unstable one's curves would flatten the
-        others'); its views are computed in a worker."""
+        others'); its views are computed in a worker. ``settle=False``: the caller computes and lists the
+        models it adds together, once."""
         if len([e for e in self.entries if e.kind != "reference"]) >= MAX_MODELS:
             self.note.object = (f"<span class='eha-warn'>The board holds {MAX_MODELS} models: delete one to keep "
                                 f"{html.escape(model.name)}.</span>")
@@ -206,7 +202,7 @@ class ModelBoard(Section):
         self.entries.append(entry)
         self.note.object = ("" if stable else f"<span class='eha-warn'>{html.escape(model.name)} is unstable: "
                                               "it is on the board unticked.</span>")
-        if not self._batching:
+        if settle:
             if self.session.in_sight(self.key):
                 self._compute_missing()
             else:                       # its curves once the board is on show
