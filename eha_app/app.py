@@ -477,7 +477,12 @@ class Page(pn.viewable.Viewer):
         from .guide import Guide, guide_steps
 
         self.guide = Guide(self.show, steps=guide_steps(session.registry),
-                           start=active == 0 and "tab" not in session.query)
+                           start=active == 0 and "tab" not in session.query, done=self._step_done,
+                           finish=lambda: self.prepare_report(), lab=bool(session.student))
+        # "Next" is offered once the step's result is on the page: the guide hears of each result shown
+        for section in session.built():
+            self._guide_hears(section)
+        session.when_built(self._guide_hears)
         watch(self.tabs.tabs, lambda _e: self._guide_follows(), "active")
         first_tab = names[active]
         if served_document() is not None:
@@ -624,6 +629,20 @@ class Page(pn.viewable.Viewer):
         session.release()
         self.tabs = None
         self.guide = None
+
+    def _step_done(self, key: str) -> bool | None:
+        section = self.session.section(key)
+        return None if section is None else section.guide_done()
+
+    def _guide_hears(self, section) -> None:
+        """The guide says the step again when ``section`` shows a result (it may offer "Next" then)."""
+        def said() -> None:
+            if self.guide is not None:
+                self.guide.refresh()
+        for view in section.result_views():
+            view.on_shown.append(said)
+        watch(section, lambda _e: said(), "result")
+        said()
 
     def _guide_follows(self) -> None:
         """The guide line says which section is shown (the student may have come by any way)."""

@@ -96,7 +96,8 @@ class ModelBoard(Section):
     #: Estimates kept for a board not opened yet (a student deletes one to keep more).
     max_mail = MAX_MODELS
     guide_step = GuideStep("3. Model board", "Step 3, comparison: every model you made, on one validation record.",
-                           "the model board")
+                           "the model board", "Each route's run puts its model here: tick the ones to compare.",
+                           runs=False)
     form_css = "eha-board-form"
     # No kept work of its own (Section.kept_work): a student who joins again gets the board filled by the
     # runs computed again, each posting its model as a click does; names typed, ticks and deletions are not kept.
@@ -554,6 +555,9 @@ class ModelBoard(Section):
     # -- the section's protocol -----------------------------------------------------------------
     def result_views(self) -> list:
         return [self.record_view]
+
+    def guide_done(self) -> bool:
+        return True             # no run of its own: the routes' runs fill it
 
     def snapshot(self) -> SectionSnapshot:
         entries = tuple(dataclasses.replace(e) for e in self.ticked())

@@ -194,7 +194,8 @@ class FrequencyPanel(Section):
     defaults = FREQ_DEFAULTS
     guide_step = GuideStep(
         "3. Transfer function", "Step 3, frequency domain: excite the closed loop, estimate Ĥ(s) (Figs. 8-13) and back "
-        "out the parameters (eqs. 26-27).", "3. Identification: transfer function")
+        "out the parameters (eqs. 26-27).", "3. Identification: transfer function",
+        "Press <b>Run experiment and estimate</b>.")
     form_css = "eha-freq-form"
     content_css = "eha-freq-summary"
     run_buttons = ("Run experiment and estimate",)

@@ -262,7 +262,8 @@ class GreyBoxPanel(Section):
     defaults = GB_DEFAULTS
     guide_step = GuideStep(
         "3. Grey-box", "Step 3, the nonlinear model: estimate the physical parameters from what is measured (output "
-        "error, as nlgreyest) and compare the three routes side by side.", "3. Identification: grey-box")
+        "error, as nlgreyest) and compare the three routes side by side.", "3. Identification: grey-box",
+        "Press <b>Run grey-box estimation</b>.")
     form_css = "eha-gb-form"
     run_buttons = ("Run grey-box estimation",)
 

@@ -242,7 +242,8 @@ class LeastSquaresPanel(Section):
     defaults = LSE_DEFAULTS
     guide_step = GuideStep(
         "3. Least squares", "Step 3, time domain: estimate M, B, A<sub>f</sub>, d<sub>0</sub> and β<sub>e</sub> from "
-        "the sensors under a disturbance (eqs. 15-18, Tables 3-4).", "3. Identification: least squares")
+        "the sensors' records (eqs. 15-18, Tables 3-4); the form chooses the disturbance (none to start).",
+        "3. Identification: least squares", "Press <b>Run least squares</b>.")
     form_css = "eha-lse-form"
     content_css = "eha-lse-table"
     run_buttons = ("Run least squares", "Run all four scenarios (Table 4)")

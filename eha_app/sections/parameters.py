@@ -87,7 +87,8 @@ class ParametersTab(Section):
     defaults = default_texts()
     guide_step = GuideStep(
         "1. Parameters", "Step 1: the actuator's physical parameters (Table 3) and initial state. P(s), H(s) and the "
-        "linearised model follow as you type.", "1. Parameters")
+        "linearised model follow as you type.", "1. Parameters",
+        "Type into a field: what is derived from it follows at once.", runs=False)
     form_css = "eha-param-form"
 
     def __init__(self, session, **kwargs):
@@ -119,6 +120,9 @@ class ParametersTab(Section):
     def load(self, texts) -> None:
         self.load_unbuilt(self.session, texts)
         self.form.values = self._texts()
+
+    def guide_done(self) -> bool:
+        return True             # no run: what is derived follows the fields
 
     def snapshot(self) -> SectionSnapshot:
         s = self.state

@@ -286,7 +286,7 @@ class SimulationTab(Section):
     defaults = DEFAULT_TEXTS
     guide_step = GuideStep(
         "2. Simulation", "Step 2: drive the nonlinear and the linearised model with the paper's four cases (Figs. 2-7) "
-        "and compare them.", "2. Simulation")
+        "and compare them.", "2. Simulation", "Press <b>Compare both</b> (after a paper case, if you like).")
     form_css = "eha-sim-form"
     #: its plots' status line, made once the plots are drawn (the form comes before them)
     content_css = "eha-sim-info"
@@ -636,6 +636,12 @@ class SimulationTab(Section):
     # -- the section's protocol -----------------------------------------------------------
     def result_views(self) -> list:
         return [self.view]
+
+    def guide_done(self) -> bool:
+        """The step is a comparison: done once both models' run is on the page (the paper's Fig. 2, drawn
+        when the tab opens, is the nonlinear model's)."""
+        key = self.view.computed_from
+        return isinstance(key, tuple) and len(key) > 2 and key[2] == "both"
 
     def run_cost(self, *, model: str = "both") -> RunCost | None:
         """Open-loop runs: every case of the request, with each model of ``model``."""

@@ -164,7 +164,7 @@ class StudyPanel(Section):
     defaults = STUDY_DEFAULTS
     guide_step = GuideStep(
         "3. Study", "Beyond the paper: repeat an estimation over many seeds to see bias and how honest the intervals "
-        "are.", "the study over seeds")
+        "are.", "the study over seeds", "Press <b>Run the study</b>.")
     form_css = "eha-study-form"
     run_buttons = ("Run the study",)
     # No kept work (Section.kept_work): a study is closed in an exercise, the only place work is kept.

@@ -90,6 +90,8 @@ class ResultView:
         self.updating_marker = updating_marker
         self.computed_from: Hashable | None = None
         self.status = "empty"
+        #: called with no argument after every :meth:`shown` (the guide offers "Next" once a result is there)
+        self.on_shown: list = []
         self.banner = pn.pane.HTML("", visible=False, sizing_mode="stretch_width",
                                    css_classes=["eha-stale-note", f"eha-stale-note-{name}"], margin=(0, 5))
         self._set_classes()
@@ -99,6 +101,8 @@ class ResultView:
         """The view now shows results computed from ``key``."""
         self.computed_from = key
         self._set("current", "")
+        for fn in list(self.on_shown):
+            fn()
 
     def inputs_changed(self, key: Hashable | None, *, updating: bool = False, why: str = "") -> None:
         """The inputs now say ``key`` (None: they are not valid). ``updating``: a run with

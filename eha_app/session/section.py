@@ -76,12 +76,17 @@ class ReportPart:
 @dataclass(frozen=True)
 class GuideStep:
     """A section's stop on the guide's way through the steps: its short name in the guide's trail,
-    what is done there (HTML, the guide line's sentence) and the label of the button that leads to it
-    ("Next: ..."). The guide (:mod:`eha_app.guide`) stops at every section that has one, in page order."""
+    what is done there (HTML, the guide line's sentence), the label of the button that leads to it
+    ("Next: ..."), ``press``: what to do there, naming the button (HTML; the guide says it until
+    the step is done, :meth:`Section.guide_done`), and ``runs``: False for a step with no run of its
+    own (it says ``press`` throughout). The guide (:mod:`eha_app.guide`) stops at every section that
+    has one, in page order."""
 
     short: str
     what: str
     go: str
+    press: str = ""
+    runs: bool = True
 
 
 @dataclass(frozen=True)
@@ -199,6 +204,13 @@ class Section(pn.viewable.Viewer):
     def result_views(self) -> list:
         """The section's :class:`~eha_app.session.freshness.ResultView`s (none by default)."""
         return []
+
+    def guide_done(self) -> bool:
+        """Is the guide's step here done, its result on the page? (The guide offers "Next" then.) By
+        default: a result was shown in one of its views, or it has one; a section whose step asks for
+        no run says True."""
+        return self.result is not None or any(getattr(v, "computed_from", None) is not None
+                                               for v in self.result_views())
 
     def snapshot(self) -> SectionSnapshot:
         """What the section shows now; call under the page's lock. Subclasses add ``content``."""

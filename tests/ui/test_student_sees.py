@@ -132,9 +132,17 @@ def test_8_a_first_time_student_reaches_the_frequency_identification(open_page):
     page = open_page()
     page.wait_for_selector(".eha-start >> text=Three steps", timeout=20_000)
     page.get_by_role("button", name="Start here").click()
-    for _ in range(3):
-        page.locator(".eha-guide-next button").click()
-        page.wait_for_timeout(300)
+    nxt = page.locator(".eha-guide-next button")
+    nxt.click()                                         # tab 1 asks for no run: on to tab 2
+    page.wait_for_selector(".eha-guide-where >> text=Press Compare both", timeout=20_000)
+    assert nxt.is_disabled()                            # "Next" once the step's result is on the page
+    page.get_by_role("button", name="Compare both").click()
+    page.wait_for_selector(".eha-guide-next button:not([disabled])", timeout=60_000)
+    nxt.click()
+    page.wait_for_selector(".eha-guide-where >> text=Press Run least squares", timeout=20_000)
+    page.get_by_role("button", name="Run least squares").click()
+    page.wait_for_selector(".eha-guide-next button:not([disabled])", timeout=60_000)
+    nxt.click()
     page.wait_for_selector(".eha-guide-where >> text=Step 3, frequency domain", timeout=20_000)
     page.wait_for_selector("button:has-text('Run experiment and estimate')", timeout=60_000)
     assert page.locator(".eha-start").first.is_hidden()
