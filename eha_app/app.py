@@ -506,8 +506,11 @@ class Page(pn.viewable.Viewer):
             sizing_mode="stretch_width")
         self.result_pane = pn.pane.HTML("", visible=False, sizing_mode="stretch_width",
                                         css_classes=["eha-student-result"])
-        # the result pane only in an exercise: a page without one sends one model fewer
-        shown = [self.result_pane] if session.student else []
+        # the lab's rules (deadline, hand-ins left, tolerances, feedback), always in view in an exercise
+        self.rules_pane = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-lab-rules-pane"],
+                                       margin=(0, 10))
+        # the result and rules panes only in an exercise: a page without one sends two models fewer
+        shown = [self.rules_pane, self.result_pane] if session.student else []
         self.layout.objects = [self.connection, header, *shown, self._settings_row(), self.guide.start,
                                self.guide.line, self.tabs.tabs]
         self._guide_follows()
@@ -524,6 +527,7 @@ class Page(pn.viewable.Viewer):
         state, doc = self.session.state, served_document()
         self.page_token = secrets.token_hex(8)
         self._polling = False
+        self._touched = time.monotonic()            # the join itself says "here now"
         self._poller = None
         # the page's presence is in the store (until then its live page is another's, which this page must
         # not give way to); written by the first look, and tried again at every look until it is
@@ -532,6 +536,8 @@ class Page(pn.viewable.Viewer):
         self.doc = doc
         _live_pages[self.page_token] = weakref.ref(self)
         student, store, token = state.student, state.handins, self.page_token
+        # after a hand-in the rules are read again at once (the attempts left, the button off after the last)
+        self.session.after_handin.append(self.check_result)
         self.check_result()
         if doc is not None:
             # the teacher's reveal (or the deadline), or this id opened elsewhere, reaches the page within seconds
@@ -560,6 +566,8 @@ class Page(pn.viewable.Viewer):
     #: How long one look waits for the store to note the page (a lock held by another program: the
     #: next look tries again) [s].
     NOTE_PATIENCE_S = 2.0
+    #: How often an open page writes that its student is still here [s].
+    TOUCH_S = 60.0
 
     def check_result(self) -> None:
         """Note the page as the student's live one (until that is done), show the student's result once
@@ -574,15 +582,26 @@ class Page(pn.viewable.Viewer):
         self._polling = True
         exercise, student, store, token = state.exercise, state.student, state.handins, self.page_token
         noted, patience = self._noted, self.NOTE_PATIENCE_S
+        # "last seen" on the teacher's dashboard moves while the page is open: a write once a minute, not
+        # at every look (thirty pages' looks every 5 s would be six writes a second)
+        touch = noted and time.monotonic() - self._touched >= self.TOUCH_S
+        if touch:
+            self._touched = time.monotonic()
 
         def read():
             before = None if noted else store.seen(student, token, patience=patience)
+            if touch and store is not None:
+                store.touch(student, token)
             live = store.live_page(student) if store is not None else token
-            return before, live, result_for_student(exercise, student, store)
+            if store is None:
+                return before, live, "", None, 0
+            control = store.control()
+            count = len(store.of(student))
+            return before, live, result_for_student(exercise, student, store, control), control, count
 
         def show(out) -> None:
             self._polling = False
-            before, live, text = out
+            before, live, text, control, count = out
             if before is not None:
                 self._took_over(before)
             if live and live != token and self._noted:
@@ -591,6 +610,8 @@ class Page(pn.viewable.Viewer):
             if text != self.result_pane.object:
                 self.result_pane.object = text
                 self.result_pane.visible = bool(text)
+            if control is not None:
+                self._rules_read(exercise, control, count)
 
         def failed(exc: Exception) -> None:
             # a damaged or busy store keeps no student out (hand-ins say so when it matters): tried again next time
@@ -602,6 +623,23 @@ class Page(pn.viewable.Viewer):
                 log.warning("a student's result could not be read: %s", exc)
 
         store_calls.call(read, show, fail=failed, doc=self.doc)
+
+    def _rules_read(self, exercise, control: dict, count: int) -> None:
+        """The lab's rules as the store says them now: the rules line, and the hand-in buttons off when
+        hand-ins are refused (no attempt left, the deadline passed, closed by the teacher)."""
+        from .sections.handin import lab_rules_html
+
+        session = self.session
+        rules = lab_rules_html(exercise, control, count)
+        if rules != self.rules_pane.object:
+            self.rules_pane.object = rules
+        why = exercise.refusal(count, open_=control.get("open", "1") == "1", deadline=control.get("deadline"),
+                               revealed=control.get("revealed") == "1")
+        changed = why != session.lab_refusal or count != session.handins_used
+        session.lab_refusal, session.handins_used = why, count
+        if changed:
+            for box in session.handin_boxes:
+                box.rules_changed()
 
     def give_way(self) -> None:
         """The student's id was opened on another page: this one stops (its runs, its saves, its

@@ -38,6 +38,7 @@ import time
 import panel as pn
 
 from eha_core.exercise import FEEDBACK, METHODS, parse_deadline
+from eha_core.param_table import FIELD_INFO
 
 from .render.tables import SYMBOLS_HTML, UNITS
 from .runtime import store_calls
@@ -88,16 +89,18 @@ def _when(stamp: str, today: str) -> str:
 
 
 def _param_head(exercise, name: str) -> str:
-    unit = UNITS.get(name, "SI")
+    unit = FIELD_INFO[name].display_unit if name in FIELD_INFO else UNITS.get(name, "SI")
     return (f"{SYMBOLS_HTML.get(name, _esc(name))} <span class='small'>[{_esc(unit)}] "
             f"±{100 * exercise.tolerance_of(name):g} %</span>")
 
 
-def _param_cell(value, error, verdict, count: int) -> str:
-    """A value with its error against the truth and its verdict, in one cell."""
+def _param_cell(name: str, value, error, verdict, count: int) -> str:
+    """A value (in the unit its column names, as the students' pages write it) with its error against
+    the truth and its verdict, in one cell."""
     if not count:
         return "<td class='num dim'>—</td>"
-    shown = f"{value:.6g}" if isinstance(value, (int, float)) else "<span class='dim'>none</span>"
+    scale = FIELD_INFO[name].display_scale if name in FIELD_INFO else 1.0
+    shown = f"{value / scale:.6g}" if isinstance(value, (int, float)) else "<span class='dim'>none</span>"
     err = f"{100 * error:+.2f} %" if isinstance(error, (int, float)) else "—"
     mark = "<span class='ok'>✓</span>" if verdict else "<span class='no'>✗</span>"
     return f"<td class='num'>{shown} <span class='small {'ok' if verdict else 'no'}'>{err}</span> {mark}</td>"
@@ -165,6 +168,7 @@ class Dashboard(pn.viewable.Viewer):
         self.control: dict[str, str] = {}
         self.rows = []
         self.handins = []
+        self.refusals = []
         self.rules = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-rules"],
                                    stylesheets=[CSS])
         self.summary = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-summary"],
@@ -226,7 +230,7 @@ class Dashboard(pn.viewable.Viewer):
     def _read(self) -> tuple:
         control = self.store.control()
         return (self.store.version(), self._passed(control)), control, class_rows(self.exercise, self.store), \
-            self.store.all()
+            self.store.all(), self.store.refusals()
 
     def poll(self) -> bool:
         """Read the database now and draw what changed (True: something did). The page's periodic
@@ -265,7 +269,7 @@ class Dashboard(pn.viewable.Viewer):
         store_calls.call(self._read, self._show, fail=self._failed, doc=self.doc)
 
     def _show(self, data: tuple) -> None:
-        self._key, self.control, self.rows, self.handins = data
+        self._key, self.control, self.rows, self.handins, self.refusals = data
         with held():
             self._draw_rules()
             self._draw_roster()
@@ -338,21 +342,33 @@ class Dashboard(pn.viewable.Viewer):
         self.summary.object = (f"<h3 style='margin:8px 0 2px'>The class</h3><span class='small'>{joined}{of} joined, "
                                f"{handed} handed in, {sum(r.count for r in rows)} hand-ins in all; updated "
                                f"{time.strftime('%H:%M:%S')}</span>")
-        head = ("<tr><th>id</th><th>name</th><th>joined</th><th>last seen</th><th>hand-ins</th><th>last</th>"
-                "<th>method</th>" + "".join(f"<th>{_param_head(ex, n)}</th>" for n in ex.hide)
-                + f"<th>score ({_esc(ex.score_rule)})</th><th>data</th><th>conditions</th><th>pages</th></tr>")
+        # two groups kept apart: the last hand-in (its time, route and values) and the score (the best and
+        # the last hand-in's, the one the exercise's rule counts in bold)
+        counts = {"best": "best", "last": "last"}
+        group = (f"<tr><th colspan='6'>student</th><th colspan='{2 + len(ex.hide)}' class='group'>last hand-in</th>"
+                 f"<th colspan='2' class='group'>score (the {_esc(ex.score_rule)} counts)</th>"
+                 "<th colspan='3'></th></tr>")
+        head = group + ("<tr><th>id</th><th>name</th><th>joined</th><th>last seen</th><th>hand-ins</th><th>refused</th>"
+                        "<th>time</th><th>route</th>" + "".join(f"<th>{_param_head(ex, n)}</th>" for n in ex.hide)
+                        + "".join(f"<th>{'<b>' + k + '</b>' if k == ex.score_rule else k}</th>" for k in counts)
+                        + "<th>data</th><th>conditions</th><th>pages</th></tr>")
         body = []
         for r in rows:
-            cells = "".join(_param_cell(r.estimates.get(n), r.errors.get(n), r.verdicts.get(n), r.count)
+            cells = "".join(_param_cell(n, r.estimates.get(n), r.errors.get(n), r.verdicts.get(n), r.count)
                             for n in ex.hide)
-            score = f"{r.score:.2f}" if r.count else "<span class='dim'>—</span>"
+            scores = "".join(
+                ("<td class='num dim'>—</td>" if not r.count else
+                 f"<td class='num'>{'<b>' if k == ex.score_rule else ''}{getattr(r, k):.2f}"
+                 f"{'</b>' if k == ex.score_rule else ''}</td>") for k in counts)
+            refused = (f"<td class='num no' title='{_esc('; '.join(r.refused))}'>{len(r.refused)}</td>" if r.refused
+                       else "<td class='num dim'>0</td>")
             body.append(f"<tr><td>{_esc(r.id)}</td><td>{_esc(r.name)}</td><td>{_when(r.joined, today)}</td>"
-                        f"<td>{_when(r.last_seen, today)}</td><td class='num'>{r.count}</td>"
+                        f"<td>{_when(r.last_seen, today)}</td><td class='num'>{r.count}</td>{refused}"
                         f"<td>{_when(r.last_time, today)}</td><td>{_method(r.method)}</td>{cells}"
-                        f"<td class='num'>{score}</td><td>{_source(r)}</td><td>{_conditions(r.conditions)}</td>"
+                        f"{scores}<td>{_source(r)}</td><td>{_conditions(r.conditions)}</td>"
                         f"<td>{_pages(r)}</td></tr>")
         if not body:
-            body.append(f"<tr><td colspan='{11 + len(ex.hide)}' class='dim'>Nobody has joined yet.</td></tr>")
+            body.append(f"<tr><td colspan='{13 + len(ex.hide)}' class='dim'>Nobody has joined yet.</td></tr>")
         self.roster.object = f"<div class='scroll'><table>{head}{''.join(body)}</table></div>"
 
     def _draw_history(self) -> None:
@@ -371,14 +387,22 @@ class Dashboard(pn.viewable.Viewer):
         body = []
         for h in handins:
             errors = h.errors or handin_errors(ex, h.student, h)
-            cells = "".join(_param_cell(h.estimates.get(n), errors.get(n), h.verdicts.get(n), 1) for n in ex.hide)
+            cells = "".join(_param_cell(n, h.estimates.get(n), errors.get(n), h.verdicts.get(n), 1) for n in ex.hide)
             body.append(f"<tr><td>{_when(h.time, today)}</td><td>{_esc(h.student)}</td>"
                         f"<td>{_esc(names.get(h.student, ''))}</td><td class='num'>{numbers[h.id]}</td>"
                         f"<td>{_method(h.method)}</td>{cells}<td class='num'>{h.score:.2f}</td>"
                         f"<td>{_source(_one(h))}</td><td>{_conditions(h.conditions)}</td></tr>")
         if not body:
             body.append(f"<tr><td colspan='{8 + len(ex.hide)}' class='dim'>No hand-in yet.</td></tr>")
-        self.history.object = f"<div class='scroll'><table>{head}{''.join(body)}</table></div>"
+        # the attempts the rules refused (too many, late, closed): nothing stored, but the teacher sees them
+        refused = [r for r in reversed(self.refusals) if who in (EVERYONE, None) or r[1] == who]
+        tried = ""
+        if refused:
+            rows = "".join(f"<tr><td>{_when(t, today)}</td><td>{_esc(s)}</td><td>{_esc(names.get(s, ''))}</td>"
+                           f"<td>{_method(m)}</td><td class='no'>{_esc(why)}</td></tr>" for t, s, m, why in refused)
+            tried = (f"<h4 style='margin:10px 0 2px'>Refused hand-ins ({len(refused)})</h4><div class='scroll'><table>"
+                     f"<tr><th>time</th><th>id</th><th>name</th><th>method</th><th>why</th></tr>{rows}</table></div>")
+        self.history.object = f"<div class='scroll'><table>{head}{''.join(body)}</table></div>{tried}"
 
     # -- the teacher's switches -------------------------------------------------------------------------
     def _switch(self, key: str, value: str, done: str, then=None) -> None:

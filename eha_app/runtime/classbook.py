@@ -55,6 +55,9 @@ class ClassRow:
     pages: int = 0
     overlaps: int = 0
     damaged: int = 0                    # hand-ins whose stored values could not be read
+    refused: tuple[str, ...] = ()       # the hand-ins the rules refused (too many, late, closed): why, each
+    best: float = 0.0                   # the best hand-in's score and the last's (``score``: the rule's)
+    last: float = 0.0
 
 
 def class_rows(exercise, store: HandIns) -> list[ClassRow]:
@@ -66,8 +69,11 @@ def class_rows(exercise, store: HandIns) -> list[ClassRow]:
         if h.source.get("kind") == "file" and h.source.get("sha256"):
             files.setdefault(str(h.source["sha256"]), set()).add(h.student)
     presence = store.presences()
+    refused: dict[str, list[str]] = {}
+    for _time, sid, _method, why in store.refusals():
+        refused.setdefault(sid, []).append(why)
     names = {e.id: e.name for e in exercise.roster}
-    ids = list(names) + sorted((set(presence) | set(handins)) - set(names))
+    ids = list(names) + sorted((set(presence) | set(handins) | set(refused)) - set(names))
     rows = []
     for sid in ids:
         hs = handins.get(sid, [])
@@ -83,7 +89,9 @@ def class_rows(exercise, store: HandIns) -> list[ClassRow]:
             verdicts=last.verdicts if last else {}, score=exercise.score([h.verdicts for h in hs]),
             conditions=last.conditions if last else {}, settings=last.settings if last else {},
             source=last.source if last else {}, same_file=tuple(same), pages=here.pages if here else 0,
-            overlaps=here.overlaps if here else 0, damaged=sum(h.damaged for h in hs)))
+            overlaps=here.overlaps if here else 0, damaged=sum(h.damaged for h in hs),
+            refused=tuple(refused.get(sid, ())), best=max((h.score for h in hs), default=0.0),
+            last=last.score if last else 0.0))
     return rows
 
 

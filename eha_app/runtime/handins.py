@@ -79,9 +79,12 @@ CREATE TABLE IF NOT EXISTS work (student TEXT PRIMARY KEY, time TEXT NOT NULL, s
 CREATE TABLE IF NOT EXISTS work_files (student TEXT NOT NULL, slot TEXT NOT NULL, name TEXT NOT NULL,
                                        mapping TEXT NOT NULL, digest TEXT NOT NULL, data BLOB NOT NULL,
                                        PRIMARY KEY (student, slot));
+CREATE TABLE IF NOT EXISTS refusals (id INTEGER PRIMARY KEY AUTOINCREMENT, time TEXT NOT NULL, student TEXT NOT NULL,
+                                     method TEXT NOT NULL, why TEXT NOT NULL);
 """
 #: What a complete database holds (tables and indexes by name).
-_NAMES = {"handins", "handins_student", "control", "presence", "clients", "work", "work_files", "work_files_size"}
+_NAMES = {"handins", "handins_student", "control", "presence", "clients", "work", "work_files", "work_files_size",
+          "refusals"}
 #: Columns added since the first version, per table (a database made by an older version gets them at the
 #: next start).
 _ADDED = {
@@ -330,14 +333,24 @@ class HandIns:
                 count = db.execute("SELECT COUNT(*) FROM handins WHERE student = ?", (student,)).fetchone()[0]
                 why = refusal(count, dict(db.execute("SELECT key, value FROM control").fetchall()))
                 if why:
-                    raise Refused(why)
+                    # the attempt is kept (the teacher sees it), the hand-in is not
+                    db.execute("INSERT INTO refusals (time, student, method, why) VALUES (?, ?, ?, ?)",
+                               (_now(), student, method, str(why)))
+                    return Refused(why)
             cur = db.execute("INSERT INTO handins (time, student, estimates, verdicts, score, method, settings, "
                              "conditions, errors, source) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                              (_now(), student, json.dumps(estimates), json.dumps(verdicts), score, method,
                               json.dumps(settings or {}), json.dumps(conditions or {}), json.dumps(errors or {}),
                               json.dumps(source or {"kind": "simulated"})))
             return int(cur.lastrowid)
-        return self._write(insert)
+        out = self._write(insert)
+        if isinstance(out, Refused):
+            raise out
+        return out
+
+    def refusals(self) -> list[tuple[str, str, str, str]]:
+        """The hand-ins the rules refused (too many, late, closed), oldest first: (time, student, method, why)."""
+        return [tuple(r) for r in self._read("SELECT time, student, method, why FROM refusals ORDER BY id")]
 
     def all(self) -> list[HandIn]:
         return [_row(r) for r in self._read(f"SELECT {_COLUMNS} FROM handins ORDER BY id")]
@@ -398,6 +411,12 @@ class HandIns:
             return before if other else ""
         return self._write(write, patience)
 
+    def touch(self, student: str, page: str, *, patience: float = 2.0) -> None:
+        """The student's live page ``page`` is still open: their "last seen" is now (the teacher's
+        dashboard shows who is here)."""
+        self._write(lambda db: db.execute("UPDATE presence SET last_seen = ? WHERE student = ? AND page = ?",
+                                          (_now(), student, page)), patience)
+
     def left(self, student: str, page: str, *, patience: float = 10.0) -> None:
         """The page ``page`` of ``student`` was closed: no page of theirs is live, unless another took over."""
         self._write(lambda db: db.execute("UPDATE presence SET page = '', last_seen = ? WHERE student = ? AND "
@@ -445,7 +464,8 @@ class HandIns:
         rows = self._read("SELECT (SELECT COUNT(*) FROM handins), (SELECT MAX(id) FROM handins), "
                           "(SELECT group_concat(key || '=' || value) FROM control), "
                           "(SELECT COUNT(*) FROM presence), (SELECT MAX(last_seen) FROM presence), "
-                          "(SELECT SUM(pages) FROM presence), (SELECT group_concat(page) FROM presence)")
+                          "(SELECT SUM(pages) FROM presence), (SELECT group_concat(page) FROM presence), "
+                          "(SELECT COUNT(*) FROM refusals)")
         return tuple(rows[0])
 
 

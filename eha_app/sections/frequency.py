@@ -623,7 +623,8 @@ class FrequencyPanel(Section):
     def __panel__(self):
         inner = self.inner()
         # the hand-in's widgets only in an exercise: a page without one sends three models fewer
-        handin = [self.handin_source, self.handin_button, self.verdict] if self.handin_button.visible else []
+        handin = ([self.handin_source, self.handin_button, self.verdict, self.handin.confirm]
+                  if self.handin_button.visible else [])
         config = pn.Column(self.form, self.error, self.button, *handin, self.kp_note,
                            pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"),
                            *[c for s in inner for c in s.controls()], self.queue_note, width=280)

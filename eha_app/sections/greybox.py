@@ -794,7 +794,7 @@ class GreyBoxPanel(Section):
 
     def __panel__(self):
         controls = pn.Column(self.form, self.notice, self.button, self.cancel_button, self.progress, self.progress_text,
-                             self.handin_button, self.verdict, self.upload_note,
+                             self.handin_button, self.verdict, self.handin.confirm, self.upload_note,
                              self.upload, self.mapping, self.simulated_button,
                              pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"), self.queue_note, width=280)
         explain = pn.pane.HTML(

@@ -16,12 +16,71 @@ from collections.abc import Callable
 
 import panel as pn
 
-from eha_core.exercise import METHODS
+from eha_core.exercise import FEEDBACK, METHODS
 
+from ..render.layout import BUTTON_CONTRAST
 from ..render.tables import SYMBOLS_HTML
 from ..runtime.tasks import on_click
 
-__all__ = ["HandInBox", "handin_status", "result_for_student"]
+__all__ = ["HandInBox", "handin_status", "result_for_student", "lab_rules_html", "impossible_estimates"]
+
+
+def impossible_estimates(estimates: dict) -> list[str]:
+    """The estimates that break their parameter's physical bound (M, βe > 0; B, Af >= 0), each as the
+    student reads it ("B = -1626 N s/m: must be ≥ 0"), in display units."""
+    import math
+
+    from eha_core.param_table import FIELD_INFO
+
+    out = []
+    for name, value in estimates.items():
+        info = FIELD_INFO.get(name)
+        bound = getattr(info, "bound", None)
+        if info is None or bound not in (">", ">="):
+            continue
+        v = float(value)
+        if math.isfinite(v) and ((bound == ">" and v > 0) or (bound == ">=" and v >= 0)):
+            continue
+        shown = v / info.display_scale if math.isfinite(v) else v
+        out.append(f"{SYMBOLS_HTML.get(name, html.escape(name))} = {shown:.4g} {html.escape(info.display_unit)}: "
+                   f"must be {'> 0' if bound == '>' else '≥ 0'}")
+    return out
+
+
+def lab_rules_html(exercise, control: dict, count: int, *, now: float | None = None) -> str:
+    """The lab's rules as they stand for this student, always on their page: the deadline (the teacher's
+    extension if any), the hand-ins used and left, the tolerances, what feedback they get and when, and
+    the routes taken; and why hand-ins are refused now, if they are."""
+    import time as _time
+
+    now = _time.time() if now is None else now
+    due = exercise.deadline_at(control.get("deadline"))
+    if due is None:
+        when = "no deadline"
+    else:
+        left = due - now
+        rel = ("passed" if left <= 0 else f"in {left / 86400:.0f} days" if left >= 2 * 86400
+               else f"in {left / 3600:.0f} h" if left >= 2 * 3600 else f"in {max(left / 60, 1):.0f} min")
+        when = f"deadline {_time.strftime('%Y-%m-%d %H:%M UTC', _time.gmtime(due))} ({rel})"
+    if exercise.attempts:
+        used = f"hand-ins: {count} of {exercise.attempts} used, {max(exercise.attempts - count, 0)} left"
+    else:
+        used = f"hand-ins: {count} so far, no limit"
+    score = "your best hand-in scores" if exercise.score_rule == "best" else "your last hand-in scores"
+    tols = {exercise.tolerance_of(n) for n in exercise.hide}
+    if len(tols) == 1:
+        names = ", ".join(SYMBOLS_HTML.get(n, html.escape(n)) for n in exercise.hide)
+        tol = f"each of {names} within ±{100 * tols.pop():g} %"
+    else:
+        tol = ", ".join(f"{SYMBOLS_HTML.get(n, html.escape(n))} ±{100 * exercise.tolerance_of(n):g} %"
+                        for n in exercise.hide)
+    routes = ", ".join(html.escape(METHODS[m].split(" (")[0]) for m in exercise.conditions.methods if m in METHODS)
+    feedback = html.escape(FEEDBACK.get(exercise.feedback, exercise.feedback))
+    why = exercise.refusal(count, now=now, open_=control.get("open", "1") == "1", deadline=control.get("deadline"),
+                           revealed=control.get("revealed") == "1")
+    closed = f" <b class='eha-warn'>Hand-ins are refused now: {html.escape(why)}.</b>" if why else ""
+    return (f"<div class='eha-lab-rules' role='status'><b>The lab's rules:</b> {when}; {used} ({score}); "
+            f"tolerance: {tol}; feedback: {feedback}; routes taken: {routes}.{closed}</div>")
 
 
 def handin_status(state) -> tuple[str | None, int]:
@@ -47,9 +106,16 @@ class HandInBox:
         state = section.state
         allowed = bool(state.hidden) and (state.exercise is None or method in state.exercise.conditions.methods)
         self.button = pn.widgets.Button(label=label, color="warning", width=260, css_classes=["eha-handin"],
-                                        visible=allowed, disabled=True, description="run first")
+                                        visible=allowed, disabled=True, description="run first",
+                                        stylesheets=[BUTTON_CONTRAST])
         on_click(self.button, lambda _e: self.hand_in())
         self.verdict = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-verdict"])
+        # the section's own view of the button (a result to hand in, and its tip), before the lab's rules
+        self._enabled, self._tip = False, "run first"
+        # the question asked before an impossible estimate uses an attempt (made when first asked)
+        self.confirm = pn.Column(visible=False, width=270, css_classes=["eha-handin-confirm"])
+        self._asked: dict | None = None
+        section.session.handin_boxes.append(self)
 
     @property
     def takes_files(self) -> bool:
@@ -58,9 +124,21 @@ class HandInBox:
         return ex is not None and bool(getattr(ex, "own_files", False))
 
     def set_tip(self, enabled: bool, tip: str) -> None:
-        self.button.disabled = not enabled
+        """The section's say: is there a result to hand in, and the button's tip. The lab's rules come
+        on top: when hand-ins are refused now (no attempt left, the deadline passed, closed), the
+        button is off and its tip says why."""
+        self._enabled, self._tip = enabled, tip
+        why = self.section.session.lab_refusal
+        self.button.disabled = not enabled or bool(why)
+        tip = f"no hand-in now: {why}" if why else tip
         if self.button.description != tip:
             self.button.description = tip
+
+    def rules_changed(self) -> None:
+        """The page read the lab's rules again (:attr:`Session.lab_refusal`): the button follows."""
+        self.set_tip(self._enabled, self._tip)
+        if self.section.session.lab_refusal and self.confirm.visible:
+            self.confirm.visible = False
 
     def show_refusal(self, why: str | None) -> None:
         """Say beside the button why the result cannot be handed in, and disable it (None: it can; a
@@ -76,8 +154,37 @@ class HandInBox:
             self.verdict.object = ""
             self._refusal_shown = False
 
-    def hand_in(self):
-        """Store the section's estimates as a hand-in; show what the feedback rule allows."""
+    def _ask(self, estimates: dict, impossible: list[str]) -> None:
+        """Ask before an impossible estimate uses an attempt: what is impossible, the attempt it would
+        use, and two buttons (hand in anyway, or not)."""
+        session, exercise = self.section.session, self.section.state.exercise
+        used = session.handins_used
+        attempt = ("" if not exercise.attempts or used is None else
+                   f" It would use hand-in {used + 1} of {exercise.attempts}.")
+        if not self.confirm.objects:
+            yes = pn.widgets.Button(label="Hand in anyway", color="danger", width=130,
+                                    css_classes=["eha-handin-anyway"], stylesheets=[BUTTON_CONTRAST])
+            no = pn.widgets.Button(label="Keep it", width=110, css_classes=["eha-handin-keep"])
+            on_click(yes, lambda _e: self._answered(True))
+            on_click(no, lambda _e: self._answered(False))
+            self.confirm.objects = [pn.pane.HTML("", sizing_mode="stretch_width"), pn.Row(yes, no)]
+        items = "".join(f"<li>{text}</li>" for text in impossible)
+        self.confirm[0].object = (f"<div class='eha-verdict-box' role='alert'><b class='eha-warn'>Physically "
+                                  f"impossible:</b><ul>{items}</ul>No actuator has such a value: it cannot be "
+                                  f"within tolerance.{attempt} Hand it in anyway?</div>")
+        self._asked = dict(estimates)
+        self.confirm.visible = True
+
+    def _answered(self, yes: bool) -> None:
+        asked, self._asked = self._asked, None
+        self.confirm.visible = False
+        if yes and asked is not None:
+            self.hand_in(confirmed=asked)
+
+    def hand_in(self, confirmed: dict | None = None):
+        """Store the section's estimates as a hand-in; show what the feedback rule allows. An estimate
+        that breaks a physical bound is asked about first (``confirmed``: the estimates the student
+        said yes to; the hand-in goes ahead only if they are still the section's)."""
         s = self.section.state
         why = self.refusal()
         if why and s.hidden:
@@ -87,6 +194,11 @@ class HandInBox:
         if got is None or not s.hidden:
             return None
         estimates, settings = got
+        impossible = impossible_estimates(estimates)
+        if impossible and confirmed != estimates:
+            self._ask(estimates, impossible)
+            return None
+        self.confirm.visible = False
         exercise, student, store, method = s.exercise, s.student, s.handins, self.method
         settings = dict(settings)
         source = dict(settings.pop("_source", None) or {"kind": "simulated"})
@@ -118,9 +230,13 @@ class HandInBox:
             shows = exercise.shows_verdicts(deadline=seen.get("deadline"), revealed=seen.get("revealed") == "1")
             return verdicts, "", count, shows
 
+        session = self.section.session
+
         def show(out, _job):
             verdicts, refused, count, shows = out
             self._refusal_shown = False         # the verdict pane says this hand-in's outcome now
+            for fn in list(session.after_handin):
+                fn()                            # the page reads the lab's rules again (attempts left)
             if refused:
                 self.verdict.object = (f"<div class='eha-verdict-box eha-handin-refused'><span class='eha-warn'>"
                                        f"Not handed in: {html.escape(refused)}.</span></div>")

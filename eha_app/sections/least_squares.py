@@ -796,7 +796,8 @@ class LeastSquaresPanel(Section):
     def __panel__(self):
         # the run first, below its settings: in view at 1366 x 768; the student's own file after it
         controls = pn.Column(self.form, self.notice, self.button, self.all_button, self.handin_button, self.verdict,
-                             self.upload_note, self.upload, self.mapping, self.window_box, self.simulated_button,
+                             self.handin.confirm, self.upload_note, self.upload, self.mapping, self.window_box,
+                             self.simulated_button,
                              pn.FlexBox(*self.downloads, width=270, sizing_mode="fixed"), self.queue_note, width=280)
         explain = pn.pane.HTML(
             "<p class='eha-note'>Least squares on eq. 15 filtered by H(s) = 1/(0.01 s + 1) (eqs. 16-18): "

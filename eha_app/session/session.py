@@ -84,6 +84,12 @@ class Session(param.Parameterized):
         # which sections the student can see (set by the page; without one every section is in sight)
         self.sight: Callable[[str], bool] | None = None
         self._out_of_sight: dict[str, list[Callable[[], None]]] = {}
+        # an exercise's hand-in boxes, and what the page last read of the lab: why hand-ins are refused now
+        # (None: they are not), the hand-ins so far (None: not read yet), and what to do after a hand-in
+        self.handin_boxes: list = []
+        self.lab_refusal: str | None = None
+        self.handins_used: int | None = None
+        self.after_handin: list[Callable[[], None]] = []
         if not list(self.registry):
             raise RuntimeError("no section is registered: import eha_app.sections (the page's sections) first")
 
@@ -116,6 +122,8 @@ class Session(param.Parameterized):
         self._mail.clear()
         self._on_built.clear()
         self._out_of_sight.clear()
+        self.handin_boxes.clear()           # each holds its section
+        self.after_handin.clear()
         # the sections watch the state: its watchers would keep every section (and its upload) alive
         for kinds in list(self.state.param.watchers.values()):
             for watchers in list(kinds.values()):

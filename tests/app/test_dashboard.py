@@ -10,7 +10,7 @@ import io
 import pytest
 
 from eha_app.dashboard import Dashboard, join_slips_html
-from eha_app.runtime.handins import HandIns
+from eha_app.runtime.handins import HandIns, Refused
 from eha_core.exercise import Exercise
 
 HIDE = ("M", "B")
@@ -115,3 +115,47 @@ def test_the_csv_neutralises_a_formula_in_a_name(lab):
     rows = list(csv.reader(io.StringIO(Dashboard(ex, store).csv_bytes().decode())))
     s2 = next(r for r in rows if r[0] == "s2")
     assert s2[1] == '\'=HYPERLINK("http://evil.example","x")' and s2[rows[0].index("score (best)")] == "1.00"
+
+
+def test_refused_attempts_best_and_last_and_units(lab):
+    """The teacher sees the attempts the rules refused, the best and the last score apart (the rule's
+    in bold), and each parameter in the unit the students' pages write it (βe in GPa)."""
+    ex, store = lab
+    hand_in(ex, store, "s1", 1.0)                       # all within tolerance
+    hand_in(ex, store, "s1", 1.5)                       # none
+    truth = ex.student_params("s1")
+    est = {n: getattr(truth, n) for n in HIDE}
+    with pytest.raises(Refused, match="closed"):
+        store.add("s1", est, ex.verdicts("s1", est), refusal=lambda count, control: "hand-ins are closed")
+    assert len(store.all()) == 2 and [r[1:] for r in store.refusals()] == [("s1", "lse", "hand-ins are closed")]
+    dash = Dashboard(ex, store)
+    roster = dash.roster.object
+    assert "last hand-in</th>" in roster and "score (the best counts)" in roster
+    row = next(r for r in roster.split("<tr>") if "<td>s1</td>" in r)
+    assert "<td class='num'><b>1.00</b></td><td class='num'>0.00</td>" in row     # best 1, last 0
+    assert "title='hand-ins are closed'>1</td>" in row                           # one refused, why on hover
+    assert "Refused hand-ins (1)" in dash.history.object and "hand-ins are closed" in dash.history.object
+    if "beta_e" in HIDE:
+        assert "[GPa]" in roster and f"{1.5 * truth.beta_e / 1e9:.6g} " in row and "e+0" not in row
+
+
+def test_last_seen_moves_while_the_page_is_open(lab):
+    ex, store = lab
+    store.seen("s1", "page-a")
+    first = store.presence()["s1"][1]
+    import time
+
+    time.sleep(1.1)
+    store.touch("s1", "page-b")                         # not the live page: nothing moves
+    assert store.presence()["s1"][1] == first
+    store.touch("s1", "page-a")
+    assert store.presence()["s1"][1] > first
+
+
+def test_bulk_modulus_is_written_in_gpa_as_on_the_students_pages():
+    from eha_app.dashboard import _param_cell, _param_head
+
+    ex = Exercise.new(hide=("beta_e",))
+    assert "[GPa]" in _param_head(ex, "beta_e")
+    cell = _param_cell("beta_e", 8.28606e8, 0.01, True, 1)
+    assert "0.828606 " in cell and "e+08" not in cell
