@@ -146,6 +146,10 @@ def test_the_guide_stops_at_it(tally):
     assert [s.key for s in guide.steps][-2:] == ["study", "tally"]
     page.show("study")
     assert guide.next.visible and guide.next.label == "Next: the tally →"
+    assert guide.next.disabled                              # offered once the study's result is there
+    page.session.section("study").guide_done = lambda: True    # (a study of its own would take seconds)
+    guide.refresh()
+    assert not guide.next.disabled
     _press(guide.next)
     assert guide.current == "tally" and "Step 3, a tally" in guide.where.object and not guide.next.visible
     assert page.tabs.built["3. Identification"].lazy.active_name == "Tally"
