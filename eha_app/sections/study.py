@@ -32,6 +32,7 @@ from ..runtime.background import background_process
 from ..runtime.tasks import PageProgress, apply_locked, on_click, pages_busy, served_document, watch
 from ..session import GuideStep, ReportPart, Section, SectionSnapshot
 from ..session.form import Field, Form, Group, parse_fields
+from ..session.freshness import ResultView
 from ..session.state import FIELD_LABELS
 
 __all__ = ["StudyPanel", "STUDY_FORM", "STUDY_DEFAULTS", "MAX_APP_SEEDS"]
@@ -199,11 +200,31 @@ class StudyPanel(Section):
             "spread of each estimate, and how often its 95 % interval covers the truth.</p>",
             sizing_mode="stretch_width", css_classes=["eha-study-summary"])
         self.plot = pn.Column(sizing_mode="stretch_width", css_classes=["eha-study-plot"])
+        # its table and histograms are marked out of date when tab 1 or the form changes, as every result is
+        self.results = pn.Column(self.summary, self.plot, sizing_mode="stretch_width", min_width=440)
+        self.view = ResultView("study", self.results, run_hint="Run the study again to update.")
+        self._run_key = None                # what the study running (or last run) was computed from
         self.exercise_note = pn.pane.HTML(
             "<p class='eha-warn'>Not in an exercise: a study draws every estimate against the true values.</p>",
             visible=bool(state.hidden), width=270)
         state.param.watch(self._update_enabled, "valid")
+        state.param.watch(lambda _e: self._inputs_changed(), ["params", "valid"])
+        watch(self.form, lambda _e: self._inputs_changed(), "values")
         self._update_enabled()
+
+    def run_key(self):
+        """What a study run now would be computed from: tab 1's parameters and the form as typed (None
+        while either is not valid)."""
+        cfg, _ = self.config()
+        if cfg is None or not self.state.valid:
+            return None
+        return (self.state.params, tuple(sorted(self.form.values.items())))
+
+    def _inputs_changed(self) -> None:
+        self.view.inputs_changed(self.run_key())
+
+    def result_views(self) -> list:
+        return [self.view]
 
     def config(self):
         """The study the form describes (None if invalid), and a message per invalid field."""
@@ -261,6 +282,7 @@ class StudyPanel(Section):
 
         self._parts, self._stopped = [], False
         self._study = (cfg, self.state.params)
+        self._run_key = self.run_key()
         self._running(True)
         self._show_progress(0, cfg.n_seeds)
         # the histograms are made now, in turn with the other pages' big changes, and only filled in
@@ -380,6 +402,9 @@ class StudyPanel(Section):
 
     def _draw(self, result, job) -> None:
         self._figure_for(tuple(result.parameters)).update(result)
+        if self._run_key is not None:
+            self.view.shown(self._run_key)
+            self._inputs_changed()          # tab 1 or the form may have changed while it ran
 
         self.summary.object = study_summary_html(result)
         done = (f"{result.n_completed} of {result.n_requested} seeds" + (" (cancelled)" if result.cancelled else "")
@@ -405,8 +430,8 @@ class StudyPanel(Section):
     def __panel__(self):
         controls = pn.Column(self.exercise_note, self.form, self.button, self.cancel_button, self.progress,
                              self.status, width=290)
-        results = pn.Column(self.summary, self.plot, sizing_mode="stretch_width", min_width=440)
-        return side_by_side(controls, results)
+        return side_by_side(controls, pn.Column(self.view.banner, self.results, sizing_mode="stretch_width",
+                                                min_width=440))
 
 
 def _n(v: float, digits: int = 4) -> str:

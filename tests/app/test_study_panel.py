@@ -264,3 +264,18 @@ def test_a_study_failing_midway_keeps_its_seeds_and_says_why(monkeypatch):
     assert panel.result.n_completed == 5 and panel.result.cancelled
     assert sum(panel.figure.sources["M"].data["top"]) == 5 and "covered the truth" in panel.summary.object
     assert not panel.button.disabled and panel.cancel_button.disabled
+
+
+def test_the_study_is_marked_out_of_date_like_every_result():
+    state = AppState()
+    panel = Session(state).build("study")
+    panel.form.values = {**panel.form.values, "study_seeds": "5"}
+    assert panel.view.status == "empty"
+    panel.run()
+    assert panel.view.is_current and not panel.is_stale()
+    state.set_text("M", "6000")
+    assert panel.is_stale() and "tab 1 changed since this run (M 4000 → 6000 kg)" in panel.view.banner.object
+    state.set_text("M", "4000")
+    assert panel.view.is_current
+    panel.form.values = {**panel.form.values, "study_first": "3"}
+    assert panel.is_stale() and "the settings changed" in panel.view.banner.object
