@@ -7,7 +7,8 @@ Importing this package stays light: it never imports panel, holoviews or bokeh,
 and python-control / numba are imported only when a function needs them. It
 re-exports nothing: import from the modules below (``from eha_core.simulate
 import simulate``). Every refused argument is an :class:`eha_core.errors.FieldError`
-(``NAME = VALUE is not allowed: WHAT``); SI units throughout.
+(``NAME = VALUE is not allowed: WHAT``); SI units throughout. Results have a short
+repr, estimates and runs ``to_pandas()``, the main ones ``plot()`` (docs/python.md).
 
 The actuator
 ============
@@ -44,6 +45,7 @@ The paper's experiments
    reproduction.reproduce        -- everything the paper shows, as one typed result
    study.run_study               -- one experiment over many noise seeds: spread, bias, coverage
    board                         -- candidate models of r -> x side by side: Bode, poles, step, fit
+   plotting                      -- matplotlib figures behind the results' plot() (matplotlib optional)
    exercise.Exercise             -- a class exercise: each student's own actuator, hidden parameters
    identify                      -- identification: least squares, tfest, grey box (its own map)
 
@@ -63,5 +65,6 @@ Internals
 .. autosummary::
 
    _checks                       -- the argument checks and the one form of their messages
+   _display                      -- the results' short reprs and tables: display units, ± standard errors
    _kernels                      -- the numba integrators (RK4, batches, sensitivities), loaded lazily
 """

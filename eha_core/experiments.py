@@ -548,6 +548,12 @@ class BodeData:
         """Former name of ``data_phase_deg``."""
         return self.data_phase_deg
 
+    def __repr__(self) -> str:
+        lo, hi = self.data_band
+        return (f"BodeData: the estimate{'' if self.theoretical is None else ', eq. 24'} at {self.w.size} "
+                f"frequencies to {self.w[-1]:.4g} rad/s; data: {self.data_method}, {self.data_w.size} points in "
+                f"[{lo:.3g}, {hi:.3g}] rad/s")
+
 
 def bode_data(estimate: TFEstimate, theoretical, data: DataFrequencyResponse, ts: float,
               n_points: int = 400) -> BodeData:
@@ -686,6 +692,49 @@ class FrequencyIdentification:
         if self.backout is not None:
             out["backout"] = self.backout.to_dict()
         return out
+
+    def to_pandas(self):
+        """The estimates as one :class:`pandas.DataFrame` indexed by name: H_hat's coefficients
+        (:meth:`TFEstimate.to_pandas <eha_core.identify.tfresult.TFEstimate.to_pandas>`), then the physical
+        parameters backed out of P_hat (:meth:`BackoutResult.to_pandas
+        <eha_core.identify.backout.BackoutResult.to_pandas>`) when there are any."""
+        import pandas as pd
+
+        frames = [self.estimate.to_pandas()] + ([self.backout.to_pandas()] if self.backout is not None else [])
+        return pd.concat(frames).rename_axis("name")
+
+    def plot(self):
+        """Draw Fig. 12 with matplotlib: the estimate's Bode diagram, eq. 24's and the data's points
+        (:func:`eha_core.plotting.plot_frequency_identification`); returns the Figure."""
+        from .plotting import plot_frequency_identification
+
+        return plot_frequency_identification(self)
+
+    def __repr__(self) -> str:
+        from ._display import block, polynomial, with_error
+
+        c, e = self.config, self.estimate
+        head = (f"FrequencyIdentification: closed loop (kp {c.kp:g} V/m, Ts {c.ts:g} s, {c.n_samples} samples, "
+                f"{c.signal_type} excitation, {c.model} plant), tfest")
+        std = e.param_std if e.param_std is not None else [math.nan] * (len(e.den) - 1 + len(e.num))
+        items = [with_error(n, v, sd) for n, v, sd in zip(e.coefficient_names(), [*e.den[1:], *e.num], std,
+                                                          strict=True)]
+        fits = f"fit {e.fit_percent:.2f} %"
+        if self.validation is not None:
+            fits += f", {self.validation.fit_percent:.2f} % on fresh data (seed {self.validation_excitation.seed})"
+        checks = self.residual_assessment
+        if checks is not None:
+            fits += (f"; residuals white: {'yes' if checks.whiteness.passed else 'no'}, independent of r: "
+                     f"{'yes' if checks.independence.passed else 'no'}")
+        notes = [f"H(s) = {e.formula()}, ± 1 standard error; {fits}"]
+        if self.backout is not None:
+            b = self.backout
+            notes.append("back-out (eq. 27): " + "; ".join(
+                with_error(n, getattr(b, n), getattr(b, n + "_std"))
+                for n in ("damping", "beta_e_from_gain", "beta_e_from_stiffness")))
+        notes.append(f"eq. 24: {polynomial(self.theoretical[0])} / ({polynomial(self.theoretical[1])}); "
+                     ".to_pandas(): the estimates; .plot(): Fig. 12")
+        return block(head, self.success, self.message, items, notes)
 
 
 def run_frequency_identification(params: ActuatorParams | None = None,

@@ -125,6 +125,20 @@ class Reproduction:
     paper_eq26_from_eq25: tuple[np.ndarray, np.ndarray]
     greybox: object = None          # GreyBoxResult on Table 3's record (x, p1, p2), from the paper's values
 
+    def __repr__(self) -> str:
+        from ._display import short
+
+        lse = ", ".join(f"{model} ({len(scenarios)} scenarios)" for model, scenarios in self.lse.items())
+        failed = [name for name, res in (("frequency", self.frequency), ("frequency_plain", self.frequency_plain),
+                                         ("lse_rich", self.lse_rich), ("greybox", self.greybox))
+                  if res is not None and not res.success]
+        failed += [f"lse[{m}][{s}]" for m, scenarios in self.lse.items() for s, r in scenarios.items() if not r.success]
+        state = "every estimate succeeded" if not failed else "FAILED: " + short(", ".join(failed), 200)
+        return (f"Reproduction: the paper's cases, tables and figures (seed {self.settings.seed}): {state}\n"
+                f"  .cases_nonlinear, .cases_linear: {len(self.cases_nonlinear)} cases each; .lse: {lse}; "
+                f".frequency: {self.frequency.estimate.n_poles} poles, fit {self.frequency.estimate.fit_percent:.2f} %"
+                f"\n  .greybox, .numbers(): every number of the report; .table_rows(): Tables 3-4")
+
     def table_rows(self) -> list[dict]:
         """Tables 3-4 as rows: model, scenario, parameter, nominal, estimate, interval, paper."""
         rows = []

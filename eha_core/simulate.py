@@ -38,8 +38,11 @@ Examples
 >>> res = simulate(u=Sine(6.0, 2.0), d=Sine(5e3, 1.0), t_end=5.0)
 >>> res.success, len(res.t), round(float(res.x.max()), 3)
 (True, 5001, 0.035)
->>> list(res.to_pandas().columns)
-['t', 'x', 'v', 'p1', 'p2', 'u', 'd']
+>>> df = res.to_pandas()                 # indexed by t, one column per signal
+>>> df.index.name, list(df.columns)
+('t', ['x', 'v', 'p1', 'p2', 'u', 'd'])
+>>> print(repr(res).splitlines()[0])
+SimulationResult: nonlinear, open loop, 5001 samples over 0-5 s: success
 """
 
 from __future__ import annotations
@@ -118,13 +121,30 @@ class SimulationResult:
         return np.column_stack([self.x, self.v, self.p1, self.p2])
 
     def to_pandas(self):
-        """A :class:`pandas.DataFrame` with columns t, x, v, p1, p2, u, d (and r)."""
+        """A :class:`pandas.DataFrame` indexed by the time ``t`` [s], one column per signal: x, v, p1, p2,
+        u, d (and r), SI units (``df.reset_index()`` makes t a column)."""
         import pandas as pd
 
-        cols = {"t": self.t, "x": self.x, "v": self.v, "p1": self.p1, "p2": self.p2, "u": self.u, "d": self.d}
+        cols = {"x": self.x, "v": self.v, "p1": self.p1, "p2": self.p2, "u": self.u, "d": self.d}
         if self.r is not None:
             cols["r"] = self.r
-        return pd.DataFrame(cols)
+        return pd.DataFrame(cols, index=pd.Index(self.t, name="t"))
+
+    def plot(self):
+        """Draw the run with matplotlib (:func:`eha_core.plotting.plot_simulation`); returns the Figure."""
+        from .plotting import plot_simulation
+
+        return plot_simulation(self)
+
+    def __repr__(self) -> str:
+        from ._display import block, span
+
+        times = f"{self.t[0]:g}-{self.t[-1]:g} s" if self.t.size else "no time"
+        loop = "open loop" if self.kp is None else f"closed loop ({self.controller}, kp {self.kp:g} V/m)"
+        head = f"SimulationResult: {self.model}, {loop}, {self.t.size} samples over {times}"
+        ranges = [span(name, getattr(self, name)) for name in ("x", "v", "p1", "p2", "u")]
+        notes = [f"label: {self.label}" if self.label else "", ".to_pandas(): the signals by t; .plot(): a figure"]
+        return block(head, self.success, self.message, ranges, notes)
 
     def to_csv(self, path_or_buf=None, **kwargs):
         """Write the CSV (header t,x,v,p1,p2,u,d[,r]); returns text when no path.
@@ -137,7 +157,7 @@ class SimulationResult:
             Passed on to :meth:`pandas.DataFrame.to_csv` (``float_format`` defaults to ``"%.10g"``).
         """
         kwargs.setdefault("float_format", "%.10g")
-        return self.to_pandas().to_csv(path_or_buf, index=False, **kwargs)
+        return self.to_pandas().reset_index().to_csv(path_or_buf, index=False, **kwargs)
 
     def beyond_physical_range(self) -> tuple[RangeExcursion, ...]:
         """Where the run leaves what the actuator can physically do.
@@ -186,7 +206,7 @@ def runs_to_pandas(results):
 
     frames = []
     for r in results:
-        df = r.to_pandas()
+        df = r.to_pandas().reset_index()
         df.insert(0, "model", r.model)
         df.insert(0, "run", r.label)
         frames.append(df)

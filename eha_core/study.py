@@ -544,6 +544,53 @@ class StudyResult:
             "seeds": [s.to_dict() for s in self.seeds],
         }
 
+    def to_pandas(self):
+        """The statistics as a :class:`pandas.DataFrame` indexed by parameter: ``nominal`` (NaN where none
+        is known), ``mean``, ``std``, ``mean_std_error``, ``coverage``, ``bias``, ``bias_std_error``,
+        ``bias_per_std_error``, ``bound`` (the grey-box study's Cramér-Rao bound, else NaN), all SI, then
+        ``unit``, ``display_unit``, ``display_scale``. The seeds themselves: :meth:`seeds_to_pandas`."""
+        import pandas as pd
+
+        from ._display import TF_UNITS, unit_columns
+
+        names = list(self.parameters)
+        cols = {c: [float(getattr(self, c).get(n, math.nan)) for n in names]
+                for c in ("nominal", "mean", "std", "mean_std_error", "coverage", "bias", "bias_std_error",
+                          "bias_per_std_error", "bound")}
+        cols.update(unit_columns(names, TF_UNITS if self.config.kind == "tf" else None))
+        return pd.DataFrame(cols, index=pd.Index(names, name="parameter"))
+
+    def seeds_to_pandas(self):
+        """One row per completed seed (indexed by seed): ``success``, then each parameter's estimate and its
+        standard error (``NAME`` and ``NAME_std_error``, SI)."""
+        import pandas as pd
+
+        rows = [{"success": s.success, **{n: s.estimates.get(n, math.nan) for n in self.parameters},
+                 **{f"{n}_std_error": s.std_errors.get(n, math.nan) for n in self.parameters}} for s in self.seeds]
+        return pd.DataFrame(rows, index=pd.Index([s.seed for s in self.seeds], name="seed"))
+
+    def __repr__(self) -> str:
+        from ._display import block, in_units, short, with_error
+
+        route = {"lse": f"least squares ({self.config.estimator})", "tf": "tfest on the closed loop",
+                 "greybox": "grey box"}[self.config.kind]
+        head = (f"StudyResult: {route}, {self.config.model} plant, seeds {self.config.first_seed}-"
+                f"{self.config.first_seed + self.n_requested - 1}")
+        state = f"{self.n_successful} of {self.n_requested} seeds successful" + (", cancelled" if self.cancelled
+                                                                                  else "")
+        items = []
+        for n in self.parameters:
+            mean, spread = self.mean.get(n, math.nan), self.std.get(n, math.nan)
+            # one seed has no spread: its mean alone
+            text = with_error(n, mean, spread) if math.isfinite(spread) else f"{n} = {in_units(n, mean, 6)}"
+            cover = self.coverage.get(n, math.nan)
+            items.append(f"{text} (s.e. {in_units(n, self.mean_std_error.get(n, math.nan), 3)}"
+                         + (f", covers {cover:.0%})" if math.isfinite(cover) else ")"))
+        notes = [f"mean ± std over the seeds, the mean reported s.e., the coverage of the 95 % intervals of "
+                 f"{'the truth' if self.nominal_is_truth else 'a reference'}; .to_pandas(), .seeds_to_pandas()",
+                 f"message: {short(self.message, 200)}"]
+        return block(head, self.n_successful > 0, self.message, items, notes, passed=state)
+
 
 # -- the experiments, one seed at a time -----------------------------------------------------
 

@@ -179,6 +179,25 @@ class BackoutResult:
             "known": self.known,
         }
 
+    def to_pandas(self):
+        """``damping``, ``beta_e_from_gain`` and ``beta_e_from_stiffness`` as a :class:`pandas.DataFrame` indexed
+        by name: ``value``, ``std_error``, ``ci95_low``, ``ci95_high`` (SI; NaN without the estimate's
+        covariance), ``unit``, ``display_unit``, ``display_scale``."""
+        from .._display import estimates_frame
+
+        ci = self.ci95()
+        return estimates_frame((n, getattr(self, n), getattr(self, n + "_std"), *ci[n]) for n in ci)
+
+    def __repr__(self) -> str:
+        from .._display import block, polynomial, with_error
+
+        items = [with_error(n, getattr(self, n), getattr(self, n + "_std"))
+                 for n in ("damping", "beta_e_from_gain", "beta_e_from_stiffness")]
+        notes = [f"P_hat = {polynomial(self.num_p)} / ({polynomial(self.den_p)}) (eq. 26); damping = B + 2 k_f Af / pi",
+                 "± 1 standard error; .to_pandas(): the 95 % intervals"]
+        return block("BackoutResult: physical parameters from the plant estimate (eq. 27)", True, "", items, notes,
+                     passed="no checks of its own (the estimate's are)")
+
 
 def backout(num_p, den_p, params: ActuatorParams | None = None, op: OperatingPoint | None = None,
             *, std_h: np.ndarray | None = None, kp: float | None = None) -> BackoutResult:

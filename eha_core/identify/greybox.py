@@ -171,6 +171,8 @@ def greybox_data(params: ActuatorParams, u: Signal | None = None, *, t_end: floa
         The simulated actuator (the truth).
     u : Signal, optional
         Open loop: the valve command [V], sampled at the record's times and linear between them.
+        Default (neither ``u`` nor ``r`` given): the paper's least-squares input 6 sin(4 pi t) V
+        (:data:`eha_core.experiments.LSE_INPUT`), the app's grey-box excitation by default.
     t_end, dt : float
         The record's length and sample time [s] (``dt`` is also the controller's Ts).
     d : Signal, optional
@@ -197,6 +199,10 @@ def greybox_data(params: ActuatorParams, u: Signal | None = None, *, t_end: floa
     if r is not None:
         run = simulate_closed_loop(params, r, kp=kp, ts=dt, d=d, t_end=t_end, dt=dt)
     else:
+        if u is None:
+            from ..experiments import LSE_INPUT
+
+            u = LSE_INPUT
         u = Sampled(t, np.asarray(u(t), dtype=float), hold="linear", name="u")
         run = simulate(params, u, d, t_end=t_end, dt=dt)
     if not run.success:
@@ -464,6 +470,8 @@ class GreyBoxResult:
     advice: tuple[str, ...] = ()
     strategy: str = ""
     held_bias: dict = field(default_factory=dict)
+    #: the record estimated from (what :meth:`plot` draws the model against)
+    data: GreyBoxData | None = field(default=None, repr=False)
 
     @property
     def failed_checks(self) -> tuple:
@@ -481,6 +489,36 @@ class GreyBoxResult:
                 "message": self.message, "checks": [c.to_dict() for c in self.checks], "advice": list(self.advice),
                 "strategy": self.strategy, "held_bias": {h: dict(v) for h, v in self.held_bias.items()},
                 "nfev": self.nfev, "time_s": self.time_s}
+
+    def to_pandas(self):
+        """The estimates as a :class:`pandas.DataFrame` indexed by parameter: ``value``, ``std_error``,
+        ``ci95_low``, ``ci95_high`` (SI; NaN for a held parameter and for every one when the checks failed),
+        ``unit``, ``display_unit``, ``display_scale``, and ``held`` (held at the initial guess)."""
+        from .._display import estimates_frame
+
+        nan = (math.nan, math.nan)
+        return estimates_frame(((n, self.estimates[n], self.std_errors.get(n, math.nan), *self.ci95.get(n, nan))
+                                for n in self.names), extra={"held": [n in self.held for n in self.names]})
+
+    def plot(self):
+        """Draw each measured signal against the estimated model's with matplotlib
+        (:func:`eha_core.plotting.plot_greybox`); returns the Figure."""
+        from ..plotting import plot_greybox
+
+        return plot_greybox(self)
+
+    def __repr__(self) -> str:
+        from .._display import block, short, with_error
+
+        fits = ", ".join(f"{s} {self.fit[s]:.1f} %" for s in self.measured)
+        head = f"GreyBoxResult: output error on the nonlinear model, fit {fits}"
+        items = [with_error(n, self.estimates[n], self.std_errors.get(n)) + (" (held)" if n in self.held else "")
+                 for n in self.names]
+        notes = ["± 1 standard error; .to_pandas(): the 95 % intervals; .plot(): the fit"]
+        if not self.success:
+            notes = [f"failed checks: {', '.join(c.name for c in self.failed_checks)}; no interval is given",
+                     "try: " + short("; ".join(self.advice), 200)]
+        return block(head, self.success, self.message, items, notes, passed="checks passed")
 
 
 def _check_request(data, names, measured, guess):
@@ -609,7 +647,7 @@ def identify_greybox(data: GreyBoxData, params=("M", "B", "Af", "beta_e"), *, me
         sentences = list(first_sentences)
     res = _result(best.problem, best, names, best.held, guess, sentences, tries, time.perf_counter() - t_start)
     res.extras["intersample"] = {"used": best.problem.data.intersample, "how": read_why}
-    return res
+    return replace(res, data=best.problem.data)
 
 
 def _intersample_by_fit(data, free, guess, rows, y_meas, sigma, max_nfev, cancel, why, tell):

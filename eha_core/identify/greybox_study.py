@@ -186,6 +186,41 @@ class GreyBoxStudyResult:
     def seconds_per_seed(self) -> float:
         return self.elapsed_s / max(self.n_completed + self.n_failed, 1)
 
+    def to_pandas(self):
+        """The statistics as a :class:`pandas.DataFrame` indexed by parameter: ``truth``, ``mean``, ``std``,
+        ``mean_std_error``, ``bias_se``, ``coverage``, ``crb``, ``std_over_crb`` (SI), ``held`` (seeds that held
+        it), then ``unit``, ``display_unit``, ``display_scale``."""
+        import pandas as pd
+
+        from .._display import unit_columns
+
+        names = list(self.config.params)
+        cols = {c: [float(getattr(self, c).get(n, math.nan)) for n in names]
+                for c in ("truth", "mean", "std", "mean_std_error", "bias_se", "coverage", "crb", "std_over_crb")}
+        cols["held"] = [int(self.held.get(n, 0)) for n in names]
+        cols.update(unit_columns(names))
+        return pd.DataFrame(cols, index=pd.Index(names, name="parameter"))
+
+    def __repr__(self) -> str:
+        from .._display import block, short, with_error
+
+        cfg = self.config
+        head = (f"GreyBoxStudyResult: grey box over seeds {cfg.first_seed}-{cfg.first_seed + cfg.n_seeds - 1}, "
+                f"{', '.join(cfg.measured)} measured at {cfg.snr_db:g} dB")
+        state = f"{self.n_completed} of {cfg.n_seeds} seeds passed their checks" + (", cancelled" if self.cancelled
+                                                                                   else "")
+        items = []
+        for n in cfg.params:
+            cover, ratio = self.coverage.get(n, math.nan), self.std_over_crb.get(n, math.nan)
+            items.append(with_error(n, self.mean.get(n, math.nan), self.std.get(n, math.nan))
+                         + (f" (covers {cover:.0%}, std/CRB {ratio:.2g})" if math.isfinite(cover) else ""))
+        notes = ["mean ± std over the seeds; coverage of the 95 % intervals; std over the Cramér-Rao bound; "
+                 ".to_pandas()"]
+        if self.failures:
+            notes.append(f"{self.n_failed} failed, first: {short(self.failures[0], 160)}")
+        return block(head, self.n_completed > 0, "no seed passed its checks" + (
+            f": {short(self.failures[0], 160)}" if self.failures else ""), items, notes, passed=state)
+
     def to_dict(self) -> dict:
         """The statistics, settings and estimates as JSON-able values (NaN written as null)."""
         cfg = self.config

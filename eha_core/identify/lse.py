@@ -311,6 +311,36 @@ class LSEResult:
             "cosine_terms": self.cosine_terms, "critical_value": self.critical_value,
         }
 
+    def to_pandas(self):
+        """The estimates as a :class:`pandas.DataFrame` indexed by parameter (M, B, Af, d0, [d_sin, d_cos,]
+        beta_e): ``value``, ``std_error``, ``ci95_low``, ``ci95_high`` (SI), ``unit``, ``display_unit``,
+        ``display_scale`` and ``std_error_textbook``."""
+        from .._display import estimates_frame
+
+        names = list(self.estimates)
+        return estimates_frame(((n, self.estimates[n], self.std_errors[n], *self.ci95[n]) for n in names),
+                               extra={"std_error_textbook": [self.std_errors_textbook[n] for n in names]})
+
+    def plot(self):
+        """Draw the two filtered equations and the fit with matplotlib (:func:`eha_core.plotting.plot_lse`);
+        returns the Figure."""
+        from ..plotting import plot_lse
+
+        return plot_lse(self)
+
+    def __repr__(self) -> str:
+        from .._display import block, with_error
+
+        route = "least squares" if self.estimator == "ls" else "instrumental variables"
+        model = f"{self.disturbance_model} disturbance"
+        if self.disturbance_freq_hz is not None:
+            model += f" at {self.disturbance_freq_hz:.4g} Hz" + (" (estimated)" if self.freq_estimated else "")
+        head = f"LSEResult: {route} (eqs. 15-18), {model}, {self.n_samples} samples"
+        items = [with_error(n, v, self.std_errors.get(n)) for n, v in self.estimates.items()]
+        how = "Newey-West" if self.intervals == "newey-west" else f"{self.cosine_terms} equal-weighted cosines"
+        notes = [f"± 1 standard error ({how}); .to_pandas(): the 95 % intervals; .plot(): the fit"]
+        return block(head, self.success, self.message, items, notes)
+
 
 def _solve(Phi: np.ndarray, y: np.ndarray, lags: int, cancel: CancelToken | None = None,
            cosine_terms: int | None = None):

@@ -82,6 +82,32 @@ class RecordIdentification:
     bode: object | None = None  # BodeData: the estimate and the record's response (no theoretical curve)
     prepared: PreparedRecord | None = None
 
+    def to_pandas(self):
+        """The estimate's coefficients as a :class:`pandas.DataFrame`
+        (:meth:`TFEstimate.to_pandas <eha_core.identify.tfresult.TFEstimate.to_pandas>`)."""
+        return self.estimate.to_pandas()
+
+    def __repr__(self) -> str:
+        from .._display import block, with_error
+        from .assessment import assess_residuals
+
+        e = self.estimate
+        n_validation = self.t.size - self.n_estimation
+        head = (f"RecordIdentification: {e.n_poles} poles, {e.n_zeros} zeros from the first {self.n_estimation} "
+                f"samples, validated on the last {n_validation} (detrend {self.detrend})")
+        std = e.param_std if e.param_std is not None else [float("nan")] * (len(e.den) - 1 + len(e.num))
+        items = [with_error(n, v, s) for n, v, s in zip(e.coefficient_names(), [*e.den[1:], *e.num], std,
+                                                          strict=True)]
+        fits = f"fit {e.fit_percent:.2f} % (estimation)"
+        if self.validation is not None:
+            fits += f", {self.validation.fit_percent:.2f} % (validation)"
+        if self.residuals is not None:
+            checks = assess_residuals(self.residuals)
+            fits += (f"; residuals white: {'yes' if checks.whiteness.passed else 'no'}, independent of u: "
+                     f"{'yes' if checks.independence.passed else 'no'}")
+        notes = [f"G(s) = {e.formula()}, ± 1 standard error; {fits}", ".estimate, .validation; .to_pandas()"]
+        return block(head, e.success, e.message, items, notes)
+
 
 def _trend(x: np.ndarray, how: str) -> np.ndarray:
     """The part of ``x`` that ``detrend = how`` removes."""

@@ -195,6 +195,19 @@ class _ReadsResponse:
     def phase_deg(self) -> np.ndarray:
         return self.response.phase_deg
 
+    def to_pandas(self):
+        """The response as a :class:`pandas.DataFrame` indexed by ``w`` [rad/s]: ``magnitude_db``,
+        ``phase_deg``, and where the estimate has them ``lower_db``, ``upper_db`` (its confidence band) and
+        ``coherence``."""
+        import pandas as pd
+
+        cols = {"magnitude_db": self.magnitude_db, "phase_deg": self.phase_deg}
+        for name in ("lower_db", "upper_db", "coherence"):
+            values = getattr(self, name, None)
+            if values is not None:
+                cols[name] = values
+        return pd.DataFrame(cols, index=pd.Index(self.w, name="w"))
+
 
 @dataclass(frozen=True, eq=False)
 class SpectralEstimate(_ReadsResponse):
@@ -235,6 +248,11 @@ class SpectralEstimate(_ReadsResponse):
     n_samples: int
     band: tuple[float, float]
     confidence: float
+
+    def __repr__(self) -> str:
+        lo, hi = self.band
+        return (f"SpectralEstimate: Blackman-Tukey (spa), {self.w.size} frequencies in [{lo:.3g}, {hi:.3g}] rad/s, "
+                f"window of {self.lags} lags, {self.confidence:.0%} band, {self.n_samples} samples; .to_pandas()")
 
 
 @dataclass(frozen=True, eq=False)
@@ -279,6 +297,13 @@ class DataFrequencyResponse(_ReadsResponse):
     n_periods: int
     lags: int | None = None
     confidence: float | None = None
+
+    def __repr__(self) -> str:
+        from .._display import short
+
+        lo, hi = self.band
+        return (f"DataFrequencyResponse: {self.method}, {self.w.size} frequencies in [{lo:.3g}, {hi:.3g}] rad/s; "
+                f".to_pandas()\n  {short(self.description)}")
 
 
 # ---------------------------------------------------------------------------

@@ -12,6 +12,7 @@ estimated input delay and the input's intersample behaviour. Only numpy is impor
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -167,6 +168,86 @@ class TFEstimate:
                 "intersample": self.intersample,
                 "optimizer_success": None if self.optimizer_success is None else bool(self.optimizer_success),
                 "noise_floor": None if self.noise_floor is None else float(self.noise_floor)}
+
+    def coefficient_names(self) -> tuple[str, ...]:
+        """Names of ``[den[1:], num]`` (the order of ``param_std``): ``a1 .. an`` of the denominator
+        ``s^n + a1 s^(n-1) + ... + an``, then ``bm .. b0`` of the numerator ``bm s^m + ... + b0``."""
+        n, m = len(self.den) - 1, len(self.num) - 1
+        return tuple(f"a{k}" for k in range(1, n + 1)) + tuple(f"b{j}" for j in range(m, -1, -1))
+
+    def formula(self) -> str:
+        """The model in the names of its coefficients (:meth:`coefficient_names`), as text:
+        ``b0 / (s^3 + a1 s^2 + a2 s + a3)``."""
+
+        def term(coefficient: str, power: int) -> str:
+            s_power = "" if power == 0 else " s" if power == 1 else f" s^{power}"
+            return f"{coefficient}{s_power}".strip()
+
+        n, m = len(self.den) - 1, len(self.num) - 1
+        names = self.coefficient_names()
+        den = " + ".join(term(c, n - k) for k, c in enumerate(("",) + names[:n]))
+        num = " + ".join(term(c, m - j) for j, c in enumerate(names[n:]))
+        return f"({num}) / ({den})" if m > 0 else f"{num} / ({den})"
+
+    def _units(self) -> dict[str, tuple[str, str, float]]:
+        """Each coefficient's unit, and the input offset's (the input's, ``u``)."""
+        def per_s(k: int) -> str:
+            return "" if k == 0 else "/s" if k == 1 else f"/s^{k}"
+
+        n = len(self.den) - 1
+        units = {"input_offset": ("u", "u", 1.0)}
+        for name in self.coefficient_names():
+            # a_k multiplies s^(n-k) of the monic denominator: 1/s^k; b_j multiplies s^j: the gain y/u over s^(n-j)
+            k = int(name[1:])
+            unit = f"1{per_s(k)}" if name[0] == "a" else f"(y/u){per_s(n - k)}"
+            units[name] = (unit, unit, 1.0)
+        return units
+
+    def to_pandas(self):
+        """The coefficients (:meth:`coefficient_names`), and the input offset and delay when estimated, as a
+        :class:`pandas.DataFrame` indexed by name: ``value``, ``std_error``, ``ci95_low``, ``ci95_high``
+        (value +- 1.96 standard errors), ``unit`` (y/u: the output's unit over the input's),
+        ``display_unit``, ``display_scale``."""
+        from .._display import estimates_frame
+        from ._stats import Z95
+
+        values = [*self.den[1:], *self.num]
+        std = np.full(len(values), np.nan) if self.param_std is None else np.asarray(self.param_std, dtype=float)
+        rows = [(n, v, s) for n, v, s in zip(self.coefficient_names(), values, std, strict=True)]
+        if self.input_offset is not None:
+            rows.append(("input_offset", self.input_offset, np.nan if self.input_offset_std is None
+                         else self.input_offset_std))
+        if self.input_delay_std is not None:
+            rows.append(("input_delay", self.input_delay, self.input_delay_std))
+        return estimates_frame(((n, v, s, v - Z95 * s, v + Z95 * s) for n, v, s in rows), index_name="coefficient",
+                               units=self._units())
+
+    def plot(self, w=None):
+        """Draw the Bode diagram with matplotlib (:func:`eha_core.plotting.plot_bode`); returns the Figure.
+
+        Parameters
+        ----------
+        w : array_like, optional
+            Frequencies [rad/s]; default 400 from 0.01 rad/s to the Nyquist frequency.
+        """
+        from ..plotting import plot_bode
+
+        return plot_bode(self, w)
+
+    def __repr__(self) -> str:
+        from .._display import block, with_error
+
+        head = (f"TFEstimate: {self.n_poles} poles, {self.n_zeros} zeros ({self.method}), fit "
+                f"{self.fit_percent:.2f} % on {self.n_samples} samples")
+        std = [math.nan] * (len(self.den) - 1 + len(self.num)) if self.param_std is None else self.param_std
+        items = [with_error(n, v, s) for n, v, s in zip(self.coefficient_names(), [*self.den[1:], *self.num], std,
+                                                          strict=True)]
+        if self.input_offset is not None:
+            items.append(with_error("input_offset", self.input_offset, self.input_offset_std) + " (input units)")
+        if self.input_delay or self.input_delay_std is not None:
+            items.append(with_error("input_delay", self.input_delay, self.input_delay_std))
+        notes = [f"G(s) = {self.formula()}; ± 1 standard error; .to_pandas(), .tf (python-control), .plot(): Bode"]
+        return block(head, self.success, self.message, items, notes)
 
     def simulate(self, u, ts=None, initial_state=None, input_offset=None, intersample=None) -> np.ndarray:
         """Exact response to ``u`` sampled at ``ts`` (default: ``self.ts``), delayed by ``input_delay``.

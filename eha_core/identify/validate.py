@@ -142,6 +142,12 @@ class CompareResult:
     input_delay: float = 0.0
     intersample: str = "zoh"
 
+    def __repr__(self) -> str:
+        offset = "" if self.input_offset is None else f", input offset {self.input_offset:.4g}"
+        delay = f", input delay {self.input_delay:g} s" if self.input_delay else ""
+        return (f"CompareResult: fit {self.fit_percent:.2f} % over {np.size(self.y_hat)} samples (initial state "
+                f"{self.initial_condition}{offset}{delay}, {self.intersample}); the model's output in .y_hat")
+
 
 def _check_compare_offset(input_offset):
     """``(estimate, value)`` from ``"zero"``, ``"estimate"``, None or a number."""
@@ -403,6 +409,11 @@ class ResidualAnalysis:
     whiteness_ok: bool
     independence_ok: bool
     n_samples: int
+
+    def __repr__(self) -> str:
+        return (f"ResidualAnalysis: {self.n_samples} samples, lags up to {int(self.lags[-1])}, 99 % band "
+                f"±{self.confidence_bound:.3g}: white: {'yes' if self.whiteness_ok else 'no'}, independent of the "
+                f"input: {'yes' if self.independence_ok else 'no'} (every lag inside the band)")
 
 
 def _correlation(a: np.ndarray, b: np.ndarray, max_lag: int) -> np.ndarray:

@@ -202,7 +202,8 @@ def test_batch_equals_single_runs():
 def test_result_object():
     res = simulate(P, u=Sine(6.0, 2.0), t_end=0.01)
     df = res.to_pandas()
-    assert list(df.columns) == ["t", "x", "v", "p1", "p2", "u", "d"]
+    assert df.index.name == "t" and list(df.columns) == ["x", "v", "p1", "p2", "u", "d"]
+    np.testing.assert_array_equal(df.index.to_numpy(), res.t)
     assert res.to_csv().splitlines()[0] == "t,x,v,p1,p2,u,d"
     assert res.states.shape == (11, 4)
     np.testing.assert_allclose(res.u, 6.0 * np.sin(4 * np.pi * res.t), atol=1e-12)
