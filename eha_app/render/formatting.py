@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 __all__ = ["num_html", "pct_text", "poly_html", "tf_html", "poles_html", "table_html", "json_default",
-           "json_safe", "pct_short"]
+           "json_safe", "pct_short", "estimate_texts", "display_unit"]
 
 
 def num_html(x: float, digits: int = 4) -> str:
@@ -22,6 +22,53 @@ def num_html(x: float, digits: int = 4) -> str:
     if -3 <= exp < digits:
         return f"{x:.{digits}g}"
     return mant.rstrip("0").rstrip(".") + f"·10<sup>{exp}</sup>"
+
+
+def display_unit(name: str, si_unit: str = "") -> tuple[str, float]:
+    """The unit a quantity is written in wherever the app shows it, and its factor from SI: tab 1's
+    (βe in GPa, everything else as typed there); ``si_unit`` for a quantity tab 1 does not have.
+
+    >>> display_unit("beta_e"), display_unit("M"), display_unit("d0", "N")
+    (('GPa', 1000000000.0), ('kg', 1.0), ('N', 1.0))
+    """
+    from eha_core.param_table import FIELD_INFO
+
+    info = FIELD_INFO.get(name)
+    return (info.display_unit, float(info.display_scale)) if info is not None else (si_unit, 1.0)
+
+
+def estimate_texts(value: float, lo: float, hi: float, scale: float = 1.0) -> tuple[str, str]:
+    """An estimate and its 95 % interval written one way (divided by ``scale``, the display unit's
+    factor): the digits follow the interval (its half-width to two significant digits, so that an
+    estimate never shows fewer digits than its interval, nor more than the data give), and the
+    estimate and both ends share one power of ten. An interval that collapsed (no noise) or is not
+    finite leaves the estimate its usual five digits.
+
+    >>> estimate_texts(1499.93, 1401.2, 1598.7)
+    ('1500', '[1401, 1599]')
+    >>> estimate_texts(-7.8868e-4, -0.0019016, 3.2499e-4)
+    ('-0.8·10<sup>-3</sup>', '[-1.9, 0.3]·10<sup>-3</sup>')
+    >>> estimate_texts(1.0976e9, 1.0946e9, 1.1006e9, scale=1e9)
+    ('1.0976', '[1.0946, 1.1006]')
+    >>> estimate_texts(4000.0, 4000.0, 4000.0)
+    ('4000', '[4000, 4000]')
+    """
+    v, a, b = value / scale, lo / scale, hi / scale
+    half = 0.5 * (b - a)
+    top = max(abs(v), abs(a), abs(b))
+    if not (math.isfinite(v) and math.isfinite(a) and math.isfinite(b)) or top == 0 or not half > 1e-9 * top:
+        return num_html(v, 5), f"[{num_html(a, 5)}, {num_html(b, 5)}]"
+    exp = math.floor(math.log10(top))
+    power = exp if (exp >= 5 or exp <= -3) else 0
+    f = 10.0 ** power
+    decimals = min(max(0, 1 - math.floor(math.log10(half / f))), 8)
+
+    def text(x: float) -> str:
+        out = f"{x / f:.{decimals}f}"
+        return "0" if float(out) == 0 else out          # -0.0 too: a sign on nothing only puzzles
+
+    times = f"·10<sup>{power}</sup>" if power else ""
+    return text(v) + times, f"[{text(a)}, {text(b)}]" + times
 
 
 def pct_text(fraction: float, digits: int = 2) -> str:

@@ -12,9 +12,8 @@ from bokeh.layouts import gridplot
 from bokeh.models import ColumnDataSource, LegendItem
 
 from eha_core.experiments import PAPER_TABLE4
-from eha_core.param_table import FIELD_INFO
 
-from .formatting import num_html, pct_short, pct_text, table_html
+from .formatting import display_unit, estimate_texts, num_html, pct_short, pct_text, table_html
 from .plots import CASE_COLORS, FIGURE_WIDTH, _f32, _figure, _lean, _legend_above, decimate
 from .tables import SCENARIOS, SYMBOLS_HTML, UNITS
 
@@ -34,7 +33,13 @@ def _num(v: float) -> str:
 
 
 def _unit(name: str) -> str:
-    return UNITS.get(name) or (FIELD_INFO[name].unit if name in FIELD_INFO else "")
+    """The unit a parameter is written in, as on tab 1 (βe in GPa)."""
+    return display_unit(name, UNITS.get(name, ""))[0]
+
+
+def _scale(name: str) -> float:
+    """The factor from SI to :func:`_unit`."""
+    return display_unit(name)[1]
 
 
 def _name(name: str) -> str:
@@ -50,7 +55,7 @@ def held_text(res, name: str) -> str:
     """A held parameter's row: its value and how it moves the estimates if it is 10 % off (the core's
     ``held_bias``), e.g. "held at the initial value, 1500 N s/m; if it is 10 % off, M moves by +4.1 %, Af by
     -2.0 %"."""
-    text = f"held at the initial value, {_num(res.estimates[name])} {_unit(name)}"
+    text = f"held at the initial value, {_num(res.estimates[name] / _scale(name))} {_unit(name)}"
     moves = [(m, v) for m, v in (res.held_bias.get(name) or {}).items() if math.isfinite(v)]
     if moves:
         parts = [f"{_name(m)} {'moves ' if k == 0 else ''}by {pct_short(v)}" for k, (m, v) in enumerate(moves)]
@@ -92,14 +97,16 @@ def greybox_table_html(res, nominal, *, hidden=(), scenario: str | None = None, 
     rows = []
     for n in res.names:
         v, lo_hi, se = res.estimates[n], res.ci95[n], res.std_errors[n]
-        row = [f"{_name(n)} [{_unit(n)}]", _num(v)]
+        scale = _scale(n)
         given = n not in res.held and res.success and all(math.isfinite(c) for c in lo_hi)
+        shown, interval = estimate_texts(v, *lo_hi, scale) if given else (_num(v / scale), "")
+        row = [f"{_name(n)} [{_unit(n)}]", shown]
         if n in res.held:
             row += [f"<span class='eha-gb-held-row'>{held_text(res, n)}</span>", ""]
         elif n in bound:
             row += ["<span class='eha-warn eha-gb-at-bound'>at the bound of its range</span>", "—"]
         elif given:
-            row += [f"[{_num(lo_hi[0])}, {_num(lo_hi[1])}]", _num(se)]
+            row += [interval, num_html(se / scale, 2)]
         else:
             row += ["<span class='eha-gb-no-interval'>—</span>", "—"]
         if known:
@@ -110,11 +117,11 @@ def greybox_table_html(res, nominal, *, hidden=(), scenario: str | None = None, 
                 inside = given and lo_hi[0] <= nom <= lo_hi[1]
                 diff = "" if nom == 0 else pct_text(v / nom - 1, 3)
                 mark = " <span class='eha-ok'>covers ✓</span>" if inside else ""
-                row += [_num(nom), diff + mark]
+                row += [_num(nom / scale), diff + mark]
         if paper is not None:
             p = paper.get(n)
-            row.append("" if p is None else f"{_num(p)}<br><small class='eha-cite'>Table 4, {SCENARIOS[scenario]}"
-                                             "</small>")
+            row.append("" if p is None else f"{_num(p / scale)}<br><small class='eha-cite'>Table 4, "
+                                             f"{SCENARIOS[scenario]}</small>")
         rows.append(row)
     header = (["parameter", "estimate", "95 % interval", "std. error"]
               + (["nominal (tab 1)" if not hidden else "known value", "difference"] if known else [])
@@ -191,10 +198,12 @@ def verdicts_html(res) -> str:
 
 # -- the three routes ----------------------------------------------------------------------------------
 
-def _cell(v: float, ci: tuple[float, float] | None, truth: float | None) -> str:
-    out = _num(v)
+def _cell(v: float, ci: tuple[float, float] | None, truth: float | None, scale: float = 1.0) -> str:
     if ci is not None and all(math.isfinite(c) for c in ci):
-        out += f"<br><small>[{_num(ci[0])}, {_num(ci[1])}]</small>"
+        shown, interval = estimate_texts(v, *ci, scale)
+        out = f"{shown}<br><small>{interval}</small>"
+    else:
+        out = _num(v / scale)
     if truth:
         out += f"<br><small>{pct_text(v / truth - 1, 2)}</small>"
     return out
@@ -203,7 +212,7 @@ def _cell(v: float, ci: tuple[float, float] | None, truth: float | None) -> str:
 def _lse_cell(lse, n, truth):
     if lse is None:
         return "<i>not run</i>"
-    return _cell(lse.estimates[n], lse.ci95.get(n), truth) if n in lse.estimates else "–"
+    return _cell(lse.estimates[n], lse.ci95.get(n), truth, _scale(n)) if n in lse.estimates else "–"
 
 
 def _tf_cell(backout, n, truth):
@@ -212,7 +221,7 @@ def _tf_cell(backout, n, truth):
         return "<i>not run</i>"
     if n == "beta_e":
         ci = backout.ci95().get("beta_e_from_gain")
-        return _cell(backout.beta_e_from_gain, ci, truth) + "<br><small>from the gain</small>"
+        return _cell(backout.beta_e_from_gain, ci, truth, _scale(n)) + "<br><small>from the gain</small>"
     if n == "M":
         m = backout.known.get("M")
         return "taken as measured" + (f" ({_num(m)})" if m is not None else "")
@@ -230,7 +239,7 @@ def _gb_cell(gb, n, truth):
         return "not estimated"
     held = n in gb.held
     ci = None if held or not gb.success else gb.ci95[n]
-    return (_cell(gb.estimates[n], ci, truth) + ("<br><small>held</small>" if held else "")
+    return (_cell(gb.estimates[n], ci, truth, _scale(n)) + ("<br><small>held</small>" if held else "")
             + ("" if gb.success or held else _MAY_BE_WRONG))
 
 
@@ -264,7 +273,7 @@ def routes_html(params, lse=None, backout=None, greybox=None, *, hidden=()) -> s
     def truth(n):
         return None if n in hidden or params is None else _nominal(params, n)
 
-    rows = [[f"{_name(n)} [{_unit(n)}]", "hidden" if n in hidden else _num(truth(n)),
+    rows = [[f"{_name(n)} [{_unit(n)}]", "hidden" if n in hidden else _num(truth(n) / _scale(n)),
              _lse_cell(lse, n, truth(n)), _tf_cell(backout, n, truth(n)), _gb_cell(greybox, n, truth(n))]
             for n in ROUTE_PARAMS]
     rows.append(_damping_row(params, lse, backout, greybox, hidden))

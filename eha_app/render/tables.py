@@ -14,7 +14,7 @@ from eha_core.linear import linearize
 from eha_core.param_table import FIELD_INFO
 from eha_core.params import ActuatorParams
 
-from .formatting import num_html, pct_text, poles_html, table_html, tf_html
+from .formatting import display_unit, estimate_texts, num_html, pct_text, poles_html, table_html, tf_html
 from .glossary import term
 
 __all__ = ["CSS", "SCENARIOS", "derived_html", "lse_table_html", "table4_html", "freq_summary_html", "backout_html",
@@ -139,12 +139,18 @@ _MARKS = {"exact": ("exact ✓", "eha-ok"), "covers": ("covers ✓", "eha-ok"),
           "misses": ("misses ✗", "eha-warn"), "impossible": ("impossible ✗", "eha-warn")}
 
 
+def _unit_of(name: str) -> tuple[str, float]:
+    """The unit a parameter's row is written in (tab 1's: βe in GPa) and its factor from SI."""
+    return display_unit(name, _UNITS.get(name, ""))
+
+
 def reading_mark(reading, nominal: str = "nominal") -> str:
     """The reading of an estimate in one word and a mark, coloured (✓ only for exact and covers)."""
     text, cls = _MARKS[reading.kind]
     if not text:
         return ""
-    tip = _plain(reading.describe(nominal=nominal))
+    unit, scale = _unit_of(reading.name)
+    tip = _plain(reading.describe(fmt=lambda x: f"{x / scale:.5g}", unit=unit, nominal=nominal))
     return f"<span class='eha-reading eha-reading-{reading.kind} {cls}' title='{tip}'>{text}</span>"
 
 
@@ -153,8 +159,9 @@ def _plain(text: str) -> str:
 
 
 def _describe(reading, nominal: str = "nominal") -> str:
-    return reading.describe(fmt=_num, symbol=_NAMES.get(reading.name, reading.name),
-                            unit=_UNITS.get(reading.name, ""), nominal=nominal)
+    unit, scale = _unit_of(reading.name)
+    return reading.describe(fmt=lambda x: _num(x / scale), symbol=_NAMES.get(reading.name, reading.name),
+                            unit=unit, nominal=nominal)
 
 
 def readings_html(readings, prefix: str = "", nominal: str = "nominal") -> str:
@@ -182,7 +189,7 @@ def _paper_cell(scenario: str, name: str, nominal: float | None) -> tuple[float 
     p = PAPER_TABLE4.get(scenario, {}).get(name)
     if p is None:
         return None, ""
-    txt = _num(p) + (f" ({pct_text(p / nominal - 1)})" if nominal else "")
+    txt = _num(p / _unit_of(name)[1]) + (f" ({pct_text(p / nominal - 1)})" if nominal else "")
     return p, f"{txt}<br><small class='eha-cite'>Table 4, {SCENARIOS[scenario]}</small>"
 
 
@@ -270,16 +277,18 @@ def lse_table_html(res, scenario: str | None, hidden=(), *, alternative=None, le
         nom = res.nominal.get(k) if known else None
         rel = res.rel_error.get(k) if known else None
         lo, hi = res.ci95[k]
-        row = [f"{_NAMES.get(k, k)} [{_UNITS.get(k, '')}]"]
+        unit, scale = _unit_of(k)
+        shown, interval = estimate_texts(v, lo, hi, scale)
+        row = [f"{_NAMES.get(k, k)} [{unit}]"]
         if known:
-            row.append("" if nom is None else _num(nom))
-        row += [_num(v)]
+            row.append("" if nom is None else _num(nom / scale))
+        row += [shown]
         if known:
             row.append("" if rel is None else pct_text(rel, 3))
-        row += [f"[{_num(lo)}, {_num(hi)}]", reading_mark(readings[k])]
+        row += [interval, reading_mark(readings[k])]
         if alt:
             a = alternative.estimates.get(k)
-            row.append("" if a is None else _num(a) + (f" ({pct_text(a / nom - 1, 3)})" if nom else ""))
+            row.append("" if a is None else _num(a / scale) + (f" ({pct_text(a / nom - 1, 3)})" if nom else ""))
         if paper_on:
             row.append(_paper_cell(scenario, k, nom)[1])
         rows.append(row)
@@ -304,7 +313,8 @@ def lse_table_html(res, scenario: str | None, hidden=(), *, alternative=None, le
         items += _setup_note(scenario, res.disturbance_model, paper_gaps(res, scenario), seed, readings)
         if scenario == "none" and "beta_e" in res.estimates:
             items += (f"<li>The paper prints this case twice: Table 4 gives β<sub>e</sub> = "
-                      f"{_num(PAPER_TABLE4['none']['beta_e'])} Pa, Table 3 {_num(PAPER_TABLE3_BETA_E)} Pa "
+                      f"{_num(PAPER_TABLE4['none']['beta_e'] / 1e9)} GPa, Table 3 "
+                      f"{_num(PAPER_TABLE3_BETA_E / 1e9)} GPa "
                       f"({pct_text(PAPER_TABLE3_BETA_E / res.nominal['beta_e'] - 1)}).</li>")
     if own_record:
         items += ("<li>Your own record: no nominal values are known, so the readings say only whether an "
@@ -339,8 +349,10 @@ def _lse_exercise_html(res, hidden) -> str:
         lo, hi = res.ci95[k]
         nom = None if k in hidden else res.nominal.get(k)
         # the harmonic disturbance's amplitudes have no known value: an empty cell, as in the full table
-        known = "hidden" if k in hidden else ("" if nom is None else _num(nom))
-        rows.append([f"{_NAMES.get(k, k)} [{_UNITS.get(k, '')}]", known, _num(v), f"[{_num(lo)}, {_num(hi)}]",
+        unit, scale = _unit_of(k)
+        known = "hidden" if k in hidden else ("" if nom is None else _num(nom / scale))
+        shown, interval = estimate_texts(v, lo, hi, scale)
+        rows.append([f"{_NAMES.get(k, k)} [{unit}]", known, shown, interval,
                      reading_mark(readings[k], nominal="known")])
     items = readings_html(readings.values(), nominal="known")
     note = (f"<p class='eha-note'>Disturbance model: {res.disturbance_model}. {_how_estimated(res)}. Hand in the "
@@ -366,7 +378,8 @@ def table4_html(by_model: dict, leaks: dict | None = None, seed: int | None = No
     rows = []
     for k in names:
         nom = first.nominal[k]
-        row = [f"{_NAMES[k]} [{_UNITS[k]}]", _num(nom)]
+        unit, scale = _unit_of(k)
+        row = [f"{_NAMES[k]} [{unit}]", _num(nom / scale)]
         for scen in scenarios:
             lines = []
             for m in models:
@@ -375,12 +388,13 @@ def table4_html(by_model: dict, leaks: dict | None = None, seed: int | None = No
                 rel = res.rel_error.get(k)
                 lo, hi = res.ci95[k]
                 mark = reading_mark(readings[m, scen][k])
-                lines.append(f"<span class='eha-t4-{m}'>{short[m]}: <b>{_num(v)}</b>"
+                shown, interval = estimate_texts(v, lo, hi, scale)
+                lines.append(f"<span class='eha-t4-{m}'>{short[m]}: <b>{shown}</b>"
                              + (f" ({pct_text(rel)})" if rel is not None else "")
-                             + f"<br><small>[{_num(lo)}, {_num(hi)}]</small> {mark}</span>")
+                             + f"<br><small>{interval}</small> {mark}</span>")
             p = PAPER_TABLE4[scen][k]
             prel = f" ({pct_text(p / nom - 1)})" if nom else ""
-            lines.append(f"<span class='eha-t4-paper'>paper: {_num(p)}{prel}</span>")
+            lines.append(f"<span class='eha-t4-paper'>paper: {_num(p / scale)}{prel}</span>")
             row.append("<br>".join(lines))
         rows.append(row)
     items = ""
@@ -408,7 +422,7 @@ def table4_html(by_model: dict, leaks: dict | None = None, seed: int | None = No
                   "seed).</li>")
     note = ("<p class='eha-note'>const. = the paper's constant d<sub>0</sub>; harm. = d<sub>0</sub> plus a sinusoid "
             "whose frequency is estimated from the data. Every paper value is Table 4's, in the column of its case "
-            f"(Table 3 prints d = 0 again with β<sub>e</sub> = {_num(PAPER_TABLE3_BETA_E)} Pa). Readings: "
+            f"(Table 3 prints d = 0 again with β<sub>e</sub> = {_num(PAPER_TABLE3_BETA_E / 1e9)} GPa). Readings: "
             "<b>exact</b> ✓ without noise, the estimate equals the nominal value to within the regressors' "
             "numerical error (~0.003 %) and its interval collapses to that error; <b>covers</b> ✓ / <b>misses</b> ✗ "
             "the nominal value; <b>undetermined</b>: the interval is wider than the estimate; <b>impossible</b> ✗: "

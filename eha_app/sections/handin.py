@@ -18,7 +18,6 @@ import panel as pn
 
 from eha_core.exercise import FEEDBACK, METHODS
 
-from ..render.layout import BUTTON_CONTRAST
 from ..render.tables import SYMBOLS_HTML
 from ..runtime.tasks import on_click
 
@@ -106,8 +105,7 @@ class HandInBox:
         state = section.state
         allowed = bool(state.hidden) and (state.exercise is None or method in state.exercise.conditions.methods)
         self.button = pn.widgets.Button(label=label, color="warning", width=260, css_classes=["eha-handin"],
-                                        visible=allowed, disabled=True, description="run first",
-                                        stylesheets=[BUTTON_CONTRAST])
+                                        visible=allowed, disabled=True, description="run first")
         on_click(self.button, lambda _e: self.hand_in())
         self.verdict = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-verdict"])
         # the section's own view of the button (a result to hand in, and its tip), before the lab's rules
@@ -163,7 +161,7 @@ class HandInBox:
                    f" It would use hand-in {used + 1} of {exercise.attempts}.")
         if not self.confirm.objects:
             yes = pn.widgets.Button(label="Hand in anyway", color="danger", width=130,
-                                    css_classes=["eha-handin-anyway"], stylesheets=[BUTTON_CONTRAST])
+                                    css_classes=["eha-handin-anyway"])
             no = pn.widgets.Button(label="Keep it", width=110, css_classes=["eha-handin-keep"])
             on_click(yes, lambda _e: self._answered(True))
             on_click(no, lambda _e: self._answered(False))

@@ -25,7 +25,7 @@ from bokeh.models import ColumnDataSource, Span
 from eha_core.experiments import FrequencyExperiment
 
 from ..render import plots
-from ..render.formatting import num_html
+from ..render.formatting import display_unit, num_html
 from ..render.layout import side_by_side
 from ..render.tables import SYMBOLS_HTML, UNITS
 from ..runtime.background import background_process
@@ -463,15 +463,17 @@ def study_summary_html(result) -> str:
                        else f"<span class='eha-ok'>{t:+.1f}</span>")
         else:
             verdict = "—"
-        unit = UNITS.get(n, "")
+        # in the unit tab 1 writes it in (βe in GPa), as everywhere on the page
+        unit, scale = display_unit(n, UNITS.get(n, ""))
         crb = ""
         if bounded:
             b = result.bound.get(n, np.nan)
             ratio = result.std[n] / b if np.isfinite(b) and b > 0 else np.nan
-            crb = f"<td>{_n(b, 3)}</td><td>{_n(ratio, 3)}</td>"
+            crb = f"<td>{_n(b / scale, 3)}</td><td>{_n(ratio, 3)}</td>"
         rows.append(f"<tr><td>{SYMBOLS_HTML.get(n, html.escape(n))}{f' [{unit}]' if unit else ''}</td>"
-                    f"<td>{_n(nom)}</td><td>{_n(result.mean[n])}</td><td>{_n(bias)}</td><td>{verdict}</td>"
-                    f"<td>{_n(result.std[n], 3)}</td><td>{_n(result.mean_std_error[n], 3)}</td>{crb}"
+                    f"<td>{_n(nom / scale)}</td><td>{_n(result.mean[n] / scale)}</td><td>{_n(bias / scale)}</td>"
+                    f"<td>{verdict}</td><td>{_n(result.std[n] / scale, 3)}</td>"
+                    f"<td>{_n(result.mean_std_error[n] / scale, 3)}</td>{crb}"
                     f"<td>{cov * 100:.1f} % {'✓' if honest else '✗'}</td></tr>")
     done = (f"{result.n_completed} of {result.n_requested} seeds" + (" (cancelled)" if result.cancelled else "")
             + f" in {result.elapsed_s:.1f} s")

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from eha_app.render.formatting import num_html
+from eha_app.render.formatting import display_unit, estimate_texts, num_html
 from eha_app.render.greybox import correlation_html, greybox_table_html, routes_html
 from eha_app.runtime.handins import HandIns
 from eha_app.session import Session
@@ -53,8 +53,10 @@ def failed():
 
 def _unchecked_intervals(res) -> list[str]:
     """The fit's own interval ends, as the table would write them (they must appear nowhere)."""
-    return [f"[{num_html(lo, 5)}, {num_html(hi, 5)}]" for n, (lo, hi) in res.extras["ci95_unchecked"].items()
-            if n not in res.held and math.isfinite(lo) and math.isfinite(hi)]
+    return [text for n, (lo, hi) in res.extras["ci95_unchecked"].items()
+            if n not in res.held and math.isfinite(lo) and math.isfinite(hi)
+            for text in (f"[{num_html(lo, 5)}, {num_html(hi, 5)}]",
+                         estimate_texts(res.estimates[n], lo, hi, display_unit(n)[1])[1])]
 
 
 def test_a_failed_estimate_has_no_interval_and_says_what_failed_and_what_to_try(micrometres):
@@ -120,7 +122,7 @@ def test_a_passed_estimate_shows_its_intervals_the_checks_and_how_it_was_fitted(
     assert f"How it was fitted: {html.escape(res.strategy)}." in table and "single shooting over the first" in table
     for n in res.names:
         lo, hi = res.ci95[n]
-        assert f"[{num_html(lo, 5)}, {num_html(hi, 5)}]" in table
+        assert estimate_texts(res.estimates[n], lo, hi, display_unit(n)[1])[1] in table
     assert table.count("covers ✓") == 4
     assert "eha-gb-corr" in gb.details.object and "Not shown" not in gb.details.object
     assert "may be wrong" not in gb.routes.object

@@ -4,7 +4,7 @@ the own record, the three routes side by side, the report and settings, the exer
 import numpy as np
 import pytest
 
-from eha_app.render.formatting import num_html
+from eha_app.render.formatting import display_unit, estimate_texts, num_html
 from eha_app.runtime.handins import HandIns
 from eha_app.session import Session
 from eha_app.session.state import AppState
@@ -32,7 +32,9 @@ def test_the_run_recovers_tab_1s_values_within_the_intervals(ran):
     for n in res.names:
         lo, hi = res.ci95[n]
         assert lo <= getattr(truth, n) <= hi, n
-        assert num_html(res.estimates[n], 5) in gb.table.object
+        # written as everywhere: in tab 1's unit, the digits following the interval
+        shown, interval = estimate_texts(res.estimates[n], lo, hi, display_unit(n)[1])
+        assert f"<td>{shown}</td><td>{interval}</td>" in gb.table.object
     assert gb.table.object.count("covers ✓") == 4
     assert all(f > 95 for f in res.fit.values()) and set(res.fit) == {"x", "p1", "p2"}
     assert f"x {res.fit['x']:.2f} %" in gb.table.object
@@ -123,14 +125,15 @@ def test_the_three_routes_side_by_side_and_in_the_report():
     routes = gb.routes.object
     assert "not run" not in routes and "taken as measured" in routes and "from the gain" in routes
     lse = session.section("least_squares").result
-    assert num_html(lse.estimates["M"], 5) in routes and num_html(gb.result.estimates["M"], 5) in routes
+    assert estimate_texts(lse.estimates["M"], *lse.ci95["M"])[0] in routes
+    assert estimate_texts(gb.result.estimates["M"], *gb.result.ci95["M"])[0] in routes
     part = type(gb).report(gb.snapshot())
     assert "three routes side by side" in part.html and "{{greybox}}" in part.html and "greybox" in part.figures
     from eha_app.render.report import session_report
 
     text = session_report(session, session.snapshot()).decode()
     assert "Grey-box identification (the nonlinear model)" in text and "gb_params" in text
-    assert num_html(gb.result.estimates["Af"], 5) in text
+    assert estimate_texts(gb.result.estimates["Af"], *gb.result.ci95["Af"])[0] in text
 
 
 def test_the_hand_in_in_an_exercise_stores_method_greybox(lab_exercise):
@@ -165,7 +168,8 @@ def test_the_hand_in_in_an_exercise_stores_method_greybox(lab_exercise):
     text = session_report(page.session, page.session.snapshot()).decode()
     assert "Grey-box identification" in text
     for n in ("M", "B", "Af", "beta_e"):
-        assert num_html(getattr(truth, n), 5) not in text
+        scale = display_unit(n)[1]
+        assert num_html(getattr(truth, n), 5) not in text and num_html(getattr(truth, n) / scale, 5) not in text
 
 
 def test_multiple_shooting_from_the_form_ends_where_output_error_does(ran):

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from eha_app.cli import main
-from eha_app.render.formatting import num_html
+from eha_app.render.formatting import estimate_texts, num_html
 from eha_app.render.report import SECTIONS, build_report
 from eha_core.experiments import FrequencyExperiment, run_frequency_identification, run_lse_table, run_paper_cases
 from eha_core.params import ActuatorParams
@@ -39,7 +39,8 @@ def test_every_section_is_present(report):
     assert "Seed 3" in page
     # the three routes side by side: the least squares' and grey-box's M on Table 3's record, eq. 27's damping
     routes = page.split('<section id="routes">')[1].split("</section>")[0]
-    assert num_html(result.reproduction.greybox.estimates["M"], 5) in routes and "not run" not in routes
+    gb = result.reproduction.greybox
+    assert estimate_texts(gb.estimates["M"], *gb.ci95["M"])[0] in routes and "not run" not in routes
     assert abs(result.reproduction.greybox.estimates["M"] / 4000.0 - 1) < 1e-3
 
 
@@ -57,7 +58,7 @@ def test_table_numbers_equal_the_core_functions(report):
             assert r["estimate"] == res.estimates[r["parameter"]]
             assert [r["ci95_lo"], r["ci95_hi"]] == list(res.ci95[r["parameter"]])
         for res in table.values():
-            assert num_html(res.estimates["M"], 5) in page
+            assert estimate_texts(res.estimates["M"], *res.ci95["M"])[0] in page
     fi = run_frequency_identification(p, FrequencyExperiment(seed=SETTINGS.seed, n_samples=SETTINGS.freq_samples))
     assert numbers["hhat_den"] == list(fi.estimate.den)
     assert numbers["hhat_num"] == list(fi.estimate.num)

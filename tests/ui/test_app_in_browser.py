@@ -83,7 +83,7 @@ def test_time_domain_identification_fills_the_table(session):
     table = page.locator(".eha-lse-table table")
     table.wait_for(state="visible", timeout=60_000)
     text = table.inner_text()
-    for row in ("M [kg]", "B [N s/m]", "βe [Pa]", "95 % interval"):
+    for row in ("M [kg]", "B [N s/m]", "βe [GPa]", "95 % interval"):
         assert row in text
     # B's relative error on the paper's noise-free record: -0.0038 % (the least squares' own, eq. 15; a
     # simulator 3e-7 less accurate made it -0.0033 %), shown to three decimals

@@ -243,7 +243,7 @@ def test_14_the_study_speaks_the_apps_vocabulary(open_page):
     page.get_by_role("button", name="Run the study").click()
     wait_until(lambda: "bias / its std error" in text_of(page, ".eha-study-summary"), 120, message="the study")
     summary = text_of(page, ".eha-study-summary")
-    assert "βe [Pa]" in summary and "beta_e" not in summary and not re.search(r"\d[eE][+-]\d", summary)
+    assert "βe [GPa]" in summary and "beta_e" not in summary and not re.search(r"\d[eE][+-]\d", summary)
     assert "Histograms:" in summary
 
 
