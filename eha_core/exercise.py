@@ -456,7 +456,8 @@ class Exercise:
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
-            raise not_allowed(name, "(not JSON)", f"line {exc.lineno}: {exc.msg}") from None
+            raise not_allowed(name, "(not JSON)", f"not an exercise file (JSON text): line {exc.lineno}: "
+                                                  f"{exc.msg}") from None
         if not isinstance(data, dict) or data.get("format") not in _FORMATS:
             raise not_allowed(name, "(no exercise)", f"not an exercise file (format {_FORMAT!r} expected); "
                               "make one with `eha exercise new`")
@@ -479,7 +480,12 @@ class Exercise:
     def load(cls, path: str | Path) -> Exercise:
         """The exercise of the exercise file at ``path`` (UTF-8 JSON, :meth:`from_json`)."""
         path = Path(path)
-        return cls.from_json(path.read_text(encoding="utf-8"), name=str(path))
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError:
+            raise not_allowed(str(path), "(not text)", "not an exercise file (JSON text): it holds bytes that "
+                                                       "are not UTF-8 text; make one with `eha exercise new`") from None
+        return cls.from_json(text, name=str(path))
 
     def save(self, path: str | Path) -> None:
         """Write the exercise file to ``path`` (:meth:`to_json`), readable by its owner only."""

@@ -11,7 +11,9 @@ from eha_core.data import csv_cell
 from eha_core.errors import FieldError
 
 from .common import (
+    NOISE_GRAMMAR,
     Parser,
+    UsageError,
     as_option,
     check_input_file,
     check_output_file,
@@ -43,11 +45,11 @@ def add_parser(sub) -> None:
     new.add_argument("--attempts", type=int, default=3, help="hand-ins allowed per student (default 3; 0: no limit)")
     new.add_argument("--feedback", default="verdict", choices=("verdict", "none", "after-deadline"),
                      help="what a student is told after a hand-in: the verdict per parameter (default), nothing "
-                          "but that it was stored, or the verdicts once the deadline has passed")
+                          "but that it was stored, or the verdicts once the deadline has passed (needs --deadline)")
     new.add_argument("--score", default="best", choices=("best", "last"), help="which hand-in counts (default best)")
-    new.add_argument("--noise", default="x=0.01mm,v=1mm/s,p=0.05MPa", metavar="SPEC",
-                     help="the sensors' noise floor, σ per signal (students may raise it, not lower it); default "
-                          "x=0.01mm,v=1mm/s,p=0.05MPa (p: both pressures); 'none' for noise-free sensors")
+    new.add_argument("--noise", default="x=0.01mm,v=1mm/s,p=0.05MPa", metavar="SIGNAL=SIGMA[UNIT],...",
+                     help=f"the sensors' noise floor (students may raise it, not lower it), {NOISE_GRAMMAR}; "
+                          "default x=0.01mm,v=1mm/s,p=0.05MPa")
     new.add_argument("--disturbance", default="none", metavar="SIGNAL",
                      help="a load force always acting, in the app's signal grammar (e.g. white:200, sine:500:3)")
     new.add_argument("--measured", default="x,v,p1,p2", help="the signals measured (x always; e.g. x,p1,p2: no "
@@ -93,7 +95,12 @@ def add_parser(sub) -> None:
     tok.add_argument("--url", default="http://localhost:5006", metavar="URL",
                      help="the server's address as the teacher's browser reaches it (default http://localhost:5006)")
     tok.set_defaults(handler=run_token)
-    ex.set_defaults(handler=lambda args: (ex.print_help(), 2)[1])
+    ex.set_defaults(handler=_missing_action)
+
+
+def _missing_action(args) -> int:
+    raise UsageError("exercise needs an ACTION: new, codes, results, reveal or token (eha exercise --help tells "
+                     "more)")
 
 
 def _fraction(option: str, text: str) -> float:
@@ -129,18 +136,65 @@ def _names(option: str, text: str) -> tuple[str, ...]:
     return tuple(n.strip() for n in str(text).split(",") if n.strip())
 
 
-def _load(path: str):
+def load_exercise(option: str, path: str):
+    """The exercise file ``path`` given as ``option``; one that cannot be read, or is not an exercise file,
+    is refused naming the option and the file."""
     from eha_core.exercise import Exercise
 
-    check_input_file("exercise", path)
-    return Exercise.load(path)
+    check_input_file(option, path)
+    try:
+        return Exercise.load(path)
+    except FieldError as exc:
+        if exc.field != str(path):
+            raise
+        raise refused_file(option, path, exc.what) from None
+
+
+def _load(path: str):
+    return load_exercise("exercise", path)
+
+
+def _check_deadline(args) -> None:
+    """A deadline a student can meet, and one for feedback that waits for it."""
+    import datetime
+    import time
+
+    from eha_core.exercise import parse_deadline
+
+    if args.feedback == "after-deadline" and not args.deadline:
+        raise refused("--feedback", args.feedback, "the verdicts wait for the deadline, and there is none: the "
+                      "students would never see them; give --deadline, or use verdict or none",
+                      context="without --deadline")
+    if args.deadline:
+        # (a deadline without a zone is this machine's time, as the exercise reads it)
+        if datetime.datetime.fromisoformat(parse_deadline(args.deadline, name="--deadline")).timestamp() <= time.time():
+            raise refused("--deadline", args.deadline, "it has passed: every hand-in would be refused; give a "
+                                                       "later date and time")
+
+
+def _roster(path: str):
+    """The class list of ``--roster``; a file that is not a CSV text, or has no students, is refused
+    naming the file."""
+    from eha_core.exercise import read_roster
+
+    check_input_file("--roster", path)
+    data = Path(path).read_bytes()
+    if b"\0" in data:
+        # a spreadsheet's own format, a picture: no text file holds a NUL byte
+        raise refused_file("--roster", path, "not a CSV text file; save the class list as CSV UTF-8")
+    try:
+        # a CSV a spreadsheet saved in its local code page is still read (an accented letter shows as �)
+        return read_roster(data.decode("utf-8-sig", errors="replace"), name="--roster")
+    except FieldError as exc:
+        raise refused_file("--roster", path, exc.what) from None
 
 
 def run_new(args) -> int:
-    from eha_core.exercise import Conditions, Exercise, parse_deadline, read_roster
+    from eha_core.exercise import Conditions, Exercise, parse_deadline
 
     hide = _names("--hide", args.hide)
     vary, tolerance = _fraction("--vary", args.vary), _tolerances(args.tolerance)
+    _check_deadline(args)
     check_output_file("--out", args.out)
     if Path(args.out).exists() and not args.force:
         raise refused_file("--out", args.out, "it exists (its secret defines every student's actuator and code); "
@@ -152,9 +206,7 @@ def run_new(args) -> int:
                "ids per client": "--ids-per-client", "kept uploads": "--kept-uploads"}
     try:
         if args.roster:
-            check_input_file("--roster", args.roster)
-            roster = read_roster(Path(args.roster).read_text(encoding="utf-8-sig", errors="replace"),
-                                 name="--roster")
+            roster = _roster(args.roster)
         try:
             max_record = float(args.max_record)
         except ValueError:

@@ -10,7 +10,17 @@ import sys
 
 from eha_core.errors import FieldError
 
-from .common import as_option, check_input_file, json_text, parse_noise, parse_params, refused
+from .common import (
+    NOISE_GRAMMAR,
+    UsageError,
+    as_option,
+    as_typed,
+    check_input_file,
+    json_text,
+    parse_noise,
+    parse_params,
+    refused,
+)
 
 #: The longest simulated record [s].
 MAX_GREYBOX_T_END = 120.0
@@ -38,8 +48,8 @@ def add_parser(idsub) -> None:
     gb.add_argument("--u", help="the valve command as signal text (default sine:6:2, the paper's)")
     gb.add_argument("--disturbance", default="none", help="a load force d(t) known to the model (signal text, "
                                                           "e.g. sine:5000:1; default none)")
-    gb.add_argument("--noise", default="x=0.01mm,p=0.05MPa", help="without --data: the sensors' white noise, e.g. "
-                    "x=0.01mm,v=1mm/s,p=0.05MPa (default x=0.01mm,p=0.05MPa; none for noise-free)")
+    gb.add_argument("--noise", default="x=0.01mm,p=0.05MPa", metavar="SIGNAL=SIGMA[UNIT],...",
+                    help=f"without --data: the sensors' noise, {NOISE_GRAMMAR} (default x=0.01mm,p=0.05MPa)")
     gb.add_argument("--t-end", type=float, default=10.0, help=f"simulated record length [s] (default 10, at most "
                                                               f"{MAX_GREYBOX_T_END:g})")
     gb.add_argument("--intersample", default="read", help="with --data: how u moves between samples: read (from "
@@ -51,7 +61,10 @@ def add_parser(idsub) -> None:
                          "all of it; multiple shooting when that estimate fails its checks), single (the whole "
                          "record from the start values) or multiple (multiple shooting, then the whole record)")
     gb.add_argument("--json", action="store_true", help="print JSON (default: a table)")
-    gb.set_defaults(handler=run_greybox)
+    # the core's names -> the options; what a simulation that fails, or a fit that cannot start, may follow
+    # from, the likeliest first
+    gb.set_defaults(handler=run_greybox, fields={"noise": "--noise"},
+                    inputs=("--param", "--u", "--disturbance", "--data", "--params", "--measured"))
 
 
 def _names(option: str, text: str, allowed) -> tuple[str, ...]:
@@ -64,7 +77,7 @@ def _names(option: str, text: str, allowed) -> tuple[str, ...]:
     return names
 
 
-def _record(args, names, measured, truth):
+def _record(args, measured, truth, noise):
     """The record: the CSV of --data, or the simulated plant."""
     import numpy as np
 
@@ -84,9 +97,12 @@ def _record(args, names, measured, truth):
     u = parse_signal(args.u, name="--u") if args.u else None
     from eha_core.experiments import LSE_INPUT
 
-    noise = parse_noise(args.noise)
-    return greybox_data(truth, u or LSE_INPUT, t_end=args.t_end, d=d, noise=noise, seed=args.seed,
-                        measured=measured)
+    try:
+        return greybox_data(truth, u or LSE_INPUT, t_end=args.t_end, d=d, noise=noise, seed=args.seed,
+                            measured=measured)
+    except FieldError as exc:
+        # the simulated plant's input and load are the signals typed (with --data they are the file's)
+        raise UsageError(as_typed(exc, {"u": "--u", "d": "--disturbance"}, args.typed)) from None
 
 
 def run_greybox(args) -> int:
@@ -104,11 +120,12 @@ def run_greybox(args) -> int:
     if args.shooting not in SHOOTING:
         raise refused("--shooting", args.shooting, f"use {', '.join(SHOOTING)}")
     check_input_file("--data", args.data)
+    noise = parse_noise(args.noise)             # checked with or without --data: a typo is a typo
     given = parse_params(args.param)
     # without data the --param values are the plant's truth and the estimate starts from the paper's;
     # with data they are what is known of the rig
     truth, guess = (given, ActuatorParams()) if not args.data else (None, given)
-    data = _record(args, names, measured, truth)
+    data = _record(args, measured, truth, noise)
 
     from eha_core.identify.greybox import identify_greybox
 

@@ -16,10 +16,12 @@ from .common import (
     Parser,
     UsageError,
     as_option,
+    as_typed,
     check_input_file,
     json_text,
     parse_params,
     refused,
+    table_text,
     tf_text,
 )
 
@@ -27,6 +29,8 @@ from .common import (
 MAX_POLES = 8
 #: Length of a simulated least-squares record at most [s] (60 s is 60 000 samples).
 MAX_LSE_T_END = 600.0
+#: ... and at least [s]: 100 samples, of which the default prefilter's start-up (5 tau_f) leaves 50.
+MIN_LSE_T_END = 0.1
 
 
 def add_parser(sub) -> None:
@@ -48,7 +52,7 @@ def add_parser(sub) -> None:
     le.add_argument("--seed", type=int, default=0, help="seed of a noise disturbance without one (default 0)")
     le.add_argument("--u", help="excitation as signal text; default sine:6:2")
     le.add_argument("--t-end", type=float, default=5.0,
-                    help=f"record length [s] (default 5, at most {MAX_LSE_T_END:g})")
+                    help=f"record length [s] (default 5, {MIN_LSE_T_END:g} to {MAX_LSE_T_END:g})")
     le.add_argument("--tau-f", type=float, default=0.01, help="prefilter time constant [s] (default 0.01, eq. 17)")
     le.add_argument("--estimator", default="ls",
                     help="ls (the paper's least squares, eq. 18; the default) or iv (instrumental variables from a "
@@ -61,7 +65,8 @@ def add_parser(sub) -> None:
                     help="known/nominal parameters (Dc, dc, L0, Kq1, Kq2, ps, pr, k_f are taken as measured); "
                          + PARAM_HELP)
     le.add_argument("--json", action="store_true", help="print JSON (default: a table)")
-    le.set_defaults(handler=run_lse)
+    # the core's names -> the options; what a failed simulation or fit may follow from, the likeliest first
+    le.set_defaults(handler=run_lse, fields={"tau_f": "--tau-f"}, inputs=("--param", "--u", "--disturbance", "--data"))
 
     tf = idsub.add_parser("tf", help="continuous-time transfer function (like MATLAB tfest)",
                           description="Transfer-function estimation. Without --data: the paper's closed-loop "
@@ -93,7 +98,8 @@ def add_parser(sub) -> None:
     from .greybox import add_parser as add_greybox
 
     add_greybox(idsub)
-    tf.set_defaults(handler=run_tf)
+    # what the paper experiment's closed-loop simulation, or a fit, may fail on, the likeliest first
+    tf.set_defaults(handler=run_tf, inputs=("--kp", "--param", "--ts", "--model", "--data"))
 
 
 def _missing_method(args) -> int:
@@ -115,8 +121,8 @@ def run_lse(args) -> int:
     estimator, intervals = checked_choices(args.estimator, args.intervals, name="--estimator",
                                            intervals_name="--intervals")
     _positive("--tau-f", args.tau_f, "s")
-    if not (math.isfinite(args.t_end) and 0 < args.t_end <= MAX_LSE_T_END):
-        raise refused("--t-end", args.t_end, f"use a record length in (0, {MAX_LSE_T_END:g}] s")
+    if not (math.isfinite(args.t_end) and MIN_LSE_T_END <= args.t_end <= MAX_LSE_T_END):
+        raise refused("--t-end", args.t_end, f"use a record length in [{MIN_LSE_T_END:g}, {MAX_LSE_T_END:g}] s")
     model, freq = parse_disturbance_model(args.disturbance_model, name="--disturbance-model")
     d = parse_signal(args.disturbance, name="--disturbance", seed=args.seed)
     u = parse_signal(args.u, name="--u") if args.u else None
@@ -131,7 +137,11 @@ def run_lse(args) -> int:
         source = args.data
     else:
         u = u or LSE_INPUT
-        data = lse_data(params, d, u=u, t_end=args.t_end, seed=args.seed)
+        try:
+            data = lse_data(params, d, u=u, t_end=args.t_end, seed=args.seed)
+        except FieldError as exc:
+            # the simulated record's times, input and load are what was typed (with --data, the file's)
+            raise UsageError(as_typed(exc, {"t": "--t-end", "u": "--u", "d": "--disturbance"}, args.typed)) from None
         source = f"simulation: u = {u.label}, d = {d.label}"
     res = identify_lse(data, params, tau_f=args.tau_f, disturbance_model=model, disturbance_freq_hz=freq,
                        estimator=estimator, intervals=intervals)
@@ -144,20 +154,29 @@ def run_lse(args) -> int:
     print(f"{method} ({source}), disturbance model: {res.disturbance_model}"
           + (f" at {res.disturbance_freq_hz:.6g} Hz{' (estimated)' if res.freq_estimated else ''}"
              if res.disturbance_freq_hz else ""))
-    print(f"{'':8s}{'nominal':>14s}{'estimate':>14s}{'rel. error':>12s}   95 % interval")
-    for k, v in res.estimates.items():
-        nom = res.nominal.get(k)
-        rel = res.rel_error.get(k)
-        lo, hi = res.ci95[k]
-        nominal = "" if nom is None else f"{nom:.6g}"
-        relative = "" if rel is None else f"{100 * rel:+.3f} %"
-        print(f"{k:8s}{nominal:>14s}{v:14.6g}{relative:>12s}   [{lo:.6g}, {hi:.6g}]")
+    print(lse_table(res, against_nominal=not args.data))
     if res.intervals == "ewc":
         print(f"95 % interval: estimate +- {res.critical_value:.4g} standard errors (Student's t, "
               f"{res.cosine_terms} equal-weighted cosines)")
     if not res.success:
         print(f"eha identify lse: warning: {res.message}", file=sys.stderr)
     return 0 if res.success else 1
+
+
+def lse_table(res, *, against_nominal: bool) -> str:
+    """The estimates as a table: estimate and 95 % interval, with the nominal value and the relative error
+    against it when ``against_nominal`` (a simulated record, whose truth is known: a user's file has none,
+    and the paper's values beside its estimates would read as its truth)."""
+    header = ["", *(["nominal"] if against_nominal else []), "estimate",
+              *(["rel. error"] if against_nominal else []), "95 % interval"]
+    rows = []
+    for k, v in res.estimates.items():
+        lo, hi = res.ci95[k]
+        nom, rel = res.nominal.get(k), res.rel_error.get(k)
+        rows.append([k, *(["" if nom is None else f"{nom:.6g}"] if against_nominal else []), f"{v:.6g}",
+                     *(["" if rel is None else f"{100 * rel:+.3f} %"] if against_nominal else []),
+                     f"[{lo:.6g}, {hi:.6g}]"])
+    return "\n".join(table_text(header, rows, align="l" + "r" * (len(header) - 2) + "l"))
 
 
 def _choice(option: str, value, allowed) -> None:
@@ -252,7 +271,14 @@ def run_tf(args) -> int:
                                   n_zeros=args.n_zeros, ts=args.ts or 0.01,
                                   initial_condition=args.initial_condition or "estimate",
                                   input_offset=args.input_offset or "estimate")
-        fi = run_frequency_identification(params, cfg)
+        try:
+            fi = run_frequency_identification(params, cfg)
+        except FieldError as exc:
+            if exc.field != "t_end":
+                raise
+            # the experiment's record is its samples times --ts: a run too long is a sample time too long
+            raise refused("--ts", args.ts, f"the record of {cfg.n_samples} samples would last {exc.value:g} s: "
+                                           f"{exc.what}", value_text=args.typed.get("--ts")) from None
         out = fi.to_dict()
         ok = fi.success
     if args.json:

@@ -26,7 +26,8 @@ def add_parser(sub) -> None:
     ii.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     ii.add_argument("--out", help="write the CSV (columns k,u) to this file")
     ii.add_argument("--json", action="store_true", help='print {"u": [...], "freqs": [...]} (freqs in rad/sample)')
-    ii.set_defaults(handler=run)
+    ii.set_defaults(handler=run, fields={"type": "--type", "n": "--n", "band": "--band", "range": "--range",
+                                         "sinedata": "--sinedata", "seed": "--seed"})
 
 
 def run(args) -> int:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
@@ -30,6 +31,28 @@ def run(args) -> int:
         raise refused_file("--out", args.out, f"{exc.strerror}") from None
     from eha_app.render.report import build_report
 
-    result = build_report(out, seed=args.seed, started=t0)
+    stream = _LineKeeper(sys.stderr)
+    try:
+        result = build_report(out, seed=args.seed, started=t0, stream=stream)
+    except KeyboardInterrupt:
+        # Ctrl-C during a step ("[3/8] least squares ..."): the line that says so starts a line of its own
+        if stream.open:
+            stream.write("\n")
+        raise
     print(result.path)
     return 0
+
+
+class _LineKeeper:
+    """A stream that knows whether its last line is open (a progress step waiting for its time)."""
+
+    def __init__(self, stream):
+        self.stream, self.open = stream, False
+
+    def write(self, text: str) -> int:
+        if text:
+            self.open = not text.endswith("\n")
+        return self.stream.write(text)
+
+    def flush(self) -> None:
+        self.stream.flush()

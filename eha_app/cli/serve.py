@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import os
 import socket
 import subprocess
@@ -69,14 +70,32 @@ def _cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
+#: What --address takes, said when it is refused.
+_ADDRESSES = "use 127.0.0.1 (this machine only), 0.0.0.0 (every network interface) or an address of this machine"
+
+
+def check_address(address: str) -> None:
+    """Refuse an address that is no address (a typo), before anything starts."""
+    try:
+        socket.getaddrinfo(address, None, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except (socket.gaierror, UnicodeError) as exc:
+        what = exc.strerror if isinstance(exc, socket.gaierror) else "not a host name"
+        raise refused("--address", address, f"not an address ({what}); {_ADDRESSES}") from None
+
+
 def check_port_free(address: str, port: int) -> None:
-    """Refuse a port another program listens on, before anything starts."""
+    """Refuse a port another program listens on, or an address that is not this machine's, before anything
+    starts."""
     family = socket.AF_INET6 if ":" in address else socket.AF_INET
     with socket.socket(family, socket.SOCK_STREAM) as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             s.bind((address, port))
         except OSError as exc:
+            if exc.errno in (errno.EADDRNOTAVAIL, errno.EAFNOSUPPORT) or isinstance(exc, socket.gaierror):
+                # the address is another machine's (or none): the port is not the trouble
+                raise refused("--address", address, f"this machine cannot listen on it ({exc.strerror}); "
+                                                    f"{_ADDRESSES}") from None
             raise refused("--port", port, f"{address}:{port} is in use ({exc.strerror}; another eha serve?); "
                                           "choose another port") from None
 
@@ -88,6 +107,7 @@ def _validate(args) -> None:
         raise refused("--num-procs", args.num_procs, "use 1 to 64")
     if args.workers is not None and not 1 <= args.workers <= 256:
         raise refused("--workers", args.workers, "use 1 to 256")
+    check_address(args.address)
 
 
 def _announce_when_ready(url: str) -> None:
@@ -108,12 +128,10 @@ def _announce_when_ready(url: str) -> None:
 def _check_exercise(args) -> None:
     """Refuse an exercise file, or its hand-in database, that cannot be used, before anything starts."""
     from eha_app.runtime.handins import HandIns, StoreError
-    from eha_core.exercise import Exercise
 
-    from .common import check_input_file
+    from .exercise import load_exercise
 
-    check_input_file("--exercise", args.exercise)
-    exercise = Exercise.load(args.exercise)          # refused now, with its message, if it is not one
+    exercise = load_exercise("--exercise", args.exercise)   # refused now, with its message, if it is not one
     try:
         HandIns(args.exercise).check()
     except StoreError as exc:

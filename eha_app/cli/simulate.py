@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from eha_core.errors import FieldError
+
 from .common import PARAM_HELP, UsageError, check_output_file, parse_params, refused, refused_file
 
 EPILOG = """\
@@ -34,7 +36,7 @@ def add_parser(sub) -> None:
     s.add_argument("--dt", type=float, default=1e-3, help="output interval [s] (default 0.001)")
     s.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help=PARAM_HELP)
     s.add_argument("--out", help="write the CSV to this file instead of stdout")
-    s.set_defaults(handler=run)
+    s.set_defaults(handler=run, fields={"t_end": "--t-end", "dt": "--dt", "u": "--u", "d": "--d"})
 
 
 def run(args) -> int:
@@ -69,7 +71,15 @@ def run(args) -> int:
         d = parse_signal(args.d, name="--d")
     if args.t_end is not None:
         t_end = args.t_end
-    res = simulate(params, u, d, t_end=t_end, dt=args.dt, model=args.model, branch=branch, label=label)
+    try:
+        res = simulate(params, u, d, t_end=t_end, dt=args.dt, model=args.model, branch=branch, label=label)
+    except FieldError as exc:
+        if exc.field == "t_end" and args.t_end is None:
+            # the horizon is the case's or the default, not typed: the output interval typed does not fit it
+            horizon = f"the horizon of --case {args.case}" if args.case is not None else "the default horizon"
+            raise refused("--dt", args.dt, f"{horizon}, {t_end:g} s, must be a whole number of output intervals "
+                                           "(--t-end sets another)", value_text=args.typed.get("--dt")) from None
+        raise
     if not res.success:
         print(f"eha simulate: warning: {res.message}", file=sys.stderr)
     if args.out:

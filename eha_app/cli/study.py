@@ -14,12 +14,25 @@ import sys
 
 from eha_core.errors import FieldError
 
-from .common import PARAM_HELP, Parser, UsageError, as_option, check_range, json_text, parse_params, refused
+from .common import (
+    NOISE_GRAMMAR,
+    PARAM_HELP,
+    Parser,
+    UsageError,
+    as_typed,
+    check_range,
+    interrupt_cancels,
+    json_text,
+    parse_noise,
+    parse_params,
+    refused,
+    table_text,
+)
+from .identify import MAX_LSE_T_END as MAX_T_END
+from .identify import MIN_LSE_T_END as MIN_T_END
 
-#: The sensors the least squares reads, with their SI units (for --noise).
-SENSOR_UNITS = {"x": "m", "v": "m/s", "p1": "Pa", "p2": "Pa"}
-#: Record length of the least squares at most [s] (as eha identify lse).
-MAX_T_END = 600.0
+#: The sensors the least squares reads (for --noise).
+LSE_SENSORS = ("x", "v", "p1", "p2")
 
 
 def add_parser(sub) -> None:
@@ -52,9 +65,10 @@ def add_parser(sub) -> None:
                     help="constant (the paper's d0) or harmonic[:FREQ_HZ] (d0 + a sinusoid)")
     le.add_argument("--model", default="nonlinear", help="the plant: nonlinear (the only one the least squares' "
                                                          "equations hold for)")
-    le.add_argument("--noise", action="append", default=[], metavar="SENSOR=SIGMA",
-                    help="white sensor noise, SI units, repeatable: x [m], v [m/s], p1, p2 [Pa], e.g. p1=1e4")
-    le.add_argument("--t-end", type=float, default=5.0, help=f"record length [s] (default 5, at most "
+    le.add_argument("--noise", action="append", default=[], metavar="SIGNAL=SIGMA[UNIT],...",
+                    help=f"the sensors' noise, {NOISE_GRAMMAR}; repeatable (default none), e.g. "
+                         "x=0.01mm,p=0.05MPa")
+    le.add_argument("--t-end", type=float, default=5.0, help=f"record length [s] (default 5, {MIN_T_END:g} to "
                                                              f"{MAX_T_END:g})")
     le.add_argument("--estimator", default="ls",
                     help="ls (the paper's least squares; the default) or iv (instrumental variables)")
@@ -69,8 +83,9 @@ def add_parser(sub) -> None:
                                       "plant, a reference for the nonlinear one.")
     common(tf)
     tf.add_argument("--model", default="nonlinear", help="the plant in the loop: nonlinear (default) or linear")
-    tf.add_argument("--noise", default="1e-4", metavar="SIGMA",
-                    help="standard deviation of the white noise on the recorded position [m] (default 1e-4)")
+    tf.add_argument("--noise", default="x=0.1mm", metavar="x=SIGMA[UNIT]",
+                    help=f"the position sensor's noise, {NOISE_GRAMMAR}; of x only, the one signal the "
+                         "experiment records (default x=0.1mm; a plain number is x in m, e.g. 1e-4)")
     tf.set_defaults(handler=run_study_command, kind="tf")
 
     gb = stsub.add_parser("greybox", help="grey-box estimate over many noise seeds: coverage and Cramer-Rao bound",
@@ -95,35 +110,17 @@ def _missing_method(args) -> int:
 
 
 def _sensor_noise(items) -> dict[str, float]:
-    """``--noise SENSOR=SIGMA`` assignments (least squares)."""
+    """The least squares' ``--noise`` (repeatable; a later σ of a signal replaces an earlier one)."""
     noise = {}
-    usage = ("give SENSOR=SIGMA, SENSOR one of " + ", ".join(f"{k} [{u}]" for k, u in SENSOR_UNITS.items())
-             + ", e.g. --noise p1=1e4; repeat for more sensors")
     for item in items:
-        name, sep, text = item.partition("=")
-        name = name.strip()
-        try:
-            sigma = float(text)
-        except ValueError:
-            sigma = math.nan
-        if not sep or name not in SENSOR_UNITS:
-            raise refused("--noise", item, usage, value_text=item)
-        if not (math.isfinite(sigma) and sigma >= 0):
-            raise refused("--noise", item, f"the standard deviation must be a number >= 0 {SENSOR_UNITS[name]}",
-                          value_text=item)
-        noise[name] = sigma
+        noise.update(parse_noise(item, signals=LSE_SENSORS))
     return noise
 
 
 def _position_noise(text: str) -> float:
-    try:
-        sigma = float(text)
-    except ValueError:
-        sigma = math.nan
-    if not (math.isfinite(sigma) and sigma >= 0):
-        raise refused("--noise", text, "give the position noise's standard deviation, a number >= 0 m (e.g. 1e-4)",
-                      value_text=text)
-    return sigma
+    """The frequency experiment's ``--noise``: σ of x [m] (a plain number, the spelling before the one
+    grammar, is x in m)."""
+    return parse_noise(text, signals=("x",), bare="x").get("x", 0.0)
 
 
 #: Core names of StudyConfig's fields -> the options that set them (for its messages).
@@ -145,8 +142,8 @@ def _config(args):
         if args.model != "nonlinear":
             raise refused("--model", args.model, "the least squares identifies the nonlinear model's parameters "
                           "(eqs. 15-18); use nonlinear, or eha study tf for the linear plant", value_text=args.model)
-        if not (math.isfinite(args.t_end) and 0 < args.t_end <= MAX_T_END):
-            raise refused("--t-end", args.t_end, f"use a record length in (0, {MAX_T_END:g}] s")
+        if not (math.isfinite(args.t_end) and MIN_T_END <= args.t_end <= MAX_T_END):
+            raise refused("--t-end", args.t_end, f"use a record length in [{MIN_T_END:g}, {MAX_T_END:g}] s")
         model, freq = parse_disturbance_model(args.disturbance_model, name="--disturbance-model")
         parse_signal(args.disturbance, name="--disturbance")
         kwargs = {"disturbance": args.disturbance, "disturbance_model": model, "disturbance_freq_hz": freq,
@@ -160,7 +157,7 @@ def _config(args):
         return StudyConfig(args.kind, n_seeds=args.seeds, first_seed=args.first_seed, **kwargs)
     except FieldError as exc:
         # the core names its field; the user typed the option
-        raise as_option(exc, _OPTIONS) from None
+        raise UsageError(as_typed(exc, _OPTIONS, args.typed)) from None
     except ValueError as exc:
         raise UsageError(str(exc)) from None
 
@@ -169,11 +166,14 @@ def run_study_command(args) -> int:
     config = _config(args)
     params = parse_params(args.param)
 
+    from eha_core.cancel import CancelToken
     from eha_core.study import run_study
 
     progress = _Progress(config.n_seeds) if sys.stderr.isatty() and not args.json else None
+    token = CancelToken()
     try:
-        res = run_study(config, params, workers=args.workers, progress=progress)
+        with interrupt_cancels(token):
+            res = run_study(config, params, workers=args.workers, progress=progress, cancel=token)
     finally:
         if progress is not None:
             progress.close()
@@ -212,16 +212,19 @@ def _greybox_config(args):
                                   measured=names("--measured", args.measured, GREYBOX_SIGNALS),
                                   snr_db=args.snr_db, t_end=args.t_end, truth=parse_params(args.param))
     except FieldError as exc:
-        raise as_option(exc, {"snr_db": "--snr-db", "t_end": "--t-end"}) from None
+        raise UsageError(as_typed(exc, {"snr_db": "--snr-db", "t_end": "--t-end"}, args.typed)) from None
 
 
 def run_greybox_study_command(args) -> int:
     config = _greybox_config(args)
+    from eha_core.cancel import CancelToken
     from eha_core.identify.greybox_study import run_greybox_study
 
     progress = _Progress(config.n_seeds) if sys.stderr.isatty() and not args.json else None
+    token = CancelToken()
     try:
-        res = run_greybox_study(config, workers=args.workers, progress=progress)
+        with interrupt_cancels(token):
+            res = run_greybox_study(config, workers=args.workers, progress=progress, cancel=token)
     finally:
         if progress is not None:
             progress.close()
@@ -241,18 +244,16 @@ def greybox_summary_text(res) -> str:
     lines = [f"study: grey-box estimate of {', '.join(cfg.params)} from {', '.join(cfg.measured)}, "
              f"{cfg.t_end:g} s, noise at {cfg.snr_db:g} dB ({noise}, SI)",
              f"seeds {cfg.first_seed}-{cfg.first_seed + cfg.n_seeds - 1}: {res.n_completed} completed, "
-             f"{res.n_failed} failed, {res.elapsed_s:.1f} s ({res.seconds_per_seed:.2f} s per seed)",
-             f"{'parameter':10s}{'truth':>12s}{'mean':>12s}{'std':>11s}{'mean se':>11s}{'bias/se':>9s}"
-             f"{'coverage':>10s}{'CRB':>11s}{'std/CRB':>9s}"]
+             f"{res.n_failed} failed, {res.elapsed_s:.1f} s ({res.seconds_per_seed:.2f} s per seed)"]
 
-    def num(v, width, fmt=".5g"):
-        return ("-" if v is None or not math.isfinite(v) else format(v, fmt)).rjust(width)
+    def num(v, fmt=".5g"):
+        return "-" if v is None or not math.isfinite(v) else format(v, fmt)
 
-    for k in cfg.params:
-        lines.append(f"{k:10s}{num(res.truth[k], 12)}{num(res.mean[k], 12)}{num(res.std[k], 11, '.4g')}"
-                     f"{num(res.mean_std_error[k], 11, '.4g')}{num(res.bias_se[k], 9, '+.3f')}"
-                     f"{num(res.coverage[k], 10, '.3f')}{num(res.crb[k], 11, '.4g')}"
-                     f"{num(res.std_over_crb[k], 9, '.3f')}" + (f"  held in {res.held[k]}" if res.held[k] else ""))
+    rows = [[k, num(res.truth[k]), num(res.mean[k]), num(res.std[k], ".4g"), num(res.mean_std_error[k], ".4g"),
+             num(res.bias_se[k], "+.3f"), num(res.coverage[k], ".3f"), num(res.crb[k], ".4g"),
+             num(res.std_over_crb[k], ".3f"), f"held in {res.held[k]}" if res.held[k] else ""] for k in cfg.params]
+    lines += table_text(["parameter", "truth", "mean", "std", "mean se", "bias/se", "coverage", "CRB", "std/CRB", ""],
+                        rows, align="lrrrrrrrrl")
     if res.n_completed:
         lo, hi = coverage_band(res.n_completed)
         lines.append(f"coverage: the fraction of seeds whose 95 % interval holds the truth; honest intervals give "
@@ -316,17 +317,16 @@ def summary_text(res) -> str:
     lines = [f"study: {what}",
              f"seeds {cfg.first_seed}-{last}: {res.n_completed} completed, {res.n_failed} failed, "
              f"{res.workers} workers, {res.elapsed_s:.2f} s ({res.seconds_per_seed:.4f} s per seed)",
-             f"nominal: {res.reference}",
-             f"{'parameter':10s}{'nominal':>14s}{'mean':>14s}{'std':>12s}{'mean std err':>14s}{'bias/se':>18s}"
-             f"{'coverage':>10s}"]
+             f"nominal: {res.reference}"]
 
-    def num(v, width, fmt=".6g", sign=""):
-        return f"{'-':>{width}s}" if v is None or not math.isfinite(v) else f"{v:{sign}{width}{fmt}}"
+    def num(v, fmt=".6g"):
+        return "-" if v is None or not math.isfinite(v) else format(v, fmt)
 
-    for k in res.parameters:
-        lines.append(f"{k:10s}{num(res.nominal.get(k), 14)}{num(res.mean[k], 14)}{num(res.std[k], 12, '.4g')}"
-                     f"{num(res.mean_std_error[k], 14, '.4g')}{_bias_text(res, k):>18s}"
-                     f"{num(res.coverage.get(k), 10, '.3f')}")
+    # every column as wide as its widest cell: a wide number (a bias of -3728 standard errors) does not
+    # run into its neighbour
+    rows = [[k, num(res.nominal.get(k)), num(res.mean[k]), num(res.std[k], ".4g"), num(res.mean_std_error[k], ".4g"),
+             _bias_text(res, k), num(res.coverage.get(k), ".3f")] for k in res.parameters]
+    lines += table_text(["parameter", "nominal", "mean", "std", "mean std err", "bias/se", "coverage"], rows)
     if res.n_successful:
         lo, hi = res.coverage_band()
         lines.append("bias/se: (mean - nominal) / mean std err, +- its Monte Carlo error (std / sqrt(seeds)) in the "

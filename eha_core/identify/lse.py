@@ -671,6 +671,17 @@ def _t_quantile(dof: int) -> float:
     return float(stdtrit(dof, 0.975))
 
 
+def _longest_tau_f(t: np.ndarray) -> float:
+    """The longest prefilter time constant whose start-up (5 tau_f, left out) leaves 20 samples of the
+    record at times ``t``, written with four digits, rounded down (the value shown is one that works)."""
+    longest = (t[-20] - t[0]) / 5
+    step = 10.0 ** (math.floor(math.log10(longest)) - 3)
+    longest = math.floor(longest / step) * step
+    while longest > step and np.count_nonzero(t - t[0] >= 5 * longest) < 20:
+        longest -= step
+    return longest
+
+
 def identify_lse(data: MeasuredData, params: ActuatorParams | None = None, *, tau_f: float = 0.01,
                  disturbance_model: str = "constant", disturbance_freq_hz: float | None = None,
                  skip_s: float | None = None, hac_lags: int | None = None,
@@ -766,12 +777,18 @@ def identify_lse(data: MeasuredData, params: ActuatorParams | None = None, *, ta
     if disturbance_freq_hz is not None and disturbance_freq_hz >= 0.5 / ts:
         raise not_allowed("disturbance_freq_hz", disturbance_freq_hz,
                           f"must be below the Nyquist frequency {0.5 / ts:g} Hz")
+    skip_given = skip_s is not None
     skip_s = 5 * tau_f if skip_s is None else float(skip_s)
     keep = data.t - data.t[0] >= skip_s
     n_kept = int(keep.sum())
     if n_kept < 20:
-        raise not_allowed("skip_s", skip_s, f"it leaves {n_kept} samples of a record of "
-                                            f"{data.t[-1] - data.t[0]:g} s; need at least 20")
+        record = f"a record of {data.t[-1] - data.t[0]:g} s"
+        if skip_given:
+            raise not_allowed("skip_s", skip_s, f"it leaves {n_kept} samples of {record}; need at least 20")
+        # the skip is the filter's start-up, 5 tau_f: the time constant is what the user chose
+        allowed = f"use at most {_longest_tau_f(data.t):.4g} s" if data.t.size > 20 else "use a longer record"
+        raise not_allowed("tau_f", tau_f, f"the first 5 tau_f (the prefilter's start-up) are left out and leave "
+                                          f"{n_kept} samples of {record}; need at least 20: {allowed}")
     terms = _checked_terms(cosine_terms, n_kept, ts, tau_f) if intervals == "ewc" else None
     lags = int(math.ceil(20 * tau_f / ts)) if hac_lags is None else int(hac_lags)
 

@@ -68,7 +68,7 @@ def test_linearize_json(capsys):
     (["simulate", "--u", "sine:a:2"], "--u = sine:a:2"),
     (["simulate", "--d", "wobble:3"], "wobble"),
     (["simulate"], "--case or --u"),
-    (["simulate", "--case", "1", "--t-end", "-3"], "t_end = -3"),
+    (["simulate", "--case", "1", "--t-end", "-3"], "--t-end = -3"),
     (["linearize", "--kp", "0"], "kp = 0"),
     (["linearize", "--kp", "ten"], "--kp"),
     (["frobnicate"], "frobnicate"),

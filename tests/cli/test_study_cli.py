@@ -71,7 +71,7 @@ def test_tf_json_on_the_linear_plant(capsys):
      "--disturbance = white:1000:4 is not allowed: its noise"),
     (["lse", "--seeds", "3", "--disturbance", "sine:x"], "--disturbance = sine:x is not allowed"),
     (["lse", "--seeds", "3", "--disturbance-model", "cubic"], "--disturbance-model = cubic is not allowed"),
-    (["lse", "--seeds", "3", "--noise", "1e4"], "--noise = 1e4 is not allowed: give SENSOR=SIGMA"),
+    (["lse", "--seeds", "3", "--noise", "1e4"], "--noise = 1e4 is not allowed: give SIGNAL=SIGMA[UNIT]"),
     (["lse", "--seeds", "3", "--noise", "p1=-5"], "--noise = p1=-5 is not allowed"),
     (["lse", "--seeds", "3", "--model", "linear"], "--model = linear is not allowed: the least squares"),
     (["lse", "--seeds", "3", "--t-end", "0"], "--t-end = 0 is not allowed"),
