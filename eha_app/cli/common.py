@@ -30,7 +30,22 @@ from eha_core.params import PARAM_NAMES
 __all__ = ["EXIT_USAGE", "EXIT_INTERRUPTED", "UsageError", "Parser", "PARAM_HELP", "NOISE_GRAMMAR", "parse_params",
            "parse_noise", "check_output_file", "check_input_file", "check_range", "json_text", "tf_text",
            "table_text", "terminal_text", "refused", "refused_file", "as_option", "as_typed", "typed_options",
-           "computation_refused", "interrupt_cancels"]
+           "computation_refused", "interrupt_cancels", "APP_LIBRARIES", "require_app"]
+
+#: What the web app and its reports need beyond the core (the ``app`` extra of pyproject.toml).
+APP_LIBRARIES = ("panel", "bokeh", "threadpoolctl")
+
+
+def require_app(what: str) -> None:
+    """Refuse ``what`` (a command that serves or draws the web app's figures) in one line when the app's
+    libraries are not installed: the core installs without them (``pip install eha``), the app with
+    ``pip install "eha[app]"``."""
+    import importlib.util
+
+    missing = [m for m in APP_LIBRARIES if importlib.util.find_spec(m) is None]
+    if missing:
+        raise UsageError(f"{what} needs the web app, which is not installed ({', '.join(missing)} missing): "
+                         "pip install \"eha[app]\"")
 
 EXIT_USAGE = 2
 #: The shell's code of a command ended by Ctrl-C (128 + SIGINT).

@@ -6,7 +6,7 @@ import sys
 import time
 from pathlib import Path
 
-from .common import refused, refused_file
+from .common import refused, refused_file, require_app
 
 
 def add_parser(sub) -> None:
@@ -20,6 +20,7 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     t0 = time.perf_counter()          # the wall time includes the imports below
+    require_app("eha reproduce (its report is the web app's page)")
     if args.seed < 0:
         raise refused("--seed", args.seed, "use a whole number >= 0")
     out = Path(args.out)

@@ -14,7 +14,7 @@ import urllib.request
 
 from eha_app.runtime.serving import lan_address
 
-from .common import UsageError, refused, refused_file, terminal_text
+from .common import UsageError, refused, refused_file, require_app, terminal_text
 
 
 def add_parser(sub) -> None:
@@ -162,6 +162,7 @@ def _announce_dashboard(host: str, port: int) -> None:
 
 
 def run(args) -> int:
+    require_app("eha serve")
     _validate(args)
     if args.nginx_config is not None:
         return _print_nginx_config(args)
