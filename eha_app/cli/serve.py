@@ -38,7 +38,8 @@ def add_parser(sub) -> None:
                     help="print an nginx configuration for N eha serve processes on ports PORT+1..PORT+N behind "
                          "nginx listening on PORT, with the commands that start them, and exit")
     sv.add_argument("--exercise", metavar="FILE", help="run a class exercise (made by `eha exercise new`): each "
-                    "student enters an id and gets an actuator of their own, with the exercise's parameters hidden")
+                    "student types the join code of their slip (`eha exercise codes`; an exercise without a roster "
+                    "takes any id) and gets an actuator of their own, with the exercise's parameters hidden")
     for flag, what in _OAUTH.items():
         sv.add_argument(flag, default=None, metavar="VALUE", help=what)
     sv.add_argument("--show", action="store_true", help="open the app in a browser")
