@@ -90,7 +90,8 @@ def _display(n: str, value: float) -> str:
 
 GB_FORM = (Group("Grey-box estimation", (
     Field("gb_params", "parameters to estimate", "text", short="parameters",
-          tip=f"comma-separated, of {', '.join(GREYBOX_PARAMS)} (the rest are held at tab 1's values)"),
+          tip=f"comma-separated, of {', '.join('βe' if n == 'beta_e' else n for n in GREYBOX_PARAMS)} (the rest "
+              "are held at tab 1's values)"),
     Field("gb_measured", "signals measured", "text", short="measured",
           tip="comma-separated, of x, v, p1, p2: what the model's simulation is compared with (x alone works)"),
     Field("gb_excitation", "excitation", "select", options=(*EXCITATIONS.items(), ("custom", "custom u(t)")),
@@ -119,7 +120,7 @@ GB_FORM = (Group("Grey-box estimation", (
           tip="white Gaussian noise added to each pressure sensor"),
 ), collapsible=True, collapsed=True), Group("Initial guess", tuple(_guess_field(n) for n in GUESS_PARAMS),
                                             collapsible=True, collapsed=True))
-GB_DEFAULTS = {"gb_params": "M, B, Af, beta_e", "gb_measured": "x, p1, p2", "gb_excitation": "paper",
+GB_DEFAULTS = {"gb_params": "M, B, Af, βe", "gb_measured": "x, p1, p2", "gb_excitation": "paper",
                "gb_u": "sine:6:2", "gb_t_end": "5",
                "gb_scenario": "none", "gb_custom": "sine:1000:3", "gb_seed": "0", "gb_shooting": "auto",
                "gb_noise_x": "0.01",

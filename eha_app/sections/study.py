@@ -60,7 +60,7 @@ STUDY_FORM = (Group("Study over noise seeds", (
     Field("study_noise", "position noise σ", "number", unit="mm", lo=0.0, hi=10.0, short="position noise σ",
           tip="transfer function: white noise added to the recorded x"),
     Field("study_gb_params", "parameters to estimate", "text", short="parameters",
-          tip="grey-box: comma-separated, e.g. M, B, Af, beta_e (the rest held at tab 1's values)"),
+          tip="grey-box: comma-separated, e.g. M, B, Af, βe (the rest held at tab 1's values)"),
     Field("study_gb_measured", "signals measured", "text", short="measured",
           tip="grey-box: comma-separated, of x, v, p1, p2 (x alone works)"),
     Field("study_snr", "signal-to-noise ratio", "number", unit="dB", lo=0.0, hi=80.0, short="SNR",
@@ -69,7 +69,7 @@ STUDY_FORM = (Group("Study over noise seeds", (
 )),)
 STUDY_DEFAULTS = {"study_kind": "lse", "study_seeds": "100", "study_first": "0", "study_white": "1000",
                   "study_dmodel": "constant", "study_model": "linear", "study_noise": "0.1", "study_estimator": "ls",
-                  "study_gb_params": "M, B, Af, beta_e", "study_gb_measured": "x, p1, p2", "study_snr": "30"}
+                  "study_gb_params": "M, B, Af, βe", "study_gb_measured": "x, p1, p2", "study_snr": "30"}
 _FIELDS = {f.name: f for g in STUDY_FORM for f in g.fields}
 _ONLY = {"lse": ("study_white", "study_dmodel", "study_estimator"), "tf": ("study_model", "study_noise"),
          "greybox": ("study_gb_params", "study_gb_measured", "study_snr")}
