@@ -147,6 +147,10 @@ def _unit_of(name: str) -> tuple[str, float]:
 def reading_mark(reading, nominal: str = "nominal") -> str:
     """The reading of an estimate in one word and a mark, coloured (✓ only for exact and covers)."""
     text, cls = _MARKS[reading.kind]
+    if reading.kind == "estimated":
+        # no value to compare with (the student's file, a hidden parameter): a physical parameter it reads is
+        # one whose interval is narrower than itself (else "undetermined"); a force's says nothing more
+        text = "determined" if reading.name in ("M", "B", "Af", "beta_e") else "estimated"
     if not text:
         return ""
     unit, scale = _unit_of(reading.name)

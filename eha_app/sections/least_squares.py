@@ -143,6 +143,12 @@ class LseRequest:
         return (LSE_INPUT, 5.0) if self.excitation == "paper" else (LSE_INPUT_RICH, LSE_INPUT_RICH_T_END)
 
 
+#: The fields that describe the simulated experiment (its disturbance, excitation, noise): they do not apply to
+#: the student's own file.
+OWN_FILE_HIDDEN = ("lse_scenario", "lse_custom", "lse_seed", "lse_excitation", "lse_noise_x", "lse_noise_v",
+                   "lse_noise_p")
+
+
 def lse_hidden(texts: dict) -> list[str]:
     hidden = []
     if texts.get("lse_scenario") != "custom":
@@ -307,7 +313,11 @@ class LeastSquaresPanel(Section):
             "<span class='eha-note'>Or use your own measurements: a CSV or MATLAB .mat file with columns "
             "t, x, v, p1, p2, u (SI, or units in the header such as <code>p1[MPa]</code>).</span>",
             width=270, css_classes=["eha-lse-upload-note"])
-        self.column_mapping = ColumnMapping({c: (c, ()) for c in LSE_COLUMNS}, "lse")
+        self.column_mapping = ColumnMapping(
+            {c: (c, ()) for c in LSE_COLUMNS}, "lse",
+            if_missing={"v": "No velocity in your file? The least squares needs v (eq. 15a: its regressors are v "
+                             "and dv/dt); grey-box estimation (tab 3, “Grey-box (nonlinear)”) needs no velocity: "
+                             "x alone works there."})
         self.mapping = self.column_mapping.panel
         # the part of the student's record to use (preprocessing: a time range)
         self.window_form = Form(spec=[Group("Part of your record to use", (
@@ -564,7 +574,10 @@ class LeastSquaresPanel(Section):
     def _update_enabled(self, *_events) -> None:
         _, errors = self.request()
         self.form.errors = errors
-        self.form.hidden = lse_hidden(self.form.values)
+        # on the student's own file, the settings that make the simulated record do not apply: not shown (one
+        # that is not valid stays, with its message, since it holds the run)
+        own = [f for f in OWN_FILE_HIDDEN if f not in errors] if self.own_data is not None else []
+        self.form.hidden = list(dict.fromkeys(lse_hidden(self.form.values) + own))
         window_errors = self.window_errors()
         self.window_form.errors = window_errors
         errors = {**errors, **window_errors}

@@ -159,11 +159,15 @@ class ColumnMapping:
     """Which of the file's columns is each needed one: one select per column, guessed from the
     names (units in brackets ignored), and a button that hands the choice to ``use``.
 
-    ``needed`` maps each needed name to its label and the file names it may go by.
+    ``needed`` maps each needed name to its label and the file names it may go by; ``if_missing``, a
+    needed name to what the question adds when the file seems not to have it (HTML: e.g. where else a
+    file without it can go).
     """
 
-    def __init__(self, needed: dict[str, tuple[str, tuple[str, ...]]], css_prefix: str, *, width: int = 270):
+    def __init__(self, needed: dict[str, tuple[str, tuple[str, ...]]], css_prefix: str, *, width: int = 270,
+                 if_missing: dict[str, str] | None = None):
         self.needed = needed
+        self.if_missing = dict(if_missing or {})
         self.css_prefix = css_prefix
         self.panel = pn.Column(visible=False, width=width, css_classes=[f"eha-{css_prefix}-mapping"])
         self.selects: dict[str, pn.widgets.Select] = {}
@@ -192,7 +196,9 @@ class ColumnMapping:
             f"<div class='eha-map-question'><b>Which columns of {html.escape(filename)} are which?</b> "
             f"It has {html.escape(columns_text(available))}, not all named {', '.join(self.needed)}. {guessed}, "
             "then press “Use these columns”. "
-            "Units in brackets are converted (position[mm], pA[bar]).</div>", css_classes=["eha-map-note"]),
+            "Units in brackets are converted (position[mm], pA[bar])."
+            + "".join(f" {self.if_missing[c]}" for c, g in guesses.items() if not g and c in self.if_missing)
+            + "</div>", css_classes=["eha-map-note"]),
             *self.selects.values(), self.button]
         self.panel.visible = True
 

@@ -400,3 +400,32 @@ def test_the_records_button_follows_the_file_read_not_its_drawing(closed_loop):
     _upload_record(panel, closed_loop.data_bytes("csv"), "loop.csv")
     assert held_back and "Your record: loop.csv" in record.note.object
     assert not record.button.disabled
+
+
+def test_own_file_results_show_only_what_applies_to_a_file():
+    """On the student's own file: the settings that make the simulated record are not shown, every
+    physical estimate has a reading, and a file without velocity is told where x alone works."""
+    from eha_app.session import Session
+    from eha_app.session.state import AppState
+
+    lse = Session(AppState()).build("least_squares")
+    lse.run()
+    blob = lse.data_bytes("csv")
+    own = Session(AppState()).build("least_squares")
+    assert "lse_scenario" not in own.form.hidden
+    own._upload = (blob, "mine.csv")
+    own.read_upload()
+    assert {"lse_scenario", "lse_excitation", "lse_seed", "lse_noise_x"} <= set(own.form.hidden)
+    own.run()
+    table = own.table.object
+    assert table.count("eha-reading-estimated") == 5 and table.count(">determined<") == 4   # d0: "estimated"
+    assert "Why the constant model fails" not in table
+    own.use_simulated()
+    assert "lse_scenario" not in own.form.hidden
+    header, *rows = blob.decode().splitlines()
+    keep = [k for k, name in enumerate(header.split(",")) if not name.startswith("v")]
+    no_v = "\n".join(",".join(line.split(",")[k] for k in keep) for line in [header, *rows])
+    third = Session(AppState()).build("least_squares")
+    third._upload = (no_v.encode(), "no_v.csv")
+    third.read_upload()
+    assert third.column_mapping.waiting and "x alone works there" in third.column_mapping.panel.objects[0].object
