@@ -18,10 +18,17 @@ import panel as pn
 
 from eha_core.exercise import FEEDBACK, METHODS
 
+from ..render.formatting import display_unit, num_html
 from ..render.tables import SYMBOLS_HTML
 from ..runtime.tasks import on_click
 
 __all__ = ["HandInBox", "handin_status", "result_for_student", "lab_rules_html", "impossible_estimates"]
+
+
+def shown_value(name: str, value: float) -> str:
+    """A handed-in value as every page writes it: in tab 1's unit (βe in GPa), five digits."""
+    unit, scale = display_unit(name)
+    return f"{num_html(float(value) / scale, 5)} {html.escape(unit)}".rstrip()
 
 
 def impossible_estimates(estimates: dict) -> list[str]:
@@ -244,13 +251,14 @@ class HandInBox:
             origin = f" on your file {html.escape(source.get('name', ''))}" if from_file else ""
             head = (f"<b>Handed in</b> (hand-in {count}{limit}, from the "
                     f"{html.escape(METHODS[method].split(' (')[0])}{origin})")
-            values = "".join(f"<li>{SYMBOLS_HTML.get(n, html.escape(n))} = {v:.5g}" for n, v in estimates.items())
+            values = "".join(f"<li>{SYMBOLS_HTML.get(n, html.escape(n))} = {shown_value(n, v)}"
+                             for n, v in estimates.items())
             if shows:
                 score = sum(verdicts.values())
                 items = "".join(
                     f"<li>{SYMBOLS_HTML.get(n, html.escape(n))} "
                     + ("not handed in from this route ✗" if n not in estimates else
-                       f"= {estimates[n]:.5g}: "
+                       f"= {shown_value(n, estimates[n])}: "
                        + (f"<span class='eha-ok'>within ±{100 * exercise.tolerance_of(n):g} % ✓</span>" if ok else
                           f"<span class='eha-warn'>not within ±{100 * exercise.tolerance_of(n):g} % ✗</span>"))
                     + "</li>" for n, ok in verdicts.items())
@@ -297,7 +305,7 @@ def result_for_student(exercise, student: str, store, control: dict | None = Non
             if v is None:
                 cells.append("—")
                 continue
-            text = f"{v:.5g} {'✓' if ok else '✗'}"
+            text = f"{shown_value(n, v)} {'✓' if ok else '✗'}"
             if revealed:
                 err = exercise.errors(student, h.estimates).get(n)
                 text += f" ({100 * err:+.2f} %)" if err is not None else ""
@@ -310,10 +318,7 @@ def result_for_student(exercise, student: str, store, control: dict | None = Non
     score = exercise.score([h.verdicts for h in handins]) if handins else 0.0
     if revealed:
         truth = exercise.student_params(student)
-        from eha_core.param_table import FIELD_INFO
-
-        values = ", ".join(f"{sym(n)} = {getattr(truth, n) / FIELD_INFO[n].display_scale:.5g} "
-                           f"{FIELD_INFO[n].display_unit}" for n in names)
+        values = ", ".join(f"{sym(n)} = {shown_value(n, getattr(truth, n))}" for n in names)
         title = f"Your teacher has revealed your actuator: {values}."
     else:
         title = "The deadline has passed: your hand-ins' verdicts."

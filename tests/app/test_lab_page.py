@@ -79,3 +79,9 @@ def test_an_impossible_estimate_is_asked_about_and_the_last_attempt_turns_the_bu
     lse.form.values = {**lse.form.values, "lse_seed": "3"}               # the section's own say cannot turn it on
     lse.run()
     assert box.button.disabled
+
+
+def test_a_verdict_writes_each_value_as_the_page_does():
+    from eha_app.sections.handin import shown_value
+
+    assert shown_value("beta_e", 8.2861e8) == "0.82861 GPa" and shown_value("M", 4012.34) == "4012.3 kg"
