@@ -208,7 +208,7 @@ class StudyPanel(Section):
             "<p class='eha-warn'>Not in an exercise: a study draws every estimate against the true values.</p>",
             visible=bool(state.hidden), width=270)
         state.param.watch(self._update_enabled, "valid")
-        state.param.watch(lambda _e: self._inputs_changed(), ["params", "valid"])
+        state.param.watch(lambda *_events: self._inputs_changed(), ["params", "valid"])
         watch(self.form, lambda _e: self._inputs_changed(), "values")
         self._update_enabled()
 

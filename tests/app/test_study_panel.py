@@ -279,3 +279,15 @@ def test_the_study_is_marked_out_of_date_like_every_result():
     assert panel.view.is_current
     panel.form.values = {**panel.form.values, "study_first": "3"}
     assert panel.is_stale() and "the settings changed" in panel.view.banner.object
+
+
+def test_tab_1_changing_params_and_validity_together_marks_the_study():
+    """A change of both tab 1's parameters and its validity in one step (a settings file) reaches the
+    study's mark (its watcher takes several events at once)."""
+    state = AppState()
+    panel = Session(state).build("study")
+    panel.form.values = {**panel.form.values, "study_seeds": "5"}
+    panel.run()
+    with state.param.update(valid=False):
+        state.set_text("M", "7000")
+    assert panel.is_stale()
