@@ -175,7 +175,8 @@ class DataError(FieldError):
         super().__init__(name, self.path, what, value_text=repr(self.path))
 
 
-def read_columns(path, columns: Sequence[str], *, name: str = "--data", min_rows: int = 2) -> dict[str, np.ndarray]:
+def read_columns(path, columns: Sequence[str], *, name: str = "--data", min_rows: int = 2,
+                 mapping: dict[str, str] | None = None) -> dict[str, np.ndarray]:
     """The named columns of a CSV (or ``.mat``) file as float arrays in SI: :func:`read_data`
     for a file name or an open file.
 
@@ -189,12 +190,15 @@ def read_columns(path, columns: Sequence[str], *, name: str = "--data", min_rows
         What the user called the file (an option, a form's field), the field of a :class:`DataError`.
     min_rows : int
         Fewest data rows accepted.
+    mapping : dict of str to str, optional
+        Which of the file's columns holds each needed one, as for :func:`read_data`.
     """
     if hasattr(path, "read"):             # an open file or a buffer
         data = path.read()
         data = data.encode() if isinstance(data, str) else data
-        return read_data(data, columns, name=name, filename=getattr(path, "name", "data"), min_rows=min_rows)
-    return read_data(path, columns, name=name, min_rows=min_rows)
+        return read_data(data, columns, name=name, filename=getattr(path, "name", "data"), min_rows=min_rows,
+                         mapping=mapping)
+    return read_data(path, columns, name=name, min_rows=min_rows, mapping=mapping)
 
 
 def sample_time(t: np.ndarray, *, name: str = "--data", path="data", rtol: float = 1e-6) -> float:

@@ -3,7 +3,8 @@
 An interface layer on top of the core and the app, like the app itself: one
 module per subcommand (``simulate``, ``linearize``, ``idinput``, ``identify``,
 ``reproduce``, ``serve``, ``exercise``, ``study``), each with ``add_parser`` and its handler, sharing
-:mod:`eha_app.cli.common`. Heavy modules are imported inside the handlers, so
+:mod:`eha_app.cli.common` (and :mod:`eha_app.cli.columns`, how ``--data`` finds a file's columns,
+``--columns``). Heavy modules are imported inside the handlers, so
 that ``eha --help`` and a refused argument are quick.
 
 Every bad input ends with one line on stderr (``eha: error: NAME = VALUE is

@@ -10,6 +10,7 @@ import sys
 
 from eha_core.errors import FieldError
 
+from .columns import add_columns_option, checked_columns, read_with_columns
 from .common import (
     NOISE_GRAMMAR,
     UsageError,
@@ -41,8 +42,11 @@ def add_parser(idsub) -> None:
                     help=f"the parameters to estimate, of {', '.join(GREYBOX_PARAMS)} (default M,B,Af,beta_e)")
     gb.add_argument("--measured", default="x,p1,p2", metavar="SIGNALS",
                     help=f"the signals compared, of {', '.join(GREYBOX_SIGNALS)} (default x,p1,p2; x alone works)")
-    gb.add_argument("--data", help="a CSV with t, u and the measured columns (SI, or units in the header such as "
-                                   "p1[MPa]); the values not estimated are the paper's or --param's")
+    gb.add_argument("--data", metavar="FILE",
+                    help="a CSV or .mat file with t, u and the measured columns (SI, or units in the header such as "
+                         "p1[MPa]; other names: see --columns); the values not estimated are the paper's or "
+                         "--param's")
+    add_columns_option(gb, "t, u and the signals of --measured")
     gb.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                     help="without --data: the simulated plant's true values; with --data: the values held")
     gb.add_argument("--u", help="the valve command as signal text (default sine:6:2, the paper's)")
@@ -64,7 +68,7 @@ def add_parser(idsub) -> None:
     # the core's names -> the options; what a simulation that fails, or a fit that cannot start, may follow
     # from, the likeliest first
     gb.set_defaults(handler=run_greybox, fields={"noise": "--noise"},
-                    inputs=("--param", "--u", "--disturbance", "--data", "--params", "--measured"))
+                    inputs=("--param", "--u", "--disturbance", "--data", "--columns", "--params", "--measured"))
 
 
 def _names(option: str, text: str, allowed) -> tuple[str, ...]:
@@ -77,8 +81,9 @@ def _names(option: str, text: str, allowed) -> tuple[str, ...]:
     return names
 
 
-def _record(args, measured, truth, noise):
-    """The record: the CSV of --data, or the simulated plant."""
+def _record(args, measured, truth, noise, columns):
+    """The record: the CSV of --data (its columns mapped by ``columns``, ``--columns``, or found as the web app
+    finds them), or the simulated plant."""
     import numpy as np
 
     from eha_core.identify.greybox import GreyBoxData, greybox_data
@@ -88,7 +93,10 @@ def _record(args, measured, truth, noise):
     if args.data:
         from eha_core.data import read_columns, sample_time
 
-        cols = read_columns(args.data, ("t", "u", *measured), name="--data", min_rows=10)
+        needed = ("t", "u", *measured)
+        cols = read_with_columns(
+            lambda mapping: read_columns(args.data, needed, name="--data", min_rows=10, mapping=mapping),
+            args.data, needed, columns)
         sample_time(cols["t"], name="--data", path=args.data)
         t = cols["t"]
         dvals = None if args.disturbance == "none" else np.asarray(d(t - t[0]), dtype=float)
@@ -120,12 +128,13 @@ def run_greybox(args) -> int:
     if args.shooting not in SHOOTING:
         raise refused("--shooting", args.shooting, f"use {', '.join(SHOOTING)}")
     check_input_file("--data", args.data)
+    columns = checked_columns(args, ("t", "u", *measured))
     noise = parse_noise(args.noise)             # checked with or without --data: a typo is a typo
     given = parse_params(args.param)
     # without data the --param values are the plant's truth and the estimate starts from the paper's;
     # with data they are what is known of the rig
     truth, guess = (given, ActuatorParams()) if not args.data else (None, given)
-    data = _record(args, measured, truth, noise)
+    data = _record(args, measured, truth, noise, columns)
 
     from eha_core.identify.greybox import identify_greybox
 

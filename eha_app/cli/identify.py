@@ -11,6 +11,7 @@ import sys
 
 from eha_core.errors import FieldError
 
+from .columns import add_columns_option, checked_columns, read_with_columns
 from .common import (
     PARAM_HELP,
     Parser,
@@ -31,6 +32,12 @@ MAX_POLES = 8
 MAX_LSE_T_END = 600.0
 #: ... and at least [s]: 100 samples, of which the default prefilter's start-up (5 tau_f) leaves 50.
 MIN_LSE_T_END = 0.1
+#: The columns each estimate reads of --data.
+LSE_COLUMNS = ("t", "x", "v", "p1", "p2", "u")
+TF_COLUMNS = ("t", "u", "y")
+#: More names u and y may go by when they are guessed: a closed loop's reference r and position x, as the
+#: web app's frequency tab reads a record.
+TF_ALIASES = {"u": ("r",), "y": ("x",)}
 
 
 def add_parser(sub) -> None:
@@ -60,19 +67,26 @@ def add_parser(sub) -> None:
     le.add_argument("--intervals", default=None,
                     help="newey-west (normal quantile) or ewc (equal-weighted cosines, t quantile); default "
                          "newey-west for ls, ewc for iv")
-    le.add_argument("--data", help="identify from a CSV with columns t,x,v,p1,p2,u (SI units) instead of simulating")
+    le.add_argument("--data", metavar="FILE",
+                    help="identify from a CSV or .mat file with columns t,x,v,p1,p2,u (SI, or units in the header "
+                         "such as x[mm], p1[bar]; other names: see --columns) instead of simulating")
+    add_columns_option(le, "t, x, v, p1, p2, u")
     le.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                     help="known/nominal parameters (Dc, dc, L0, Kq1, Kq2, ps, pr, k_f are taken as measured); "
                          + PARAM_HELP)
     le.add_argument("--json", action="store_true", help="print JSON (default: a table)")
     # the core's names -> the options; what a failed simulation or fit may follow from, the likeliest first
-    le.set_defaults(handler=run_lse, fields={"tau_f": "--tau-f"}, inputs=("--param", "--u", "--disturbance", "--data"))
+    le.set_defaults(handler=run_lse, fields={"tau_f": "--tau-f"},
+                    inputs=("--param", "--u", "--disturbance", "--data", "--columns"))
 
     tf = idsub.add_parser("tf", help="continuous-time transfer function (like MATLAB tfest)",
                           description="Transfer-function estimation. Without --data: the paper's closed-loop "
                                       "experiment (idinput sine reference, Kp = 10 at Ts = 0.01 s, nonlinear plant).")
-    tf.add_argument("--data", help="CSV with columns t,u,y (uniformly sampled; u held or linear between samples, "
-                                   "see --intersample)")
+    tf.add_argument("--data", metavar="FILE",
+                    help="a CSV or .mat file with columns t,u,y, or t,r,x (a closed loop's reference and position, "
+                         "as the web app writes them), uniformly sampled; u held or linear between samples, see "
+                         "--intersample; other names: see --columns")
+    add_columns_option(tf, "t, u, y (u may be a closed loop's reference r, y its position x)")
     tf.add_argument("--ts", type=float, help="sample time [s]; default from t in --data, or 0.01")
     tf.add_argument("--np", dest="n_poles", type=int, default=3, help=f"number of poles, 1 to {MAX_POLES} (default 3)")
     tf.add_argument("--nz", dest="n_zeros", type=int, default=0, help="number of zeros, 0 to np - 1 (default 0)")
@@ -99,7 +113,7 @@ def add_parser(sub) -> None:
 
     add_greybox(idsub)
     # what the paper experiment's closed-loop simulation, or a fit, may fail on, the likeliest first
-    tf.set_defaults(handler=run_tf, inputs=("--kp", "--param", "--ts", "--model", "--data"))
+    tf.set_defaults(handler=run_tf, inputs=("--kp", "--param", "--ts", "--model", "--data", "--columns"))
 
 
 def _missing_method(args) -> int:
@@ -127,13 +141,15 @@ def run_lse(args) -> int:
     d = parse_signal(args.disturbance, name="--disturbance", seed=args.seed)
     u = parse_signal(args.u, name="--u") if args.u else None
     check_input_file("--data", args.data)
+    given = checked_columns(args, LSE_COLUMNS)
     params = parse_params(args.param)
 
     from eha_core.experiments import LSE_INPUT, lse_data
     from eha_core.identify.lse import MeasuredData, identify_lse
 
     if args.data:
-        data = MeasuredData.from_csv(args.data, name="--data")
+        data = read_with_columns(lambda mapping: MeasuredData.from_csv(args.data, name="--data", mapping=mapping),
+                                 args.data, LSE_COLUMNS, given)
         source = args.data
     else:
         u = u or LSE_INPUT
@@ -224,12 +240,19 @@ def _checked_intersample(args) -> str:
 _DELAY_OPTIONS = {"input_delay": "--delay", "max_delay": "--max-delay"}
 
 
-def _tf_on_data(args, delay, intersample) -> dict:
-    """``tfest`` on the CSV of ``--data``: the estimate's dictionary with ``ts``."""
+def _tf_on_data(args, delay, intersample, given) -> dict:
+    """``tfest`` on the CSV of ``--data``, its columns mapped by ``given`` (``--columns``) or found as the
+    web app finds them: the estimate's dictionary with ``ts``."""
     from eha_core.data import read_columns, sample_time
     from eha_core.identify.tfest import tfest
 
-    cols = read_columns(args.data, ("t", "u", "y"), name="--data", min_rows=args.n_poles + args.n_zeros + 3)
+    def read(mapping, names=TF_COLUMNS):
+        cols = read_columns(args.data, names, name="--data", min_rows=args.n_poles + args.n_zeros + 3,
+                            mapping=mapping)
+        return dict(zip(TF_COLUMNS, (cols[n] for n in names), strict=True))
+
+    cols = read_with_columns(read, args.data, TF_COLUMNS, given, aliases=TF_ALIASES,
+                             also=(lambda: read(None, ("t", "r", "x")), "t, r, x"))
     ts = args.ts if args.ts is not None else sample_time(cols["t"], name="--data", path=args.data)
     try:
         est = tfest(cols["u"], cols["y"], ts, args.n_poles, args.n_zeros,
@@ -259,10 +282,11 @@ def run_tf(args) -> int:
     delay = _checked_delay(args)
     intersample = _checked_intersample(args)
     check_input_file("--data", args.data)
+    given = checked_columns(args, TF_COLUMNS)
     params = parse_params(args.param)
 
     if args.data:
-        out = _tf_on_data(args, delay, intersample)
+        out = _tf_on_data(args, delay, intersample, given)
         ok = out["success"]
     else:
         from eha_core.experiments import FrequencyExperiment, run_frequency_identification

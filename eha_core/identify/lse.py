@@ -171,16 +171,17 @@ class MeasuredData:
         return cls(*(np.asarray(table[c], dtype=float) for c in ("t", "x", "v", "p1", "p2", "u")), source=source)
 
     @classmethod
-    def from_csv(cls, path, *, name: str = "--data") -> MeasuredData:
+    def from_csv(cls, path, *, name: str = "--data", mapping: dict[str, str] | None = None) -> MeasuredData:
         """From a CSV file with columns t, x, v, p1, p2, u (SI units), read by
         :func:`eha_core.data.read_columns` (a bad cell is named by column and row).
 
         ``path`` is the file's name or an open file; a refusal names it ``name`` (the option
-        or form field that gave it).
+        or form field that gave it); ``mapping`` says which of the file's columns holds each
+        of t, x, v, p1, p2, u (``{"x": "position[mm]"}``; by default the columns of those names).
         """
         from ..data import read_columns, sample_time
 
-        cols = read_columns(path, ("t", "x", "v", "p1", "p2", "u"), name=name, min_rows=_MIN_ROWS)
+        cols = read_columns(path, ("t", "x", "v", "p1", "p2", "u"), name=name, min_rows=_MIN_ROWS, mapping=mapping)
         sample_time(cols["t"], name=name, path=path)
         return cls(*(cols[c] for c in ("t", "x", "v", "p1", "p2", "u")), source=str(path))
 

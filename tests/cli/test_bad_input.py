@@ -15,7 +15,8 @@ from eha_app.cli import main
 
 #: (argv, the line's start: the option as typed and its value as typed). Paths are filled in by
 #: ``files``: {dir} a folder, {bin} a binary file, {empty} an empty one, {missing} none, {new} a file
-#: name free to write, {exercise} an exercise file.
+#: name free to write, {exercise} an exercise file, {renamed} a record whose columns have other names
+#: (time, position[mm], ...), {odd} one whose columns cannot be guessed (a, b, c).
 CASES = [
     # simulate
     (["simulate", "--case", "7"], "--case = 7"),
@@ -54,6 +55,11 @@ CASES = [
     (["identify", "lse", "--data", "{empty}"], "--data = '{empty}'"),
     (["identify", "lse", "--t-end", "0.2", "--u", "sine:1e308:2"], "--u = sine:1e308:2"),
     (["identify", "lse", "--t-end", "0.2", "--param", "beta_e=1e300"], "--param beta_e = 1e300"),
+    (["identify", "lse", "--data", "{renamed}", "--columns", "q=time"], "--columns = q=time"),
+    (["identify", "lse", "--data", "{renamed}", "--columns", "x=pos"], "--columns = x=pos"),
+    (["identify", "lse", "--data", "{renamed}", "--columns", "x"], "--columns = x"),
+    (["identify", "lse", "--columns", "t=time"], "--columns = t=time"),
+    (["identify", "lse", "--data", "{odd}"], "--data = '{odd}'"),
     # identify tf: the closed-loop simulation that diverges names the gain typed
     (["identify", "tf", "--kp", "1e308"], "--kp = 1e308"),
     (["identify", "tf", "--kp", "nan"], "--kp = nan"),
@@ -61,11 +67,16 @@ CASES = [
     (["identify", "tf", "--ts", "1e9"], "--ts = 1e9"),
     (["identify", "tf", "--np", "0"], "--np = 0"),
     (["identify", "tf", "--data", "{empty}"], "--data = '{empty}'"),
+    (["identify", "tf", "--data", "{renamed}", "--columns", "y=nothere"], "--columns = y=nothere"),
+    (["identify", "tf", "--data", "{odd}"], "--data = '{odd}'"),
     # identify greybox
     (["identify", "greybox", "--noise", "x=-1mm"], "--noise = x=-1mm"),
     (["identify", "greybox", "--t-end", "nan"], "--t-end = nan"),
     (["identify", "greybox", "--shooting", "x"], "--shooting = x"),
     (["identify", "greybox", "--data", "{bin}"], "--data = '{bin}'"),
+    (["identify", "greybox", "--data", "{renamed}", "--measured", "x", "--columns", "v=velocity"],
+     "--columns = v=velocity"),
+    (["identify", "greybox", "--data", "{odd}"], "--data = '{odd}'"),
     (["identify", "greybox", "--t-end", "0.5", "--u", "sine:1e308:2"], "--u = sine:1e308:2"),
     # study
     (["study", "lse", "--seeds", "0"], "--seeds = 0"),
@@ -108,8 +119,12 @@ def files(tmp_path_factory):
     (root / "binary.json").write_bytes(b"\x80\x81\x00 not text")
     (root / "empty.csv").write_text("")
     Exercise.new(hide=("M",)).save(root / "class.json")
+    (root / "renamed.csv").write_text("time,position[mm],velocity[mm/s],pA[bar],pB[bar],valve[V]\n"
+                                      + "".join(f"{k * 1e-3},0,0,120,180,0\n" for k in range(60)))
+    (root / "odd.csv").write_text("a,b,c\n" + "".join(f"{k},0,0\n" for k in range(60)))
     return {"dir": str(root / "folder"), "bin": str(root / "binary.json"), "empty": str(root / "empty.csv"),
-            "missing": str(root / "nothere.csv"), "new": str(root / "new.json"), "exercise": str(root / "class.json")}
+            "missing": str(root / "nothere.csv"), "new": str(root / "new.json"), "exercise": str(root / "class.json"),
+            "renamed": str(root / "renamed.csv"), "odd": str(root / "odd.csv")}
 
 
 @pytest.mark.parametrize("argv, named", CASES, ids=[" ".join(argv) for argv, _ in CASES])
