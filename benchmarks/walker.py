@@ -2130,12 +2130,13 @@ class Walker:
         return out
 
     # freshness -------------------------------------------------------------------------------------
-    def _values(self, css: str, names=None) -> dict | None:
-        """The shown fields of a form, as the app compares them (None: no such form)."""
+    def _values(self, css: str, names=None, *, shown_only: bool = True) -> dict | None:
+        """The shown fields of a form (``shown_only`` False: every field), as the app compares them (None: no
+        such form)."""
         form = self.s.form_model(css)
         if form is None:
             return None
-        hidden = set(form.attributes.get("hidden") or [])
+        hidden = set(form.attributes.get("hidden") or []) if shown_only else set()
         values = form.attributes.get("values") or {}
         return {k: normalized(k, v) for k, v in sorted(values.items())
                 if k not in hidden and (names is None or k in names)}
@@ -2192,7 +2193,9 @@ class Walker:
             tab1, errors = self._tab1_key(False), self._form_errors(LSE_FORM)
             if tab1 is None or errors is None or "lse_seed" in errors:
                 return None
-            return tab1, (self._values(LSE_FORM) or {}).get("lse_seed")
+            # its seed whether shown or not (hidden while the student's own file is in use, which Table 4
+            # does not read)
+            return tab1, (self._values(LSE_FORM, shown_only=False) or {}).get("lse_seed")
         if view in FREQ_VIEWS:
             tab1, values = self._tab1_key(True), self._values(FREQ_FORM)
             if tab1 is None or values is None or self._form_errors(FREQ_FORM):
