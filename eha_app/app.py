@@ -23,7 +23,7 @@ from eha_core.errors import not_allowed
 from eha_core.exercise import normalize_id
 
 from . import sections as _sections  # noqa: F401 - registers the page's sections
-from .render.layout import WRAP_TAB_HEADERS
+from .render.layout import BUTTON_CONTRAST, WRAP_TAB_HEADERS
 from .render.tables import CSS, SYMBOLS_HTML
 from .runtime import store_calls
 from .runtime.connection import ConnectionWatch
@@ -357,7 +357,14 @@ def serve_session() -> None:
     """Make this browser session's page (the server runs :mod:`eha_app.eha` for every session)."""
     from bokeh.models import CustomJS
 
-    from .runtime.patches import CONTROLS_BEFORE_RENDER_JS, VIEW_CLASS_JS, apply_patches, strict_mode_on, usable
+    from .runtime.patches import (
+        ACCESSIBLE_WIDGETS_JS,
+        CONTROLS_BEFORE_RENDER_JS,
+        VIEW_CLASS_JS,
+        apply_patches,
+        strict_mode_on,
+        usable,
+    )
     from .runtime.redaction import redact_server_logs
     from .runtime.serving import quiet_closed_websockets, use_local_resources
     from .runtime.tasks import note_loop_thread
@@ -386,6 +393,10 @@ def serve_session() -> None:
     if usable("controls_before_render"):
         pn.state.curdoc.js_on_event("document_ready", CustomJS(code=VIEW_CLASS_JS + CONTROLS_BEFORE_RENDER_JS
                                                                + "ehaControlsBeforeRender();"))
+    # ... and the tab headers a keyboard opens, the checkboxes named (patches.ACCESSIBLE_WIDGETS_JS)
+    if usable("accessible_widgets"):
+        pn.state.curdoc.js_on_event("document_ready", CustomJS(code=VIEW_CLASS_JS + ACCESSIBLE_WIDGETS_JS
+                                                               + "ehaAccessibleWidgets();"))
 
     def build() -> None:
         shell.objects = [create_app(query=query).layout]
@@ -744,7 +755,7 @@ class Page(pn.viewable.Viewer):
                                        css_classes=["eha-save-settings"],
                                        description="every input of every tab, as a JSON file")
         self.load = FileUpload(accept=".json", max_bytes=MAX_SETTINGS_BYTES, width=230,
-                               css_classes=["eha-load-settings"])
+                               css_classes=["eha-load-settings"], label="Load settings (a JSON file saved here)")
         # The report takes about 0.8 s to draw: a worker draws it from a snapshot of the page taken
         # now (the page's thread serves the other students meanwhile), then it is offered.
         # no tooltip: it would cover the download that appears beside the button under the pointer
@@ -756,7 +767,8 @@ class Page(pn.viewable.Viewer):
                                                 visible=not self.session.state.hidden)
         self.report_download = pn.widgets.FileDownload(filename="eha_session_report.html", label="Download the report",
                                                        visible=False, width=190, color="success",
-                                                       css_classes=["eha-session-report-download"])
+                                                       css_classes=["eha-session-report-download"],
+                                                       stylesheets=[BUTTON_CONTRAST])
         on_click(self.report_button, lambda _e: self.prepare_report())
         watch(self.load, lambda _e: self._loaded(), "value")
         # a row that wraps: at 800 px its six parts do not fit one line, and a row that does not wrap

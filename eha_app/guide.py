@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import panel as pn
 
+from .render.layout import BUTTON_CONTRAST
 from .runtime.tasks import on_click
 from .session import SECTIONS, SectionRegistry
 
@@ -82,7 +83,7 @@ class Guide:
                                       css_classes=["eha-guide-next"])
         on_click(self.next, lambda _e: self.go_next())
         self.finish = pn.widgets.Button(label="Report of this session", width=200, color="success", visible=False,
-                                        css_classes=["eha-guide-finish"])
+                                        css_classes=["eha-guide-finish"], stylesheets=[BUTTON_CONTRAST])
         if finish is not None:
             on_click(self.finish, lambda _e: finish())
         self._can_finish = finish is not None

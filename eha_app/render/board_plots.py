@@ -14,31 +14,40 @@ import numpy as np
 from bokeh.layouts import column
 from bokeh.models import ColumnDataSource, DataRange1d, Div, HoverTool, Span
 
+from .figure_text import Described
 from .plots import FIGURE_WIDTH, _f32, _figure, _lean, _swatch, decimate
 
-__all__ = ["BOARD_COLORS", "board_legend", "BoardFitFigure", "BoardBodeFigure", "BoardStepFigure",
+__all__ = ["BOARD_STYLES", "BOARD_DASHES", "board_legend", "BoardFitFigure", "BoardBodeFigure", "BoardStepFigure",
            "PoleZeroFigure"]
 
-BOARD_COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf",
-                "#bcbd22", "#7f7f7f", "#393b79", "#ad494a", "#637939", "#843c39")
+#: Okabe and Ito's colour-blind-safe colours (Bokeh's ``Colorblind`` palette, ordered by contrast on
+#: white; its yellow is too faint on white, and its black is the measured record's).
+_COLORS = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9")
+BOARD_DASHES = ("solid", "dashed", "dotted", "dotdash")
+#: Each model's (colour, dash), in the order models arrive: no two share both, and models next to each
+#: other differ in both, so that lines are told apart without telling colours apart. One per model
+#: the board holds (its references and ``MAX_MODELS`` estimates).
+BOARD_STYLES = tuple((_COLORS[i % len(_COLORS)], BOARD_DASHES[(i + i // len(_COLORS)) % len(BOARD_DASHES)])
+                     for i in range(14))
 
 
 def board_legend(entries, extra: tuple[tuple[str, str, str], ...] = ()) -> str:
     """One HTML line: a swatch and the name of each ticked model (and ``extra`` (label, colour, dash))."""
     parts = [_swatch(label, color, dash) for label, color, dash in
-             [(e.name, e.color, "solid") for e in entries] + list(extra)]
+             [(e.name, e.color, e.dash) for e in entries] + list(extra)]
     return "".join(parts) or "<span class='eha-note'>Tick a model to draw it.</span>"
 
 
-def _lines(xs, ys, colors, names):
-    return {"xs": [_f32(x) for x in xs], "ys": [_f32(y) for y in ys], "color": list(colors), "name": list(names)}
+def _lines(xs, ys, entries):
+    return {"xs": [_f32(x) for x in xs], "ys": [_f32(y) for y in ys], "color": [e.color for e in entries],
+            "dash": [e.dash for e in entries], "name": [e.name for e in entries]}
 
 
 def _empty_lines():
-    return {"xs": [], "ys": [], "color": [], "name": []}
+    return {"xs": [], "ys": [], "color": [], "dash": [], "name": []}
 
 
-class BoardFitFigure:
+class BoardFitFigure(Described):
     """The validation record's x and each model's output on it (MATLAB ``compare``)."""
 
     def __init__(self, *, height: int = 300, width: int = FIGURE_WIDTH):
@@ -46,8 +55,9 @@ class BoardFitFigure:
         self.models = ColumnDataSource(data=_empty_lines())
         self.fig = _figure(width=width, height=height, x_axis_label="t [s]", y_axis_label="x [mm]",
                            title="Models on the validation record")
-        self.fig.line("t", "x", source=self.measured, color="#333333", line_width=2)
-        self.fig.multi_line("xs", "ys", source=self.models, color="color", line_width=1.5, line_dash="dashed")
+        self.fig.line("t", "x", source=self.measured, color="#333333", line_width=2,
+                      name="validation record (measured x)")
+        self.fig.multi_line("xs", "ys", source=self.models, color="color", line_width=1.5, line_dash="dash")
         self.legend = Div(text="", sizing_mode="stretch_width", styles={"font-size": "12px"},
                           css_classes=["eha-board-legend"])
         _lean(self.fig)
@@ -60,7 +70,7 @@ class BoardFitFigure:
             return
         t, x = decimate(record.t, record.x * 1e3)
         self.measured.data = {"t": _f32(t), "x": _f32(x)}
-        xs, ys, colors, names = [], [], [], []
+        xs, ys, drawn = [], [], []
         for e in entries:
             fit = fits.get(e.key)
             if fit is None or not np.all(np.isfinite(fit.y_hat)):
@@ -68,28 +78,27 @@ class BoardFitFigure:
             tt, yy = decimate(record.t, fit.y_hat * 1e3)
             xs.append(tt)
             ys.append(yy)
-            colors.append(e.color)
-            names.append(e.name)
-        self.models.data = _lines(xs, ys, colors, names)
+            drawn.append(e)
+        self.models.data = _lines(xs, ys, drawn)
         self.legend.text = board_legend(entries, (("validation record (measured x)", "#333333", "solid"),))
 
 
-class BoardBodeFigure:
+class BoardBodeFigure(Described):
     """Magnitude and phase of each ticked model, with its 95 % band when it has one."""
 
     def __init__(self, *, height: int = 230, width: int = FIGURE_WIDTH):
         self.curves = ColumnDataSource(data=_empty_lines())
         self.phases = ColumnDataSource(data=_empty_lines())
-        self.mag_band = ColumnDataSource(data={"xs": [], "ys": [], "color": []})
-        self.phase_band = ColumnDataSource(data={"xs": [], "ys": [], "color": []})
+        self.mag_band = ColumnDataSource(data={"xs": [], "ys": [], "color": [], "name": []})
+        self.phase_band = ColumnDataSource(data={"xs": [], "ys": [], "color": [], "name": []})
         x_range = DataRange1d()
         self.mag = _figure(width=width, height=height, x_axis_type="log", x_range=x_range,
                            x_axis_label="ω [rad/s]", y_axis_label="magnitude [dB]", title="Bode diagram")
         self.phase = _figure(width=width, height=height, x_axis_type="log", x_range=x_range,
-                             x_axis_label="ω [rad/s]", y_axis_label="phase [deg]")
+                             x_axis_label="ω [rad/s]", y_axis_label="phase [deg]", name="Bode diagram, phase")
         for fig, band, src in ((self.mag, self.mag_band, self.curves), (self.phase, self.phase_band, self.phases)):
-            fig.patches("xs", "ys", source=band, fill_color="color", fill_alpha=0.15, line_alpha=0)
-            fig.multi_line("xs", "ys", source=src, color="color", line_width=2)
+            fig.patches("xs", "ys", source=band, fill_color="color", fill_alpha=0.15, line_alpha=0, name="95 % band")
+            fig.multi_line("xs", "ys", source=src, color="color", line_width=2, line_dash="dash")
             fig.add_tools(HoverTool(tooltips=[("model", "@name")]))
         self.note = Div(text="", sizing_mode="stretch_width", styles={"font-size": "12px", "color": "#555"},
                         css_classes=["eha-board-bode-note"])
@@ -98,7 +107,7 @@ class BoardBodeFigure:
         self.layout = column(self.legend, self.mag, self.phase, self.note, sizing_mode="stretch_width")
 
     def update(self, entries, views, *, bands: bool = True) -> None:
-        mags, phases, mb, pb = ([], [], [], []), ([], [], [], []), ([], [], []), ([], [], [])
+        mags, phases, mb, pb = ([], [], []), ([], [], []), ([], [], [], []), ([], [], [], [])
         banded = []
         for e in entries:
             v = views.get(e.key)
@@ -107,8 +116,7 @@ class BoardBodeFigure:
             for out, y in ((mags, v.magnitude_db), (phases, v.phase_deg)):
                 out[0].append(v.w)
                 out[1].append(y)
-                out[2].append(e.color)
-                out[3].append(e.name)
+                out[2].append(e)
             if bands and v.band is not None:
                 banded.append(e.name)
                 w = np.concatenate([v.band.w, v.band.w[::-1]])
@@ -117,10 +125,11 @@ class BoardBodeFigure:
                     out[0].append(_f32(w))
                     out[1].append(_f32(np.concatenate([lo, hi[::-1]])))
                     out[2].append(e.color)
+                    out[3].append(f"95 % band of {e.name}")
         self.curves.data = _lines(*mags)
         self.phases.data = _lines(*phases)
-        self.mag_band.data = {"xs": mb[0], "ys": mb[1], "color": mb[2]}
-        self.phase_band.data = {"xs": pb[0], "ys": pb[1], "color": pb[2]}
+        self.mag_band.data = {"xs": mb[0], "ys": mb[1], "color": mb[2], "name": mb[3]}
+        self.phase_band.data = {"xs": pb[0], "ys": pb[1], "color": pb[2], "name": pb[3]}
         self.legend.text = board_legend(entries)
         without = [e.name for e in entries if views.get(e.key) is not None and views[e.key].band is None]
         parts = []
@@ -133,7 +142,7 @@ class BoardBodeFigure:
         self.note.text = " ".join(parts)
 
 
-class BoardStepFigure:
+class BoardStepFigure(Described):
     """Step responses of the ticked models, of the nonlinear plant under the same controller, and the step."""
 
     def __init__(self, *, height: int = 300, width: int = FIGURE_WIDTH):
@@ -141,8 +150,9 @@ class BoardStepFigure:
         self.plant = ColumnDataSource(data={"t": _f32([]), "x": _f32([])})
         self.fig = _figure(width=width, height=height, x_axis_label="t [s]", y_axis_label="x [mm]",
                            title="Step response")
-        self.fig.multi_line("xs", "ys", source=self.models, color="color", line_width=2)
-        self.fig.line("t", "x", source=self.plant, color="#333333", line_width=2, line_dash="dashed")
+        self.fig.multi_line("xs", "ys", source=self.models, color="color", line_width=2, line_dash="dash")
+        self.fig.line("t", "x", source=self.plant, color="#333333", line_width=2, line_dash="dashed",
+                      name="nonlinear plant, same controller")
         self.reference = Span(location=0.0, dimension="width", line_color="#999999", line_dash="dotted")
         self.fig.add_layout(self.reference)
         self.fig.add_tools(HoverTool(tooltips=[("model", "@name"), ("t", "$x{0.00} s"), ("x", "$y{0.000} mm")]))
@@ -151,7 +161,7 @@ class BoardStepFigure:
         self.layout = column(self.legend, self.fig, sizing_mode="stretch_width")
 
     def update(self, entries, views, plant, amplitude_m: float) -> None:
-        xs, ys, colors, names = [], [], [], []
+        xs, ys, drawn = [], [], []
         scale = amplitude_m * 1e3
         for e in entries:
             v = views.get(e.key)
@@ -160,9 +170,8 @@ class BoardStepFigure:
             t, y = decimate(v.step.t, v.step.y * scale)
             xs.append(t)
             ys.append(y)
-            colors.append(e.color)
-            names.append(e.name)
-        self.models.data = _lines(xs, ys, colors, names)
+            drawn.append(e)
+        self.models.data = _lines(xs, ys, drawn)
         extra = ()
         if plant is not None:
             t, x = decimate(plant.t, plant.y * 1e3)
@@ -175,7 +184,7 @@ class BoardStepFigure:
         self.legend.text = board_legend(entries, extra)
 
 
-class PoleZeroFigure:
+class PoleZeroFigure(Described):
     """Poles (×) and zeros (○) of the ticked models with their 95 % regions; flagged roots ringed in red.
 
     The dashed circle is the Nyquist frequency π/Ts of the estimation data: a pole beyond it
@@ -194,14 +203,17 @@ class PoleZeroFigure:
         self.fig = _figure(width=width, height=height, x_axis_label="Re s [rad/s]", y_axis_label="Im s [rad/s]",
                            title="Poles (×) and zeros (○) with their 95 % regions", match_aspect=True)
         self.fig.patches("xs", "ys", source=self.regions, fill_color="color", fill_alpha=0.18, line_color="color",
-                         line_alpha=0.6)
-        self.fig.segment("x0", "y", "x1", "y", source=self.intervals, color="color", line_width=8, line_alpha=0.35)
-        self.fig.line("x", "y", source=self.nyquist, color="#999999", line_dash="dashed")
+                         line_alpha=0.6, name="95 % region")
+        self.fig.segment("x0", "y", "x1", "y", source=self.intervals, color="color", line_width=8, line_alpha=0.35,
+                         name="95 % interval of a real root")
+        self.fig.line("x", "y", source=self.nyquist, color="#999999", line_dash="dashed",
+                      name="Nyquist frequency |s| = π/Ts")
         self.fig.scatter("x", "y", source=self.flagged, marker="circle", size=18, fill_alpha=0, line_color="#b00020",
-                         line_width=2)
-        r1 = self.fig.scatter("x", "y", source=self.poles, marker="x", size=12, line_width=3, color="color")
+                         line_width=2, name="ringed (weakly determined)")
+        r1 = self.fig.scatter("x", "y", source=self.poles, marker="x", size=12, line_width=3, color="color",
+                              name="poles")
         r2 = self.fig.scatter("x", "y", source=self.zeros, marker="circle", size=10, fill_alpha=0, line_width=2,
-                              color="color")
+                              color="color", name="zeros")
         self.fig.add_tools(HoverTool(renderers=[r1, r2], tooltips=[("model", "@name"), ("", "@what"),
                                                                    ("", "@flag")]))
         self.fig.add_layout(Span(location=0, dimension="height", line_color="#bbbbbb"))

@@ -13,6 +13,7 @@ from bokeh.models import ColumnDataSource, LegendItem
 
 from eha_core.experiments import PAPER_TABLE4
 
+from .figure_text import Described
 from .formatting import display_unit, estimate_texts, num_html, pct_short, pct_text, table_html
 from .plots import CASE_COLORS, FIGURE_WIDTH, _f32, _figure, _lean, _legend_above, decimate
 from .tables import SCENARIOS, SYMBOLS_HTML, UNITS
@@ -290,7 +291,7 @@ def routes_html(params, lse=None, backout=None, greybox=None, *, hidden=()) -> s
 
 # -- the figure ------------------------------------------------------------------------------------------
 
-class GreyBoxFigure:
+class GreyBoxFigure(Described):
     """One plot per measured signal: the record (grey) against the model simulated with the estimates
     (the legend says only "simulated": a longer label overflowed a plot's width at 800 px)."""
 
@@ -307,8 +308,8 @@ class GreyBoxFigure:
             kw = {"x_range": x_range} if x_range is not None else {}
             fig = _figure(width=share, height=height, x_axis_label="t [s]", y_axis_label=label, title=title, **kw)
             x_range = fig.x_range
-            m = fig.line("t", "m", source=src, color="#888888", line_width=1.5)
-            r = fig.line("t", "s", source=src, color=CASE_COLORS[1], line_dash="dashed", line_width=2)
+            m = fig.line("t", "m", source=src, color="#888888", line_width=1.5, name="measured")
+            r = fig.line("t", "s", source=src, color=CASE_COLORS[1], line_dash="dashed", line_width=2, name="simulated")
             if k == 0:
                 _legend_above(fig, [LegendItem(label="measured", renderers=[m]),
                                     LegendItem(label="simulated", renderers=[r])], ncols=2)

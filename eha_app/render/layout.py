@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import panel as pn
 
-__all__ = ["WRAP_TAB_HEADERS", "side_by_side"]
+__all__ = ["WRAP_TAB_HEADERS", "LABEL_FOR_SCREEN_READERS", "BUTTON_CONTRAST", "side_by_side"]
 
 
 def side_by_side(*objects, css_classes=()) -> pn.FlexBox:
@@ -22,4 +22,25 @@ def side_by_side(*objects, css_classes=()) -> pn.FlexBox:
 
 #: Tab headers that wrap onto a second line instead of running past a narrow window's edge (at 800 px
 #: the frequency panel's sixth figure tab, "Residuals", sat at x = 794, out of sight).
-WRAP_TAB_HEADERS = ":host .bk-header { flex-wrap: wrap; } :host .bk-header .bk-tab { white-space: nowrap; }"
+WRAP_TAB_HEADERS = (":host .bk-header { flex-wrap: wrap; } :host .bk-header .bk-tab { white-space: nowrap; }"
+                    # where the keyboard is: Bokeh's own ring is a thin line the active tab's border hides
+                    " :host .bk-header .bk-tab:focus-visible { outline: 2px solid #1a56c4; outline-offset: -3px; }")
+
+#: A widget's label read by screen readers but not shown, where the row around it says what it is
+#: (a tick and a name field beside a model's colour on the model board).
+LABEL_FOR_SCREEN_READERS = (":host label, :host .bk-label { position: absolute; width: 1px; height: 1px; "
+                            "overflow: hidden; clip-path: inset(50%); white-space: nowrap; }")
+
+#: Bokeh's green, orange and red buttons with white text of at least 4.5:1 (WCAG 2.1 AA; Bokeh's
+#: own are 2.5:1, 2.0:1 and 3.9:1), in the same hues. Bokeh declares the colours on each button's
+#: :host, so a button takes these in its ``stylesheets``.
+BUTTON_CONTRAST = """
+:host {
+  --success: #2e7d32; --success-border: #276b2b; --success-hover: #276b2b; --success-hover-border: #1b5e20;
+  --success-active: #1b5e20; --success-active-border: #14471a;
+  --warning: #a35200; --warning-border: #8f4700; --warning-hover: #8f4700; --warning-hover-border: #7a3d00;
+  --warning-active: #7a3d00; --warning-active-border: #663300;
+  --danger: #c62828; --danger-border: #b71c1c; --danger-hover: #b71c1c; --danger-hover-border: #a61b1b;
+  --danger-active: #a61b1b; --danger-active-border: #8e1616;
+}
+"""

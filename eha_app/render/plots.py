@@ -47,10 +47,11 @@ from bokeh.plotting import figure
 
 from eha_core.identify.validate import FIT_DEFINITION, fit_conditions
 
+from .figure_text import Described, set_description
 from .glossary import term
 
 __all__ = [
-    "STATE_PANELS", "CASE_COLORS", "FIGURE_WIDTH", "MAX_POINTS", "decimate", "style_for", "legend_html",
+    "STATE_PANELS", "CASE_COLORS", "FIGURE_WIDTH", "MAX_POINTS", "decimate", "style_for", "legend_html", "line_sample",
     "TimeSeriesGrid", "ExcitationFigure", "ClosedLoopFigure", "FitFigure", "BodeFigure", "ValidationFigure",
     "ResidualFigure", "LseFitFigure", "FrequencyView", "frequency_view", "LseView", "lse_view",
 ]
@@ -62,8 +63,14 @@ STATE_PANELS = (
     ("p1", "p₁ [MPa]", 1e-6),
     ("p2", "p₂ [MPa]", 1e-6),
 )
-CASE_COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+#: Okabe and Ito's colour-blind-safe palette (Bokeh's ``Colorblind``), ordered by contrast on white: the
+#: first four, which the figures use most, reach 3:1 (WCAG's contrast for graphics); its yellow, too faint
+#: on white, comes last.
+CASE_COLORS = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000", "#F0E442")
 _MODEL_DASH = {"nonlinear": "solid", "linear": "dashed", "linear-positive": "dotted", "linear-negative": "dotdash"}
+#: The dash of each run when all runs are of one model (then the dash is free to tell the runs apart a
+#: second way, beside their colours: for a reader who cannot tell the colours apart, or a grey print).
+_RUN_DASH = ("solid", "dashed", "dotted", "dotdash")
 #: Points drawn per curve at most: a 5 s run at 1 kHz is shown every 2 ms, plenty
 #: for the paper's 2 Hz inputs, and it halves what the browser receives.
 MAX_POINTS = 2500
@@ -97,8 +104,16 @@ def _lean(*figs) -> None:
                 r.muted_glyph = None
 
 
-def style_for(index: int, model: str) -> dict:
-    return {"color": CASE_COLORS[index % len(CASE_COLORS)], "line_dash": _MODEL_DASH.get(model, "solid")}
+def style_for(index: int, model: str, *, dash_per_run: bool = False) -> dict:
+    """Run ``index``'s colour and dash: the dash says the model, or with ``dash_per_run`` (all runs of one
+    model) the run, as its colour does."""
+    dash = _RUN_DASH[index % len(_RUN_DASH)] if dash_per_run else _MODEL_DASH.get(model, "solid")
+    return {"color": CASE_COLORS[index % len(CASE_COLORS)], "line_dash": dash}
+
+
+def _dash_per_run(results) -> bool:
+    """Do the dashes tell the runs apart (several runs, one model) rather than the models?"""
+    return len({res.model for res in results}) == 1 and len({res.label for res in results}) > 1
 
 
 def _escape(text: str) -> str:
@@ -123,6 +138,8 @@ def _figure(**kwargs):
     # the browser would echo every range it computes and size it lays out
     for model in (fig, fig.x_range, fig.y_range):
         model.syncable = False
+    # its text alternative (a screen reader's): written again by each figure class's update (figure_text)
+    set_description(fig)
     return fig
 
 
@@ -135,23 +152,41 @@ def _legend_above(fig, items, ncols: str | int = "auto") -> Legend:
     return legend
 
 
+#: Bokeh's dash patterns (on and off lengths in px), for the HTML legends' samples of a line
+_DASH_ARRAY = {"solid": "", "dashed": "6", "dotted": "2 4", "dotdash": "2 4 6 4", "dashdot": "6 4 2 4"}
+
+
+def line_sample(color: str, dash: str = "solid", width: int = 3) -> str:
+    """A short line drawn as the figures draw it (colour, Bokeh's ``dash`` and ``width``), for an HTML
+    legend: a CSS border has no dot-dash. Hidden from screen readers: its label says what it is."""
+    height = max(width, 6)
+    array = _DASH_ARRAY.get(dash, "")
+    pattern = f' stroke-dasharray="{array}"' if array else ""
+    return (f'<svg width="22" height="{height}" aria-hidden="true" style="vertical-align:middle;margin-right:5px">'
+            f'<line x1="0" y1="{height / 2:g}" x2="22" y2="{height / 2:g}" stroke="{color}" stroke-width="{width}"'
+            f'{pattern}/></svg>')
+
+
 def _swatch(label: str, color: str, dash: str = "solid", width: int = 3) -> str:
-    return (f'<span style="white-space:nowrap;margin-right:14px"><span style="display:inline-block;width:22px;'
-            f'height:0;border-top:{width}px {dash} {color};vertical-align:middle;margin-right:5px"></span>'
+    return (f'<span style="white-space:nowrap;margin-right:14px">{line_sample(color, dash, width)}'
             f'{_escape(label)}</span>')
 
 
 def legend_html(results) -> str:
-    """A one-line legend: a swatch per run label, solid = nonlinear, dashed = linearised."""
+    """A one-line legend: a swatch per run label, and per model (solid = nonlinear, dashed = linearised);
+    runs of one model only: each run's swatch with its own dash."""
     keys: dict[str, int] = {}
     for res in results:
         keys.setdefault(res.label, len(keys))
     models = list(dict.fromkeys(res.model for res in results))
-    parts = [_swatch(label or "run", CASE_COLORS[i % len(CASE_COLORS)]) for label, i in keys.items()]
+    per_run = _dash_per_run(results)
+    parts = [_swatch(label or "run", style["color"], style["line_dash"])
+             for label, i in keys.items() for style in [style_for(i, models[0], dash_per_run=per_run)]]
     names = {"nonlinear": "nonlinear", "linear": "linearised (switching)",
              "linear-positive": "linearised (u ≥ 0 branch)", "linear-negative": "linearised (u < 0 branch)"}
-    css_dash = {"solid": "solid", "dashed": "dashed", "dotted": "dotted", "dotdash": "dashed"}
-    parts += [_swatch(names.get(m, m), "#444", css_dash[_MODEL_DASH.get(m, "solid")], width=2) for m in models]
+    if per_run:
+        return "".join(parts) + f"<span>{html.escape(names.get(models[0], models[0]))} model</span>"
+    parts += [_swatch(names.get(m, m), "#444", _MODEL_DASH.get(m, "solid"), width=2) for m in models]
     return "".join(parts)
 
 
@@ -192,7 +227,7 @@ def nice_range(lo: float, hi: float, current: tuple[float, float] | None = None)
     return float(np.round(start, 12)) + 0.0, float(np.round(end, 12)) + 0.0
 
 
-class TimeSeriesGrid:
+class TimeSeriesGrid(Described):
     """x, v, p1, p2 against t: a 2 x 2 grid of figures with a shared time axis.
 
     All curves of a panel are one MultiLine glyph reading one ColumnDataSource
@@ -252,12 +287,13 @@ class TimeSeriesGrid:
         cols = {"xs": [], "color": [], "dash": [], "label": []}
         for field, _, _ in STATE_PANELS:
             cols[field] = []
+        per_run = _dash_per_run(results)
         for res in results:
             t, *states = decimate(res.t, *(getattr(res, f) for f, _, _ in STATE_PANELS))
             cols["xs"].append(_f32(t))
             for (field, _, scale), y in zip(STATE_PANELS, states, strict=True):
                 cols[field].append(_f32(y * scale))
-            style = style_for(keys[res.label], res.model)
+            style = style_for(keys[res.label], res.model, dash_per_run=per_run)
             cols["color"].append(style["color"])
             cols["dash"].append(style["line_dash"])
             cols["label"].append(f"{res.label or 'run'} ({res.model})")
@@ -446,54 +482,56 @@ def _set_legend_label(item: LegendItem, text: str) -> None:
     item.label = {"value": text}
 
 
-class ExcitationFigure:
-    """The idinput reference signal against t (Fig. 8)."""
+class ExcitationFigure(Described):
+    """The idinput reference signal against t (Fig. 8), in mm as every position on the page (the paper's
+    range ±1 m is ±1000 mm: a student reads it against the piston's travel, a few tens of mm)."""
 
     def __init__(self, *, height: int = 240, width: int = FIGURE_WIDTH):
         self.source = ColumnDataSource(data={"t": _f32([]), "r": _f32([])})
-        self.fig = _figure(width=width, height=height, x_axis_label="t [s]", y_axis_label="r [m]",
+        self.fig = _figure(width=width, height=height, x_axis_label="t [s]", y_axis_label="r [mm]",
                            title="Excitation")
-        self.fig.step("t", "r", source=self.source, mode="after", color=CASE_COLORS[0])
-        self.fig.add_tools(HoverTool(tooltips=[("t", "@t{0.000} s"), ("r", "@r{0.0000}")]))
+        self.fig.step("t", "r", source=self.source, mode="after", color=CASE_COLORS[0], name="reference r")
+        self.fig.add_tools(HoverTool(tooltips=[("t", "@t{0.000} s"), ("r", "@r{0.0} mm")]))
         _lean(self.fig)
         self.layout = self.fig
 
     def update(self, t, r, title: str) -> None:
         t, r = decimate(t, r, max_points=4 * MAX_POINTS)
-        self.source.data = {"t": _f32(t), "r": _f32(r)}
+        self.source.data = {"t": _f32(t), "r": _f32(1e3 * np.asarray(r, dtype=float))}
         self.fig.title.text = title
 
 
-class ClosedLoopFigure:
-    """Reference r [m], position x [mm] and valve command u [V] of the closed-loop run (Fig. 9).
+class ClosedLoopFigure(Described):
+    """Reference r and position x [mm] and valve command u [V] of the closed-loop run (Fig. 9).
 
-    Three panels: r swings over +-1 m while x moves by centimetres (the slow
-    closed loop filters most of the excitation), so one axis would hide x.
+    Three panels: r swings over +-1000 mm (the paper's +-1 m) while x moves by a few
+    tens of mm (the slow closed loop filters most of the excitation, and u saturates),
+    so one axis would hide x; both in mm, so that their axes compare.
     """
 
     def __init__(self, *, height: int = 240, width: int = FIGURE_WIDTH):
         self.source = ColumnDataSource(data={k: _f32([]) for k in ("t", "r", "x", "u")})
         x_range = DataRange1d()
         self.figs = []
-        for key, ylabel, title, color, step in (("r", "r [m]", "Reference r", "#777777", True),
+        for key, ylabel, title, color, step in (("r", "r [mm]", "Reference r", "#777777", True),
                                                 ("x", "x [mm]", "Position x", CASE_COLORS[0], False),
                                                 ("u", "u [V]", "Command u = Kp (r − x)", CASE_COLORS[1], True)):
             fig = _figure(width=width // 3, height=height, x_range=x_range, x_axis_label="t [s]",
                           y_axis_label=ylabel, title=title)
             if step:
-                fig.step("t", key, source=self.source, mode="after", color=color, alpha=0.8)
+                fig.step("t", key, source=self.source, mode="after", color=color, alpha=0.8, name=title)
             else:
-                fig.line("t", key, source=self.source, color=color)
+                fig.line("t", key, source=self.source, color=color, name=title)
             self.figs.append(fig)
         _lean(*self.figs)
         self.layout = row(*self.figs, sizing_mode="stretch_width")
 
     def update(self, view: FrequencyView) -> None:
         t, r, x, u = decimate(view.t, view.r, view.x_mm, view.u)
-        self.source.data = {"t": _f32(t), "r": _f32(r), "x": _f32(x), "u": _f32(u)}
+        self.source.data = {"t": _f32(t), "r": _f32(1e3 * np.asarray(r, dtype=float)), "x": _f32(x), "u": _f32(u)}
 
 
-class FitFigure:
+class FitFigure(Described):
     """Measured x against the estimated model's output on the estimation data (Fig. 11)."""
 
     def __init__(self, *, height: int = 300, width: int = FIGURE_WIDTH):
@@ -524,7 +562,7 @@ class FitFigure:
         _set_legend_label(self.items[2], view.theory_label)
 
 
-class BodeFigure:
+class BodeFigure(Described):
     """Bode diagram (Fig. 12): the estimate, the theoretical H(s) of eq. 24, and the data's
     frequency response as the core chose it (ETFE or spectral estimate with its band), named so."""
 
@@ -536,14 +574,16 @@ class BodeFigure:
         self.mag = _figure(width=width, height=height, x_axis_type="log", x_range=x_range,
                            x_axis_label="ω [rad/s]", y_axis_label="magnitude [dB]", title="Bode diagram")
         self.phase = _figure(width=width, height=height, x_axis_type="log", x_range=x_range,
-                             x_axis_label="ω [rad/s]", y_axis_label="phase [deg]")
+                             x_axis_label="ω [rad/s]", y_axis_label="phase [deg]", name="Bode diagram, phase")
         r1 = self.mag.line("w", "est_db", source=self.curves, color=CASE_COLORS[1], line_width=2)
         r2 = self.mag.line("w", "th_db", source=self.curves, color=CASE_COLORS[2], line_dash="dashed")
         r4 = self.mag.varea("w", "lo", "hi", source=self.band, fill_color="#333333", fill_alpha=0.12)
         r3 = self.mag.scatter("w", "db", source=self.points, color="#333333", size=4)
-        self.phase.line("w", "est_deg", source=self.curves, color=CASE_COLORS[1], line_width=2)
-        self.phase.line("w", "th_deg", source=self.curves, color=CASE_COLORS[2], line_dash="dashed")
-        self.phase.scatter("w", "deg", source=self.points, color="#333333", size=4)
+        # (named for the text alternative: the legend is the magnitude's)
+        self.phase.line("w", "est_deg", source=self.curves, color=CASE_COLORS[1], line_width=2, name="estimated H(s)")
+        self.phase.line("w", "th_deg", source=self.curves, color=CASE_COLORS[2], line_dash="dashed",
+                        name="linearised H(s), eq. 24")
+        self.phase.scatter("w", "deg", source=self.points, color="#333333", size=4, name="the data")
         self.data_item = LegendItem(label="the data", renderers=[r3, r4])
         self.theory_item = LegendItem(label="linearised H(s), eq. 24", renderers=[r2])
         _legend_above(self.mag, [LegendItem(label="estimated H(s)", renderers=[r1]), self.theory_item,
@@ -582,7 +622,7 @@ class BodeFigure:
                           "below the continuous H(jω) near the Nyquist frequency.")
 
 
-class ValidationFigure:
+class ValidationFigure(Described):
     """The model on a fresh excitation (Fig. 13)."""
 
     def __init__(self, *, height: int = 300, width: int = FIGURE_WIDTH):
@@ -607,7 +647,7 @@ class ValidationFigure:
         self.fig.title.text = view.validation_title
 
 
-class ResidualFigure:
+class ResidualFigure(Described):
     """Residual autocorrelation and input cross-correlation with their 99 % bands."""
 
     def __init__(self, *, height: int = 260, width: int = FIGURE_WIDTH):
@@ -622,8 +662,8 @@ class ResidualFigure:
             band = BoxAnnotation(bottom=0, top=0, fill_color="#cccccc", fill_alpha=0.35, line_alpha=0)
             fig.add_layout(band)
             fig.add_layout(Span(location=0, dimension="width", line_color="#999999", line_width=1))
-            fig.segment("lag", "zero", "lag", "c", source=src, color=color, line_width=2)
-            fig.scatter("lag", "c", source=src, color=color, size=4)
+            fig.segment("lag", "zero", "lag", "c", source=src, color=color, line_width=2, name="correlation")
+            fig.scatter("lag", "c", source=src, color=color, size=4, name="correlation")
             self.sources.append(src)
             self.bands.append(band)
             self.figs.append(fig)
@@ -670,7 +710,7 @@ def lse_view(measured, resimulated) -> LseView:
     return LseView(t=t, x_mm=x, p1_mpa=p1, resim_t=tr, resim_x_mm=xr, resim_p1_mpa=p1r)
 
 
-class LseFitFigure:
+class LseFitFigure(Described):
     """Measured response against the model re-simulated with the estimates (x and p1).
 
     Without a re-simulation (an estimate that is not physical) only the
@@ -688,9 +728,10 @@ class LseFitFigure:
         m0 = self.left.line("t", "x", source=self.measured, color="#333333", line_width=2)
         self.resim_renderers = [
             self.left.line("t", "x", source=self.resim, color=CASE_COLORS[1], line_dash="dashed"),
-            self.right.line("t", "p1", source=self.resim, color=CASE_COLORS[1], line_dash="dashed"),
+            self.right.line("t", "p1", source=self.resim, color=CASE_COLORS[1], line_dash="dashed",
+                            name="re-simulated with the estimates"),
         ]
-        self.right.line("t", "p1", source=self.measured, color="#333333", line_width=2)
+        self.right.line("t", "p1", source=self.measured, color="#333333", line_width=2, name="measured")
         self.resim_item = LegendItem(label="re-simulated with the estimates", renderers=[self.resim_renderers[0]])
         _legend_above(self.left, [LegendItem(label="measured", renderers=[m0]), self.resim_item])
         _lean(self.left, self.right)
@@ -752,7 +793,7 @@ def record_data_view(t, u, y, prepared, rec=None) -> RecordDataView:
                           t_split=p.t_split, title=title, model_t=model_t, model_y=model_y, model_label=label)
 
 
-class RecordDataFigure:
+class RecordDataFigure(Described):
     """The student's record: the file's u and y (grey), the part used with its trend removed
     (colour), the removed trend (dashed), the estimation/validation split, and the estimate's output.
 
@@ -771,14 +812,16 @@ class RecordDataFigure:
         for key, label in (("u", "input u"), ("y", "output y")):
             fig = _figure(width=width // 2, height=height, x_range=x_range, x_axis_label="t [s]",
                           y_axis_label=label, title=f"Your record: {label}")
-            fig.line("t", key, source=self.raw, color="#b0b0b0", line_width=1)
-            fig.line("t", key, source=self.used, color=CASE_COLORS[0], line_width=1.5)
-            fig.line("t", key, source=self.trend, color=CASE_COLORS[1], line_dash="dashed", line_width=2)
+            fig.line("t", key, source=self.raw, color="#b0b0b0", line_width=1, name="as in the file")
+            fig.line("t", key, source=self.used, color=CASE_COLORS[0], line_width=1.5, name="as estimated")
+            fig.line("t", key, source=self.trend, color=CASE_COLORS[1], line_dash="dashed", line_width=2,
+                     name="removed trend")
             split = Span(location=0.0, dimension="height", line_color="#555555", line_dash="dotted", line_width=2)
             fig.add_layout(split)
             self.splits.append(split)
             if key == "y":
-                fig.line("t", "y", source=self.model, color=CASE_COLORS[2], line_dash="dashed", line_width=2)
+                self.model_renderer = fig.line("t", "y", source=self.model, color=CASE_COLORS[2], line_dash="dashed",
+                                               line_width=2, name="estimated H(s)")
             self.figs.append(fig)
         self.trend_shown = False
         self.model_label = ""
@@ -807,6 +850,8 @@ class RecordDataFigure:
             t, y = decimate(view.model_t, view.model_y)
             self.model.data = {"t": _f32(t), "y": _f32(y)}
         self.model_label = view.model_label if view.model_t is not None else ""
+        if self.model_label and self.model_renderer.name != self.model_label:
+            self.model_renderer.name = self.model_label         # its fits, in the text alternative
         parts = [_swatch("as in the file", "#b0b0b0", width=2), _swatch("as estimated", CASE_COLORS[0])]
         if self.trend_shown:
             parts.append(_swatch("removed trend", CASE_COLORS[1], "dashed"))

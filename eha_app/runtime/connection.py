@@ -11,9 +11,11 @@ and the app reads them back when it starts (:func:`eha_app.app.create_app`).
 
 It also keeps the address in step with the open tab (``tab=2``), and installs
 the page's one layout per message
-(:data:`~eha_app.runtime.patches.LAYOUT_ONCE_JS`) and the guard of widgets
+(:data:`~eha_app.runtime.patches.LAYOUT_ONCE_JS`), the guard of widgets
 changed before they are drawn
-(:data:`~eha_app.runtime.patches.CONTROLS_BEFORE_RENDER_JS`), reporting in
+(:data:`~eha_app.runtime.patches.CONTROLS_BEFORE_RENDER_JS`) and the tabs and
+checkboxes for the keyboard and screen readers
+(:data:`~eha_app.runtime.patches.ACCESSIBLE_WIDGETS_JS`), reporting in
 ``patches`` whether each took effect.
 """
 
@@ -22,7 +24,7 @@ from __future__ import annotations
 import param
 from panel.custom import JSComponent
 
-from .patches import CONTROLS_BEFORE_RENDER_JS, LAYOUT_ONCE_JS, VIEW_CLASS_JS
+from .patches import ACCESSIBLE_WIDGETS_JS, CONTROLS_BEFORE_RENDER_JS, LAYOUT_ONCE_JS, VIEW_CLASS_JS
 
 __all__ = ["ConnectionWatch"]
 
@@ -33,16 +35,18 @@ class ConnectionWatch(JSComponent):
     retry_ms = param.Integer(default=2000, bounds=(100, None))
     tabs_class = param.String(default="eha-main-tabs", doc="css class of the Tabs whose index goes into the URL")
     patches = param.Dict(default={}, doc="what the page reports of the library patches it installed, e.g. "
-                                         "{'layout_once': True, 'controls_before_render': True}")
+                                         "{'layout_once': True, 'controls_before_render': True, "
+                                         "'accessible_widgets': True}")
     install = param.List(default=[], doc="the BokehJS patches the server found fit for its Bokeh (patches.usable)")
 
     def __init__(self, **params):
         from .patches import usable
 
-        params.setdefault("install", [n for n in ("layout_once", "controls_before_render") if usable(n)])
+        params.setdefault("install", [n for n in ("layout_once", "controls_before_render", "accessible_widgets")
+                                      if usable(n)])
         super().__init__(**params)
 
-    _esm = VIEW_CLASS_JS + LAYOUT_ONCE_JS + CONTROLS_BEFORE_RENDER_JS + """
+    _esm = VIEW_CLASS_JS + LAYOUT_ONCE_JS + CONTROLS_BEFORE_RENDER_JS + ACCESSIBLE_WIDGETS_JS + """
 export function render({ view, model, el }) {
   el.style.display = 'none'
   const doc = view.model.document
@@ -53,6 +57,8 @@ export function render({ view, model, el }) {
   const applied = {}
   if (wanted.includes('layout_once')) { applied.layout_once = ehaLayoutOncePerMessage(doc) }
   if (wanted.includes('controls_before_render')) { applied.controls_before_render = ehaControlsBeforeRender() }
+  // tab headers a keyboard opens and a screen reader names, named checkboxes
+  if (wanted.includes('accessible_widgets')) { applied.accessible_widgets = ehaAccessibleWidgets() }
   window.__eha_patches = applied
   model.patches = applied
   let overlay = null

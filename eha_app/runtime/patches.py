@@ -52,6 +52,20 @@ A widget enabled before it is drawn (BokehJS 3.9, ``ControlView.connect_signals`
     drawn yet (drawing them takes the widget's state then). The page reports
     it in ``ConnectionWatch.patches`` like the one layout per message.
 
+Tabs and checkboxes for the keyboard and screen readers (BokehJS 3.9, ``TabsView._update_headers``,
+``TabsView.update_active``, ``CheckboxView.render``; Panel 1.9's ``TabsView.update_active``)
+    BokehJS draws a tab header as a ``div`` that only a click opens: a student without a mouse
+    could reach a header with Tab but not open it, and a screen reader heard no tab, no tab list,
+    and not which tab is open. A ``Checkbox``'s text is a ``div`` beside its input, which names
+    nothing (axe-core's ``label`` rule; the model board's ticks and its band checkbox had no name).
+    :data:`ACCESSIBLE_WIDGETS_JS` gives the headers the ARIA tab roles (``tablist``, ``tab`` with
+    ``aria-selected``, ``tabpanel``), one Tab stop per list (the open tab), the arrow keys, Home
+    and End between headers and Enter or Space to open one (the WAI-ARIA tabs pattern, activated
+    by hand: a tab is built when first opened, which the arrow keys alone should not do), and
+    each checkbox input its text as ``aria-label``. Installed before the page's widgets are drawn
+    (like the guard below) and reported by the page like the layout patch; Bokeh has no API
+    for an element's attributes inside a widget.
+
 Is the event loop busy? (CPython 3.10-3.13 ``asyncio.BaseEventLoop._ready``)
     The page updates wait until nothing else is ready to run
     (:class:`~eha_app.runtime.tasks.PageUpdates`): a student typing goes
@@ -132,7 +146,7 @@ from dataclasses import dataclass
 
 __all__ = ["COMPONENT_PACKAGES", "WRITTEN_FOR", "component_allowed", "refuse_foreign_components",
            "strict_page_changes", "UnlockedChange", "strict_mode_on", "VIEW_CLASS_JS", "LAYOUT_ONCE_JS",
-           "CONTROLS_BEFORE_RENDER_JS", "loop_has_work",
+           "CONTROLS_BEFORE_RENDER_JS", "ACCESSIBLE_WIDGETS_JS", "loop_has_work",
            "bind_port_shared", "guard_paths", "cache_stable_defaults", "fast_themed_values", "settle_settings",
            "SETTLED_SETTINGS", "lazy_container_defaults", "incremental_model_graph",
            "tune_garbage_collector", "collect_often", "on_disconnect",
@@ -279,6 +293,93 @@ function ehaControlsBeforeRender() {
   };
   connect.__eha_before_render = true;
   proto.connect_signals = connect;
+  return true;
+}
+"""
+
+
+#: Tab headers a keyboard can use and a screen reader can name, and named checkboxes (BokehJS 3.9,
+#: ``TabsView._update_headers``/``update_active``, Panel 1.9's ``TabsView.update_active``,
+#: ``CheckboxView.render``/``_update_label``; see the module docstring): ``ehaAccessibleWidgets()``,
+#: after :data:`VIEW_CLASS_JS`.
+ACCESSIBLE_WIDGETS_JS = """
+function ehaTabKey(view, i, event) {
+  const headers = view.header_els;
+  const n = headers.length;
+  let next = null;
+  switch (event.key) {
+    case "ArrowRight": next = (i + 1) % n; break;
+    case "ArrowLeft": next = (i - 1 + n) % n; break;
+    case "Home": next = 0; break;
+    case "End": next = n - 1; break;
+    case "Enter": case " ":
+      event.preventDefault();
+      if (!view.model.disabled && !view.model.tabs[i].disabled) { view.change_active(i); }
+      return;
+    default: return;
+  }
+  event.preventDefault();
+  headers[next].focus();
+}
+function ehaTabsAria(view) {
+  const headers = view.header_els;
+  if (headers == null || view.headers_wrapper_el == null) { return; }
+  const active = view.model.active;
+  view.headers_wrapper_el.setAttribute("role", "tablist");
+  headers.forEach((el, i) => {
+    el.setAttribute("role", "tab");
+    el.setAttribute("aria-selected", i === active ? "true" : "false");
+    // one stop for Tab in the list (the open tab's header); the arrow keys move between headers
+    el.tabIndex = i === active ? 0 : -1;
+    if (!el.__eha_keys) {
+      el.__eha_keys = true;
+      el.addEventListener("keydown", (event) => ehaTabKey(view, i, event));
+    }
+  });
+  (view.child_views || []).forEach((child, i) => {
+    if (child != null && child.el != null && view.model.tabs[i] != null) {
+      child.el.setAttribute("role", "tabpanel");
+      child.el.setAttribute("aria-label", view.model.tabs[i].title);
+    }
+  });
+}
+function ehaCheckboxName(view) {
+  if (view.checkbox_el == null) { return; }
+  const text = view.model.label;
+  if (text) { view.checkbox_el.setAttribute("aria-label", text); }
+  else { view.checkbox_el.removeAttribute("aria-label"); }
+}
+function ehaAccessibleWidgets() {
+  const tabs = ehaViewClass("Tabs", "TabsView");
+  const checkbox = ehaViewClass("Checkbox", "CheckboxView");
+  if (tabs == null || checkbox == null) { return false; }
+  for (const [proto, names] of [[tabs, ["_update_headers", "update_active", "change_active"]],
+                                [checkbox, ["render", "_update_label"]]]) {
+    if (names.some((name) => typeof proto[name] !== "function")) { return false; }
+  }
+  if (tabs._update_headers.__eha_aria) { return true; }
+  // Panel's Tabs draws its headers with Bokeh's view and shows a tab with a method of its own
+  const panelTabs = ehaViewClass("panel.models.tabs.Tabs", "TabsView");
+  // (a method a class inherits is wrapped where it is defined, unless ``here``)
+  const after = (proto, name, fn, here = false) => {
+    if (!here && !Object.prototype.hasOwnProperty.call(proto, name)) { return; }
+    const original = proto[name];
+    const wrapped = function (...args) { const out = original.apply(this, args); fn(this); return out; };
+    wrapped.__eha_aria = true;
+    proto[name] = wrapped;
+  };
+  for (const proto of [tabs, panelTabs]) {
+    if (proto == null) { continue; }
+    after(proto, "_update_headers", ehaTabsAria);
+    after(proto, "update_active", ehaTabsAria);
+  }
+  after(checkbox, "render", ehaCheckboxName);
+  after(checkbox, "_update_label", ehaCheckboxName, true);
+  // views drawn before this ran
+  try {
+    for (const view of Bokeh.index.query((v) => v instanceof tabs.constructor)) { ehaTabsAria(view); }
+    for (const view of Bokeh.index.query((v) => v instanceof checkbox.constructor)) { ehaCheckboxName(view); }
+  } catch (e) { console.warn("eha: could not name the widgets drawn before", e); }
   return true;
 }
 """
@@ -1104,6 +1205,10 @@ PATCHES: dict[str, Patch] = {p.name: p for p in (
           "bench_frequency_page.py --visit-all freq_click_to_page_ms_median: 502 ms, 2501 without it"),
     Patch("controls_before_render", "bokeh", _BOKEH_39, ("BokehJS ControlView.connect_signals",),
           "tests/ui/test_patches_in_browser.py: a tab left undrawn in 5 of 12 pages opened from a link", "fix"),
+    Patch("accessible_widgets", "bokeh", _BOKEH_39,
+          ("BokehJS TabsView._update_headers", "BokehJS TabsView.update_active", "BokehJS CheckboxView.render"),
+          "tests/ui/test_accessibility.py: no tab opened from the keyboard; axe-core's label rule on the board's "
+          "ticks", "fix"),
 )}
 
 #: The patches the server applies when it starts (in this order), and those its pages use.
@@ -1113,7 +1218,8 @@ SERVER_PATCHES = ("component_guard", "teacher_routes", "stable_defaults", "fast_
 AFTER_LOAD_PATCHES = ("gc_freeze", "gc_often")
 #: Read where they are used (a page's lock, its freeze, the event loop) or pasted into the page for
 #: the browser: checked when the server starts, like the others.
-READ_PATCHES = ("lock_check", "lazy_freeze", "loop_has_work", "layout_once", "controls_before_render")
+READ_PATCHES = ("lock_check", "lazy_freeze", "loop_has_work", "layout_once", "controls_before_render",
+                "accessible_widgets")
 #: Without these the server does not start (it would not be safe to open to a class).
 GUARDS = ("component_guard", "teacher_routes")
 

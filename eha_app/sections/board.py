@@ -42,8 +42,8 @@ from eha_core.board import (
 )
 from eha_core.errors import ComputationError
 
-from ..render import board_plots
-from ..render.layout import WRAP_TAB_HEADERS, side_by_side
+from ..render import board_plots, plots
+from ..render.layout import LABEL_FOR_SCREEN_READERS, WRAP_TAB_HEADERS, side_by_side
 from ..runtime.tasks import on_click, watch
 from ..session import GuideStep, ReportPart, Section, SectionSnapshot, stale_note
 from ..session.form import Field, Form, Group, parse_fields
@@ -66,6 +66,11 @@ _VIEWS = (("Fit on validation data", "fit"), ("Bode", "bode"), ("Step response",
           ("Poles and zeros", "pz"))
 
 
+def _tick_label(name: str) -> str:
+    """What a screen reader says of a model's tick on the board's list."""
+    return f"Draw {name} on the views"
+
+
 @dataclass
 class BoardEntry:
     """A model on the board, as the student sees it (name editable, ticked or not)."""
@@ -75,6 +80,7 @@ class BoardEntry:
     color: str
     name: str
     ticked: bool = True
+    dash: str = "solid"             # with the colour, tells its lines apart (board_plots.BOARD_STYLES)
 
     @property
     def kind(self) -> str:
@@ -121,6 +127,7 @@ class ModelBoard(Section):
         self.plant_runner = runner.sub("board plant")
         self.figures: dict = {}
         self._panes: dict = {}
+        self._ticks: dict = {}          # key -> the list's tick of that model (named after it)
         self.built = False
         # On a page, the views out of sight are computed when first shown: opening the board computes the
         # validation record and the fits (its first view); the Bode diagrams, steps and poles (and the
@@ -156,9 +163,11 @@ class ModelBoard(Section):
         self.build()
 
     # -- models ------------------------------------------------------------------------------
-    def _color(self) -> str:
-        used = {e.color for e in self.entries}
-        return next((c for c in board_plots.BOARD_COLORS if c not in used), board_plots.BOARD_COLORS[0])
+    def _style(self) -> dict:
+        """The first (colour, dash) of board_plots.BOARD_STYLES no model on the board has."""
+        used = {(e.color, e.dash) for e in self.entries}
+        color, dash = next((s for s in board_plots.BOARD_STYLES if s not in used), board_plots.BOARD_STYLES[0])
+        return {"color": color, "dash": dash}
 
     def _references(self) -> None:
         """eq. 24 (unless an exercise hides the values it is made of) and the paper's Ĥ."""
@@ -168,7 +177,7 @@ class ModelBoard(Section):
             entry = old.pop(ref.name, None)
             if entry is None:
                 self.entries.insert(len([e for e in self.entries if e.kind == "reference"]),
-                                    BoardEntry(next(self._keys), ref, self._color(), ref.name,
+                                    BoardEntry(next(self._keys), ref, name=ref.name, **self._style(),
                                                ticked=ref.name.startswith("H(s)")))
             elif entry.model.num.tolist() != ref.num.tolist() or entry.model.den.tolist() != ref.den.tolist():
                 entry.model = ref
@@ -199,7 +208,7 @@ class ModelBoard(Section):
                                 f"{html.escape(model.name)}.</span>")
             return None
         stable = bool(np.all(np.roots(np.asarray(model.den, dtype=float)).real < 0))
-        entry = BoardEntry(next(self._keys), model, self._color(), model.name, ticked=stable)
+        entry = BoardEntry(next(self._keys), model, name=model.name, ticked=stable, **self._style())
         self.entries.append(entry)
         self.note.object = ("" if stable else f"<span class='eha-warn'>{html.escape(model.name)} is unstable: "
                                               "it is on the board unticked.</span>")
@@ -296,6 +305,9 @@ class ModelBoard(Section):
         if not name:
             return
         entry.name = name
+        box = self._ticks.get(entry.key)
+        if box is not None:
+            box.label = _tick_label(name)
         self.refresh()
 
     def tick(self, entry: BoardEntry, ticked: bool) -> None:
@@ -308,14 +320,19 @@ class ModelBoard(Section):
     # -- the list ---------------------------------------------------------------------------------
     def _rebuild_list(self) -> None:
         rows = []
+        self._ticks = {}
         for e in self.entries:
-            box = pn.widgets.Checkbox(value=e.ticked, width=22, margin=(8, 0, 0, 5),
-                                      css_classes=[f"eha-board-tick-{e.key}", "eha-board-tick"])
+            # the tick and the name field are named for screen readers; the row shows what they are
+            box = pn.widgets.Checkbox(label=_tick_label(e.name), value=e.ticked, width=22, margin=(8, 0, 0, 5),
+                                      css_classes=[f"eha-board-tick-{e.key}", "eha-board-tick"],
+                                      stylesheets=[LABEL_FOR_SCREEN_READERS])
+            self._ticks[e.key] = box
             watch(box, lambda ev, e=e: self.tick(e, ev.new), "value")
-            swatch = pn.pane.HTML(f"<span style='display:inline-block;width:14px;height:14px;background:{e.color};"
-                                  f"border-radius:3px;margin-top:9px'></span>", width=18, margin=(0, 2))
-            name = pn.widgets.TextInput(value=e.name, width=150, margin=(3, 3),
-                                        css_classes=[f"eha-board-name-{e.key}", "eha-board-name"])
+            # a line as the model's curves are drawn: its colour and its dash
+            swatch = pn.pane.HTML(plots.line_sample(e.color, e.dash), width=24, margin=(12, 0, 0, 2))
+            name = pn.widgets.TextInput(label="Model name", value=e.name, width=150, margin=(3, 3),
+                                        css_classes=[f"eha-board-name-{e.key}", "eha-board-name"],
+                                        stylesheets=[LABEL_FOR_SCREEN_READERS])
             watch(name, lambda ev, e=e: self.rename(e, ev.new), "value")
             parts = [box, swatch, name]
             if e.kind != "reference":

@@ -317,7 +317,8 @@ class GreyBoxPanel(Section):
         self.own_source: dict = {}          # what a hand-in records of the file (uploads.file_source)
         self.result_source: dict = {}       # ... and of the data behind the last result
         self._upload = None
-        self.upload = FileUpload(accept=".csv,.mat", width=260, css_classes=["eha-gb-upload"])
+        self.upload = FileUpload(accept=".csv,.mat", width=260, css_classes=["eha-gb-upload"],
+                                 label="Your own record (a CSV or .mat file)")
         watch(self.upload, self._uploaded, "value")
         self.upload_note = pn.pane.HTML(
             "<span class='eha-note'>Or use your own record: a CSV or MATLAB .mat file with columns t, u and the "

@@ -19,6 +19,7 @@ import panel as pn
 from eha_core.exercise import FEEDBACK, METHODS
 
 from ..render.formatting import display_unit, num_html
+from ..render.layout import BUTTON_CONTRAST
 from ..render.tables import SYMBOLS_HTML
 from ..runtime.tasks import on_click
 
@@ -112,7 +113,8 @@ class HandInBox:
         state = section.state
         allowed = bool(state.hidden) and (state.exercise is None or method in state.exercise.conditions.methods)
         self.button = pn.widgets.Button(label=label, color="warning", width=260, css_classes=["eha-handin"],
-                                        visible=allowed, disabled=True, description="run first")
+                                        visible=allowed, disabled=True, description="run first",
+                                        stylesheets=[BUTTON_CONTRAST])
         on_click(self.button, lambda _e: self.hand_in())
         self.verdict = pn.pane.HTML("", visible=False, width=270, css_classes=["eha-verdict"])
         # the section's own view of the button (a result to hand in, and its tip), before the lab's rules
@@ -168,7 +170,7 @@ class HandInBox:
                    f" It would use hand-in {used + 1} of {exercise.attempts}.")
         if not self.confirm.objects:
             yes = pn.widgets.Button(label="Hand in anyway", color="danger", width=130,
-                                    css_classes=["eha-handin-anyway"])
+                                    css_classes=["eha-handin-anyway"], stylesheets=[BUTTON_CONTRAST])
             no = pn.widgets.Button(label="Keep it", width=110, css_classes=["eha-handin-keep"])
             on_click(yes, lambda _e: self._answered(True))
             on_click(no, lambda _e: self._answered(False))

@@ -34,7 +34,7 @@ from eha_core.signals import SignalSpecError, parse_signal
 
 from ..render import plots
 from ..render.glossary import term
-from ..render.layout import side_by_side
+from ..render.layout import BUTTON_CONTRAST, side_by_side
 from ..render.tables import (
     SCENARIOS,
     UNITS,
@@ -292,7 +292,7 @@ class LeastSquaresPanel(Section):
         self.button = pn.widgets.Button(label="Run least squares", color="primary", width=260,
                                         css_classes=["eha-run-lse"])
         self.all_button = pn.widgets.Button(label="Run all four scenarios (Table 4)", color="success", width=260,
-                                            css_classes=["eha-run-table4"])
+                                            css_classes=["eha-run-table4"], stylesheets=[BUTTON_CONTRAST])
         on_click(self.button, lambda _e: self.run())
         on_click(self.all_button, lambda _e: self.run_all())
         # an exercise: hand in the hidden parameters' estimates (Table 4 would show the truth)
@@ -307,7 +307,8 @@ class LeastSquaresPanel(Section):
         self.last_data = None               # the data behind the table and the plot (for downloads)
         self.last_resim = None              # the plot's re-simulation with the estimates
         self._upload = None
-        self.upload = FileUpload(accept=".csv,.mat", width=260, css_classes=["eha-lse-upload"])
+        self.upload = FileUpload(accept=".csv,.mat", width=260, css_classes=["eha-lse-upload"],
+                                 label="Your own measurements (a CSV or .mat file)")
         watch(self.upload, self._uploaded, "value")
         self.upload_note = pn.pane.HTML(
             "<span class='eha-note'>Or use your own measurements: a CSV or MATLAB .mat file with columns "

@@ -75,7 +75,8 @@ class RecordPanel(Section):
             "(or t, r, x), in SI or with units in the header. Its first two thirds estimate, the rest "
             "validates; the model's poles, zeros, initial condition, offset and delay are the form's.</span>",
             width=270, css_classes=["eha-freq-record-note"])
-        self.upload = FileUpload(accept=".csv,.mat", width=260, css_classes=["eha-freq-upload"])
+        self.upload = FileUpload(accept=".csv,.mat", width=260, css_classes=["eha-freq-upload"],
+                                 label="Your own record (a CSV or .mat file)")
         watch(self.upload, self._uploaded, "value")
         self.mapping = ColumnMapping(RECORD_COLUMNS, "freq-record")
         self.window_form = Form(spec=[Group("Part of your record to use", (

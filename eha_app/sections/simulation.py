@@ -16,7 +16,7 @@ from eha_core.experiments import PAPER_CASES, run_paper_cases
 from eha_core.signals import ZERO, Chirp, Sine, Square, Step, WhiteNoise
 from eha_core.simulate import runs_to_pandas, simulate_many, simulation_cost
 
-from ..render.layout import side_by_side
+from ..render.layout import BUTTON_CONTRAST, side_by_side
 from ..render.plots import TimeSeriesGrid
 from ..runtime.limits import RunCost
 from ..runtime.shared import shared_results
@@ -351,7 +351,8 @@ class SimulationTab(Section):
                                            css_classes=["eha-run-nonlinear"]),
             "linear": pn.widgets.Button(label="Run linearised", color="primary", width=130,
                                         css_classes=["eha-run-linear"]),
-            "both": pn.widgets.Button(label="Compare both", color="success", width=130, css_classes=["eha-run-both"]),
+            "both": pn.widgets.Button(label="Compare both", color="success", width=130, css_classes=["eha-run-both"],
+                                      stylesheets=[BUTTON_CONTRAST]),
         }
         for model, button in self.run_buttons.items():
             on_click(button, self._run_handler(model))
@@ -594,7 +595,7 @@ class SimulationTab(Section):
         if chosen != "all" and len(labels) > 1:
             what = f"{chosen} of {what} (choose the case above the plots)"
         self.info.text = (f"<b>{what}</b> — {models} model, {results[0].t[-1]:g} s{timing}. "
-                          f"<span class='eha-run-count' style='color:#999'>run {self.run_count}</span>"
+                          f"<span class='eha-run-count' style='color:#666'>run {self.run_count}</span>"
                           + beyond_range_html(results))
 
     def _show(self, results, job) -> None:

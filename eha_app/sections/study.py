@@ -25,6 +25,7 @@ from bokeh.models import ColumnDataSource, Span
 from eha_core.experiments import FrequencyExperiment
 
 from ..render import plots
+from ..render.figure_text import Described
 from ..render.formatting import display_unit, num_html
 from ..render.layout import side_by_side
 from ..render.tables import SYMBOLS_HTML, UNITS
@@ -92,7 +93,7 @@ def study_hidden(texts: dict) -> list[str]:
 _NO_BARS = {"left": [-1.0], "right": [1.0], "top": [0]}
 
 
-class StudyFigure:
+class StudyFigure(Described):
     """One histogram per parameter: estimates minus the nominal value (in % of it, or in its unit
     when it is zero), the nominal value (dashed) and the mean (solid)."""
 
@@ -107,7 +108,7 @@ class StudyFigure:
             fig.title.text_font_size = "11px"
             fig.xaxis.ticker.desired_num_ticks = 4
             fig.quad(left="left", right="right", bottom=0, top="top", source=src, fill_color=plots.CASE_COLORS[0],
-                     fill_alpha=0.5, line_color="white")
+                     fill_alpha=0.5, line_color="white", name="estimates over the seeds")
             fig.add_layout(Span(location=0.0, dimension="height", line_color="#333333", line_dash="dashed",
                                 line_width=2))
             mean = Span(location=0.0, dimension="height", line_color=plots.CASE_COLORS[1], line_width=2)

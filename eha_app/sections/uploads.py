@@ -118,6 +118,9 @@ class FileUpload(JSComponent):
     """
 
     accept = param.String(default="", doc="file types offered, e.g. '.csv,.mat'")
+    label = param.String(default="", doc="""
+        The chooser's name, e.g. 'Load settings (a JSON file)': a file input has no visible label of
+        its own (its button says 'Choose file'), and a screen reader would announce it unnamed.""")
     max_bytes = param.Integer(default=MAX_UPLOAD_BYTES, bounds=(1, None), doc="the largest file sent")
     filename = param.String(default=None, allow_None=True, doc="the name of the last file sent")
     value = param.Bytes(default=None, allow_None=True, doc="the last file's bytes")
@@ -135,6 +138,7 @@ export function render({ model, el }) {
   const input = document.createElement('input')
   input.type = 'file'
   input.accept = model.accept || ''
+  if (model.label) { input.setAttribute('aria-label', model.label) }
   const refused = document.createElement('div')
   refused.className = 'eha-upload-refused'
   refused.setAttribute('role', 'alert')

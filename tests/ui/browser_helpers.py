@@ -82,3 +82,58 @@ class Session:
 
     def close(self):
         self.context.close()
+
+
+# -- accessibility: axe-core (installed from tests/ui/package-lock.json) ------------------------------
+
+AXE_JS = Path(__file__).with_name("node_modules") / "axe-core" / "axe.min.js"
+AXE_INSTALL = "npm ci --prefix tests/ui"
+#: WCAG 2.0 and 2.1, levels A and AA, as axe-core tags its rules
+WCAG_AA_TAGS = ("wcag2a", "wcag2aa", "wcag21a", "wcag21aa")
+
+
+def axe_path() -> Path:
+    """axe-core's script, or the test is skipped saying how to install it."""
+    if not AXE_JS.exists():
+        pytest.skip(f"axe-core is not installed: run `{AXE_INSTALL}` (tests/ui/package.json pins its version; the "
+                    "README's test command runs it)")
+    return AXE_JS
+
+
+JS_AXE = """async (tags) => {
+  const r = await axe.run(document, {runOnly: {type: 'tag', values: tags}});
+  // a node inside a shadow root is named by a path of selectors, one per shadow root (Bokeh draws
+  // every widget into one)
+  const deep = (n) => n.target.some((t) => Array.isArray(t));
+  const last = (n) => { const t = n.target[n.target.length - 1]; return Array.isArray(t) ? t[t.length - 1] : t; };
+  const nodes = [...r.passes, ...r.violations, ...r.incomplete].flatMap((rule) => rule.nodes);
+  return {
+    violations: r.violations.map((v) => ({id: v.id, impact: v.impact, help: v.help,
+      nodes: v.nodes.map((n) => ({target: JSON.stringify(n.target), html: n.html.slice(0, 300),
+                                  summary: n.failureSummary}))})),
+    checked: nodes.length,
+    in_shadow: nodes.filter(deep).length,
+    // the form controls axe-core found named (rule "label"), by the last selector of their path
+    labelled: (r.passes.find((p) => p.id === 'label') || {nodes: []}).nodes.filter(deep).map(last),
+    version: axe.version,
+  };
+}"""
+
+
+def axe_check(page) -> dict:
+    """axe-core's WCAG 2.1 AA rules (:data:`WCAG_AA_TAGS`) on ``page`` as it is shown now: its
+    ``violations`` (rule, impact, nodes), how many nodes it ``checked`` and how many of those are
+    ``in_shadow`` roots, the form controls it found ``labelled``."""
+    if not page.evaluate("typeof axe !== 'undefined'"):
+        page.add_script_tag(path=str(axe_path()))
+    return page.evaluate(JS_AXE, list(WCAG_AA_TAGS))
+
+
+def violations_text(result: dict) -> str:
+    """axe-core's violations, one line per node: rule (impact), where, what to fix."""
+    lines = []
+    for v in result["violations"]:
+        for n in v["nodes"]:
+            lines.append(f"{v['id']} ({v['impact']}): {n['target']}\n    {n['html'][:160]}\n    "
+                         + " ".join(n["summary"].split())[:300])
+    return "\n".join(lines)

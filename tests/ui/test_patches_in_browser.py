@@ -45,7 +45,8 @@ JS_ENABLED_BEFORE_DRAWN = """async () => {
 def test_the_page_lays_itself_out_once_per_message_guards_early_widgets_and_says_so(session):
     page = session.page
     state = wait_until(lambda: page.evaluate(JS_INSTALLED), 15, message="the page's patches")
-    assert state == {"reported": {"layout_once": True, "controls_before_render": True}, "deferring": True,
+    assert state == {"reported": {"layout_once": True, "controls_before_render": True, "accessible_widgets": True},
+                     "deferring": True,
                      "document": True, "controls": True}
     # a widget enabled and disabled before it is drawn: no exception, and drawn in its last state
     assert page.evaluate(JS_ENABLED_BEFORE_DRAWN) == {"error": None, "drawn": True}
