@@ -316,7 +316,7 @@ class Dashboard(pn.viewable.Viewer):
             f"<dt>Deadline</dt><dd>{self._deadline_text()}</dd>"
             f"<dt>Hand-ins allowed</dt><dd>{ex.attempts or 'no limit'}</dd>"
             f"<dt>Feedback</dt><dd>{_esc(FEEDBACK.get(ex.feedback, ex.feedback))}</dd>"
-            f"<dt>Score</dt><dd>the {_esc(ex.score_rule)} hand-in's share within tolerance</dd>"
+            f"<dt>Score</dt><dd>{_esc(ex.score_text())}: its share of parameters within tolerance</dd>"
             f"<dt>Students</dt><dd>{students}</dd>"
             f"<dt>Hand-ins</dt><dd>{status}</dd>"
             f"<dt>Verdicts revealed</dt><dd>{'yes' if self.revealed else 'no'}</dd></dl>")
@@ -344,13 +344,14 @@ class Dashboard(pn.viewable.Viewer):
                                f"{time.strftime('%H:%M:%S')}</span>")
         # two groups kept apart: the last hand-in (its time, route and values) and the score (the best and
         # the last hand-in's, the one the exercise's rule counts in bold)
-        counts = {"best": "best", "last": "last"}
+        # the best and the last hand-in's scores, then the one the exercise's rule counts (in bold)
+        counts = ("best", "last", "score")
         group = (f"<tr><th colspan='6'>student</th><th colspan='{2 + len(ex.hide)}' class='group'>last hand-in</th>"
-                 f"<th colspan='2' class='group'>score (the {_esc(ex.score_rule)} counts)</th>"
+                 f"<th colspan='3' class='group'>score ({_esc(ex.score_text())})</th>"
                  "<th colspan='3'></th></tr>")
         head = group + ("<tr><th>id</th><th>name</th><th>joined</th><th>last seen</th><th>hand-ins</th><th>refused</th>"
                         "<th>time</th><th>route</th>" + "".join(f"<th>{_param_head(ex, n)}</th>" for n in ex.hide)
-                        + "".join(f"<th>{'<b>' + k + '</b>' if k == ex.score_rule else k}</th>" for k in counts)
+                        + "<th>best</th><th>last</th><th><b>counted</b></th>"
                         + "<th>data</th><th>conditions</th><th>pages</th></tr>")
         body = []
         for r in rows:
@@ -358,8 +359,8 @@ class Dashboard(pn.viewable.Viewer):
                             for n in ex.hide)
             scores = "".join(
                 ("<td class='num dim'>—</td>" if not r.count else
-                 f"<td class='num'>{'<b>' if k == ex.score_rule else ''}{getattr(r, k):.2f}"
-                 f"{'</b>' if k == ex.score_rule else ''}</td>") for k in counts)
+                 f"<td class='num'>{'<b>' if k == 'score' else ''}{getattr(r, k):.2f}"
+                 f"{'</b>' if k == 'score' else ''}</td>") for k in counts)
             refused = (f"<td class='num no' title='{_esc('; '.join(r.refused))}'>{len(r.refused)}</td>" if r.refused
                        else "<td class='num dim'>0</td>")
             body.append(f"<tr><td>{_esc(r.id)}</td><td>{_esc(r.name)}</td><td>{_when(r.joined, today)}</td>"
@@ -368,7 +369,7 @@ class Dashboard(pn.viewable.Viewer):
                         f"{scores}<td>{_source(r)}</td><td>{_conditions(r.conditions)}</td>"
                         f"<td>{_pages(r)}</td></tr>")
         if not body:
-            body.append(f"<tr><td colspan='{13 + len(ex.hide)}' class='dim'>Nobody has joined yet.</td></tr>")
+            body.append(f"<tr><td colspan='{14 + len(ex.hide)}' class='dim'>Nobody has joined yet.</td></tr>")
         self.roster.object = f"<div class='scroll'><table>{head}{''.join(body)}</table></div>"
 
     def _draw_history(self) -> None:

@@ -46,7 +46,15 @@ def add_parser(sub) -> None:
     new.add_argument("--feedback", default="verdict", choices=("verdict", "none", "after-deadline"),
                      help="what a student is told after a hand-in: the verdict per parameter (default), nothing "
                           "but that it was stored, or the verdicts once the deadline has passed (needs --deadline)")
-    new.add_argument("--score", default="best", choices=("best", "last"), help="which hand-in counts (default best)")
+    # eha_core.exercise.SCORE_RULES (not imported here: the parser is built for every command)
+    new.add_argument("--score", default="last", choices=("last", "mean", "best-penalty", "best"),
+                     help="which hand-ins count: last (default), mean, best-penalty (the best, less --attempt-penalty "
+                          "for each hand-in before it: three sprayed guesses still beat one below about 85%%) or "
+                          "best (the best of several rewards spraying guesses: 3 of B put 58%% of students within 5%%, "
+                          "one guess 21%%)")
+    new.add_argument("--attempt-penalty", default="25%", metavar="PERCENT",
+                     help="with --score best-penalty: the points taken off a hand-in for each one before it "
+                          "(default 25%%)")
     new.add_argument("--noise", default="x=0.01mm,v=1mm/s,p=0.05MPa", metavar="SIGNAL=SIGMA[UNIT],...",
                      help=f"the sensors' noise floor (students may raise it, not lower it), {NOISE_GRAMMAR}; "
                           "default x=0.01mm,v=1mm/s,p=0.05MPa")
@@ -194,6 +202,10 @@ def run_new(args) -> int:
 
     hide = _names("--hide", args.hide)
     vary, tolerance = _fraction("--vary", args.vary), _tolerances(args.tolerance)
+    penalty = _fraction("--attempt-penalty", args.attempt_penalty)
+    if not 0 <= penalty <= 1:
+        raise refused("--attempt-penalty", args.attempt_penalty, "use a percentage in [0 %, 100 %]",
+                      value_text=str(args.attempt_penalty))
     _check_deadline(args)
     check_output_file("--out", args.out)
     if Path(args.out).exists() and not args.force:
@@ -203,7 +215,8 @@ def run_new(args) -> int:
     options = {"hide": "--hide", "vary": "--vary", "tolerance": "--tolerance", "noise": "--noise",
                "measured": "--measured", "methods": "--methods", "max record": "--max-record",
                "deadline": "--deadline", "attempts": "--attempts", "roster": "--roster",
-               "ids per client": "--ids-per-client", "kept uploads": "--kept-uploads"}
+               "ids per client": "--ids-per-client", "kept uploads": "--kept-uploads",
+               "attempt penalty": "--attempt-penalty"}
     try:
         if args.roster:
             roster = _roster(args.roster)
@@ -225,6 +238,7 @@ def run_new(args) -> int:
         ex = Exercise.new(hide=hide, vary=vary, tolerance=tolerance, title=args.title, roster=roster,
                           conditions=conditions, deadline=parse_deadline(args.deadline) if args.deadline else "",
                           attempts=args.attempts, feedback=args.feedback, score_rule=args.score,
+                          attempt_penalty=penalty,
                           own_files=args.own_files, ids_per_client=ids_per_client, kept_uploads_mb=kept_uploads)
     except FieldError as exc:
         raise as_option(exc, options) from None
@@ -235,7 +249,7 @@ def run_new(args) -> int:
     print(f"conditions: {ex.conditions.describe()}")
     print(f"hand-ins: {ex.attempts or 'no limit on the number of'} per student"
           + (f", until {ex.deadline}" if ex.deadline else ", no deadline")
-          + f"; feedback: {ex.feedback}; score: the {ex.score_rule} hand-in")
+          + f"; feedback: {ex.feedback}; score: {ex.score_text()}")
     print("hand-ins from an uploaded file: " + ("taken, and labelled so" if ex.own_files else
                                                 "refused (only the student's own actuator's experiment counts; "
                                                 "--own-files takes them)")

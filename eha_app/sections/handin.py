@@ -73,7 +73,7 @@ def lab_rules_html(exercise, control: dict, count: int, *, now: float | None = N
         used = f"hand-ins: {count} of {exercise.attempts} used, {max(exercise.attempts - count, 0)} left"
     else:
         used = f"hand-ins: {count} so far, no limit"
-    score = "your best hand-in scores" if exercise.score_rule == "best" else "your last hand-in scores"
+    score = exercise.score_text()
     tols = {exercise.tolerance_of(n) for n in exercise.hide}
     if len(tols) == 1:
         names = ", ".join(SYMBOLS_HTML.get(n, html.escape(n)) for n in exercise.hide)
@@ -324,5 +324,5 @@ def result_for_student(exercise, student: str, store, control: dict | None = Non
         title = f"Your teacher has revealed your actuator: {values}."
     else:
         title = "The deadline has passed: your hand-ins' verdicts."
-    return (f"<div class='eha-reveal'><b>{title}</b> Score ({exercise.score_rule} hand-in): "
+    return (f"<div class='eha-reveal'><b>{title}</b> Score ({html.escape(exercise.score_text())}): "
             f"{100 * score:.0f} %.{table}</div>")

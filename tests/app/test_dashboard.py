@@ -114,7 +114,7 @@ def test_the_csv_neutralises_a_formula_in_a_name(lab):
     hand_in(ex, store, "s2", 1.0)
     rows = list(csv.reader(io.StringIO(Dashboard(ex, store).csv_bytes().decode())))
     s2 = next(r for r in rows if r[0] == "s2")
-    assert s2[1] == '\'=HYPERLINK("http://evil.example","x")' and s2[rows[0].index("score (best)")] == "1.00"
+    assert s2[1] == '\'=HYPERLINK("http://evil.example","x")' and s2[rows[0].index("score (last)")] == "1.00"
 
 
 def test_refused_attempts_best_and_last_and_units(lab):
@@ -130,9 +130,10 @@ def test_refused_attempts_best_and_last_and_units(lab):
     assert len(store.all()) == 2 and [r[1:] for r in store.refusals()] == [("s1", "lse", "hand-ins are closed")]
     dash = Dashboard(ex, store)
     roster = dash.roster.object
-    assert "last hand-in</th>" in roster and "score (the best counts)" in roster
+    assert "last hand-in</th>" in roster and "score (the last hand-in counts)" in roster
     row = next(r for r in roster.split("<tr>") if "<td>s1</td>" in r)
-    assert "<td class='num'><b>1.00</b></td><td class='num'>0.00</td>" in row     # best 1, last 0
+    # best 1, last 0, and the rule's (the last) in bold
+    assert "<td class='num'>1.00</td><td class='num'>0.00</td><td class='num'><b>0.00</b></td>" in row
     assert "title='hand-ins are closed'>1</td>" in row                           # one refused, why on hover
     assert "Refused hand-ins (1)" in dash.history.object and "hand-ins are closed" in dash.history.object
     if "beta_e" in HIDE:

@@ -100,6 +100,8 @@ CASES = [
     (["exercise", "new", "--feedback", "after-deadline", "--out", "{new}"], "--feedback = after-deadline"),
     (["exercise", "new", "--deadline", "2020-01-01T00:00", "--out", "{new}"], "--deadline = 2020-01-01T00:00"),
     (["exercise", "new", "--vary", "-5%", "--out", "{new}"], "--vary = "),
+    (["exercise", "new", "--attempt-penalty", "150%", "--out", "{new}"], "--attempt-penalty = 150%"),
+    (["exercise", "new", "--attempt-penalty", "lots", "--out", "{new}"], "--attempt-penalty = lots"),
     (["exercise", "new", "--noise", "x=-1mm", "--out", "{new}"], "--noise = x=-1mm"),
     (["exercise", "new", "--roster", "{bin}", "--out", "{new}"], "--roster = '{bin}'"),
     (["exercise", "new", "--out", "{dir}"], "--out = '{dir}'"),
