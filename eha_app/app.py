@@ -638,14 +638,13 @@ class Page(pn.viewable.Viewer):
     def _rules_read(self, exercise, control: dict, count: int) -> None:
         """The lab's rules as the store says them now: the rules line, and the hand-in buttons off when
         hand-ins are refused (no attempt left, the deadline passed, closed by the teacher)."""
-        from .sections.handin import lab_rules_html
+        from .sections.handin import lab_refusal, lab_rules_html
 
         session = self.session
-        rules = lab_rules_html(exercise, control, count)
+        why = lab_refusal(exercise, control, count)
+        rules = lab_rules_html(exercise, control, count, why=why)
         if rules != self.rules_pane.object:
             self.rules_pane.object = rules
-        why = exercise.refusal(count, open_=control.get("open", "1") == "1", deadline=control.get("deadline"),
-                               revealed=control.get("revealed") == "1")
         changed = why != session.lab_refusal or count != session.handins_used
         session.lab_refusal, session.handins_used = why, count
         if changed:

@@ -38,8 +38,8 @@ import time
 import panel as pn
 
 from eha_core.exercise import FEEDBACK, METHODS, parse_deadline
-from eha_core.param_table import FIELD_INFO
 
+from .render.formatting import display_unit
 from .render.tables import SYMBOLS_HTML, UNITS
 from .runtime import store_calls
 from .runtime.classbook import (
@@ -89,7 +89,7 @@ def _when(stamp: str, today: str) -> str:
 
 
 def _param_head(exercise, name: str) -> str:
-    unit = FIELD_INFO[name].display_unit if name in FIELD_INFO else UNITS.get(name, "SI")
+    unit = display_unit(name, UNITS.get(name, "SI"))[0]
     return (f"{SYMBOLS_HTML.get(name, _esc(name))} <span class='small'>[{_esc(unit)}] "
             f"±{100 * exercise.tolerance_of(name):g} %</span>")
 
@@ -99,7 +99,7 @@ def _param_cell(name: str, value, error, verdict, count: int) -> str:
     the truth and its verdict, in one cell."""
     if not count:
         return "<td class='num dim'>—</td>"
-    scale = FIELD_INFO[name].display_scale if name in FIELD_INFO else 1.0
+    scale = display_unit(name)[1]
     shown = f"{value / scale:.6g}" if isinstance(value, (int, float)) else "<span class='dim'>none</span>"
     err = f"{100 * error:+.2f} %" if isinstance(error, (int, float)) else "—"
     mark = "<span class='ok'>✓</span>" if verdict else "<span class='no'>✗</span>"

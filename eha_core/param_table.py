@@ -43,6 +43,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 
 __all__ = [
+    "physically_possible",
     "FieldInfo",
     "FIELD_INFO",
     "PARAM_NAMES",
@@ -122,6 +123,20 @@ PARAM_NAMES: tuple[str, ...] = tuple(FIELD_INFO)
 POSITIVE_FIELDS: tuple[str, ...] = tuple(n for n, f in FIELD_INFO.items() if f.bound == ">")
 NON_NEGATIVE_FIELDS: tuple[str, ...] = tuple(sorted((n for n, f in FIELD_INFO.items() if f.bound == ">="),
                                                     key=lambda n: n == "pr"))
+
+
+def physically_possible(name: str, value: float) -> bool:
+    """Is ``value`` finite and within the physical bound of field ``name`` (> 0 or >= 0; a field
+    without one, or no field, only needs to be finite)?
+
+    >>> physically_possible("B", -1626.0), physically_possible("B", 0.0), physically_possible("beta_e", 0.0)
+    (False, True, False)
+    """
+    value = float(value)
+    if not math.isfinite(value):
+        return False
+    bound = FIELD_INFO[name].bound if name in FIELD_INFO else None
+    return not ((bound == ">" and value <= 0) or (bound == ">=" and value < 0))
 
 
 # -- quantities derived from the fields ----------------------------------------------------------

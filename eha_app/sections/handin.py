@@ -23,7 +23,7 @@ from ..render.layout import BUTTON_CONTRAST
 from ..render.tables import SYMBOLS_HTML
 from ..runtime.tasks import on_click
 
-__all__ = ["HandInBox", "handin_status", "result_for_student", "lab_rules_html", "impossible_estimates"]
+__all__ = ["HandInBox", "handin_status", "result_for_student", "lab_rules_html", "lab_refusal", "impossible_estimates"]
 
 
 def shown_value(name: str, value: float) -> str:
@@ -35,29 +35,29 @@ def shown_value(name: str, value: float) -> str:
 def impossible_estimates(estimates: dict) -> list[str]:
     """The estimates that break their parameter's physical bound (M, βe > 0; B, Af >= 0), each as the
     student reads it ("B = -1626 N s/m: must be ≥ 0"), in display units."""
-    import math
-
-    from eha_core.param_table import FIELD_INFO
+    from eha_core.param_table import FIELD_INFO, physically_possible
 
     out = []
     for name, value in estimates.items():
         info = FIELD_INFO.get(name)
-        bound = getattr(info, "bound", None)
-        if info is None or bound not in (">", ">="):
+        if info is None or info.bound not in (">", ">=") or physically_possible(name, value):
             continue
-        v = float(value)
-        if math.isfinite(v) and ((bound == ">" and v > 0) or (bound == ">=" and v >= 0)):
-            continue
-        shown = v / info.display_scale if math.isfinite(v) else v
-        out.append(f"{SYMBOLS_HTML.get(name, html.escape(name))} = {shown:.4g} {html.escape(info.display_unit)}: "
-                   f"must be {'> 0' if bound == '>' else '≥ 0'}")
+        out.append(f"{SYMBOLS_HTML.get(name, html.escape(name))} = {float(value) / info.display_scale:.4g} "
+                   f"{html.escape(info.display_unit)}: must be {'> 0' if info.bound == '>' else '≥ 0'}")
     return out
 
 
-def lab_rules_html(exercise, control: dict, count: int, *, now: float | None = None) -> str:
+def lab_refusal(exercise, control: dict, count: int, *, now: float | None = None) -> str | None:
+    """Why the student, with ``count`` hand-ins, may hand in nothing now under the teacher's switches
+    ``control`` (None: they may)."""
+    return exercise.refusal(count, now=now, open_=control.get("open", "1") == "1", deadline=control.get("deadline"),
+                            revealed=control.get("revealed") == "1")
+
+
+def lab_rules_html(exercise, control: dict, count: int, *, now: float | None = None, why: str | None = None) -> str:
     """The lab's rules as they stand for this student, always on their page: the deadline (the teacher's
     extension if any), the hand-ins used and left, the tolerances, what feedback they get and when, and
-    the routes taken; and why hand-ins are refused now, if they are."""
+    the routes taken; and ``why`` hand-ins are refused now (default :func:`lab_refusal`), if they are."""
     import time as _time
 
     now = _time.time() if now is None else now
@@ -83,8 +83,7 @@ def lab_rules_html(exercise, control: dict, count: int, *, now: float | None = N
                         for n in exercise.hide)
     routes = ", ".join(html.escape(METHODS[m].split(" (")[0]) for m in exercise.conditions.methods if m in METHODS)
     feedback = html.escape(FEEDBACK.get(exercise.feedback, exercise.feedback))
-    why = exercise.refusal(count, now=now, open_=control.get("open", "1") == "1", deadline=control.get("deadline"),
-                           revealed=control.get("revealed") == "1")
+    why = lab_refusal(exercise, control, count, now=now) if why is None else why
     closed = f" <b class='eha-warn'>Hand-ins are refused now: {html.escape(why)}.</b>" if why else ""
     return (f"<div class='eha-lab-rules' role='status'><b>The lab's rules:</b> {when}; {used} ({score}); "
             f"tolerance: {tol}; feedback: {feedback}; routes taken: {routes}.{closed}</div>")

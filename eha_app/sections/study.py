@@ -186,6 +186,7 @@ class StudyPanel(Section):
         texts = self.initial_texts()
         self.form = Form(spec=[g.to_spec() for g in STUDY_FORM], values=texts, url_defaults=STUDY_DEFAULTS,
                          width=270, css_classes=[self.form_css], margin=(5, 10))
+        # one parse of the form per change: the run button's state and the results' out-of-date mark
         watch(self.form, lambda _e: self._update_enabled(), "values")
         self.button = pn.widgets.Button(label="Run the study", color="primary", width=260,
                                         css_classes=["eha-run-study"])
@@ -208,21 +209,16 @@ class StudyPanel(Section):
         self.exercise_note = pn.pane.HTML(
             "<p class='eha-warn'>Not in an exercise: a study draws every estimate against the true values.</p>",
             visible=bool(state.hidden), width=270)
-        state.param.watch(self._update_enabled, "valid")
-        state.param.watch(lambda *_events: self._inputs_changed(), ["params", "valid"])
-        watch(self.form, lambda _e: self._inputs_changed(), "values")
+        state.param.watch(self._update_enabled, ["params", "valid"])
         self._update_enabled()
 
-    def run_key(self):
+    def run_key(self, cfg=None):
         """What a study run now would be computed from: tab 1's parameters and the form as typed (None
-        while either is not valid)."""
-        cfg, _ = self.config()
+        while either is not valid); ``cfg``: :meth:`config`'s study, when it was just parsed."""
+        cfg = self.config()[0] if cfg is None else cfg
         if cfg is None or not self.state.valid:
             return None
         return (self.state.params, tuple(sorted(self.form.values.items())))
-
-    def _inputs_changed(self) -> None:
-        self.view.inputs_changed(self.run_key())
 
     def result_views(self) -> list:
         return [self.view]
@@ -268,6 +264,7 @@ class StudyPanel(Section):
         self.form.errors = errors
         self.form.hidden = study_hidden(self.form.values)
         self.button.disabled = self._busy or cfg is None or not self.state.valid or bool(self.state.hidden)
+        self.view.inputs_changed(self.run_key(cfg) if cfg is not None else None)
 
     #: Seeds per part (about 0.7 s of one core): two students' studies take turns part by part, and a
     #: part's end is a change of the page (fewer parts, less of the event loop's time for one study).
@@ -405,7 +402,7 @@ class StudyPanel(Section):
         self._figure_for(tuple(result.parameters)).update(result)
         if self._run_key is not None:
             self.view.shown(self._run_key)
-            self._inputs_changed()          # tab 1 or the form may have changed while it ran
+            self._update_enabled()          # tab 1 or the form may have changed while it ran
 
         self.summary.object = study_summary_html(result)
         done = (f"{result.n_completed} of {result.n_requested} seeds" + (" (cancelled)" if result.cancelled else "")

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..param_table import FIELD_INFO
+from ..param_table import FIELD_INFO, physically_possible
 from ..params import ActuatorParams
 
 __all__ = ["EstimateReading", "READING_KINDS", "read_estimate", "read_all", "DisturbanceLeak",
@@ -155,8 +155,7 @@ def read_estimate(res, name: str, *, known: bool = True) -> EstimateReading:
     v = float(res.estimates[name])
     lo, hi = (float(b) for b in res.ci95[name])
     nom = res.nominal.get(name) if known else None
-    bound = FIELD_INFO[name].bound if name in FIELD_INFO else None
-    if not math.isfinite(v) or (bound == ">" and v <= 0) or (bound == ">=" and v < 0):
+    if not physically_possible(name, v):
         return EstimateReading(name, "impossible", False, v, lo, hi, nom)
     half = 0.5 * (hi - lo)
     tol = _tolerance(res, name, nom) if nom is not None else 0.0
