@@ -18,6 +18,7 @@ The actuator
    params                        -- ActuatorParams: the physical parameters, checked; defaults the paper's
    param_table                   -- each parameter's unit, meaning, display and bound; the rules tying them
    model                         -- the nonlinear dynamics (eqs. 1-4): derivatives, rhs, bounds
+   variants                      -- effects the paper leaves out (spool, leakage, Stribeck), off by default
    linear                        -- operating point and linearisation (eqs. 9-14, 20-24): P(s), H(s)
    linear.linearize              -- the LinearModel at an operating point: A, B, E, tf_coeffs, closed loop
 
@@ -67,4 +68,5 @@ Internals
    _checks                       -- the argument checks and the one form of their messages
    _display                      -- the results' short reprs and tables: display units, ± standard errors
    _kernels                      -- the numba integrators (RK4, batches, sensitivities), loaded lazily
+   _kernels_spool                -- the same for the six states of the valve's spool dynamics
 """

@@ -46,7 +46,9 @@ def _f(mode, x, v, p1, p2, u, d, prm, lin):
     if mode == NONLINEAR:
         return derivatives(x, v, p1, p2, u, d, prm)
     # linearised model about lin[28:32] (x, v, p1, p2 of the operating point);
-    # A = lin[0:16] row-major, B+ = lin[16:20], B- = lin[20:24], E = lin[24:28]
+    # A = lin[0:16] row-major, B+ = lin[16:20], B- = lin[20:24], E = lin[24:28], and the valve's
+    # offset lin[32:36] = B(sign u_e) u_e of an operating point that holds with u_e != 0 (internal
+    # leakage, eq. V2; zero for the paper's model): dxi/dt = A dxi + B(sign u) u - B(sign u_e) u_e + E d
     dx0 = x - lin[28]
     dx1 = v - lin[29]
     dx2 = p1 - lin[30]
@@ -55,10 +57,10 @@ def _f(mode, x, v, p1, p2, u, d, prm, lin):
         b0, b1, b2, b3 = lin[16], lin[17], lin[18], lin[19]
     else:
         b0, b1, b2, b3 = lin[20], lin[21], lin[22], lin[23]
-    r0 = lin[0] * dx0 + lin[1] * dx1 + lin[2] * dx2 + lin[3] * dx3 + b0 * u + lin[24] * d
-    r1 = lin[4] * dx0 + lin[5] * dx1 + lin[6] * dx2 + lin[7] * dx3 + b1 * u + lin[25] * d
-    r2 = lin[8] * dx0 + lin[9] * dx1 + lin[10] * dx2 + lin[11] * dx3 + b2 * u + lin[26] * d
-    r3 = lin[12] * dx0 + lin[13] * dx1 + lin[14] * dx2 + lin[15] * dx3 + b3 * u + lin[27] * d
+    r0 = lin[0] * dx0 + lin[1] * dx1 + lin[2] * dx2 + lin[3] * dx3 + b0 * u + lin[24] * d - lin[32]
+    r1 = lin[4] * dx0 + lin[5] * dx1 + lin[6] * dx2 + lin[7] * dx3 + b1 * u + lin[25] * d - lin[33]
+    r2 = lin[8] * dx0 + lin[9] * dx1 + lin[10] * dx2 + lin[11] * dx3 + b2 * u + lin[26] * d - lin[34]
+    r3 = lin[12] * dx0 + lin[13] * dx1 + lin[14] * dx2 + lin[15] * dx3 + b3 * u + lin[27] * d - lin[35]
     return r0, r1, r2, r3
 
 
@@ -327,8 +329,9 @@ def _segment_inputs(s, seg_t, seg_u, seg_d, seg_r, sm_u, sm_d, sm_r, n_sm):
 
 @njit(cache=True, nogil=True)
 def _params_tuple(prm):
+    # the paper's parameters, then the effects' (eha_core.model.PARAM_INDEX)
     return (prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8], prm[9], prm[10], prm[11],
-            prm[12], prm[13])
+            prm[12], prm[13], prm[14], prm[15], prm[16], prm[17], prm[18], prm[19], prm[20])
 
 
 @njit(cache=True, nogil=True)
@@ -336,7 +339,7 @@ def _lin_tuple(lin):
     return (
         lin[0], lin[1], lin[2], lin[3], lin[4], lin[5], lin[6], lin[7], lin[8], lin[9], lin[10], lin[11], lin[12],
         lin[13], lin[14], lin[15], lin[16], lin[17], lin[18], lin[19], lin[20], lin[21], lin[22], lin[23], lin[24],
-        lin[25], lin[26], lin[27], lin[28], lin[29], lin[30], lin[31])
+        lin[25], lin[26], lin[27], lin[28], lin[29], lin[30], lin[31], lin[32], lin[33], lin[34], lin[35])
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -39,6 +39,7 @@ from .param_table import (
     piston_area,
     rod_area,
 )
+from .variants import EFFECTS_OFF, Effects
 
 __all__ = [
     "ActuatorParams",
@@ -89,6 +90,12 @@ class ActuatorParams:
 
     Validation happens at construction; a bad value raises
     :class:`ParameterError` naming the field, the value and the allowed range.
+
+    ``effects`` (:class:`eha_core.variants.Effects`, default all off: the
+    paper's model) adds structural effects the paper leaves out: the valve's
+    spool dynamics, internal leakage, Stribeck friction (docs/model.md §6). It
+    is not one of the form's parameters (:data:`FIELD_INFO`); the repr and
+    :meth:`to_dict` show it only when it is not the default.
     """
 
     M: float = 4000.0
@@ -108,9 +115,17 @@ class ActuatorParams:
     v0: float = 0.0
     p1_0: float = 12e6
     p2_0: float | None = None
+    effects: Effects = field(default=EFFECTS_OFF, repr=False)
 
     def __post_init__(self):
+        # the effects: Effects, None (off), their mapping (to_dict) or a variant's name (eha_core.variants)
+        try:
+            object.__setattr__(self, "effects", Effects.from_value(self.effects))
+        except FieldError as error:
+            raise ParameterError(error.field, error.value, error.what) from None
         for f in dataclasses.fields(self):
+            if f.name == "effects":
+                continue
             value = getattr(self, f.name)
             if value is None and f.name == "p2_0":
                 continue
@@ -179,19 +194,30 @@ class ActuatorParams:
 
     # -- conversions ------------------------------------------------------
     def replace(self, **changes) -> ActuatorParams:
-        """A copy with some fields changed (validated again).
+        """A copy with some fields changed (validated again); ``effects`` may be among them.
 
         >>> ActuatorParams().replace(M=5000.0).M
         5000.0
         """
-        unknown = sorted(set(changes) - set(PARAM_NAMES))
+        unknown = sorted(set(changes) - set(PARAM_NAMES) - {"effects"})
         if unknown:
             raise ParameterError(unknown[0], changes[unknown[0]], f"unknown parameter; known: {', '.join(PARAM_NAMES)}")
         return dataclasses.replace(self, **changes)
 
-    def to_dict(self) -> dict[str, float | None]:
-        """Field values by name (SI units)."""
-        return dataclasses.asdict(self)
+    def to_dict(self) -> dict:
+        """Field values by name (SI units); ``effects`` (as a mapping) only when they are not the default
+        (every effect off), so that ``ActuatorParams(**p.to_dict()) == p``."""
+        out: dict = {name: getattr(self, name) for name in PARAM_NAMES}
+        if self.effects != EFFECTS_OFF:
+            out["effects"] = self.effects.to_dict()
+        return out
+
+    def __repr__(self) -> str:
+        # the dataclass's own form, with the effects only when they are not the default
+        # (the paper's parameter sets print as they always have)
+        fields = ", ".join(f"{name}={getattr(self, name)!r}" for name in PARAM_NAMES)
+        extra = f", effects={self.effects!r}" if self.effects != EFFECTS_OFF else ""
+        return f"{type(self).__qualname__}({fields}{extra})"
 
 
 def parse_param_assignments(items, base: ActuatorParams | None = None) -> ActuatorParams:

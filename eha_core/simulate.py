@@ -21,6 +21,15 @@ point is added back (eq. 14), as the paper plots them. The nonlinear model
 enforces its physical bounds (pressures in [pr, ps], end stops); the linearised
 model has none, by construction.
 
+Structural effects (``params.effects``, :mod:`eha_core.variants`, docs/model.md
+§6) are simulated by the same integrators: internal leakage and Stribeck
+friction are terms of the model's right-hand side; the valve's spool dynamics
+add two states [u_v, du_v/dt], integrated by the six-state kernels of
+:mod:`eha_core._kernels_spool` (the results still hold x, v, p1, p2 and the
+command u; the spool starts at rest at u_v = 0 unless six initial states are
+given). The paper's model (every effect off) takes the four-state kernels, as
+before.
+
 For a server shared by many users: runs are integrated in chunks (the
 adaptive kernel's of ``CHUNK_SECONDS`` simulated seconds, the RK4's of
 ``CHUNK_STEPS`` steps), the inputs prepared one chunk at a time, so memory
@@ -55,7 +64,7 @@ import numpy as np
 
 from ._checks import not_allowed, positive_number
 from .cancel import CancelToken
-from .linear import N_PACKED_LINEAR, VALVE_BRANCHES, OperatingPoint, linearize
+from .linear import N_PACKED_LINEAR, N_PACKED_LINEAR_SPOOL, VALVE_BRANCHES, OperatingPoint, linearize
 from .model import N_PACKED_PARAMS, pack_params
 from .params import ActuatorParams
 from .signals import ZERO, Constant, Sampled, Signal
@@ -336,18 +345,32 @@ def _mode(model: str, branch: str) -> int:
 
 def _lin_vector(params: ActuatorParams, op: OperatingPoint | None, needed: bool) -> np.ndarray:
     if not needed:
-        return np.zeros(N_PACKED_LINEAR)
+        return np.zeros(N_PACKED_LINEAR_SPOOL if params.effects.spool else N_PACKED_LINEAR)
     return linearize(params, op).packed()
 
 
+def _kernels_of(params: ActuatorParams):
+    """The compiled integrators for ``params``: the four-state ones, or the six-state ones of the spool."""
+    if params.effects.spool:
+        from . import _kernels_spool as K
+    else:
+        from . import _kernels as K
+    return K
+
+
 def _initial(params: ActuatorParams, initial_state) -> np.ndarray:
-    """The run's initial state: given ([x, v, p1, p2]) or the parameters' initial conditions."""
+    """The run's initial state: given ([x, v, p1, p2], with the spool also [..., u_v, du_v/dt]) or the
+    parameters' initial conditions (the spool at rest at u_v = 0)."""
+    spool = params.effects.spool
     if initial_state is None:
-        return params.initial_state
+        y0 = params.initial_state
+        return np.concatenate([y0, [0.0, 0.0]]) if spool else y0
     y0 = np.asarray(initial_state, dtype=float).ravel()
-    if y0.size != 4 or not np.all(np.isfinite(y0)):
-        raise not_allowed("initial_state", initial_state, "give four finite numbers [x, v, p1, p2]")
-    return y0
+    if y0.size not in ((4, 6) if spool else (4,)) or not np.all(np.isfinite(y0)):
+        raise not_allowed("initial_state", initial_state, "give four finite numbers [x, v, p1, p2], or six with "
+                          "the valve's spool dynamics [x, v, p1, p2, u_v, du_v/dt]" if spool else
+                          "give four finite numbers [x, v, p1, p2]")
+    return np.concatenate([y0, [0.0, 0.0]]) if spool and y0.size == 4 else y0
 
 
 def _model_label(model: str, branch: str) -> str:
@@ -386,7 +409,7 @@ def _chunk_length(n_steps: int, *aligns: int) -> int:
 
 
 def _integrate_chunked(n_runs, y0s, h, n_steps, sub, prms, mode, lins, stage_sources, ctrl, kp, ctrl_every,
-                       u_limit, n_out, cancel, parallel):
+                       u_limit, n_out, cancel, parallel, K=None):
     """Integrate ``n_runs`` runs chunk by chunk; returns (outs, status).
 
     ``stage_sources(j, start, count)`` gives run j's (u, d, r) stage samples
@@ -396,14 +419,17 @@ def _integrate_chunked(n_runs, y0s, h, n_steps, sub, prms, mode, lins, stage_sou
     first step, and leaves the state for the next chunk in ``y_end``. The
     result is bitwise that of one kernel call over all steps
     (tests/core/test_chunks_and_cancel.py checks it); a failure is reported at
-    its global step.
+    its global step. ``K``: the kernels' module (default the four-state :mod:`eha_core._kernels`; the
+    states are the columns of ``y0s``).
     """
-    from . import _kernels as K
+    if K is None:
+        from . import _kernels as K
 
     chunk = _chunk_length(n_steps, sub, ctrl_every)
     outs = np.zeros((n_runs, n_out, 5))
     status = np.full(n_runs, -1, dtype=np.int64)
-    y = np.array(y0s, dtype=float).reshape(n_runs, 4)
+    n_states = np.shape(y0s)[-1]
+    y = np.array(y0s, dtype=float).reshape(n_runs, n_states)
     start = 0
     while start < n_steps:
         if cancel is not None:
@@ -414,7 +440,7 @@ def _integrate_chunked(n_runs, y0s, h, n_steps, sub, prms, mode, lins, stage_sou
         rows = count // sub + (1 if last else 0)
         # runs that failed are left alone: their state is not finite any more
         alive = np.flatnonzero(status < 0)
-        y_end = np.empty((n_runs, 4))
+        y_end = np.empty((n_runs, n_states))
         if alive.size == 1 or not parallel:
             for j in alive:
                 u_st, d_st, r_st = stage_sources(j, start, count)
@@ -428,7 +454,7 @@ def _integrate_chunked(n_runs, y0s, h, n_steps, sub, prms, mode, lins, stage_sou
             stages = [stage_sources(j, start, count) for j in alive]
             buf = np.zeros((alive.size, rows, 5))
             st = np.full(alive.size, -1, dtype=np.int64)
-            ends = np.empty((alive.size, 4))
+            ends = np.empty((alive.size, n_states))
             K.integrate_batch(y[sel], h, count, sub, prms[sel], mode, lins[sel],
                               np.stack([g[0] for g in stages]), np.stack([g[1] for g in stages]), ctrl, kp,
                               np.stack([g[2] for g in stages]), ctrl_every, u_limit, buf, st, ends)
@@ -560,6 +586,9 @@ def simulation_cost(t_end: float, dt: float, *, ts: float | None = None, h_max: 
 TOL = 1e-9
 #: The scales of the states in the error test [m, m/s, Pa, Pa] (the pressures also count their size).
 _SCALE = np.array([0.01, 0.01, 1e6, 1e6])
+#: The same with the spool's dynamics (docs/model.md §6.1): its position u_v [V] and rate [V/s] (a command of
+#: a volt through the 150 rad/s spool of the variant moves it at about 100 V/s).
+_SCALE_SPOOL = np.array([0.01, 0.01, 1e6, 1e6, 1.0, 100.0])
 #: Simulated seconds per chunk of the adaptive integrator: the segments (and held inputs) of one chunk
 #: are built at a time, and ``cancel`` is checked between chunks. A chunk's start is a restart of the
 #: integrator like any breakpoint (exact: the state is continuous there).
@@ -641,18 +670,22 @@ def _segment_bounds(sigs, a: float, b: float, ts: float | None, t_end: float):
 
 
 def _adaptive_runs(n_runs, y0s, prms, mode, lins, sigs, forms, ctrl, kp, u_limit, ts, t_end, dt, n_out,
-                   cancel, parallel, h_max=None):
+                   cancel, parallel, h_max=None, K=None):
     """Integrate runs with the adaptive kernel, chunk by chunk; returns (outs, status, fail_t, steps).
 
-    ``sigs[j]`` and ``forms[j]``: run j's (u, d, r) signals and their :func:`_segment_form`.
+    ``sigs[j]`` and ``forms[j]``: run j's (u, d, r) signals and their :func:`_segment_form`. ``K``: the
+    kernels' module (default the four-state :mod:`eha_core._kernels`; the states are the columns of ``y0s``).
     """
-    from . import _kernels as K
+    if K is None:
+        from . import _kernels as K
 
     h_max = math.inf if h_max is None else h_max
     outs = np.zeros((n_runs, n_out, 5))
     status = np.full(n_runs, -1, dtype=np.int64)
     fail_t = np.full(n_runs, np.nan)
-    y = np.array(y0s, dtype=float).reshape(n_runs, 4).copy()
+    n_states = np.shape(y0s)[-1]
+    scale = _SCALE if n_states == 4 else _SCALE_SPOOL
+    y = np.array(y0s, dtype=float).reshape(n_runs, n_states).copy()
     # state: [proposed step, held command, time of failure, time of a pause]; counts: [next output sample,
     # accepted steps, rejected steps, right-hand side evaluations, segment of a pause]
     state = np.zeros((n_runs, 4))
@@ -669,7 +702,7 @@ def _adaptive_runs(n_runs, y0s, prms, mode, lins, sigs, forms, ctrl, kp, u_limit
         while True:
             st = K.integrate_segments(y[j], state[j], counts[j], seg_t.size - 1, seg_t, lines[0], lines[1],
                                       lines[2], seg_ctrl, forms[j][0][0], forms[j][1][0], forms[j][2][0], n_sm,
-                                      prms[j], mode, lins[j], ctrl, kp, u_limit, TOL, _SCALE, dt, h_max, outs[j],
+                                      prms[j], mode, lins[j], ctrl, kp, u_limit, TOL, scale, dt, h_max, outs[j],
                                       MAX_ADAPTIVE_STEPS, final, counts[j, 1] + counts[j, 2] + CANCEL_CHECK_STEPS)
             if st != K.PAUSED:
                 break
@@ -731,8 +764,10 @@ def simulate(params: ActuatorParams | None = None, u=None, d=None, *, t_end: flo
     branch : {'switching', 'positive', 'negative'}
         Linear model only: switch l5, l6 with the sign of u (default, as the
         paper's Fig. 3), or keep one branch.
-    initial_state : array of 4, optional
-        Initial state [x, v, p1, p2]; defaults to the parameters' initial conditions.
+    initial_state : array of 4 (or 6), optional
+        Initial state [x, v, p1, p2]; defaults to the parameters' initial conditions. With the valve's
+        spool dynamics (``params.effects``) six may be given, [x, v, p1, p2, u_v, du_v/dt]; with four the
+        spool starts at rest at u_v = 0.
     op : OperatingPoint, optional
         Linearisation point (default :func:`eha_core.linear.operating_point`).
     h_max : float, optional
@@ -785,8 +820,8 @@ def simulate_many(params: ActuatorParams | Sequence[ActuatorParams] | None, us: 
         Each run's input and disturbance (see :func:`simulate`).
     t_end, dt, model, branch, op, h_max
         As for :func:`simulate`.
-    initial_states : sequence of arrays of 4, optional
-        Each run's initial state.
+    initial_states : sequence of arrays of 4 (or 6), optional
+        Each run's initial state (see :func:`simulate`).
     labels : sequence of str, optional
         Each run's name (:attr:`SimulationResult.label`); default empty.
     cancel : eha_core.cancel.CancelToken, optional
@@ -823,14 +858,29 @@ def simulate_many(params: ActuatorParams | Sequence[ActuatorParams] | None, us: 
                                                      "give one, or one per run")
     labels = list(labels) if labels is not None else [""] * n
     mode = _mode(model, branch)
-    from . import _kernels as K
+    spools = [p.effects.spool for p in params_list]
+    if any(spools) and not all(spools):
+        # the models with and without the spool's states take different kernels: a batch for each
+        results: list = [None] * n
+        for group in (False, True):
+            idx = [j for j in range(n) if spools[j] == group]
+            runs = simulate_many([params_list[j] for j in idx], [us[j] for j in idx], [ds[j] for j in idx],
+                                 t_end=t_end, dt=dt, model=model, branch=branch,
+                                 initial_states=None if initial_states is None else [initial_states[j] for j in idx],
+                                 op=op, h_max=h_max, labels=[labels[j] for j in idx], cancel=cancel,
+                                 parallel=parallel)
+            for j, run in zip(idx, runs, strict=True):
+                results[j] = run
+        return results
+    K = _kernels_of(params_list[0])
+    spool = spools[0]
 
     h, sub, _, n_steps, n_out = _grid(t_end, dt, _rk4_h_max(h_max))
     t = np.arange(n_out) * dt
 
-    y0s = np.empty((n, 4))
+    y0s = np.empty((n, 6 if spool else 4))
     prms = np.empty((n, N_PACKED_PARAMS))
-    lins = np.empty((n, N_PACKED_LINEAR))
+    lins = np.empty((n, N_PACKED_LINEAR_SPOOL if spool else N_PACKED_LINEAR))
     u_sigs, d_sigs, d_out = [], [], []
     for j in range(n):
         p = params_list[j]
@@ -846,7 +896,7 @@ def simulate_many(params: ActuatorParams | Sequence[ActuatorParams] | None, us: 
         t_end_grid = (n_out - 1) * dt
         sigs = [(u_sigs[j], d_sigs[j], ZERO) for j in range(n)]
         outs, status, fail_t, counts = _adaptive_runs(n, y0s, prms, mode, lins, sigs, forms, K.OPEN_LOOP, 0.0, 0.0,
-                                                      None, t_end_grid, dt, n_out, cancel, parallel, h_max)
+                                                      None, t_end_grid, dt, n_out, cancel, parallel, h_max, K)
         return [_simulation_result(outs[j], int(status[j]), t, d_out[j], params_list[j], name, labels[j],
                                    h=t_end_grid / max(1, counts[j, 1]), t_fail=fail_t[j]) for j in range(n)]
 
@@ -858,7 +908,7 @@ def simulate_many(params: ActuatorParams | Sequence[ActuatorParams] | None, us: 
                 no_r)
 
     outs, status = _integrate_chunked(n, y0s, h, n_steps, sub, prms, mode, lins, stages, K.OPEN_LOOP, 0.0, 1,
-                                      0.0, n_out, cancel, parallel)
+                                      0.0, n_out, cancel, parallel, K)
     return [_simulation_result(outs[j], int(status[j]), t, d_out[j], params_list[j], name, labels[j], h=h)
             for j in range(n)]
 
@@ -897,8 +947,10 @@ def simulate_closed_loop(params: ActuatorParams | None = None, r=None, *, kp: fl
         The nonlinear model (eqs. 1-4) or the one linearised at ``op`` (eqs. 20-24).
     branch : {'switching', 'positive', 'negative'}
         Linear model only: the valve's branch, as for :func:`simulate`.
-    initial_state : array of 4, optional
-        Initial state [x, v, p1, p2] (SI units); defaults to the parameters' initial conditions.
+    initial_state : array of 4 (or 6), optional
+        Initial state [x, v, p1, p2] (SI units); defaults to the parameters' initial conditions. With
+        the valve's spool dynamics (``params.effects``) six may be given, [x, v, p1, p2, u_v, du_v/dt];
+        with four the spool starts at rest at u_v = 0.
     op : OperatingPoint, optional
         Linearisation point (default :func:`eha_core.linear.operating_point`).
     u_limit : float, optional
@@ -920,9 +972,8 @@ def simulate_closed_loop(params: ActuatorParams | None = None, r=None, *, kp: fl
     theirs; a function of t, or a signal with more than 4 sines and chirps, takes the fixed-step
     RK4, not exact at jumps.
     """
-    from . import _kernels as K
-
     params = params if params is not None else ActuatorParams()
+    K = _kernels_of(params)
     kp = positive_number("kp", kp, "must be a finite gain > 0 V/m")
     ts = positive_number("ts", ts, "must be a finite sample time > 0 s")
     if controller not in CONTROLLERS:
@@ -954,7 +1005,7 @@ def simulate_closed_loop(params: ActuatorParams | None = None, r=None, *, kp: fl
         t_end_grid = (n_out - 1) * dt
         outs, status, fail_t, counts = _adaptive_runs(1, y0, pack_params(params)[None, :], mode, lin,
                                                       [(ZERO, d_sig, r_sig)], [forms], ctrl, kp, u_lim, ts,
-                                                      t_end_grid, dt, n_out, cancel, False, h_max)
+                                                      t_end_grid, dt, n_out, cancel, False, h_max, K)
         return _simulation_result(outs[0], int(status[0]), t, _sample(d_sig, "d", t), params,
                                   _model_label(model, branch), label, r=_sample(r_sig, "r", t),
                                   controller=controller, kp=kp, h=t_end_grid / max(1, counts[0, 1]),
@@ -967,6 +1018,6 @@ def simulate_closed_loop(params: ActuatorParams | None = None, r=None, *, kp: fl
         return no_u, _stage_samples(d_sig, "d", h, count, start), _stage_samples(r_sig, "r", h, count, start)
 
     outs, status = _integrate_chunked(1, y0, h, n_steps, sub, pack_params(params)[None, :], mode, lin, stages,
-                                      ctrl, kp, ctrl_every, u_lim, n_out, cancel, False)
+                                      ctrl, kp, ctrl_every, u_lim, n_out, cancel, False, K)
     return _simulation_result(outs[0], int(status[0]), t, _sample(d_sig, "d", t), params, _model_label(model, branch),
                               label, r=_sample(r_sig, "r", t), controller=controller, kp=kp, h=h)

@@ -20,12 +20,16 @@ from eha_core.param_table import (
     broken_rules,
 )
 from eha_core.params import ActuatorParams, ParameterError
+from eha_core.variants import EFFECT_FIELDS
 
 DEFAULTS = dataclasses.asdict(ActuatorParams())
 
 
 def test_the_table_lists_every_field_of_the_parameter_set_in_its_order():
-    assert tuple(FIELD_INFO) == tuple(f.name for f in dataclasses.fields(ActuatorParams))
+    # every field but the structural effects (eha_core.variants), which are not the form's parameters
+    names = tuple(f.name for f in dataclasses.fields(ActuatorParams))
+    assert names[-1] == "effects" and "effects" not in FIELD_INFO
+    assert tuple(FIELD_INFO) == names[:-1]
     assert all(info.label and info.bound in (None, ">", ">=") for info in FIELD_INFO.values())
     assert set(POSITIVE_FIELDS) == {n for n, f in FIELD_INFO.items() if f.bound == ">"}
     assert set(NON_NEGATIVE_FIELDS) == {n for n, f in FIELD_INFO.items() if f.bound == ">="}
@@ -33,8 +37,10 @@ def test_the_table_lists_every_field_of_the_parameter_set_in_its_order():
 
 def test_the_packed_vector_follows_the_table():
     p = ActuatorParams(M=4100.0, d0=12.0, p2_0=17e6)
-    assert list(PARAM_INDEX) == list(PACKED) and set(PACKED) <= set(FIELD_INFO) | set(DERIVED)
-    np.testing.assert_array_equal(pack_params(p), [getattr(p, name) for name in PACKED])
+    # the table's values, then the structural effects' (eha_core.variants.EFFECT_FIELDS) at the end
+    assert list(PARAM_INDEX) == list(PACKED) + list(EFFECT_FIELDS)
+    assert set(PACKED) <= set(FIELD_INFO) | set(DERIVED)
+    np.testing.assert_array_equal(pack_params(p), [getattr(p, name) for name in PACKED] + list(p.effects.packed()))
     assert [PARAM_INDEX[n] for n in ("A1", "A2", "x_max")] == [4, 5, 12]
     assert (p.A1, p.A2, p.x_max) == tuple(DERIVED[n].compute(vars(p)) for n in ("A1", "A2", "x_max"))
 

@@ -12,6 +12,7 @@ from eha_core.params import (
     ParameterError,
     parse_param_assignments,
 )
+from eha_core.variants import EFFECT_FIELDS
 
 
 def test_defaults_and_derived_areas():
@@ -104,4 +105,5 @@ def test_parse_assignments():
 
 def test_equal_parameters_hash_equal():
     assert hash(ActuatorParams(M=4000)) == hash(ActuatorParams(M=4000.0))
-    assert pack_params(ActuatorParams()).shape == (14,)
+    # the paper's 14 values, then the structural effects' (eha_core.variants, all off by default)
+    assert pack_params(ActuatorParams()).shape == (14 + len(EFFECT_FIELDS),)
