@@ -2547,8 +2547,9 @@ def main(argv=None) -> int:
                 tmp = tempfile.mkdtemp(prefix="eha-walk-")
                 exercise = os.path.join(tmp, "class.json")
                 eha = Path(sys.executable).with_name("eha")
-                subprocess.run([str(eha), "exercise", "new", "--hide", "M,B,Af,beta_e", "--out", exercise],
-                               check=True, capture_output=True)
+                # every kind of actuator a lab may give (the student's id draws one of them)
+                subprocess.run([str(eha), "exercise", "new", "--hide", "M,B,Af,beta_e", "--variants",
+                                "paper,spool,leakage,stribeck", "--out", exercise], check=True, capture_output=True)
                 extra = ["--exercise", exercise]
                 options.exercise_hidden = ("M", "B", "Af", "beta_e")
             server = WalkServer(*extra)

@@ -606,7 +606,7 @@ class Page(pn.viewable.Viewer):
             live = store.live_page(student) if store is not None else token
             if store is None:
                 return before, live, "", None, 0
-            control = store.control()
+            control = store.control_for(student)     # with their own deadline, if extended
             count = len(store.of(student))
             return before, live, result_for_student(exercise, student, store, control), control, count
 

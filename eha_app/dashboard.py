@@ -11,8 +11,11 @@ event loop) and draws again only when it changed, or when the deadline passed.
 
 Its buttons write through :meth:`~eha_app.runtime.handins.HandIns.set_control`,
 so every server process (and ``eha exercise results``) sees the same switches:
-open or close hand-ins, move the deadline, reveal the verdicts to the students
-once the deadline has passed; and it offers the results as CSV and, with a
+open or close hand-ins, move the deadline, give one student a later deadline of
+their own (:meth:`~eha_app.runtime.handins.HandIns.set_extension`, listed under the
+form), reveal the verdicts to the students once the deadline (and every
+extension) has passed; the rules say when the exercise file releases the true
+values by itself (``release_at``). And it offers the results as CSV and, with a
 roster, the join-code slips to print. A reveal is final: from then on every
 student's page shows the truth, so no hand-in is taken whatever the deadline
 or the open switch say, and the page says so beside both.
@@ -37,6 +40,7 @@ import time
 
 import panel as pn
 
+from eha_core.errors import not_allowed
 from eha_core.exercise import FEEDBACK, METHODS, parse_deadline
 
 from .render.formatting import display_unit
@@ -49,8 +53,10 @@ from .runtime.classbook import (
     describe_pages,
     describe_source,
     handin_errors,
+    handin_zscores,
     results_csv,
 )
+from .runtime.extensions import STUDENT_FIELD, check_extension
 from .runtime.handins import StoreError
 from .runtime.tasks import held, on_click, served_document, watch
 
@@ -94,16 +100,26 @@ def _param_head(exercise, name: str) -> str:
             f"±{100 * exercise.tolerance_of(name):g} %</span>")
 
 
-def _param_cell(name: str, value, error, verdict, count: int) -> str:
+def _param_cell(name: str, value, error, verdict, count: int, z=None) -> str:
     """A value (in the unit its column names, as the students' pages write it) with its error against
-    the truth and its verdict, in one cell."""
+    the truth, its z-score (the error in standard errors of the student's record) and its verdict, in
+    one cell."""
     if not count:
         return "<td class='num dim'>—</td>"
     scale = display_unit(name)[1]
     shown = f"{value / scale:.6g}" if isinstance(value, (int, float)) else "<span class='dim'>none</span>"
     err = f"{100 * error:+.2f} %" if isinstance(error, (int, float)) else "—"
     mark = "<span class='ok'>✓</span>" if verdict else "<span class='no'>✗</span>"
-    return f"<td class='num'>{shown} <span class='small {'ok' if verdict else 'no'}'>{err}</span> {mark}</td>"
+    zs = f" <span class='small'>z {z:+.1f}</span>" if isinstance(z, (int, float)) else ""
+    return f"<td class='num'>{shown} <span class='small {'ok' if verdict else 'no'}'>{err}</span>{zs} {mark}</td>"
+
+
+def _variant_tag(exercise, student: str) -> str:
+    try:
+        name = exercise.variant_of(student)
+    except ValueError:                  # an id the app now refuses (stored by an older version)
+        return ""
+    return f" <span class='small eha-dash-variant'>({_esc(name)})</span>"
 
 
 def _method(method: str) -> str:
@@ -169,6 +185,7 @@ class Dashboard(pn.viewable.Viewer):
         self.rows = []
         self.handins = []
         self.refusals = []
+        self.extensions: dict[str, tuple[str, str]] = {}        # student -> (their deadline, when it was set)
         self.rules = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-rules"],
                                    stylesheets=[CSS])
         self.summary = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-dash-summary"],
@@ -187,6 +204,21 @@ class Dashboard(pn.viewable.Viewer):
                                                  css_classes=["eha-dash-set-deadline"])
         self.deadline_message = pn.pane.HTML("", css_classes=["eha-error", "eha-error-deadline"], width=420,
                                              styles={"color": "#b00020", "font-size": "12px"})
+        # one student's later deadline: "Extend the deadline for [id] until [date]", and the extensions granted
+        self.extension_student = pn.widgets.TextInput(label="Extend the deadline for (student id)", width=200,
+                                                      placeholder="e.g. s1234567",
+                                                      css_classes=["eha-dash-extension-student"])
+        self.extension_until = pn.widgets.TextInput(label="until (ISO-8601; empty: take it away)", width=220,
+                                                    placeholder="e.g. 2026-12-08T17:00",
+                                                    css_classes=["eha-dash-extension-until"])
+        self.extension_button = pn.widgets.Button(label="Extend", width=90, align="end",
+                                                  css_classes=["eha-dash-extend"])
+        self.extension_student_message = pn.pane.HTML("", css_classes=["eha-error", "eha-error-extension-student"],
+                                                      width=420, styles={"color": "#b00020", "font-size": "12px"})
+        self.extension_until_message = pn.pane.HTML("", css_classes=["eha-error", "eha-error-extension-until"],
+                                                    width=420, styles={"color": "#b00020", "font-size": "12px"})
+        self.extensions_pane = pn.pane.HTML("", css_classes=["eha-dash-extensions"], width=540,
+                                            styles={"font-size": "12px"})
         self.reveal_button = pn.widgets.Button(label="Reveal the verdicts to the students", width=270,
                                                css_classes=["eha-dash-reveal"])
         self.reveal_message = pn.pane.HTML("", css_classes=["eha-dash-reveal-message"], width=420,
@@ -202,11 +234,14 @@ class Dashboard(pn.viewable.Viewer):
         on_click(self.open_button, lambda _e: self.toggle_open())
         on_click(self.deadline_button, lambda _e: self.set_deadline())
         on_click(self.reveal_button, lambda _e: self.reveal())
+        on_click(self.extension_button, lambda _e: self.extend())
         watch(self.who, lambda _e: self._draw_history(), "value")
         actions = pn.Column(
             pn.pane.HTML("<h3 style='margin:4px 0'>Switches</h3>"),
             pn.Row(self.open_button, self.reveal_button), self.reveal_message,
             pn.Row(self.deadline_input, self.deadline_button), self.deadline_message,
+            pn.Row(self.extension_student, self.extension_until, self.extension_button),
+            self.extension_student_message, self.extension_until_message, self.extensions_pane,
             pn.Row(self.csv, self.slips), self.note, width=560, css_classes=["eha-dash-actions"])
         self.layout = pn.Column(
             pn.Row(self.rules, actions, sizing_mode="stretch_width"),
@@ -224,13 +259,18 @@ class Dashboard(pn.viewable.Viewer):
         due = self.exercise.deadline_at((control if control is not None else self.control).get("deadline") or None)
         return due is not None and self.clock() > due
 
+    def _released(self) -> bool:
+        return self.exercise.released(self.clock())
+
     def _key_now(self) -> tuple:
-        return self.store.version(), self._passed()
+        # an extension's passing is drawn without a change, as the deadline's and the release's are
+        return self.store.version(), self._passed(), self._released(), tuple(self._pending_extensions())
 
     def _read(self) -> tuple:
-        control = self.store.control()
-        return (self.store.version(), self._passed(control)), control, class_rows(self.exercise, self.store), \
-            self.store.all(), self.store.refusals()
+        control, extensions = self.store.control(), self.store.extensions()
+        return (self.store.version(), self._passed(control), self._released(),
+                tuple(self._pending_extensions(extensions, control))), control, \
+            class_rows(self.exercise, self.store), self.store.all(), self.store.refusals(), extensions
 
     def poll(self) -> bool:
         """Read the database now and draw what changed (True: something did). The page's periodic
@@ -269,9 +309,10 @@ class Dashboard(pn.viewable.Viewer):
         store_calls.call(self._read, self._show, fail=self._failed, doc=self.doc)
 
     def _show(self, data: tuple) -> None:
-        self._key, self.control, self.rows, self.handins, self.refusals = data
+        self._key, self.control, self.rows, self.handins, self.refusals, self.extensions = data
         with held():
             self._draw_rules()
+            self._draw_extensions()
             self._draw_roster()
             options = [EVERYONE] + [r.id for r in self.rows if r.count]
             if self.who.options != options:
@@ -307,16 +348,31 @@ class Dashboard(pn.viewable.Viewer):
         if self.revealed:
             status = ("<span class='badge closed'>closed for good</span> <span class='small'>(the true values "
                       "were revealed: no hand-in is taken, whatever the deadline or the open switch say)</span>")
+        elif self._released():
+            status = (f"<span class='badge closed'>closed for good</span> <span class='small'>(the true values were "
+                      f"released at {_esc(ex.release_at)}: no hand-in is taken)</span>")
         elif self._passed():
-            status += " <span class='small'>(the deadline has passed: no hand-in is taken)</span>"
+            later = self._pending_extensions()
+            status += (" <span class='small'>(the deadline has passed: no hand-in is taken"
+                       + (f", except from {len(later)} student{'s' if len(later) > 1 else ''} with a later deadline "
+                          "of their own" if later else "") + ")</span>")
+        if ex.release_at:
+            release = (f"{_esc(ex.release_at)}: every student sees their own true values from then on, and no hand-in "
+                       "is taken" + (" <span class='no'>— released</span>" if self._released() else ""))
+        else:
+            release = "no date: only when you reveal them"
         self.rules.object = (
             f"<h2 style='margin:4px 0'>{_esc(ex.title)} <span class='small'>teacher's dashboard</span></h2><dl>"
             f"<dt>Hidden (tolerance)</dt><dd>{hidden}; each student's within ±{100 * ex.vary:g} % of the paper's</dd>"
             f"<dt>Conditions</dt><dd>{_esc(ex.conditions.describe())}</dd>"
-            f"<dt>Deadline</dt><dd>{self._deadline_text()}</dd>"
+            + (f"<dt>Actuators</dt><dd>each student's drawn from {_esc(', '.join(ex.variants))} (the class table "
+               "says whose is which; students are not told)</dd>" if len(ex.variants) > 1 else "")
+            + f"<dt>Deadline</dt><dd>{self._deadline_text()}</dd>"
+            f"<dt>Truth released</dt><dd>{release}</dd>"
             f"<dt>Hand-ins allowed</dt><dd>{ex.attempts or 'no limit'}</dd>"
             f"<dt>Feedback</dt><dd>{_esc(FEEDBACK.get(ex.feedback, ex.feedback))}</dd>"
-            f"<dt>Score</dt><dd>{_esc(ex.score_text())}: its share of parameters within tolerance</dd>"
+            f"<dt>Grading</dt><dd>{_esc(ex.grading_text())}</dd>"
+            f"<dt>Score</dt><dd>{_esc(ex.score_text())}: its share of parameters accepted</dd>"
             f"<dt>Students</dt><dd>{students}</dd>"
             f"<dt>Hand-ins</dt><dd>{status}</dd>"
             f"<dt>Verdicts revealed</dt><dd>{'yes' if self.revealed else 'no'}</dd></dl>")
@@ -355,7 +411,8 @@ class Dashboard(pn.viewable.Viewer):
                         + "<th>data</th><th>conditions</th><th>pages</th></tr>")
         body = []
         for r in rows:
-            cells = "".join(_param_cell(n, r.estimates.get(n), r.errors.get(n), r.verdicts.get(n), r.count)
+            cells = "".join(_param_cell(n, r.estimates.get(n), r.errors.get(n), r.verdicts.get(n), r.count,
+                                        r.zscores.get(n))
                             for n in ex.hide)
             scores = "".join(
                 ("<td class='num dim'>—</td>" if not r.count else
@@ -363,7 +420,9 @@ class Dashboard(pn.viewable.Viewer):
                  f"{'</b>' if k == 'score' else ''}</td>") for k in counts)
             refused = (f"<td class='num no' title='{_esc('; '.join(r.refused))}'>{len(r.refused)}</td>" if r.refused
                        else "<td class='num dim'>0</td>")
-            body.append(f"<tr><td>{_esc(r.id)}</td><td>{_esc(r.name)}</td><td>{_when(r.joined, today)}</td>"
+            # the student's variant, when the pool has several (the teacher's: a student is never told)
+            kind = _variant_tag(ex, r.id) if len(ex.variants) > 1 else ""
+            body.append(f"<tr><td>{_esc(r.id)}</td><td>{_esc(r.name)}{kind}</td><td>{_when(r.joined, today)}</td>"
                         f"<td>{_when(r.last_seen, today)}</td><td class='num'>{r.count}</td>{refused}"
                         f"<td>{_when(r.last_time, today)}</td><td>{_method(r.method)}</td>{cells}"
                         f"{scores}<td>{_source(r)}</td><td>{_conditions(r.conditions)}</td>"
@@ -388,7 +447,9 @@ class Dashboard(pn.viewable.Viewer):
         body = []
         for h in handins:
             errors = h.errors or handin_errors(ex, h.student, h)
-            cells = "".join(_param_cell(n, h.estimates.get(n), errors.get(n), h.verdicts.get(n), 1) for n in ex.hide)
+            zs = handin_zscores(ex, h.student, h)
+            cells = "".join(_param_cell(n, h.estimates.get(n), errors.get(n), h.verdicts.get(n), 1, zs.get(n))
+                            for n in ex.hide)
             body.append(f"<tr><td>{_when(h.time, today)}</td><td>{_esc(h.student)}</td>"
                         f"<td>{_esc(names.get(h.student, ''))}</td><td class='num'>{numbers[h.id]}</td>"
                         f"<td>{_method(h.method)}</td>{cells}<td class='num'>{h.score:.2f}</td>"
@@ -439,6 +500,10 @@ class Dashboard(pn.viewable.Viewer):
         if text:
             try:
                 text = parse_deadline(text)
+                release = self.exercise.release_at
+                if release and self.exercise.deadline_at(text) > self.exercise.deadline_at(release):
+                    raise not_allowed("deadline", text, f"it is after the true values are released ({release}): no "
+                                                        "hand-in is taken from then on; give one at or before it")
             except ValueError as exc:
                 self.deadline_message.object = _esc(" ".join(str(exc).split()))
                 return
@@ -454,6 +519,10 @@ class Dashboard(pn.viewable.Viewer):
         elif self.clock() <= due:
             why = (f"The deadline ({_esc(self.control.get('deadline') or self.exercise.deadline)}) has not passed: "
                    "students could still hand in after seeing the verdicts. Reveal after it, or move it to now.")
+        elif self._pending_extensions():
+            sid, until = self._pending_extensions()[0]
+            why = (f"The deadline of {_esc(sid)}'s extension ({_esc(until)}) has not passed: they could still hand "
+                   "in after seeing the verdicts. Reveal after it, or take the extension away.")
         else:
             why = ""
         if why:
@@ -461,6 +530,77 @@ class Dashboard(pn.viewable.Viewer):
             return
         self._switch("revealed", "1", "Verdicts revealed to the students; hand-ins are closed for good",
                      then=lambda: setattr(self.reveal_message, "object", ""))
+
+    # -- one student's later deadline ------------------------------------------------------------------
+    def _pending_extensions(self, extensions: dict | None = None, control: dict | None = None) -> list[tuple[str, str]]:
+        """(student, their deadline) of the ``extensions`` (default: as last read) still open now, later than the
+        class's deadline under ``control``."""
+        extensions = self.extensions if extensions is None else extensions
+        control = self.control if control is None else control
+        due = self.exercise.deadline_at(control.get("deadline") or None)
+        out = []
+        for sid, (until, _set) in sorted(extensions.items()):
+            try:
+                when = self.exercise.deadline_at(until)
+            except ValueError:
+                continue                    # a date no one can read (edited by hand) extends nothing
+            if due is not None and when > due and when > self.clock():
+                out.append((sid, until))
+        return out
+
+    def _draw_extensions(self) -> None:
+        """The extensions granted: who, until when, and whether it still counts."""
+        if not self.extensions:
+            self.extensions_pane.object = "<span class='small'>No student has a later deadline of their own.</span>"
+            return
+        names = {e.id: e.name for e in self.exercise.roster}
+        open_ = {sid for sid, _until in self._pending_extensions()}
+        due = self.exercise.deadline_at(self.control.get("deadline") or None)
+        items = []
+        for sid, (until, when_set) in sorted(self.extensions.items()):
+            who = f"{_esc(sid)}" + (f" ({_esc(names[sid])})" if names.get(sid) else "")
+            try:
+                later = due is not None and self.exercise.deadline_at(until) > due
+            except ValueError:
+                later = False
+            state = ("" if sid in open_ else " <span class='dim'>— passed</span>" if later
+                     else " <span class='dim'>— not later than the class's deadline: it changes nothing</span>")
+            items.append(f"<li>{who} until {_esc(until)}{state} <span class='small'>(set {_esc(when_set)})</span></li>")
+        self.extensions_pane.object = (f"<b>Later deadlines of their own</b><ul style='margin:2px 0'>{''.join(items)}"
+                                       "</ul>")
+
+    def extend(self, student: str | None = None, until: str | None = None) -> None:
+        """Give ``student`` (by default the field's id) the deadline ``until`` (by default the field's, ISO-8601;
+        empty: take their extension away). A refusal is said beside its field, naming the value as typed."""
+        if student is None:
+            student = self.extension_student.value_input or self.extension_student.value or ""
+        if until is None:
+            until = self.extension_until.value_input or self.extension_until.value or ""
+        self.extension_student_message.object = self.extension_until_message.object = ""
+        try:
+            sid, deadline = check_extension(self.exercise, student, until, now=self.clock(),
+                                            class_deadline=self.control.get("deadline", ""))
+        except ValueError as exc:
+            shown = _esc(" ".join(str(exc).split()))
+            if getattr(exc, "field", "") == STUDENT_FIELD:
+                self.extension_student_message.object = shown
+            else:
+                self.extension_until_message.object = shown
+            return
+        if not deadline and sid not in self.extensions:
+            self.extension_until_message.object = _esc(str(not_allowed(
+                "until", until, f"{sid} has no extension to take away; give an ISO-8601 date and time, e.g. "
+                                "2026-12-08T17:00")))
+            return
+        store = self.store
+
+        def written(_none) -> None:
+            done = f"{sid} may hand in until {deadline}" if deadline else f"{sid}'s extension taken away"
+            self.note.object = f"<span style='color:#11703a'>{_esc(done)} ({time.strftime('%H:%M:%S')})</span>"
+            self.refresh()
+
+        self.note.object = "<span class='small'>Saving…</span>"
+        store_calls.call(lambda: store.set_extension(sid, deadline), written, fail=self._failed, doc=self.doc)
 
     def csv_bytes(self) -> bytes:
         """The results as ``eha exercise results --csv`` writes them (formula-like cells neutralised), from

@@ -18,8 +18,16 @@ file keeps only the code's hash, which is all the server compares. Without a
 roster the exercise is open: any id typed is taken as given (the teacher is
 told so).
 
+A hand-in is judged by the precision of the student's own record (``grading``
+"zscore", the default): the value must lie within k standard errors of the
+truth, the standard error the server computed on the record the student made,
+and k standard errors must be within the parameter's tolerance (a record that
+does not determine a parameter earns nothing for it, however close the value).
+A better experiment earns a tighter acceptance. ``grading="relative"`` judges by
+the tolerance alone.
+
 The file is read only by the server and the teacher's command line; a verdict
-says within tolerance or not, never the true value.
+says accepted or not, never the true value.
 
 Examples
 --------
@@ -28,7 +36,8 @@ Examples
 >>> p = ex.student_params("s1")
 >>> 0.75 * 4000 <= p.M <= 1.25 * 4000 and p.Af == 3000.0
 True
->>> ex.verdicts("s1", {"M": p.M * 1.04, "B": p.B * 0.5})
+>>> ex.verdicts("s1", {"M": p.M * 1.04, "B": p.B * 0.5},        # the standard errors of the student's record
+...             {"M": 0.015 * p.M, "B": 0.01 * p.B})
 {'M': True, 'B': False}
 >>> code = ex.join_code("s1")
 >>> len(code), ex.entry_for_code(code.lower().replace("-", " ")).name
@@ -60,7 +69,8 @@ from .param_table import FIELD_INFO
 from .params import ActuatorParams
 
 __all__ = ["Exercise", "Conditions", "RosterEntry", "HIDEABLE", "SIGNALS", "METHODS", "FEEDBACK", "SCORE_RULES",
-           "SCORE_TEXT", "normalize_id", "normalize_code", "parse_deadline", "read_roster", "MAX_VARY", "MAX_ID_LENGTH"]
+           "SCORE_TEXT", "GRADINGS", "Judgement", "normalize_id", "normalize_code", "parse_deadline", "read_roster",
+           "MAX_VARY", "MAX_ID_LENGTH"]
 
 #: Every parameter of the actuator may be hidden (the blank-able p2(0) aside: it follows from the force balance).
 HIDEABLE = tuple(n for n in FIELD_INFO if n != "p2_0")
@@ -80,7 +90,7 @@ SIGNALS = {"x": "m", "v": "m/s", "p1": "Pa", "p2": "Pa"}
 #: The routes a student can hand in from.
 METHODS = {"lse": "least squares (tab 3, time domain)", "frequency": "transfer function and back-out (tab 3, "
            "frequency domain)", "greybox": "grey-box identification (tab 3)"}
-FEEDBACK = {"verdict": "within tolerance or not, after every hand-in",
+FEEDBACK = {"verdict": "accepted or not, per parameter, after every hand-in",
             "none": "only that the hand-in was stored",
             "after-deadline": "the verdicts once the deadline has passed"}
 #: Which hand-ins count, and how (the first is the default). Plain "best" of several hand-ins rewards
@@ -92,6 +102,21 @@ SCORE_RULES = ("last", "mean", "best-penalty", "best")
 SCORE_TEXT = {"last": "the last hand-in counts", "mean": "the mean of the hand-ins counts",
               "best-penalty": "the best hand-in counts, less {penalty} for each hand-in before it",
               "best": "the best hand-in counts"}
+#: How a hand-in's value is judged against the truth (the first is the default of a new exercise).
+#: "zscore": by the precision the student's own record gives (the standard error the server computed
+#: on it): the value must lie within k standard errors of the truth (never narrower than ``floor`` of
+#: it), and k standard errors must be within the parameter's tolerance (an experiment that does not
+#: determine the parameter to the lab's precision is not accepted, whatever the value).
+#: "relative": within the tolerance of the truth, whatever the record (an exercise file from before
+#: the choice keeps it).
+GRADINGS = {"zscore": "within k standard errors of the truth, the standard error of your own record",
+            "relative": "within a fixed relative tolerance of the truth"}
+#: The k of "zscore" grading: at 3 an honest estimate with an honest standard error is refused about
+#: 0.3 % of the time.
+DEFAULT_K = 3.0
+#: The narrowest acceptance of "zscore" grading, relative to the truth: a model error of the route
+#: below it is not held against a very precise record.
+DEFAULT_FLOOR = 0.005
 _FORMATS = ("eha-exercise/1", "eha-exercise/2")
 _FORMAT = _FORMATS[-1]
 #: Join codes: ten characters of an alphabet without look-alikes (0/O, 1/I/L), about 50 bits.
@@ -299,6 +324,28 @@ class Conditions:
                    methods=tuple(data.get("methods", tuple(METHODS))))
 
 
+@dataclass(frozen=True)
+class Judgement:
+    """The verdict on one handed-in parameter, and why (the teacher's: ``error`` and ``z`` hold the truth).
+
+    ``ok``: accepted. ``reason``: "within" (accepted), "outside" (too far from the truth), "imprecise"
+    (zscore grading: k standard errors exceed the tolerance, the record does not determine it to the
+    lab's precision), "no-error" (zscore grading: the route gave no standard error) or "missing".
+    ``error``: relative error against the truth; ``z``: (estimate - truth - the route's own model error)
+    / standard error; ``band``: the accepted half-width relative to the estimate (what the student can
+    see: it comes from their record, not the truth); ``model_error``: the route's own error on the
+    student's experiment without noise, relative to the truth (0 when not given).
+    """
+
+    ok: bool
+    reason: str
+    error: float | None = None
+    z: float | None = None
+    band: float | None = None
+    std_error: float | None = None
+    model_error: float = 0.0
+
+
 #: The conditions of an exercise file of format 1 (before conditions existed): none.
 _NO_CONDITIONS = {"noise": {}, "disturbance": "none"}
 
@@ -308,7 +355,9 @@ class Exercise:
     """The rules of an exercise and its secret (``secret``: 64 hex digits; never shown to students).
 
     ``tolerance`` is the relative error of a correct answer; ``tolerances`` overrides it per
-    parameter. ``attempts`` = 0: no limit. ``deadline``: ISO-8601 or "" (none).
+    parameter. ``attempts`` = 0: no limit. ``deadline``: ISO-8601 or "" (none). ``release_at``:
+    ISO-8601 or "" (none), at or after the deadline: from then on every student sees their own true
+    values and no hand-in is taken, as after the teacher's reveal (:meth:`released`).
 
     ``own_files``: hand-ins from a file the student uploaded are taken (labelled as such); by
     default only estimates from the student's own actuator's experiment count, since a file can
@@ -326,12 +375,22 @@ class Exercise:
     tolerances: Mapping[str, float] = field(default_factory=dict)
     conditions: Conditions = field(default_factory=Conditions)
     deadline: str = ""
+    #: ISO-8601 or "" (none): from then on every student sees their own true values, as after a reveal.
+    release_at: str = ""
     attempts: int = 0
     feedback: str = "verdict"
+    grading: str = "zscore"
+    #: zscore grading: accepted within k standard errors of the truth (k >= 1).
+    k: float = DEFAULT_K
+    #: zscore grading: the narrowest acceptance, a fraction of the truth.
+    floor: float = DEFAULT_FLOOR
     score_rule: str = "last"
     #: With score_rule "best-penalty": taken off a hand-in's score (a fraction of 1) per hand-in before it.
     attempt_penalty: float = 0.25
     roster: tuple[RosterEntry, ...] = field(default=(), repr=False)
+    #: The pool each student's actuator is drawn from: names of :data:`eha_core.variants.VARIANTS`
+    #: ("paper": the paper's model; "spool", "leakage", "stribeck": one effect it leaves out).
+    variants: tuple[str, ...] = ("paper",)
     own_files: bool = False
     ids_per_client: int = DEFAULT_IDS_PER_CLIENT
     kept_uploads_mb: int = DEFAULT_KEPT_UPLOADS_MB
@@ -366,16 +425,76 @@ class Exercise:
         ids = [e.id for e in self.roster]
         if len(set(ids)) != len(ids):
             raise not_allowed("roster", "(repeated id)", "every id once")
+        object.__setattr__(self, "variants", tuple(self.variants))
+        self._check_variants()
+
+    def _check_variants(self) -> None:
+        """Every name of the pool is a variant, each once, and each gives a valid actuator with the
+        paper's values and with each hidden parameter at either end of its range (a draw that breaks a
+        rule is drawn again, :meth:`student_params`; an effect that no draw can carry leaves its
+        students without an actuator)."""
+        from .variants import VARIANTS, variant_effects
+
+        if not self.variants:
+            raise not_allowed("variants", "(none)", f"name at least one of {', '.join(VARIANTS)}")
+        if len(set(self.variants)) != len(self.variants):
+            raise not_allowed("variants", ",".join(self.variants), "name each variant once")
+        base = ActuatorParams()
+        for name in self.variants:
+            try:
+                effects = variant_effects(name)
+            except ValueError:
+                raise not_allowed("variants", name, f"not a variant; use any of {', '.join(VARIANTS)}") from None
+            if effects.off:
+                continue                            # the paper's model: the draws' own rules hold
+            try:
+                base.replace(effects=effects)
+            except ValueError as exc:
+                raise not_allowed("variants", name, f"the actuator is not valid with it ({exc}); leave it out of "
+                                                    "the pool") from None
+            bad = []
+            for values in ({n: v} for n in self.hide for v in self._ends(base, n)):
+                try:
+                    base.replace(**values)
+                except ValueError:
+                    continue                        # not a draw a student gets
+                try:
+                    base.replace(effects=effects, **values)
+                except ValueError as exc:
+                    bad.append(f"{next(iter(values))} = {next(iter(values.values())):.4g} ({exc})")
+            if bad:
+                raise not_allowed("variants", name, f"students drawn near {bad[0]} would have no valid actuator; "
+                                                    "leave it out of the pool or vary less")
+
+    def _ends(self, base: ActuatorParams, name: str) -> tuple[float, float]:
+        """The two ends of the hidden parameter ``name``'s range (:meth:`_value`)."""
+        b = getattr(base, name)
+        if b == 0 and name in _ADDITIVE_SCALE:
+            return b - self.vary * _ADDITIVE_SCALE[name], b + self.vary * _ADDITIVE_SCALE[name]
+        return b * (1.0 - self.vary), b * (1.0 + self.vary)
 
     def _check_rules(self) -> None:
         if self.deadline:
             parse_deadline(self.deadline)
+        if self.release_at:
+            release = parse_deadline(self.release_at, name="release truth at")
+            if self.deadline and _as_utc(release) < _as_utc(parse_deadline(self.deadline)):
+                raise not_allowed("release truth at", self.release_at,
+                                  f"it is before the deadline ({self.deadline}): students could hand in after seeing "
+                                  "their true values; give a date and time at or after the deadline")
         if not (isinstance(self.attempts, int) and 0 <= self.attempts <= 1000):
             raise not_allowed("attempts", self.attempts, "a whole number of hand-ins in 0-1000 (0: no limit)")
         if self.feedback not in FEEDBACK:
             raise not_allowed("feedback", self.feedback, f"use {', '.join(FEEDBACK)}")
         if self.score_rule not in SCORE_RULES:
             raise not_allowed("score", self.score_rule, f"use {', '.join(SCORE_RULES)}")
+        if self.grading not in GRADINGS:
+            raise not_allowed("grading", self.grading, f"use {', '.join(GRADINGS)}")
+        if not (isinstance(self.k, (int, float)) and math.isfinite(self.k) and 1.0 <= self.k <= 10.0):
+            raise not_allowed("k", self.k, "a number of standard errors in [1, 10] (below 1 an honest estimate "
+                                           "is refused a third of the time; 3 is the usual)")
+        if not (isinstance(self.floor, (int, float)) and math.isfinite(self.floor) and 0.0 <= self.floor < 0.5):
+            raise not_allowed("floor", f"{100 * self.floor:g} %", "a fraction of the truth in [0, 50) %")
         if not (isinstance(self.attempt_penalty, (int, float)) and math.isfinite(self.attempt_penalty)
                 and 0 <= self.attempt_penalty <= 1):
             raise not_allowed("attempt penalty", self.attempt_penalty, "use a fraction in [0, 1] (0.25: 25 points)")
@@ -390,10 +509,12 @@ class Exercise:
     def new(cls, hide, vary: float = 0.25, tolerance: float | Mapping[str, float] = 0.05,
             title: str = "EHA identification exercise", secret: str | None = None, *,
             roster: Iterable[tuple[str, str]] | None = None, conditions: Conditions | None = None,
-            deadline: str = "", attempts: int = 0, feedback: str = "verdict", score_rule: str = "last",
-            attempt_penalty: float = 0.25,
+            deadline: str = "", release_at: str = "", attempts: int = 0, feedback: str = "verdict",
+            score_rule: str = "last",
+            attempt_penalty: float = 0.25, grading: str = "zscore", k: float = DEFAULT_K,
+            floor: float = DEFAULT_FLOOR,
             own_files: bool = False, ids_per_client: int = DEFAULT_IDS_PER_CLIENT,
-            kept_uploads_mb: int = DEFAULT_KEPT_UPLOADS_MB) -> Exercise:
+            kept_uploads_mb: int = DEFAULT_KEPT_UPLOADS_MB, variants: Iterable[str] = ("paper",)) -> Exercise:
         """A new exercise with a fresh random secret (``secrets.token_hex``) and, with a roster,
         a join code per student (see :meth:`join_code`).
 
@@ -406,7 +527,8 @@ class Exercise:
             fraction in [0, :data:`MAX_VARY`] (0.25: +-25 %).
         tolerance : float or mapping of str to float
             The relative error of a correct answer, in (0, 1); a mapping gives it per hidden
-            parameter (the others 0.05).
+            parameter (the others 0.05). Under zscore grading, the precision the lab asks for: k
+            standard errors of the student's record must lie within it.
         title : str
             The exercise's title, shown to the students.
         secret : str, optional
@@ -419,6 +541,10 @@ class Exercise:
             The experiment's conditions; default :class:`Conditions`'s.
         deadline : str
             ISO-8601 date and time of the last hand-in (:func:`parse_deadline`), or "" for none.
+        release_at : str
+            ISO-8601 date and time from which every student sees their own true values, as after
+            the teacher's reveal (no hand-in is taken from then on), or "" for none; not before
+            ``deadline``.
         attempts : int
             Hand-ins allowed per student, 0 for no limit.
         feedback : str
@@ -428,6 +554,11 @@ class Exercise:
             nothing).
         attempt_penalty : float
             With "best-penalty", the score taken off a hand-in for each one before it (0.25).
+        grading : str
+            How a value is judged, a key of :data:`GRADINGS` (default "zscore").
+        k, floor : float
+            zscore grading: accepted within ``k`` standard errors of the truth (default 3), never
+            narrower than ``floor`` of the truth (default 0.005).
         own_files : bool
             Take hand-ins from a file the student uploaded (default: only from their own actuator's
             experiment).
@@ -435,6 +566,9 @@ class Exercise:
             Open exercise: new ids one client address may start per hour (0: no limit).
         kept_uploads_mb : int
             The disk the class's kept uploads may take in all [MB] (0: no upload is kept).
+        variants : iterable of str
+            The pool each student's actuator is drawn from, names of
+            :data:`eha_core.variants.VARIANTS` (default the paper's model alone).
         """
         secret = secret or secrets.token_hex(32)
         if isinstance(tolerance, Mapping):
@@ -449,9 +583,12 @@ class Exercise:
         return cls(hide=tuple(hide), vary=float(vary), tolerance=default, title=str(title), secret=secret,
                    created=time.strftime("%Y-%m-%dT%H:%M:%S"), tolerances=tolerances,
                    conditions=conditions if conditions is not None else Conditions(), deadline=deadline,
+                   release_at=str(release_at).strip(),
                    attempts=int(attempts), feedback=feedback, score_rule=score_rule,
-                   attempt_penalty=float(attempt_penalty), roster=tuple(entries),
-                   own_files=bool(own_files), ids_per_client=int(ids_per_client), kept_uploads_mb=int(kept_uploads_mb))
+                   attempt_penalty=float(attempt_penalty), grading=grading, k=float(k), floor=float(floor),
+                   roster=tuple(entries),
+                   own_files=bool(own_files), ids_per_client=int(ids_per_client), kept_uploads_mb=int(kept_uploads_mb),
+                   variants=tuple(variants))
 
     def replace(self, **changes) -> Exercise:
         """A copy with the fields named in ``**changes`` changed (checked again), as :func:`dataclasses.replace`."""
@@ -463,6 +600,7 @@ class Exercise:
         data["conditions"] = self.conditions.to_dict()
         data["roster"] = [dataclasses.asdict(e) for e in self.roster]
         data["hide"] = list(self.hide)
+        data["variants"] = list(self.variants)
         return json.dumps(data, indent=1, ensure_ascii=False)
 
     @classmethod
@@ -485,12 +623,18 @@ class Exercise:
                        title=str(data.get("title", "")), secret=str(data["secret"]),
                        created=str(data.get("created", "")), tolerances=dict(data.get("tolerances", {})),
                        conditions=conditions, deadline=str(data.get("deadline", "")),
+                       # an exercise file from before the release date releases nothing by itself
+                       release_at=str(data.get("release_at", "")),
                        attempts=int(data.get("attempts", 0)), feedback=str(data.get("feedback", "verdict")),
                        # an exercise file from before the rule was a choice scored the best hand-in
                        score_rule=str(data.get("score_rule", "best")),
                        attempt_penalty=float(data.get("attempt_penalty", 0.25)),
+                       # an exercise file from before the choice judged by the relative tolerance
+                       grading=str(data.get("grading", "relative")), k=float(data.get("k", DEFAULT_K)),
+                       floor=float(data.get("floor", DEFAULT_FLOOR)),
                        roster=tuple(RosterEntry(**e) for e in data.get("roster", ())),
                        own_files=bool(data.get("own_files", False)),
+                       variants=tuple(data.get("variants", ("paper",))),
                        ids_per_client=int(data.get("ids_per_client", DEFAULT_IDS_PER_CLIENT)),
                        kept_uploads_mb=int(data.get("kept_uploads_mb", DEFAULT_KEPT_UPLOADS_MB)))
         except (KeyError, TypeError, AttributeError) as exc:
@@ -570,13 +714,26 @@ class Exercise:
         b = getattr(base, name)
         return b + w * _ADDITIVE_SCALE[name] if b == 0 and name in _ADDITIVE_SCALE else b * (1.0 + w)
 
+    def variant_of(self, student_id: str) -> str:
+        """The variant of the pool (:attr:`variants`) the actuator of ``student_id`` is, drawn from the
+        secret and the id (the teacher's: a student is never told)."""
+        if len(self.variants) == 1:
+            return self.variants[0]
+        k = int(self._unit(normalize_id(student_id), "\0variant", 0) * len(self.variants))
+        return self.variants[min(k, len(self.variants) - 1)]
+
     def student_params(self, student_id: str, base: ActuatorParams | None = None) -> ActuatorParams:
-        """The actuator of ``student_id``: each hidden parameter of ``base`` (the paper's) times a factor in
-        [1 - vary, 1 + vary] drawn from the secret and the id (a parameter whose paper value is 0,
-        d0 for one, moves by up to ``vary`` times a scale of its own: 2000 N for d0). A draw that
-        breaks a rule of the parameters (a rod wider than the bore) is drawn again."""
+        """The actuator of ``student_id``: its variant's effects (:meth:`variant_of`), and each hidden
+        parameter of ``base`` (the paper's) times a factor in [1 - vary, 1 + vary] drawn from the
+        secret and the id (a parameter whose paper value is 0, d0 for one, moves by up to ``vary``
+        times a scale of its own: 2000 N for d0). A draw that breaks a rule of the parameters (a rod
+        wider than the bore) is drawn again."""
+        from .variants import variant_effects
+
         base = base if base is not None else ActuatorParams()
         student = normalize_id(student_id)
+        if self.variants != ("paper",):
+            base = base.replace(effects=variant_effects(self.variant_of(student)))
         for attempt in range(64):
             try:
                 return base.replace(**{n: self._value(base, student, n, attempt) for n in self.hide})
@@ -612,9 +769,9 @@ class Exercise:
             out[n] = (v - t) / scale if math.isfinite(v) else None
         return out
 
-    def verdicts(self, student_id: str, estimates: Mapping) -> dict[str, bool]:
-        """Per hidden parameter: is the estimate within its tolerance (relative) of the truth?
-        A missing or non-finite estimate is not.
+    def judge(self, student_id: str, estimates: Mapping, std_errors: Mapping | None = None,
+              model_errors: Mapping | None = None) -> dict[str, Judgement]:
+        """Per hidden parameter: the :class:`Judgement` of the estimate by the exercise's grading.
 
         Parameters
         ----------
@@ -622,15 +779,101 @@ class Exercise:
             The student, whose actuator is the truth (:meth:`student_params`).
         estimates : mapping of str to float
             The student's estimates by parameter name, in SI units.
+        std_errors : mapping of str to float, optional
+            The standard error of each estimate (SI), as the server computed it on the student's
+            record; zscore grading refuses an estimate without one.
+        model_errors : mapping of str to float, optional
+            The route's own error (SI, estimate minus truth) on the student's experiment without noise
+            (:func:`eha_core.grading.lse_model_error`, :func:`~eha_core.grading.frequency_model_error`):
+            zscore grading measures the estimate from the truth plus it, so a route's approximation
+            (eq. 27's linearisation) is not held against the student; 0 when not given.
+
+        >>> ex = Exercise.new(hide=("M", "B"), secret="00" * 32, tolerance={"M": 0.05, "B": 0.30})
+        >>> m = ex.student_params("s1").M
+        >>> j = ex.judge("s1", {"M": m * 1.01, "B": 1.0}, {"M": 0.005 * m, "B": 1.0})
+        >>> j["M"].ok, round(j["M"].z, 1), j["B"].reason     # 2 standard errors off; B's record says nothing
+        (True, 2.0, 'imprecise')
         """
-        return {n: e is not None and abs(e) <= self.tolerance_of(n)
-                for n, e in self.errors(student_id, estimates).items()}
+        errors = self.errors(student_id, estimates)
+        truth = self.student_params(student_id)
+        std_errors = std_errors or {}
+        out = {}
+        for n, rel in errors.items():
+            tol = self.tolerance_of(n)
+            if rel is None:
+                out[n] = Judgement(False, "missing")
+                continue
+            if self.grading == "relative":
+                out[n] = Judgement(abs(rel) <= tol, "within" if abs(rel) <= tol else "outside", rel)
+                continue
+            try:
+                se = float(std_errors.get(n))
+            except (TypeError, ValueError):
+                se = math.nan
+            if not (math.isfinite(se) and se > 0):
+                out[n] = Judgement(False, "no-error", rel)
+                continue
+            value, t = float(estimates[n]), getattr(truth, n)
+            scale = max(abs(t), self.vary * _ADDITIVE_SCALE.get(n, 0.0)) or 1.0
+            try:
+                me = float((model_errors or {}).get(n, 0.0))
+            except (TypeError, ValueError):
+                me = 0.0
+            me = me if math.isfinite(me) else 0.0
+            z = (value - t - me) / se
+            # the band the student sees: k standard errors relative to their own estimate
+            band = self.k * se / max(abs(value), 1e-300)
+            if band > tol:
+                out[n] = Judgement(False, "imprecise", rel, z, band, se, me / scale)
+                continue
+            ok = abs(value - t - me) <= self.k * se or abs(value - t) <= self.floor * scale
+            out[n] = Judgement(ok, "within" if ok else "outside", rel, z, band, se, me / scale)
+        return out
+
+    def verdicts(self, student_id: str, estimates: Mapping, std_errors: Mapping | None = None,
+                 model_errors: Mapping | None = None) -> dict[str, bool]:
+        """Per hidden parameter: is the estimate accepted by the exercise's grading (:meth:`judge`)?
+        A missing or non-finite estimate is not; under zscore grading neither is one without a
+        standard error (``std_errors``, SI, as the server computed them on the student's record).
+
+        Parameters
+        ----------
+        student_id : str
+            The student, whose actuator is the truth (:meth:`student_params`).
+        estimates : mapping of str to float
+            The student's estimates by parameter name, in SI units.
+        std_errors : mapping of str to float, optional
+            The standard error of each estimate (zscore grading).
+        model_errors : mapping of str to float, optional
+            The route's own error on the student's experiment (zscore grading, :meth:`judge`).
+        """
+        return {n: j.ok for n, j in self.judge(student_id, estimates, std_errors, model_errors).items()}
+
+    def grading_text(self) -> str:
+        """The grading in words, for the students and the teacher."""
+        if self.grading == "relative":
+            return "a value counts when it lies within its tolerance of the truth"
+        return (f"a value counts when it lies within {self.k:g} standard errors of the truth (the standard "
+                f"error of your own record, at least {100 * self.floor:g} % of the truth), and {self.k:g} "
+                "standard errors are within its tolerance: a better experiment earns a tighter acceptance")
 
     # -- the hand-in rules ------------------------------------------------------------------
     def deadline_at(self, override: str | None = None) -> float | None:
         """The deadline as a POSIX time (``override``: the teacher's extension), None without one."""
         text = override or self.deadline
         return _as_utc(text) if text else None
+
+    def released(self, now: float | None = None) -> bool:
+        """Are the true values released now (``now`` [s, POSIX], default the current time): has
+        :attr:`release_at` come? From then on every student's page is as after the teacher's reveal.
+
+        >>> ex = Exercise.new(hide=("M",), secret="00" * 32, release_at="2030-01-01T00:00+00:00")
+        >>> ex.released(now=1893456000.0 - 1), ex.released(now=1893456000.0), ex.replace(release_at="").released()
+        (False, True, False)
+        """
+        if not self.release_at:
+            return False
+        return (time.time() if now is None else now) >= _as_utc(self.release_at)
 
     def refusal(self, count: int, *, now: float | None = None, method: str | None = None, open_: bool = True,
                 deadline: str | None = None, revealed: bool = False, source: str | None = None) -> str | None:
@@ -650,7 +893,7 @@ class Exercise:
             The teacher's extension of the deadline (ISO-8601), replacing the exercise's.
         revealed : bool
             The teacher has shown every student their true values; that is final, whatever
-            the deadline or the open switch say since.
+            the deadline or the open switch say since. So is :attr:`release_at` once it has come.
         source : str, optional
             "file" for estimates from an uploaded file (refused unless :attr:`own_files`), else the
             student's own actuator's experiment.
@@ -658,6 +901,8 @@ class Exercise:
         now = time.time() if now is None else now
         if revealed:
             return "your teacher has revealed the true values: hand-ins are closed for good"
+        if self.released(now):
+            return f"the true values were released at {self.release_at}: hand-ins are closed for good"
         if source == "file" and not self.own_files:
             return ("this exercise takes estimates from your actuator's experiment (the simulated sensors), not from "
                     "a file: run the identification on the simulated sensors")
@@ -683,9 +928,10 @@ class Exercise:
         deadline : str, optional
             The teacher's extension of the deadline (ISO-8601), replacing the exercise's.
         revealed : bool
-            The teacher has revealed the true values: verdicts are shown whatever the rule.
+            The teacher has revealed the true values: verdicts are shown whatever the rule (so
+            are they once :attr:`release_at` has come).
         """
-        if revealed or self.feedback == "verdict":
+        if revealed or self.feedback == "verdict" or self.released(now):
             return True
         if self.feedback == "none":
             return False

@@ -38,10 +38,25 @@ def add_parser(sub) -> None:
                      "as given (not checked)")
     new.add_argument("--vary", default="25%", help="how far each student's actuator varies around the paper's "
                      "values (default 25%%; at most 50%%)")
-    new.add_argument("--tolerance", default="5%", help="relative error of a correct answer: one for all (5%%) or "
-                     "per parameter (M=3%%,beta_e=10%%; the others 5%%)")
+    new.add_argument("--tolerance", default=None, help="the precision asked of an answer: one for all (5%%) or per "
+                     "parameter (M=3%%,beta_e=10%%; the others 5%%). Default 5%%, and 10%% for B (friction is the "
+                     "parameter a 20 s record determines least: about ±6%% for the grey-box at 3 standard errors). "
+                     "With --grading zscore, k standard errors of the student's record must lie within it; with "
+                     "relative, the answer itself")
+    new.add_argument("--grading", default="zscore", choices=("zscore", "relative"),
+                     help="zscore (default): an answer counts within k standard errors of the truth, the standard "
+                          "error of the student's own record (a better experiment earns a tighter acceptance), "
+                          "when k standard errors are within the tolerance; relative: within the tolerance of the "
+                          "truth, whatever the record")
+    new.add_argument("--k", default="3", metavar="K", help="with --grading zscore: the standard errors an answer may "
+                     "lie from the truth (default 3: an honest answer is refused about 0.3%% of the time; at least 1)")
+    new.add_argument("--floor", default="0.5%", metavar="PERCENT", help="with --grading zscore: the narrowest "
+                     "acceptance, a percentage of the truth (default 0.5%%)")
     new.add_argument("--deadline", default="", help="ISO-8601 date and time after which hand-ins are refused "
                      "(e.g. 2026-12-01T17:00; no zone: this machine's)")
+    new.add_argument("--release-truth-at", default="", metavar="DATE",
+                     help="ISO-8601 date and time from which every student sees their own true values on their page, "
+                          "as after the dashboard's reveal (hand-ins close then for good); at or after --deadline")
     new.add_argument("--attempts", type=int, default=3, help="hand-ins allowed per student (default 3; 0: no limit)")
     new.add_argument("--feedback", default="verdict", choices=("verdict", "none", "after-deadline"),
                      help="what a student is told after a hand-in: the verdict per parameter (default), nothing "
@@ -62,6 +77,11 @@ def add_parser(sub) -> None:
                      help="a load force always acting, in the app's signal grammar (e.g. white:200, sine:500:3)")
     new.add_argument("--measured", default="x,v,p1,p2", help="the signals measured (x always; e.g. x,p1,p2: no "
                      "velocity sensor)")
+    new.add_argument("--variants", default="paper", metavar="NAMES",
+                     help="the pool each student's actuator is drawn from, comma-separated: paper (the paper's "
+                          "model, default), spool (a valve spool that lags, 2nd order), leakage (internal leakage "
+                          "past the piston), stribeck (Stribeck friction); e.g. paper,spool,leakage,stribeck gives "
+                          "a quarter of the class each, so one shared script no longer fits everyone's actuator")
     new.add_argument("--methods", default="lse,frequency,greybox", help="the routes a hand-in may come from: lse "
                      "(the least squares), frequency (the back-out's βe), greybox (grey-box identification); "
                      "default all three")
@@ -86,11 +106,35 @@ def add_parser(sub) -> None:
     res = cmds.add_parser("results", help="the class's table: joined, hand-ins, values, errors, verdicts, score")
     res.add_argument("exercise", help="the exercise file")
     res.add_argument("--csv", metavar="FILE", help="also write the table as CSV")
+    res.add_argument("--format", choices=("csv", "moodle", "canvas"), default=None,
+                     help="with --out: csv (the table, as --csv writes it), moodle (Moodle's Grades > Import > CSV "
+                          "file: First name, Last name, ID number, Email address, 'ITEM (Real)'; map ID number to "
+                          "useridnumber: the roster's ids must be the students' ID numbers in Moodle, which takes at "
+                          "most 100 points unless the site allows more) or canvas (Canvas's Gradebook import: Student, "
+                          "ID, SIS User ID, SIS Login ID, Section, ITEM and a Points Possible row; the roster's id is "
+                          "written as SIS User ID, the Canvas ID left empty, so the students' SIS ids must be the "
+                          "roster's). The grade is the counted score times --points; no hand-in scores 0")
+    res.add_argument("--out", metavar="FILE", help="the file --format writes (UTF-8, no byte-order mark)")
+    res.add_argument("--points", default="100", metavar="POINTS",
+                     help="what a full score is worth in the gradebook (default 100)")
+    res.add_argument("--item", default="", metavar="NAME",
+                     help="the grade item's (Moodle) or assignment's (Canvas) name; default the exercise's title")
     res.set_defaults(handler=run_results)
     rev = cmds.add_parser("reveal", help="one student's true actuator (after the deadline)")
     rev.add_argument("exercise", help="the exercise file")
     rev.add_argument("--student", required=True, help="the student's id (as in the roster, or as they typed it)")
     rev.set_defaults(handler=run_reveal)
+    ext = cmds.add_parser("extend", help="a later deadline for one student (or --clear it)",
+                          description="Give one student a deadline of their own, later than the class's: their "
+                                      "hand-ins are taken until then, and their page says so. Kept in the class's "
+                                      "database (every server of the exercise sees it at once).")
+    ext.add_argument("exercise", help="the exercise file")
+    ext.add_argument("--student", required=True, help="the student's id (as in the roster, or as they typed it)")
+    until = ext.add_mutually_exclusive_group(required=True)
+    until.add_argument("--until", metavar="DATE", help="their deadline, ISO-8601 (e.g. 2026-12-08T17:00; no zone: "
+                       "this machine's): later than the class's, not after --release-truth-at")
+    until.add_argument("--clear", action="store_true", help="take their extension away (the class's deadline holds)")
+    ext.set_defaults(handler=run_extend)
     tok = cmds.add_parser("token", help="the teacher's dashboard link: print it, or make a new one (--rotate)",
                           description="Print the link of the teacher's dashboard (a new one if it has expired). "
                                       "--rotate makes a new link now: the old one, and every browser logged in "
@@ -107,8 +151,8 @@ def add_parser(sub) -> None:
 
 
 def _missing_action(args) -> int:
-    raise UsageError("exercise needs an ACTION: new, codes, results, reveal or token (eha exercise --help tells "
-                     "more)")
+    raise UsageError("exercise needs an ACTION: new, codes, results, reveal, extend or token (eha exercise --help "
+                     "tells more)")
 
 
 def _fraction(option: str, text: str) -> float:
@@ -178,6 +222,11 @@ def _check_deadline(args) -> None:
         if datetime.datetime.fromisoformat(parse_deadline(args.deadline, name="--deadline")).timestamp() <= time.time():
             raise refused("--deadline", args.deadline, "it has passed: every hand-in would be refused; give a "
                                                        "later date and time")
+    if args.release_truth_at:
+        when = parse_deadline(args.release_truth_at, name="--release-truth-at")
+        if datetime.datetime.fromisoformat(when).timestamp() <= time.time():
+            raise refused("--release-truth-at", args.release_truth_at, "it has passed: every student would see "
+                          "their true values at once and no hand-in would be taken; give a later date and time")
 
 
 def _roster(path: str):
@@ -201,7 +250,16 @@ def run_new(args) -> int:
     from eha_core.exercise import Conditions, Exercise, parse_deadline
 
     hide = _names("--hide", args.hide)
-    vary, tolerance = _fraction("--vary", args.vary), _tolerances(args.tolerance)
+    vary = _fraction("--vary", args.vary)
+    if args.tolerance is None:
+        tolerance = {"B": 0.10} if "B" in hide else 0.05
+    else:
+        tolerance = _tolerances(args.tolerance)
+    try:
+        k = float(args.k)
+    except ValueError:
+        raise refused("--k", args.k, "a number of standard errors in [1, 10], e.g. 3") from None
+    floor = _fraction("--floor", args.floor)
     penalty = _fraction("--attempt-penalty", args.attempt_penalty)
     if not 0 <= penalty <= 1:
         raise refused("--attempt-penalty", args.attempt_penalty, "use a percentage in [0 %, 100 %]",
@@ -214,9 +272,11 @@ def run_new(args) -> int:
     roster = None
     options = {"hide": "--hide", "vary": "--vary", "tolerance": "--tolerance", "noise": "--noise",
                "measured": "--measured", "methods": "--methods", "max record": "--max-record",
+               "variants": "--variants",
                "deadline": "--deadline", "attempts": "--attempts", "roster": "--roster",
                "ids per client": "--ids-per-client", "kept uploads": "--kept-uploads",
-               "attempt penalty": "--attempt-penalty"}
+               "attempt penalty": "--attempt-penalty", "release truth at": "--release-truth-at", "k": "--k",
+               "floor": "--floor", "grading": "--grading"}
     try:
         if args.roster:
             roster = _roster(args.roster)
@@ -237,18 +297,27 @@ def run_new(args) -> int:
                                 methods=_names("--methods", args.methods), max_record_s=max_record)
         ex = Exercise.new(hide=hide, vary=vary, tolerance=tolerance, title=args.title, roster=roster,
                           conditions=conditions, deadline=parse_deadline(args.deadline) if args.deadline else "",
+                          release_at=args.release_truth_at,
                           attempts=args.attempts, feedback=args.feedback, score_rule=args.score,
-                          attempt_penalty=penalty,
+                          attempt_penalty=penalty, grading=args.grading, k=k, floor=floor,
+                          variants=tuple(v.strip() for v in args.variants.split(",") if v.strip()),
                           own_files=args.own_files, ids_per_client=ids_per_client, kept_uploads_mb=kept_uploads)
     except FieldError as exc:
         raise as_option(exc, options) from None
     ex.save(args.out)
     tol = ", ".join(f"{n} ±{100 * ex.tolerance_of(n):g} %" for n in ex.hide)
+    counts = (f"an answer counts within {tol}" if ex.grading == "relative" else
+              f"an answer counts within {ex.k:g} standard errors of the student's record from the truth (at least "
+              f"{100 * ex.floor:g} %), when {ex.k:g} standard errors are within {tol}")
     print(f"wrote {args.out}: hides {', '.join(ex.hide)}, each student's values vary by up to ±{100 * ex.vary:g} %; "
-          f"an answer counts within {tol}. Keep this file on the server.")
+          f"{counts}. Keep this file on the server.")
     print(f"conditions: {ex.conditions.describe()}")
+    if ex.variants != ("paper",):
+        print(f"actuators: drawn from {', '.join(ex.variants)} (each student one; eha exercise reveal says whose is "
+              "which)")
     print(f"hand-ins: {ex.attempts or 'no limit on the number of'} per student"
           + (f", until {ex.deadline}" if ex.deadline else ", no deadline")
+          + (f"; every student sees their true values from {ex.release_at}" if ex.release_at else "")
           + f"; feedback: {ex.feedback}; score: {ex.score_text()}")
     print("hand-ins from an uploaded file: " + ("taken, and labelled so" if ex.own_files else
                                                 "refused (only the student's own actuator's experiment counts; "
@@ -304,12 +373,42 @@ def _store(path: str):
         raise refused_file("exercise", path, f"{exc}") from None
 
 
+def _gradebook_file(args, ex, rows) -> str:
+    """The text ``--format`` writes to ``--out``: the table as CSV, or a gradebook's import file."""
+    from eha_app.runtime.classbook import results_csv
+    from eha_app.runtime.gradebook import canvas_csv, moodle_csv
+
+    if args.format == "moodle":
+        return moodle_csv(ex, rows, points=args.points_value, item=args.item)
+    if args.format == "canvas":
+        return canvas_csv(ex, rows, points=args.points_value, item=args.item)
+    return results_csv(ex, rows)
+
+
+def _check_gradebook(args, ex) -> None:
+    """--format, --out, --points and --item, checked before the database is read."""
+    from eha_app.runtime.gradebook import check_item, check_points
+
+    if args.format is not None and not args.out:
+        raise refused("--format", args.format, "give --out FILE: the file to write it to")
+    if args.out:
+        args.format = args.format or "csv"
+        check_output_file("--out", args.out)
+    try:
+        args.points_value = check_points(args.points, name="--points")
+        if args.format in ("moodle", "canvas"):
+            check_item(args.item or ex.title, args.format, name="--item")
+    except FieldError as exc:
+        raise UsageError(exc) from None
+
+
 def run_results(args) -> int:
     from eha_app.runtime.classbook import class_rows, results_cells, results_csv, results_header
 
     ex = _load(args.exercise)
     if args.csv:
         check_output_file("--csv", args.csv)
+    _check_gradebook(args, ex)
     rows = class_rows(ex, _store(args.exercise))
     header = results_header(ex)
     # what students typed reaches the teacher's terminal and spreadsheet: neither may act on it
@@ -323,6 +422,45 @@ def run_results(args) -> int:
     if args.csv:
         _write_private(args.csv, results_csv(ex, rows))
         print(f"wrote {args.csv}", file=sys.stderr)
+    if args.out:
+        # every student's grade: the teacher's, like the table
+        _write_private(args.out, _gradebook_file(args, ex, rows))
+        what = {"csv": "the table as CSV", "moodle": "Moodle's grade import (Grades > Import > CSV file; map ID "
+                "number to useridnumber)", "canvas": "Canvas's gradebook import (matched by SIS User ID)"}
+        print(f"wrote {args.out}: {what[args.format]}", file=sys.stderr)
+        if args.format == "moodle" and args.points_value > 100:
+            print(f"note: Moodle refuses a grade above 100 (here up to {args.points_value:g}) unless the site allows "
+                  "more (Site administration > Grades > General settings: unlimitedgrades, gradepointmax)",
+                  file=sys.stderr)
+    return 0
+
+
+def run_extend(args) -> int:
+    from eha_app.runtime.extensions import STUDENT_FIELD, UNTIL_FIELD, check_extension
+    from eha_app.runtime.handins import StoreError
+
+    ex = _load(args.exercise)
+    store = _store(args.exercise)
+    options = {STUDENT_FIELD: "--student", UNTIL_FIELD: "--until"}
+    try:
+        class_deadline = store.control().get("deadline", "")
+        student, until = check_extension(ex, args.student, "" if args.clear else args.until,
+                                         class_deadline=class_deadline)
+        if not args.clear and not until:
+            raise refused("--until", args.until, "give an ISO-8601 date and time, e.g. 2026-12-08T17:00 (--clear "
+                                                 "takes an extension away)")
+        store.set_extension(student, until)
+    except FieldError as exc:
+        raise as_option(exc, options) from None
+    except StoreError as exc:
+        raise refused_file("exercise", args.exercise, f"{exc}") from None
+    entry = ex.entry(student)
+    who = terminal_text(f"{entry.name} ({student})" if entry else student)
+    base = class_deadline or ex.deadline or "none"
+    if until:
+        print(f"{who} may hand in until {until} (the class's deadline: {base})")
+    else:
+        print(f"{who} has no extension now: the class's deadline holds ({base})")
     return 0
 
 
@@ -382,4 +520,9 @@ def run_reveal(args) -> int:
     for n in ex.hide:
         info = FIELD_INFO[n]
         print(f"  {n} = {getattr(p, n):.6g} {info.unit}  ({info.description})")
+    if ex.variants != ("paper",):
+        from eha_core.variants import VARIANTS
+
+        name = ex.variant_of(student)
+        print(f"  variant: {name} ({VARIANTS[name].description})")
     return 0

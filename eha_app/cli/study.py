@@ -1,4 +1,5 @@
-"""``eha study lse|tf|greybox``: one experiment repeated over many noise seeds (:mod:`eha_core.study`).
+"""``eha study lse|tf|greybox|grading``: one experiment repeated over many noise seeds (:mod:`eha_core.study`),
+or a class's hand-ins graded (:mod:`eha_core.grading`).
 
 Shows whether an estimator's standard errors are honest: per parameter, the
 mean and spread of the estimates over the seeds, the mean reported standard
@@ -104,9 +105,70 @@ def add_parser(sub) -> None:
     gb.add_argument("--t-end", type=float, default=5.0, help="record length [s] (default 5)")
     gb.set_defaults(handler=run_greybox_study_command, kind="greybox")
 
+    gr = stsub.add_parser("grading", help="is the lab's grading fair? many students, each their own actuator",
+                          description="Students of an exercise (eha exercise new's defaults, or --exercise), each "
+                                      "identifying their own actuator by one route with the page's default "
+                                      "experiment or a sound one, judged by the exercise's grading. Prints, per "
+                                      "route: the honest values refused, those the record does not determine to "
+                                      "the tolerance, the hand-ins accepted whole, a neighbour's values refused, "
+                                      "the score of three sprayed guesses, and the acceptance per parameter.")
+    gr.add_argument("--students", type=int, default=200, help="students per route, 2 to 5000 (default 200); "
+                                                              "student i's noise seed is i")
+    gr.add_argument("--route", default="all", help="lse, frequency, greybox or all (default)")
+    gr.add_argument("--experiment", default="both", help="default (the page's default run), sound, or both "
+                                                         "(default)")
+    gr.add_argument("--exercise", metavar="FILE", help="an exercise file to grade by (its secret draws the "
+                                                       "students; default: eha exercise new's defaults)")
+    gr.add_argument("--workers", type=int, default=DEFAULT_WORKERS,
+                    help=f"threads, 1 to {MAX_WORKERS} (default {DEFAULT_WORKERS})")
+    gr.add_argument("--json", action="store_true", help="print one JSON object per route and experiment")
+    gr.set_defaults(handler=run_grading_study_command, kind="grading")
+
 
 def _missing_method(args) -> int:
-    raise UsageError("study needs a METHOD: lse, tf or greybox (eha study --help tells more)")
+    raise UsageError("study needs a METHOD: lse, tf, greybox or grading (eha study --help tells more)")
+
+
+def run_grading_study_command(args) -> int:
+    from eha_core.grading import EXPERIMENTS, ROUTES
+    from eha_core.study import MAX_WORKERS
+
+    routes = list(ROUTES) if args.route == "all" else [args.route]
+    if any(r not in ROUTES for r in routes):
+        raise refused("--route", args.route, f"one of {', '.join(ROUTES)} or all")
+    experiments = ["default", "sound"] if args.experiment == "both" else [args.experiment]
+    if any(e not in ("default", "sound") for e in experiments):
+        raise refused("--experiment", args.experiment, "default, sound or both")
+    if not 2 <= args.students <= 5000:
+        raise refused("--students", args.students, "a whole number in 2-5000 (each student is compared with the next)")
+    if not 1 <= args.workers <= MAX_WORKERS:
+        raise refused("--workers", args.workers, f"a whole number in 1-{MAX_WORKERS}")
+    exercise = None
+    if args.exercise:
+        from eha_core.exercise import Exercise
+
+        from .common import check_input_file
+
+        check_input_file("--exercise", args.exercise)
+        try:
+            exercise = Exercise.load(args.exercise)
+        except FieldError as exc:
+            raise refused("--exercise", args.exercise, exc.what) from None
+    from eha_core.cancel import CancelToken
+    from eha_core.grading import GradingStudyConfig, run_grading_study
+
+    token = CancelToken()
+    for route in routes:
+        for experiment in experiments:
+            config = GradingStudyConfig(route, n_students=args.students, experiment=experiment, exercise=exercise)
+            res = _with_progress(lambda progress, c=config: run_grading_study(
+                c, workers=args.workers, progress=progress, cancel=token), args.students, args.json, token)
+            if args.json:
+                print(json_text(res.to_dict()))
+            else:
+                print(f"# {route}, {experiment}: {EXPERIMENTS[route][experiment]}")
+                print(res.summary(), f"time={res.time_s:.0f}s", flush=True)
+    return 0
 
 
 def _sensor_noise(items) -> dict[str, float]:
@@ -169,14 +231,9 @@ def run_study_command(args) -> int:
     from eha_core.cancel import CancelToken
     from eha_core.study import run_study
 
-    progress = _Progress(config.n_seeds) if sys.stderr.isatty() and not args.json else None
     token = CancelToken()
-    try:
-        with interrupt_cancels(token):
-            res = run_study(config, params, workers=args.workers, progress=progress, cancel=token)
-    finally:
-        if progress is not None:
-            progress.close()
+    res = _with_progress(lambda progress: run_study(config, params, workers=args.workers, progress=progress,
+                                                    cancel=token), config.n_seeds, args.json, token)
     if args.json:
         print(json_text(res.to_dict()))
     else:
@@ -220,14 +277,9 @@ def run_greybox_study_command(args) -> int:
     from eha_core.cancel import CancelToken
     from eha_core.identify.greybox_study import run_greybox_study
 
-    progress = _Progress(config.n_seeds) if sys.stderr.isatty() and not args.json else None
     token = CancelToken()
-    try:
-        with interrupt_cancels(token):
-            res = run_greybox_study(config, workers=args.workers, progress=progress, cancel=token)
-    finally:
-        if progress is not None:
-            progress.close()
+    res = _with_progress(lambda progress: run_greybox_study(config, workers=args.workers, progress=progress,
+                                                            cancel=token), config.n_seeds, args.json, token)
     print(json_text(res.to_dict()) if args.json else greybox_summary_text(res))
     if res.n_failed:
         print(f"eha study greybox: warning: {res.n_failed} seeds failed: {'; '.join(res.failures[:3])}",
@@ -281,6 +333,18 @@ def _bias_text(res, name: str) -> str:
     if not math.isfinite(mc):
         return f"{bias:+.3f} "
     return f"{bias:+.3f} +- {mc / se:.3f}{'!' if res.biased(name) else ' '}"
+
+
+def _with_progress(run, total: int, quiet: bool, token):
+    """``run(progress)`` with a progress line on a terminal (none with ``quiet``: JSON goes to stdout), Ctrl-C
+    setting ``token``."""
+    progress = _Progress(total) if sys.stderr.isatty() and not quiet else None
+    try:
+        with interrupt_cancels(token):
+            return run(progress)
+    finally:
+        if progress is not None:
+            progress.close()
 
 
 class _Progress:

@@ -19,7 +19,7 @@ from .glossary import term
 
 __all__ = ["CSS", "SCENARIOS", "derived_html", "lse_table_html", "table4_html", "freq_summary_html", "backout_html",
            "estimate_alert", "estimation_sentences", "SYMBOLS_HTML", "UNITS",
-           "reading_mark", "readings_html", "paper_gaps", "open_loop_note"]
+           "reading_mark", "readings_html", "paper_gaps", "open_loop_note", "assumed_model_html"]
 
 #: Styles of the formulas and tables (the app's page and the report).
 CSS = """
@@ -593,3 +593,16 @@ def backout_html(fi, hidden=()) -> str:
     lin = fi.linear
     return (table + f"<p class='eha-note eha-s2-explain'>{_s2_sentence(fi, b, lin)}</p>"
             f"<p class='eha-note'>{_gain_sentence(b, lin)}</p>")
+
+
+def assumed_model_html(route: str) -> str:
+    """What a route's model assumes of the actuator, one line under its result: every route fits the
+    paper's model, and an actuator with an effect it leaves out (a lagging spool, internal leakage,
+    Stribeck friction) shows in its residuals."""
+    from eha_core.variants import describe_effects
+
+    what = {"lse": "The least squares fit", "greybox": "The grey-box fits",
+            "frequency": "The back-out (eq. 27) linearises"}[route]
+    return (f"<p class='eha-note eha-assumes'>{what} {html.escape(describe_effects(None))}. An effect it leaves "
+            "out (a lagging valve spool, leakage between the chambers, friction that falls with speed) shows in "
+            "the residuals, not in the estimates' intervals.</p>")

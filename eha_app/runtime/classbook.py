@@ -15,9 +15,12 @@ twice). The errors are the teacher's: nothing here goes to a student's page.
 >>> store = HandIns(pathlib.Path(tempfile.mkdtemp()) / "class.json").check()
 >>> truth = ex.student_params("s1").M
 >>> est = {"M": truth * 1.02}
->>> _ = store.add("s1", est, ex.verdicts("s1", est), errors=ex.errors("s1", est))
+>>> se = {"M": truth * 0.01}          # the standard error of the student's record: 2 of them off, accepted
+>>> _ = store.add("s1", est, ex.verdicts("s1", est, se), errors=ex.errors("s1", est), settings={"std_errors": se})
 >>> [(r.id, r.name, r.count, r.score, round(r.errors["M"], 4)) for r in class_rows(ex, store)]
 [('s1', 'Ada', 1, 1.0, 0.02)]
+>>> round(class_rows(ex, store)[0].zscores["M"], 2)
+2.0
 """
 
 from __future__ import annotations
@@ -58,6 +61,7 @@ class ClassRow:
     refused: tuple[str, ...] = ()       # the hand-ins the rules refused (too many, late, closed): why, each
     best: float = 0.0                   # the best hand-in's score and the last's (``score``: the rule's)
     last: float = 0.0
+    zscores: dict = field(default_factory=dict)     # the last hand-in's (estimate - truth) / standard error
 
 
 def class_rows(exercise, store: HandIns) -> list[ClassRow]:
@@ -91,8 +95,21 @@ def class_rows(exercise, store: HandIns) -> list[ClassRow]:
             source=last.source if last else {}, same_file=tuple(same), pages=here.pages if here else 0,
             overlaps=here.overlaps if here else 0, damaged=sum(h.damaged for h in hs),
             refused=tuple(refused.get(sid, ())), best=max((h.score for h in hs), default=0.0),
-            last=last.score if last else 0.0))
+            last=last.score if last else 0.0, zscores=handin_zscores(exercise, sid, last)))
     return rows
+
+
+def handin_zscores(exercise, sid: str, handin: HandIn | None) -> dict:
+    """Per parameter of ``handin``: (estimate - truth) / the standard error the server computed on the
+    student's record (kept with the hand-in), or None without one (a hand-in from before they were kept)."""
+    if handin is None:
+        return {}
+    try:
+        judged = exercise.judge(sid, handin.estimates, handin.settings.get("std_errors") or {},
+                                handin.settings.get("model_errors") or {})
+    except (ValueError, TypeError, AttributeError):
+        return {}
+    return {n: j.z for n, j in judged.items()}
 
 
 def describe_source(row) -> str:
@@ -171,7 +188,7 @@ def describe_conditions(conditions: dict) -> str:
 def results_header(exercise) -> list[str]:
     cols = ["id", "name", "joined", "last seen", "hand-ins", "last hand-in", "method"]
     for n in exercise.hide:
-        cols += [n, f"{n} error %", f"{n} ok"]
+        cols += [n, f"{n} error %", f"{n} z", f"{n} ok"]
     return cols + [f"score ({exercise.score_rule})", "data", "conditions", "pages"]
 
 
@@ -181,8 +198,10 @@ def results_cells(exercise, row: ClassRow) -> list[str]:
              METHODS.get(row.method, row.method).split(" (")[0] if row.method else ""]
     for n in exercise.hide:
         v, e = row.estimates.get(n), row.errors.get(n)
+        z = row.zscores.get(n)
         cells += [f"{v:.6g}" if isinstance(v, (int, float)) else "",
                   f"{100 * e:.2f}" if isinstance(e, (int, float)) else "",
+                  f"{z:+.2f}" if isinstance(z, (int, float)) else "",
                   ("yes" if row.verdicts.get(n) else "no") if row.count else ""]
     return cells + [f"{row.score:.2f}" if row.count else "", describe_source(row), describe_conditions(row.conditions),
                     describe_pages(row)]

@@ -81,10 +81,11 @@ CREATE TABLE IF NOT EXISTS work_files (student TEXT NOT NULL, slot TEXT NOT NULL
                                        PRIMARY KEY (student, slot));
 CREATE TABLE IF NOT EXISTS refusals (id INTEGER PRIMARY KEY AUTOINCREMENT, time TEXT NOT NULL, student TEXT NOT NULL,
                                      method TEXT NOT NULL, why TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS extensions (student TEXT PRIMARY KEY, deadline TEXT NOT NULL, time TEXT NOT NULL);
 """
 #: What a complete database holds (tables and indexes by name).
 _NAMES = {"handins", "handins_student", "control", "presence", "clients", "work", "work_files", "work_files_size",
-          "refusals"}
+          "refusals", "extensions"}
 #: Columns added since the first version, per table (a database made by an older version gets them at the
 #: next start).
 _ADDED = {
@@ -170,7 +171,8 @@ def _busy(exc: sqlite3.Error) -> bool:
 
 class HandIns:
     """The hand-ins of the exercise at ``exercise_path``, the teacher's switches (``control``: open or
-    closed, an extended deadline, revealed, the dashboard token's nonce and expiry), who has joined
+    closed, an extended deadline, revealed, the dashboard token's nonce and expiry), the deadlines the
+    teacher extended for single students (``extensions``), who has joined
     and when they were last seen, and the students' kept work (:mod:`eha_app.runtime.work_store`)."""
 
     def __init__(self, exercise_path: str | Path):
@@ -322,16 +324,18 @@ class HandIns:
         """Store a hand-in; returns its row id. :class:`StoreError` if the database cannot take it.
 
         ``refusal(count, control)``, if given, is asked inside the transaction with the student's number
-        of hand-ins so far and the teacher's switches as they are now (two pages of one student handing
-        in at once cannot both take the last attempt; a reveal a moment ago holds): a message it returns
-        is raised as :class:`Refused` and nothing is stored. ``source``: where the data came from
-        (``{"kind": "simulated"}``, the default, or ``{"kind": "file", "name": ..., "sha256": ...}``)."""
+        of hand-ins so far and the teacher's switches as they are now, with the student's own deadline
+        under ``"extension"`` when the teacher extended it (:meth:`control_for`; two pages of one student
+        handing in at once cannot both take the last attempt; a reveal or an extension a moment ago
+        holds): a message it returns is raised as :class:`Refused` and nothing is stored. ``source``:
+        where the data came from (``{"kind": "simulated"}``, the default, or ``{"kind": "file", "name": ...,
+        "sha256": ...}``)."""
         score = sum(bool(v) for v in verdicts.values()) / max(len(verdicts), 1)
 
         def insert(db):
             if refusal is not None:
                 count = db.execute("SELECT COUNT(*) FROM handins WHERE student = ?", (student,)).fetchone()[0]
-                why = refusal(count, dict(db.execute("SELECT key, value FROM control").fetchall()))
+                why = refusal(count, _control_for(db, student))
                 if why:
                     # the attempt is kept (the teacher sees it), the hand-in is not
                     db.execute("INSERT INTO refusals (time, student, method, why) VALUES (?, ?, ?, ?)",
@@ -374,6 +378,33 @@ class HandIns:
         """``open`` ("1"/"0"), ``deadline`` (an extension, ISO-8601), ``revealed`` ("1"/"0"), and the
         dashboard token's ``token_nonce`` and ``token_expires`` (POSIX time), as set."""
         return dict(self._read("SELECT key, value FROM control"))
+
+    def control_for(self, student: str) -> dict[str, str]:
+        """The teacher's switches (:meth:`control`) as they hold for ``student``: with their own deadline
+        under ``"extension"`` when the teacher extended it (:meth:`set_extension`), read together."""
+        return self._snapshot(lambda db: _control_for(db, student))
+
+    def set_extension(self, student: str, deadline: str) -> None:
+        """Give ``student`` (the normalised id) a deadline of their own, ``deadline`` (ISO-8601, checked by
+        the caller); "" takes it away (the class's deadline holds again)."""
+        def write(db):
+            if deadline:
+                db.execute("INSERT INTO extensions (student, deadline, time) VALUES (?, ?, ?) ON CONFLICT(student) "
+                           "DO UPDATE SET deadline = excluded.deadline, time = excluded.time",
+                           (student, str(deadline), _now()))
+            else:
+                db.execute("DELETE FROM extensions WHERE student = ?", (student,))
+        self._write(write)
+
+    def extensions(self) -> dict[str, tuple[str, str]]:
+        """student -> (their own deadline, ISO-8601; when it was set), by id."""
+        return {r[0]: (r[1], r[2]) for r in
+                self._read("SELECT student, deadline, time FROM extensions ORDER BY student")}
+
+    def extension(self, student: str) -> str:
+        """The deadline of ``student``'s extension ("" if none)."""
+        rows = self._read("SELECT deadline FROM extensions WHERE student = ?", (student,))
+        return rows[0][0] if rows else ""
 
     def set_control(self, key: str, value: str) -> None:
         if key not in CONTROL_KEYS:
@@ -465,8 +496,18 @@ class HandIns:
                           "(SELECT group_concat(key || '=' || value) FROM control), "
                           "(SELECT COUNT(*) FROM presence), (SELECT MAX(last_seen) FROM presence), "
                           "(SELECT SUM(pages) FROM presence), (SELECT group_concat(page) FROM presence), "
-                          "(SELECT COUNT(*) FROM refusals)")
+                          "(SELECT COUNT(*) FROM refusals), "
+                          "(SELECT group_concat(student || '=' || deadline) FROM extensions)")
         return tuple(rows[0])
+
+
+def _control_for(db, student: str) -> dict[str, str]:
+    """The switches and ``student``'s extension, in the transaction of ``db``."""
+    control = dict(db.execute("SELECT key, value FROM control").fetchall())
+    row = db.execute("SELECT deadline FROM extensions WHERE student = ?", (student,)).fetchone()
+    if row is not None:
+        control["extension"] = row[0]
+    return control
 
 
 class Refused(StoreError):

@@ -15,12 +15,14 @@ from eha_core.experiments import (
     FrequencyExperiment,
     run_frequency_identification,
 )
+from eha_core.grading import frequency_model_error
 
 from ..render import plots
 from ..render.exports import bode_csv, frequency_figures_zip, tf_estimate_bytes
 from ..render.glossary import GLOSSARY
 from ..render.layout import WRAP_TAB_HEADERS, side_by_side
 from ..render.tables import (
+    assumed_model_html,
     backout_html,
     estimate_alert,
     freq_summary_html,
@@ -469,7 +471,8 @@ class FrequencyPanel(Section):
                       + (f", after {job.wait_s:.1f} s waiting for the server" if job.wait_s > 0.05 else "")
                       + ".</p>")
             self.summary.object = freq_summary_html(fi, hidden) + timing
-            self.backout.object = "<h4>Backed-out parameters (eq. 27)</h4>" + backout_html(fi, hidden)
+            self.backout.object = ("<h4>Backed-out parameters (eq. 27)</h4>" + backout_html(fi, hidden)
+                                   + assumed_model_html("frequency"))
             for d in self.downloads:
                 d.disabled = fi.bode is None and "bode" in d.css_classes[0]
             alert = estimate_alert(fi.estimate)
@@ -507,11 +510,13 @@ class FrequencyPanel(Section):
                 values[n], sources[n] = float(estimates[n]), "your least-squares estimate"
             else:
                 values[n], sources[n] = getattr(paper, n), "the paper's value"
+        # eq. 27 is the paper's model linearised: the effects of a variant actuator are not the student's to
+        # know (the plant's, never the model's)
         try:
-            return state.params.replace(**values), sources
+            return state.params.replace(effects=None, **values), sources
         except ValueError:
-            return state.params.replace(**{n: getattr(paper, n) for n in values}), {n: "the paper's value"
-                                                                                    for n in values}
+            return state.params.replace(effects=None, **{n: getattr(paper, n) for n in values}), {
+                n: "the paper's value" for n in values}
 
     def _assumed_backout(self, fi):
         from eha_core.identify.backout import backout
@@ -537,6 +542,13 @@ class FrequencyPanel(Section):
         settings = {**self.settings(), "beta_e_from": key,
                     "assumed": {n: getattr(assumed, n) for n in sources}, "assumed_from": sources}
         settings["_conditions"] = {"noise": {"x": self.result.config.noise_x}}
+        # the precision of the student's record, as this server computed it (zscore grading): the
+        # estimate's covariance carried through eq. 27 (the values assumed count as exact)
+        settings["_se"] = {"beta_e": float(getattr(b, key + "_std"))}
+        exercise = self.state.exercise
+        if exercise is not None and exercise.grading == "zscore" and getattr(self, "own_data", None) is None:
+            # eq. 27's own error on this experiment at the student's actuator (computed with the hand-in)
+            settings["_model_error"] = partial(frequency_model_error, self.state.params, self.result.config)
         return {"beta_e": float(getattr(b, key))}, settings
 
     def hand_in(self):

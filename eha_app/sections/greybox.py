@@ -13,6 +13,7 @@ import panel as pn
 from eha_core.board import greybox_plant, plant_model
 from eha_core.errors import ComputationError, FieldError, not_allowed
 from eha_core.experiments import LSE_INPUT, LSE_INPUT_RICH, LSE_INPUT_RICH_T_END, LSE_SCENARIOS
+from eha_core.grading import greybox_model_error
 from eha_core.identify.greybox import GREYBOX_PARAMS, GREYBOX_SIGNALS
 from eha_core.param_table import FIELD_INFO
 from eha_core.params import ActuatorParams, ParameterError
@@ -29,7 +30,7 @@ from ..render.greybox import (
     verdicts_html,
 )
 from ..render.layout import side_by_side
-from ..render.tables import SCENARIOS
+from ..render.tables import SCENARIOS, assumed_model_html
 from ..runtime.limits import RunCost
 from ..runtime.tasks import PageProgress, apply_locked, on_click, watch
 from ..session import (
@@ -374,8 +375,10 @@ class GreyBoxPanel(Section):
             elif n in hidden:
                 values[n] = _PAPER.initial_state[3] if n == "p2_0" else getattr(_PAPER, n)
         # a hidden parameter held (not estimated) stays at the truth: the plant's simulation and the model
-        # agree on it, as the least squares' regressors use it; it is never shown
-        return base.replace(**values)
+        # agree on it, as the least squares' regressors use it; it is never shown. The model is the
+        # paper's (eqs. 1-4), whatever the plant: an effect of a variant actuator (a lagging spool,
+        # leakage, Stribeck friction) is not the model's, and shows in the residuals
+        return base.replace(effects=None, **values)
 
     def _known(self, req, own) -> tuple[ActuatorParams, str] | None:
         """The parameters the run takes as known and the sentence about them: tab 1's on the student's
@@ -532,10 +535,15 @@ class GreyBoxPanel(Section):
             self.result = res
             self.last_data = data
             self.last_settings, self.last_conditions = run_settings, run_conditions
+            # what the hand-in's grading needs of the experiment: on a variant of the paper's actuator, the
+            # grey-box's own error on a noise-free record of it (its model is the paper's, not the plant's)
+            self.last_reference = None if own is not None else dict(
+                truth=params, u=u, t_end=t_end, d=parse_signal(d_text, name="custom d(t)", seed=req.seed, hold_s=1e-3),
+                measured=tuple(req.measured), guess=guess)
             self.result_context = {"scenario": scenario, "own_record": own is not None, "params": params}
             self.result_source = own_source if own is not None else {"kind": "simulated"}
             note = _run_note(job, data, res, own is not None) + paper_note
-            self.table.object = self._table_html() + note
+            self.table.object = self._table_html() + note + assumed_model_html("greybox")
             self._draw(data, res)
             self.details.object = self._details_html()
             for d in self.downloads:
@@ -718,6 +726,14 @@ class GreyBoxPanel(Section):
         # the data the estimates came from (HandInBox refuses a file's unless the exercise allows them)
         settings["_source"] = dict(self.result_source) or {"kind": "simulated"}
         settings["_conditions"] = dict(self.last_conditions)
+        # the precision of the student's record, as this server computed it (zscore grading): the
+        # inverse Fisher information at the estimate
+        settings["_se"] = {n: float(res.std_errors[n]) for n in estimates if n in res.std_errors}
+        ref = getattr(self, "last_reference", None)
+        exercise = self.state.exercise
+        if (ref is not None and exercise is not None and exercise.grading == "zscore"
+                and not ref["truth"].effects.off):
+            settings["_model_error"] = partial(greybox_model_error, names=tuple(estimates), **ref)
         return estimates, settings
 
     def _handin_refusal(self) -> str | None:

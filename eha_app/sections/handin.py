@@ -16,6 +16,7 @@ from collections.abc import Callable
 
 import panel as pn
 
+from eha_core.cancel import Cancelled
 from eha_core.exercise import FEEDBACK, METHODS
 
 from ..render.formatting import display_unit, num_html
@@ -23,7 +24,8 @@ from ..render.layout import BUTTON_CONTRAST
 from ..render.tables import SYMBOLS_HTML
 from ..runtime.tasks import on_click
 
-__all__ = ["HandInBox", "handin_status", "result_for_student", "lab_rules_html", "lab_refusal", "impossible_estimates"]
+__all__ = ["HandInBox", "handin_status", "result_for_student", "lab_rules_html", "lab_refusal", "impossible_estimates",
+           "verdict_words", "own_deadline"]
 
 
 def shown_value(name: str, value: float) -> str:
@@ -47,11 +49,61 @@ def impossible_estimates(estimates: dict) -> list[str]:
     return out
 
 
+def own_deadline(exercise, control: dict) -> str | None:
+    """The student's deadline under the teacher's switches ``control`` (:meth:`HandIns.control_for`): their
+    own extension when it is later than the class's deadline (the teacher's moved one, else the exercise
+    file's), else the class's; None when the class has none (an extension extends nothing then)."""
+    class_deadline = control.get("deadline") or exercise.deadline
+    extension = control.get("extension") or ""
+    if not class_deadline:
+        return None
+    try:
+        later = bool(extension) and exercise.deadline_at(extension) > exercise.deadline_at(class_deadline)
+    except ValueError:
+        later = False                       # a stored date no one can read (edited by hand): the class's holds
+    return extension if later else class_deadline
+
+
+def route_model_errors(reference, estimates: dict, token) -> dict:
+    """The route's own error on the student's experiment at the truth (``reference(cancel=token)``, a
+    function of :mod:`eha_core.grading`), for the parameters handed in; {} without one, or when it
+    cannot be computed (then the hand-in is judged against the truth alone, and the teacher sees
+    that no model error was kept)."""
+    if reference is None:
+        return {}
+    try:
+        return {n: float(v) for n, v in reference(cancel=token).items() if n in estimates}
+    except Cancelled:
+        raise
+    except (ValueError, ArithmeticError, RuntimeError):
+        return {}
+
+
+def verdict_words(exercise, name: str, judgement) -> str:
+    """The verdict on one value as the student reads it: accepted or not, and the acceptance their
+    record earned (k standard errors, from their own data: it says nothing of the truth)."""
+    tol = f"±{100 * exercise.tolerance_of(name):g} %"
+    band = "" if judgement.band is None else f"±{100 * judgement.band:.2g} %"
+    if exercise.grading == "relative":
+        return (f"<span class='eha-ok'>within {tol} ✓</span>" if judgement.ok else
+                f"<span class='eha-warn'>not within {tol} ✗</span>")
+    k = f"{exercise.k:g}"
+    if judgement.ok:
+        return f"<span class='eha-ok'>accepted ✓</span> (your record's acceptance: {k} standard errors, {band})"
+    if judgement.reason == "imprecise":
+        return (f"<span class='eha-warn'>not determined well enough ✗</span>: {k} standard errors of your record are "
+                f"{band}, the lab asks for {tol}; a longer record or a richer input narrows it")
+    if judgement.reason == "no-error":
+        return "<span class='eha-warn'>no standard error ✗</span>: the route gave none, so it cannot be judged"
+    return (f"<span class='eha-warn'>not accepted ✗</span>: further from the truth than {k} standard errors of your "
+            f"record ({band})")
+
+
 def lab_refusal(exercise, control: dict, count: int, *, now: float | None = None) -> str | None:
     """Why the student, with ``count`` hand-ins, may hand in nothing now under the teacher's switches
     ``control`` (None: they may)."""
-    return exercise.refusal(count, now=now, open_=control.get("open", "1") == "1", deadline=control.get("deadline"),
-                            revealed=control.get("revealed") == "1")
+    return exercise.refusal(count, now=now, open_=control.get("open", "1") == "1",
+                            deadline=own_deadline(exercise, control), revealed=control.get("revealed") == "1")
 
 
 def lab_rules_html(exercise, control: dict, count: int, *, now: float | None = None, why: str | None = None) -> str:
@@ -61,42 +113,55 @@ def lab_rules_html(exercise, control: dict, count: int, *, now: float | None = N
     import time as _time
 
     now = _time.time() if now is None else now
-    due = exercise.deadline_at(control.get("deadline"))
+    deadline = own_deadline(exercise, control)
+    due = exercise.deadline_at(deadline)
     if due is None:
         when = "no deadline"
     else:
         left = due - now
         rel = ("passed" if left <= 0 else f"in {left / 86400:.0f} days" if left >= 2 * 86400
                else f"in {left / 3600:.0f} h" if left >= 2 * 3600 else f"in {max(left / 60, 1):.0f} min")
-        when = f"deadline {_time.strftime('%Y-%m-%d %H:%M UTC', _time.gmtime(due))} ({rel})"
+        own = " extended for you" if deadline == control.get("extension") else ""
+        when = f"deadline{own} {_time.strftime('%Y-%m-%d %H:%M UTC', _time.gmtime(due))} ({rel})"
+    if exercise.release_at:
+        at = _time.strftime('%Y-%m-%d %H:%M UTC', _time.gmtime(exercise.deadline_at(exercise.release_at)))
+        when += (f"; your true values were released at {at}" if exercise.released(now)
+                 else f"; your true values are shown from {at}")
     if exercise.attempts:
         used = f"hand-ins: {count} of {exercise.attempts} used, {max(exercise.attempts - count, 0)} left"
     else:
         used = f"hand-ins: {count} so far, no limit"
     score = exercise.score_text()
     tols = {exercise.tolerance_of(n) for n in exercise.hide}
+    names = ", ".join(SYMBOLS_HTML.get(n, html.escape(n)) for n in exercise.hide)
     if len(tols) == 1:
-        names = ", ".join(SYMBOLS_HTML.get(n, html.escape(n)) for n in exercise.hide)
-        tol = f"each of {names} within ±{100 * tols.pop():g} %"
+        one = f"±{100 * tols.pop():g} %"
+        each, within = f"{one} ({names})", f"each of {names} within {one}"
     else:
-        tol = ", ".join(f"{SYMBOLS_HTML.get(n, html.escape(n))} ±{100 * exercise.tolerance_of(n):g} %"
-                        for n in exercise.hide)
+        each = within = ", ".join(f"{SYMBOLS_HTML.get(n, html.escape(n))} ±{100 * exercise.tolerance_of(n):g} %"
+                                  for n in exercise.hide)
+    if exercise.grading == "zscore":
+        label = "grading"
+        tol = (f"a value counts within {exercise.k:g} standard errors of your record from the truth (at least "
+               f"{100 * exercise.floor:g} % of it), when {exercise.k:g} standard errors are at most {each}: a "
+               "better experiment earns a tighter acceptance")
+    else:
+        label, tol = "tolerance", within
     routes = ", ".join(html.escape(METHODS[m].split(" (")[0]) for m in exercise.conditions.methods if m in METHODS)
     feedback = html.escape(FEEDBACK.get(exercise.feedback, exercise.feedback))
     why = lab_refusal(exercise, control, count, now=now) if why is None else why
     closed = f" <b class='eha-warn'>Hand-ins are refused now: {html.escape(why)}.</b>" if why else ""
     return (f"<div class='eha-lab-rules' role='status'><b>The lab's rules:</b> {when}; {used} ({score}); "
-            f"tolerance: {tol}; feedback: {feedback}; routes taken: {routes}.{closed}</div>")
+            f"{label}: {tol}; feedback: {feedback}; routes taken: {routes}.{closed}</div>")
 
 
 def handin_status(state) -> tuple[str | None, int]:
     """(why a hand-in is refused now or None, hand-ins so far) for the session's student; the
     teacher's switches are read from the store (a closed or extended exercise holds at once)."""
     ex, store = state.exercise, state.handins
-    control = store.control()
+    control = store.control_for(state.student)
     count = len(store.of(state.student))
-    return ex.refusal(count, open_=control.get("open", "1") == "1", deadline=control.get("deadline"),
-                      revealed=control.get("revealed") == "1"), count
+    return lab_refusal(ex, control, count), count
 
 
 class HandInBox:
@@ -208,6 +273,12 @@ class HandInBox:
         exercise, student, store, method = s.exercise, s.student, s.handins, self.method
         settings = dict(settings)
         source = dict(settings.pop("_source", None) or {"kind": "simulated"})
+        # the standard errors this server computed on the student's record (zscore grading), kept with
+        # the hand-in so the teacher's table can show each value's z-score
+        std_errors = {n: float(v) for n, v in dict(settings.pop("_se", None) or {}).items()}
+        settings["std_errors"] = std_errors
+        # the route's own error on the student's experiment, at the truth: computed in the worker below
+        reference = settings.pop("_model_error", None)
         from_file = source.get("kind") == "file"
         # a file's data were not taken under the exercise's conditions: its hand-in says so, not the noise floors
         conditions = ({"data": "an uploaded file"} if from_file
@@ -217,7 +288,10 @@ class HandInBox:
         def compute(_token):
             from ..runtime.handins import Refused
 
-            verdicts = exercise.verdicts(student, estimates)
+            model_errors = route_model_errors(reference, estimates, _token)
+            settings["model_errors"] = model_errors
+            judged = exercise.judge(student, estimates, std_errors, model_errors)
+            verdicts = {n: j.ok for n, j in judged.items()}
             seen = {}
 
             def refusal(count, control):
@@ -225,7 +299,7 @@ class HandInBox:
                 # moved deadline or a reveal a moment ago holds
                 seen.update(control)
                 return exercise.refusal(count, open_=control.get("open", "1") == "1",
-                                        deadline=control.get("deadline"), method=method,
+                                        deadline=own_deadline(exercise, control), method=method,
                                         revealed=control.get("revealed") == "1", source=source.get("kind"))
             try:
                 store.add(student, estimates, verdicts, method=method, settings=settings, conditions=conditions,
@@ -233,13 +307,13 @@ class HandInBox:
             except Refused as exc:
                 return None, str(exc), 0, False
             count = len(store.of(student))
-            shows = exercise.shows_verdicts(deadline=seen.get("deadline"), revealed=seen.get("revealed") == "1")
-            return verdicts, "", count, shows
+            shows = exercise.shows_verdicts(deadline=own_deadline(exercise, seen), revealed=seen.get("revealed") == "1")
+            return judged, "", count, shows
 
         session = self.section.session
 
         def show(out, _job):
-            verdicts, refused, count, shows = out
+            judged, refused, count, shows = out
             self._refusal_shown = False         # the verdict pane says this hand-in's outcome now
             for fn in list(session.after_handin):
                 fn()                            # the page reads the lab's rules again (attempts left)
@@ -255,15 +329,13 @@ class HandInBox:
             values = "".join(f"<li>{SYMBOLS_HTML.get(n, html.escape(n))} = {shown_value(n, v)}"
                              for n, v in estimates.items())
             if shows:
-                score = sum(verdicts.values())
+                score = sum(j.ok for j in judged.values())
                 items = "".join(
                     f"<li>{SYMBOLS_HTML.get(n, html.escape(n))} "
                     + ("not handed in from this route ✗" if n not in estimates else
-                       f"= {shown_value(n, estimates[n])}: "
-                       + (f"<span class='eha-ok'>within ±{100 * exercise.tolerance_of(n):g} % ✓</span>" if ok else
-                          f"<span class='eha-warn'>not within ±{100 * exercise.tolerance_of(n):g} % ✗</span>"))
-                    + "</li>" for n, ok in verdicts.items())
-                body = f"{head}: {score} of {len(verdicts)} within tolerance.<ul>{items}</ul>"
+                       f"= {shown_value(n, estimates[n])}: " + verdict_words(exercise, n, j))
+                    + "</li>" for n, j in judged.items())
+                body = f"{head}: {score} of {len(judged)} accepted.<ul>{items}</ul>"
             elif exercise.feedback == "after-deadline":
                 body = (f"{head}.<ul>{values}</ul>The verdicts are shown after the deadline"
                         + (f" ({html.escape(exercise.deadline)})" if exercise.deadline else "") + ".")
@@ -283,12 +355,13 @@ class HandInBox:
 
 
 def result_for_student(exercise, student: str, store, control: dict | None = None) -> str:
-    """What the student may now see of their result ("" for nothing yet): after the teacher's reveal,
-    their actuator's true hidden values and each hand-in's errors; after the deadline (feedback
-    "after-deadline"), the verdicts of their hand-ins."""
-    control = store.control() if control is None else control
-    revealed = control.get("revealed") == "1"
-    deadline = control.get("deadline")
+    """What the student may now see of their result ("" for nothing yet): after the teacher's reveal (or
+    once the exercise's release date has come), their actuator's true hidden values and each hand-in's
+    errors; after their deadline (feedback "after-deadline"), the verdicts of their hand-ins."""
+    control = store.control_for(student) if control is None else control
+    released = exercise.released()
+    revealed = control.get("revealed") == "1" or released
+    deadline = own_deadline(exercise, control)
     if not revealed and not (exercise.feedback == "after-deadline"
                              and exercise.shows_verdicts(deadline=deadline)):
         return ""
@@ -320,7 +393,8 @@ def result_for_student(exercise, student: str, store, control: dict | None = Non
     if revealed:
         truth = exercise.student_params(student)
         values = ", ".join(f"{sym(n)} = {shown_value(n, getattr(truth, n))}" for n in names)
-        title = f"Your teacher has revealed your actuator: {values}."
+        title = (f"Your actuator, released at {html.escape(exercise.release_at)}: {values}." if released
+                 and control.get("revealed") != "1" else f"Your teacher has revealed your actuator: {values}.")
     else:
         title = "The deadline has passed: your hand-ins' verdicts."
     return (f"<div class='eha-reveal'><b>{title}</b> Score ({html.escape(exercise.score_text())}): "

@@ -26,6 +26,7 @@ from eha_core.experiments import (
     lse_resimulation,
     run_lse_table,
 )
+from eha_core.grading import lse_model_error
 from eha_core.identify.disturbance import MAX_FREQ_HZ
 from eha_core.identify.lse import identify_lse
 from eha_core.identify.lse_reading import disturbance_leak
@@ -38,6 +39,7 @@ from ..render.layout import BUTTON_CONTRAST, side_by_side
 from ..render.tables import (
     SCENARIOS,
     UNITS,
+    assumed_model_html,
     lse_table_html,
     table4_html,
 )
@@ -660,6 +662,11 @@ class LeastSquaresPanel(Section):
             res, view, resim_error, data, resim, model, (alt, leak) = out
             self.result = res
             self.last_settings, self.last_conditions = run_settings, run_conditions
+            # what the hand-in's grading needs of the experiment (the route's own error on it, at the truth)
+            self.last_reference = None if own is not None else dict(
+                truth=params, u=u, t_end=t_end, disturbance=self._disturbance(req),
+                harmonic="sine" in self._disturbance_text(req).lower(), measured=tuple(measured),
+                noise=req.measurement_noise(), seed=req.seed)
             self.result_context = {"alternative": alt, "leak": leak, "seed": req.seed, "own_record": own is not None}
             self.result_source = own_source if own is not None else {"kind": "simulated"}
             self.last_data, self.last_resim = data, resim
@@ -671,8 +678,9 @@ class LeastSquaresPanel(Section):
                     + (f" (and {job.wait_s:.1f} s waiting for the server)" if job.wait_s > 0.05 else "")
                     + f". {resim_error}</p>" + paper_note)
             warn = "" if res.success else f"<div class='eha-warn'>{res.message}</div>"
-            self.table.object = warn + lse_table_html(res, scenario if scenario != "custom" else None,
-                                                      hidden=self.state.hidden, **self.result_context) + note
+            self.table.object = (warn + lse_table_html(res, scenario if scenario != "custom" else None,
+                                                       hidden=self.state.hidden, **self.result_context) + note
+                                 + assumed_model_html("lse"))
             if self.figure is None:
                 self.figure = plots.LseFitFigure()
                 self.figure.update(view)
@@ -730,6 +738,12 @@ class LeastSquaresPanel(Section):
         # the data the estimates came from (HandInBox refuses a file's unless the exercise allows them)
         settings["_source"] = dict(self.result_source) or {"kind": "simulated"}
         settings["_conditions"] = dict(self.last_conditions)
+        # the precision of the student's record, as this server computed it (zscore grading), and the
+        # route's own error on the same experiment (computed with the hand-in, in its worker)
+        settings["_se"] = {n: float(self.result.std_errors[n]) for n in estimates if n in self.result.std_errors}
+        ref = getattr(self, "last_reference", None)
+        if ref is not None and self.state.exercise is not None and self.state.exercise.grading == "zscore":
+            settings["_model_error"] = partial(lse_model_error, **ref)
         return estimates, settings
 
     def _disturbance_text(self, req) -> str:

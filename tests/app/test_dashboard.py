@@ -27,9 +27,12 @@ def lab(tmp_path):
 
 
 def hand_in(ex, store, student, factor):
+    """A hand-in of the truth times ``factor``, from a record with a standard error of 1 % of each value."""
     truth = ex.student_params(student)
     est = {n: getattr(truth, n) * factor for n in HIDE}
-    return store.add(student, est, ex.verdicts(student, est), errors=ex.errors(student, est))
+    se = {n: 0.01 * getattr(truth, n) for n in HIDE}
+    return store.add(student, est, ex.verdicts(student, est, se), errors=ex.errors(student, est),
+                     settings={"std_errors": se})
 
 
 def test_hand_ins_added_to_the_store_show_up_after_a_poll(lab):

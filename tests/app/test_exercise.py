@@ -104,8 +104,13 @@ def test_a_student_identifies_their_actuator_and_hands_in(exercise):
     assert lse.handin_button.description.endswith("in the table")
     assert "hidden" in lse.table.object and "nominal" not in lse.table.object
     lse.hand_in()
-    verdicts = ex.verdicts("ada", lse.result.estimates)
-    assert f"{sum(verdicts.values())} of 4 within tolerance" in lse.verdict.object
+    rows = HandIns(path).all()
+    # judged by the standard errors of the student's own record and the route's own error on it
+    kept = rows[0].settings
+    assert kept["std_errors"] == {n: pytest.approx(lse.result.std_errors[n]) for n in HIDE}
+    assert set(kept["model_errors"]) == set(HIDE)
+    verdicts = ex.verdicts("ada", lse.result.estimates, kept["std_errors"], kept["model_errors"])
+    assert f"{sum(verdicts.values())} of 4 accepted" in lse.verdict.object
     for n in HIDE:
         assert f"{getattr(truth, n):.6g}" not in lse.verdict.object.replace(f"{lse.result.estimates[n]:.5g}", "")
     rows = HandIns(path).all()

@@ -31,7 +31,7 @@ def test_the_rules_are_in_view_from_the_start(lab):
     rules = page.rules_pane.object
     assert page.rules_pane in page.layout.objects
     assert "deadline 2099-01-01 12:00 UTC (in " in rules
-    assert "hand-ins: 0 of 2 used, 2 left" in rules and "within ±5 %" in rules
+    assert "hand-ins: 0 of 2 used, 2 left" in rules and "3 standard errors are at most ±5 % (M, B, A" in rules
     assert "only that the hand-in was stored" in rules                    # the feedback policy, named
     assert "least squares" in rules and "refused" not in rules
 

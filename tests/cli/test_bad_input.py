@@ -16,7 +16,8 @@ from eha_app.cli import main
 #: (argv, the line's start: the option as typed and its value as typed). Paths are filled in by
 #: ``files``: {dir} a folder, {bin} a binary file, {empty} an empty one, {missing} none, {new} a file
 #: name free to write, {exercise} an exercise file, {renamed} a record whose columns have other names
-#: (time, position[mm], ...), {odd} one whose columns cannot be guessed (a, b, c).
+#: (time, position[mm], ...), {odd} one whose columns cannot be guessed (a, b, c), {roster} an exercise file
+#: with a roster (s1) and a deadline.
 CASES = [
     # simulate
     (["simulate", "--case", "7"], "--case = 7"),
@@ -102,6 +103,13 @@ CASES = [
     (["exercise", "new", "--vary", "-5%", "--out", "{new}"], "--vary = "),
     (["exercise", "new", "--attempt-penalty", "150%", "--out", "{new}"], "--attempt-penalty = 150%"),
     (["exercise", "new", "--attempt-penalty", "lots", "--out", "{new}"], "--attempt-penalty = lots"),
+    (["exercise", "new", "--k", "0.5", "--out", "{new}"], "--k = 0.5 is not allowed: a number of standard errors"),
+    (["exercise", "new", "--k", "three", "--out", "{new}"], "--k = three"),
+    (["exercise", "new", "--floor", "60%", "--out", "{new}"], "--floor = 60 %"),
+    (["exercise", "new", "--tolerance", "Q=5%", "--out", "{new}"], "--tolerance = Q=5%"),
+    (["study", "grading", "--route", "arx"], "--route = arx"),
+    (["study", "grading", "--students", "1"], "--students = 1"),
+    (["study", "grading", "--experiment", "best"], "--experiment = best"),
     (["exercise", "new", "--noise", "x=-1mm", "--out", "{new}"], "--noise = x=-1mm"),
     (["exercise", "new", "--roster", "{bin}", "--out", "{new}"], "--roster = '{bin}'"),
     (["exercise", "new", "--out", "{dir}"], "--out = '{dir}'"),
@@ -109,6 +117,20 @@ CASES = [
     (["exercise", "results", "{empty}"], "exercise = '{empty}'"),
     (["exercise", "reveal", "{bin}", "--student", "ada"], "exercise = '{bin}'"),
     (["exercise", "token", "{exercise}", "--days", "-1"], "--days = -1"),
+    (["exercise", "new", "--deadline", "2099-01-02T00:00", "--release-truth-at", "2099-01-01T00:00", "--out", "{new}"],
+     "--release-truth-at = 2099-01-01T00:00"),
+    (["exercise", "new", "--release-truth-at", "soon", "--out", "{new}"], "--release-truth-at = soon"),
+    (["exercise", "new", "--release-truth-at", "2020-01-01T00:00", "--out", "{new}"],
+     "--release-truth-at = 2020-01-01T00:00"),
+    (["exercise", "results", "{exercise}", "--format", "moodle", "--out", "{new}", "--points", "0"], "--points = 0"),
+    (["exercise", "results", "{exercise}", "--format", "canvas"], "--format = canvas"),
+    (["exercise", "extend", "{roster}", "--student", "s9", "--until", "2099-02-01T00:00"], "--student = s9"),
+    (["exercise", "extend", "{roster}", "--student", "s1", "--until", "next friday"], "--until = next friday"),
+    (["exercise", "extend", "{roster}", "--student", "s1", "--until", "2098-12-31T00:00"],
+     "--until = 2098-12-31T00:00"),
+    (["exercise", "extend", "{exercise}", "--student", "ada", "--until", "2099-02-01T00:00"],
+     "--until = 2099-02-01T00:00"),
+    (["exercise", "extend", "{bin}", "--student", "s1", "--until", "2099-02-01T00:00"], "exercise = '{bin}'"),
 ]
 
 
@@ -121,12 +143,13 @@ def files(tmp_path_factory):
     (root / "binary.json").write_bytes(b"\x80\x81\x00 not text")
     (root / "empty.csv").write_text("")
     Exercise.new(hide=("M",)).save(root / "class.json")
+    Exercise.new(hide=("M",), roster=[("s1", "Ada")], deadline="2099-01-01T00:00").save(root / "roster.json")
     (root / "renamed.csv").write_text("time,position[mm],velocity[mm/s],pA[bar],pB[bar],valve[V]\n"
                                       + "".join(f"{k * 1e-3},0,0,120,180,0\n" for k in range(60)))
     (root / "odd.csv").write_text("a,b,c\n" + "".join(f"{k},0,0\n" for k in range(60)))
     return {"dir": str(root / "folder"), "bin": str(root / "binary.json"), "empty": str(root / "empty.csv"),
             "missing": str(root / "nothere.csv"), "new": str(root / "new.json"), "exercise": str(root / "class.json"),
-            "renamed": str(root / "renamed.csv"), "odd": str(root / "odd.csv")}
+            "renamed": str(root / "renamed.csv"), "odd": str(root / "odd.csv"), "roster": str(root / "roster.json")}
 
 
 @pytest.mark.parametrize("argv, named", CASES, ids=[" ".join(argv) for argv, _ in CASES])
@@ -194,8 +217,8 @@ def test_an_address_another_machine_has_names_the_address_not_the_port():
 
 @pytest.mark.parametrize("argv, says", [
     (["identify"], "identify needs a METHOD: lse, tf or greybox"),
-    (["study"], "study needs a METHOD: lse, tf or greybox"),
-    (["exercise"], "exercise needs an ACTION: new, codes, results, reveal or token"),
+    (["study"], "study needs a METHOD: lse, tf, greybox or grading"),
+    (["exercise"], "exercise needs an ACTION: new, codes, results, reveal, extend or token"),
     (["frobnicate"], "argument COMMAND: invalid choice: 'frobnicate'"),
 ])
 def test_a_missing_or_unknown_subcommand_is_one_line(capsys, argv, says):

@@ -81,7 +81,7 @@ def test_tf_json_on_the_linear_plant(capsys):
     (["tf", "--seeds", "3", "--estimator", "iv"], "unrecognized arguments: --estimator iv"),
     (["tf", "--seeds", "3", "--noise", "-1"], "--noise = -1 is not allowed"),
     (["lse"], "the following arguments are required: --seeds"),
-    ([], "study needs a METHOD: lse, tf or greybox"),
+    ([], "study needs a METHOD: lse, tf, greybox or grading"),
 ])
 def test_bad_arguments_get_one_line_and_exit_code_2(capsys, argv, message):
     code, out, err = run(capsys, "study", *argv)
