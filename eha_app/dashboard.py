@@ -53,7 +53,7 @@ from .runtime.classbook import (
     describe_pages,
     describe_source,
     handin_errors,
-    handin_zscores,
+    handin_judgements,
     results_csv,
 )
 from .runtime.extensions import STUDENT_FIELD, check_extension
@@ -100,7 +100,7 @@ def _param_head(exercise, name: str) -> str:
             f"±{100 * exercise.tolerance_of(name):g} %</span>")
 
 
-def _param_cell(name: str, value, error, verdict, count: int, z=None) -> str:
+def _param_cell(name: str, value, error, verdict, count: int, z=None, reason: str = "") -> str:
     """A value (in the unit its column names, as the students' pages write it) with its error against
     the truth, its z-score (the error in standard errors of the student's record) and its verdict, in
     one cell."""
@@ -111,6 +111,9 @@ def _param_cell(name: str, value, error, verdict, count: int, z=None) -> str:
     err = f"{100 * error:+.2f} %" if isinstance(error, (int, float)) else "—"
     mark = "<span class='ok'>✓</span>" if verdict else "<span class='no'>✗</span>"
     zs = f" <span class='small'>z {z:+.1f}</span>" if isinstance(z, (int, float)) else ""
+    if reason == "imprecise":
+        zs += (" <span class='small no' title='k standard errors of the record exceed the tolerance'>not "
+               "determined</span>")
     return f"<td class='num'>{shown} <span class='small {'ok' if verdict else 'no'}'>{err}</span>{zs} {mark}</td>"
 
 
@@ -412,7 +415,7 @@ class Dashboard(pn.viewable.Viewer):
         body = []
         for r in rows:
             cells = "".join(_param_cell(n, r.estimates.get(n), r.errors.get(n), r.verdicts.get(n), r.count,
-                                        r.zscores.get(n))
+                                        r.zscores.get(n), r.reasons.get(n, ""))
                             for n in ex.hide)
             scores = "".join(
                 ("<td class='num dim'>—</td>" if not r.count else
@@ -447,8 +450,9 @@ class Dashboard(pn.viewable.Viewer):
         body = []
         for h in handins:
             errors = h.errors or handin_errors(ex, h.student, h)
-            zs = handin_zscores(ex, h.student, h)
-            cells = "".join(_param_cell(n, h.estimates.get(n), errors.get(n), h.verdicts.get(n), 1, zs.get(n))
+            judged = handin_judgements(ex, h.student, h)
+            cells = "".join(_param_cell(n, h.estimates.get(n), errors.get(n), h.verdicts.get(n), 1,
+                                        getattr(judged.get(n), "z", None), getattr(judged.get(n), "reason", ""))
                             for n in ex.hide)
             body.append(f"<tr><td>{_when(h.time, today)}</td><td>{_esc(h.student)}</td>"
                         f"<td>{_esc(names.get(h.student, ''))}</td><td class='num'>{numbers[h.id]}</td>"

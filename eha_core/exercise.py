@@ -854,8 +854,9 @@ class Exercise:
         if self.grading == "relative":
             return "a value counts when it lies within its tolerance of the truth"
         return (f"a value counts when it lies within {self.k:g} standard errors of the truth (the standard "
-                f"error of your own record, at least {100 * self.floor:g} % of the truth), and {self.k:g} "
-                "standard errors are within its tolerance: a better experiment earns a tighter acceptance")
+                f"error of the student's own record, at least {100 * self.floor:g} % of the truth), and "
+                f"{self.k:g} standard errors are within its tolerance: a better experiment earns a tighter "
+                "acceptance")
 
     # -- the hand-in rules ------------------------------------------------------------------
     def deadline_at(self, override: str | None = None) -> float | None:

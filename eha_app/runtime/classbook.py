@@ -62,6 +62,7 @@ class ClassRow:
     best: float = 0.0                   # the best hand-in's score and the last's (``score``: the rule's)
     last: float = 0.0
     zscores: dict = field(default_factory=dict)     # the last hand-in's (estimate - truth) / standard error
+    reasons: dict = field(default_factory=dict)     # ... and why each value counts or not (Judgement.reason)
 
 
 def class_rows(exercise, store: HandIns) -> list[ClassRow]:
@@ -95,21 +96,32 @@ def class_rows(exercise, store: HandIns) -> list[ClassRow]:
             source=last.source if last else {}, same_file=tuple(same), pages=here.pages if here else 0,
             overlaps=here.overlaps if here else 0, damaged=sum(h.damaged for h in hs),
             refused=tuple(refused.get(sid, ())), best=max((h.score for h in hs), default=0.0),
-            last=last.score if last else 0.0, zscores=handin_zscores(exercise, sid, last)))
+            last=last.score if last else 0.0, zscores=handin_zscores(exercise, sid, last),
+            reasons=handin_reasons(exercise, sid, last)))
     return rows
 
 
-def handin_zscores(exercise, sid: str, handin: HandIn | None) -> dict:
-    """Per parameter of ``handin``: (estimate - truth) / the standard error the server computed on the
-    student's record (kept with the hand-in), or None without one (a hand-in from before they were kept)."""
+def handin_judgements(exercise, sid: str, handin: HandIn | None) -> dict:
+    """Per parameter of ``handin``: its :class:`~eha_core.exercise.Judgement` by the exercise's grading,
+    from the standard errors and the route's model errors kept with it ({} for none)."""
     if handin is None:
         return {}
     try:
-        judged = exercise.judge(sid, handin.estimates, handin.settings.get("std_errors") or {},
-                                handin.settings.get("model_errors") or {})
+        return exercise.judge(sid, handin.estimates, handin.settings.get("std_errors") or {},
+                              handin.settings.get("model_errors") or {})
     except (ValueError, TypeError, AttributeError):
         return {}
-    return {n: j.z for n, j in judged.items()}
+
+
+def handin_zscores(exercise, sid: str, handin: HandIn | None) -> dict:
+    """Per parameter of ``handin``: (estimate - truth - the route's own error) / the standard error the
+    server computed on the student's record, or None without one (a hand-in from before they were kept)."""
+    return {n: j.z for n, j in handin_judgements(exercise, sid, handin).items()}
+
+
+def handin_reasons(exercise, sid: str, handin: HandIn | None) -> dict:
+    """Per parameter of ``handin``: why it counts or not ("within", "outside", "imprecise", ...)."""
+    return {n: j.reason for n, j in handin_judgements(exercise, sid, handin).items()}
 
 
 def describe_source(row) -> str:

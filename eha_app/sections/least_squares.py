@@ -640,7 +640,9 @@ class LeastSquaresPanel(Section):
             if not res.success:
                 return None
             try:
-                return lse_model(res, params, kp, "LS", f"least squares ({what}) → eq. 24, Kp = {kp:g} V/m")
+                # the paper's model with the estimates (a variant actuator's effects are the plant's only)
+                return lse_model(res, params.replace(effects=None), kp, "LS",
+                                 f"least squares ({what}) → eq. 24, Kp = {kp:g} V/m")
             except ParameterError:
                 return None
 

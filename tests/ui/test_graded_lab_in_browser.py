@@ -13,7 +13,9 @@ field); the gradebook file for Moodle carries the counted score."""
 from __future__ import annotations
 
 import csv
+import os
 import subprocess
+from pathlib import Path
 
 from playwright.sync_api import expect
 
@@ -22,6 +24,8 @@ from eha_core.exercise import Exercise
 from tests.serve.conftest import EHA, EhaServer, dashboard_token
 from tests.ui.browser_helpers import JS_TEXT, text_of
 from tests.ui.test_lab_in_browser import join
+
+SHOTS = Path(os.environ.get("EHA_SCREENSHOTS", "/work/scratch"))
 
 
 def _exercise(path):
@@ -78,6 +82,9 @@ def test_a_lab_with_variants_graded_by_each_record(browser, tmp_path):
         page.locator(".eha-field-lse_estimator select").select_option(label="instrumental variables")
         second = _hand_in_lse(page, 2, shows="Estimator: instrumental variables")
         assert "3 of 4 accepted" in second, second
+        SHOTS.mkdir(parents=True, exist_ok=True)
+        page.locator(".eha-verdict", has_text="hand-in 2 of 3").first.scroll_into_view_if_needed()
+        page.screenshot(path=str(SHOTS / "graded_lab_verdict.png"))
         rows = HandIns(path).of("s1")
         judged = [ex.judge("s1", r.estimates, r.settings["std_errors"], r.settings["model_errors"]) for r in rows]
         assert [j["M"].ok for j in judged] == [False, True]
@@ -100,6 +107,7 @@ def test_a_lab_with_variants_graded_by_each_record(browser, tmp_path):
         teacher.get_by_role("button", name="Extend").click()
         teacher.locator(".eha-dash-extensions", has_text="s2").wait_for(timeout=30_000)
         assert HandIns(path).extension("s2") == "2099-02-01T12:00"
+        teacher.screenshot(path=str(SHOTS / "graded_lab_dashboard.png"), full_page=True)
         assert "Traceback" not in server.log_text()
     finally:
         for c in contexts:
