@@ -35,7 +35,7 @@ joins with its own code. The steps:
            when the grey-box passed its checks); its other views are computed when their tabs are opened
   handin   "Hand in the grey-box estimates"; when the grey-box failed its checks that button is off and
            the least squares' are handed in instead; done when the verdict shows. handin_ok=K/N: the
-           hand-ins stored (the route and the verdicts "k of 4 within tolerance" are printed under the step)
+           hand-ins stored (the route and the verdicts "k of 4 accepted" are printed under the step)
   retype   back to tab 1, type L0 again
 
 ``--churn`` works with it too (a roster of K); ``--url`` does not (the benchmark makes the exercise and

@@ -946,7 +946,8 @@ class Student(StudentSession):
         seconds = time.perf_counter() - t0
         self.detail["route"] = route
         self.detail["handed_in"] = "<b>Handed in</b>" in text
-        within = re.search(r"(\d+) of (\d+) within tolerance", _plain_text(text))
+        # "k of 4 accepted" (graded by the record), "k of 4 within tolerance" (an exercise file from before)
+        within = re.search(r"(\d+) of (\d+) (?:accepted|within tolerance)", _plain_text(text))
         if within:
             self.detail["within"] = f"{within.group(1)}/{within.group(2)}"
             # the parameters outside their tolerance (✗), by their symbols on the page (M, B, A f, β e)

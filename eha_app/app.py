@@ -235,7 +235,7 @@ class ExerciseGate:
         if not exercise.own_files:
             rules.append("a hand-in comes from your actuator's experiment (a file you upload can be identified, "
                          "not handed in)")
-        rules.append({"verdict": "each hand-in tells you which values are within tolerance",
+        rules.append({"verdict": "each hand-in tells you which values are accepted",
                       "none": "a hand-in is only stored: your teacher tells you the result",
                       "after-deadline": "the verdicts are shown after the deadline"}[exercise.feedback])
         who = ("Type the join code your teacher gave you." if exercise.has_roster else

@@ -242,7 +242,7 @@ class HandInBox:
         items = "".join(f"<li>{text}</li>" for text in impossible)
         self.confirm[0].object = (f"<div class='eha-verdict-box' role='alert'><b class='eha-warn'>Physically "
                                   f"impossible:</b><ul>{items}</ul>No actuator has such a value: it cannot be "
-                                  f"within tolerance.{attempt} Hand it in anyway?</div>")
+                                  f"accepted.{attempt} Hand it in anyway?</div>")
         self._asked = dict(estimates)
         self.confirm.visible = True
 
