@@ -84,6 +84,7 @@ def class_rows(exercise, store: HandIns) -> list[ClassRow]:
         hs = handins.get(sid, [])
         here = presence.get(sid)
         last = hs[-1] if hs else None
+        judged = handin_judgements(exercise, sid, last)
         mine = {str(h.source.get("sha256")) for h in hs if h.source.get("kind") == "file"}
         same = sorted(set().union(*(files.get(d, set()) for d in mine)) - {sid}) if mine else []
         rows.append(ClassRow(
@@ -96,8 +97,8 @@ def class_rows(exercise, store: HandIns) -> list[ClassRow]:
             source=last.source if last else {}, same_file=tuple(same), pages=here.pages if here else 0,
             overlaps=here.overlaps if here else 0, damaged=sum(h.damaged for h in hs),
             refused=tuple(refused.get(sid, ())), best=max((h.score for h in hs), default=0.0),
-            last=last.score if last else 0.0, zscores=handin_zscores(exercise, sid, last),
-            reasons=handin_reasons(exercise, sid, last)))
+            last=last.score if last else 0.0, zscores={n: j.z for n, j in judged.items()},
+            reasons={n: j.reason for n, j in judged.items()}))
     return rows
 
 
@@ -113,15 +114,6 @@ def handin_judgements(exercise, sid: str, handin: HandIn | None) -> dict:
         return {}
 
 
-def handin_zscores(exercise, sid: str, handin: HandIn | None) -> dict:
-    """Per parameter of ``handin``: (estimate - truth - the route's own error) / the standard error the
-    server computed on the student's record, or None without one (a hand-in from before they were kept)."""
-    return {n: j.z for n, j in handin_judgements(exercise, sid, handin).items()}
-
-
-def handin_reasons(exercise, sid: str, handin: HandIn | None) -> dict:
-    """Per parameter of ``handin``: why it counts or not ("within", "outside", "imprecise", ...)."""
-    return {n: j.reason for n, j in handin_judgements(exercise, sid, handin).items()}
 
 
 def describe_source(row) -> str:
