@@ -22,24 +22,16 @@ JS_BUTTON_BOX = """(label) => {
 }"""
 
 JS_WATCH_REPORT_LABEL = """() => {
-  // every label the report's button shows, polled every millisecond (a report of a short session is
-  // ready in ~100 ms: the "Preparing" label is short-lived); the button's element is redrawn when its
-  // label changes, so it is looked up in its widget's host each time
-  const find = (root) => {
-    for (const el of root.querySelectorAll('.eha-session-report')) return el;
-    for (const el of root.querySelectorAll('*')) if (el.shadowRoot) { const f = find(el.shadowRoot); if (f) return f; }
-    return null;
-  };
-  const label = () => {
-    const host = find(document);            // looked up each time: the page may redraw the row
-    const b = host && (host.shadowRoot || host).querySelector('button');
-    return b ? b.textContent.trim() : '';
-  };
-  window.__ehaLabels = [label()];
-  setInterval(() => {
-    const t = label();
-    if (t !== window.__ehaLabels.at(-1)) window.__ehaLabels.push(t);
-  }, 1);
+  // every label the report's button is given, as the page's model receives it: a report of a short
+  // session is ready in ~100 ms, and under load the "Preparing" label and its return can arrive in
+  // one batch, between two paints, so the page's drawn text would miss it
+  window.__ehaLabels = [];
+  for (const doc of window.Bokeh.documents)
+    for (const m of doc.all_models)
+      if (m.label === 'Report of this session') {
+        window.__ehaLabels.push(m.label);
+        m.properties.label.change.connect(() => window.__ehaLabels.push(m.label));
+      }
 }"""
 
 
