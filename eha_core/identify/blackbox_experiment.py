@@ -74,7 +74,7 @@ class BlackBoxExperiment:
     """
 
     loop: str = "closed"
-    signal_type: str = "prbs"
+    signal_type: str = "rbs"
     n_samples: int = 2000
     ts: float = 0.02
     r_amplitude: float = 10.0
@@ -132,6 +132,10 @@ class BlackBoxExperiment:
             warnings.simplefilter("ignore", UserWarning)
             ex = idinput([self.n_samples, 1, 1], self.signal_type, band, (-amp, amp), seed=seed)
         rng = np.random.default_rng([seed, 0xB1AC])
+        if self.signal_type == "prbs":
+            # a maximum-length sequence is the same for every seed (idinput's): the seed picks where its
+            # period starts, so the validation experiment's input is not the estimation's
+            ex = dataclasses.replace(ex, u=np.roll(ex.u, int(rng.integers(ex.u.size))))
         if self.loop == "closed":
             from ..experiments import FrequencyExperiment
 
