@@ -150,7 +150,15 @@ def merge(*datas: IdData, name: str | None = None) -> IdData:
     """Several experiments as one data set for estimation (MATLAB ``merge``).
 
     Every experiment must have the same sample time; the estimators restart
-    their filters at each experiment, so no false transient joins them."""
+    their filters at each experiment, so no false transient joins them.
+
+    Parameters
+    ----------
+    *datas : IdData
+        The experiments (each may itself hold several).
+    name : str, optional
+        The merged data's name; default the experiments' names joined by " + ".
+    """
     if not datas:
         raise not_allowed("experiments", "none", "merge needs at least one experiment")
     ts = datas[0].ts
@@ -186,6 +194,15 @@ class LinearModel:
     def h_poly(self) -> tuple[np.ndarray, np.ndarray]:
         """``(hc, hd)``: ``H(q) = hc(q^-1) / hd(q^-1)``, both monic (default ``H = 1``: output error)."""
         return np.array([1.0]), np.array([1.0])
+
+    def polynomial_form(self) -> tuple[np.ndarray, ...]:
+        """``(A, B, C, D, F)`` of the general form ``A y = B/F u + C/D e`` (Ljung 1999, eq. 4.33):
+        by default ``A = 1``, ``B, F`` from :meth:`g_poly` and ``C, D`` from :meth:`h_poly`. A model
+        whose ``G`` and ``H`` share ``A`` gives it here, so that its predictor needs no ``1/A``."""
+        gb, ga = self.g_poly()
+        hc, hd = self.h_poly()
+        return np.array([1.0]), np.asarray(gb, float), np.asarray(hc, float), np.asarray(hd, float), \
+            np.asarray(ga, float)
 
     def poles(self) -> np.ndarray:
         """Poles of ``G`` (roots in ``z``)."""
@@ -261,6 +278,7 @@ class EstimateFields:
         }
 
     def to_json(self, **kwargs) -> str:
+        """:meth:`to_dict` as JSON text; ``**kwargs`` go to :func:`json.dumps` (``indent=2``...)."""
         import json
 
         return json.dumps(self.to_dict(), **kwargs)
@@ -318,21 +336,22 @@ def _segment_output(model: LinearModel, y: np.ndarray, u: np.ndarray, horizon, i
                 coef, *_ = np.linalg.lstsq(basis, y - yhat, rcond=None)
                 yhat = yhat + basis @ coef
         return yhat
-    hc, hd = model.h_poly()
-    # k-step predictor (Ljung 1999, eq. 3.31): y_hat = Wk H^-1 G u + (1 - Wk H^-1) y, Wk = the first k
-    # impulse-response terms of H; H^-1 G = gb hd / (ga hc)
+    pa, pb, pc, pd, pf = model.polynomial_form()
+    # k-step predictor (Ljung 1999, eq. 3.31): y_hat = Wk H^-1 G u + (1 - Wk H^-1) y, with H = C/(A D),
+    # G = B/(A F) and Wk the first k terms of H's impulse response; A cancels from H^-1 G = D B/(C F),
+    # and 1 - Wk H^-1 = (C - Wk A D)/C, so the predictor never divides by A (nor runs 1/A unstable)
     impulse = np.zeros(horizon)
     impulse[0] = 1.0
-    wk = scipy.signal.lfilter(hc, hd, impulse)
-    num_u = _polymul(_polymul(wk, hd), gb)
-    den_u = _polymul(ga, hc)
-    num_y = _polymul(wk, hd)                    # Wk H^-1 = wk hd / hc; 1 - that = (hc - wk hd) / hc
-    n = max(len(hc), len(num_y))
-    one_minus = np.pad(hc, (0, n - len(hc))) - np.pad(num_y, (0, n - len(num_y)))
-    yhat = scipy.signal.lfilter(num_u, den_u, u) + scipy.signal.lfilter(one_minus, hc, y)
+    wk = scipy.signal.lfilter(pc, _polymul(pa, pd), impulse)
+    num_u = _polymul(_polymul(wk, pd), pb)
+    den_u = _polymul(pc, pf)
+    wad = _polymul(wk, _polymul(pa, pd))
+    n = max(len(pc), len(wad))
+    one_minus = np.pad(pc, (0, n - len(pc))) - np.pad(wad, (0, n - len(wad)))
+    yhat = scipy.signal.lfilter(num_u, den_u, u) + scipy.signal.lfilter(one_minus, pc, y)
     if initial == "estimate":
         # the predictor's transients: free responses of its two filters, fitted by least squares
-        basis = np.hstack([_filter_free_basis(den_u, y.size), _filter_free_basis(np.asarray(hc, float), y.size)])
+        basis = np.hstack([_filter_free_basis(den_u, y.size), _filter_free_basis(np.asarray(pc, float), y.size)])
         if basis.shape[1]:
             coef, *_ = np.linalg.lstsq(basis, y - yhat, rcond=None)
             yhat = yhat + basis @ coef
@@ -340,13 +359,35 @@ def _segment_output(model: LinearModel, y: np.ndarray, u: np.ndarray, horizon, i
 
 
 def simulate(model: LinearModel, data: IdData, initial: str = "zero") -> np.ndarray:
-    """The model's simulated output ``G u`` on ``data`` (each experiment from rest, or its free
-    response fitted with ``initial="estimate"``)."""
+    """The model's simulated output ``G u`` on ``data``.
+
+    Parameters
+    ----------
+    model : LinearModel
+        Any black-box model.
+    data : IdData
+        Its input ``u`` drives the model; with ``initial="estimate"`` its output ``y`` fits the free
+        response of each experiment.
+    initial : {"zero", "estimate"}
+        Each experiment from rest, or its free response fitted by linear least squares.
+    """
     return predict(model, data, None, initial)
 
 
 def predict(model: LinearModel, data: IdData, horizon=1, initial: str = "zero") -> np.ndarray:
-    """The model's k-step-ahead prediction on ``data`` (``horizon=None``: simulation)."""
+    """The model's k-step-ahead prediction on ``data``.
+
+    Parameters
+    ----------
+    model : LinearModel
+        Any black-box model.
+    data : IdData
+        The input and the measured output the predictor reads (up to ``t - k``).
+    horizon : int or None
+        k >= 1 steps ahead; None (or ``math.inf``) for simulation.
+    initial : {"zero", "estimate"}
+        The predictor's filters from rest, or their free responses fitted by linear least squares.
+    """
     k, initial = _check_horizon(horizon), _check_initial(initial)
     return np.concatenate([_segment_output(model, y, u, k, initial) for y, u in data.segments()])
 
@@ -355,20 +396,21 @@ def predict(model: LinearModel, data: IdData, horizon=1, initial: str = "zero") 
 # fit and criteria
 # ---------------------------------------------------------------------------
 def fit_percent(y, yhat) -> float:
-    """MATLAB's fit, ``100 (1 - ||y - y_hat|| / ||y - mean(y)||)`` (NRMSE)."""
+    """MATLAB's fit, ``100 (1 - ||y - yhat|| / ||y - mean(y)||)`` (NRMSE), of ``yhat`` to ``y``
+    (NaN for a constant ``y``)."""
     y, yhat = np.asarray(y, float), np.asarray(yhat, float)
     den = np.linalg.norm(y - y.mean())
     return float("nan") if den == 0 else float(100.0 * (1.0 - np.linalg.norm(y - yhat) / den))
 
 
 def horizon_words(horizon) -> str:
-    """How a fit's horizon reads everywhere it is shown."""
+    """How a fit's ``horizon`` (None or inf: simulation; k: k-step prediction) reads everywhere it is shown."""
     k = _check_horizon(horizon)
     return "simulation" if k is None else f"{k}-step prediction"
 
 
 def initial_words(initial: str) -> str:
-    """How a fit's initial conditions read everywhere they are shown."""
+    """How a fit's ``initial`` conditions (zero, estimate) read everywhere they are shown."""
     return {"zero": "zero initial conditions", "estimate": "initial conditions estimated"}[_check_initial(initial)]
 
 
@@ -407,7 +449,19 @@ class Comparison:
 
 
 def compare(model: LinearModel, data: IdData, horizon=None, initial: str = "zero") -> Comparison:
-    """The model on ``data``: its simulated (``horizon=None``) or k-step predicted output and the fit."""
+    """The model on ``data``: its simulated or k-step predicted output and the fit (MATLAB ``compare``).
+
+    Parameters
+    ----------
+    model : LinearModel
+        Any black-box model.
+    data : IdData
+        Estimation or validation data.
+    horizon : int or None
+        None (or ``math.inf``): simulation; k: k-step prediction.
+    initial : {"zero", "estimate"}
+        How initial conditions are handled; stated in the result's :attr:`Comparison.label`.
+    """
     yhat = predict(model, data, horizon, initial)
     return Comparison(data.y, yhat, fit_percent(data.y, yhat), _check_horizon(horizon), initial, data.name,
                       np.arange(data.n_samples) * data.ts)

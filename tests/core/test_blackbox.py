@@ -228,3 +228,17 @@ def test_an_estimate_exports_with_its_covariance():
     lo, hi = est.intervals(0.95)
     np.testing.assert_allclose(hi - lo, 2 * 1.959964 * np.array([0.02, 0.03]), rtol=1e-6)
     assert "1-step prediction" in repr(est)
+
+
+def test_the_predictor_never_divides_by_a_so_an_unstable_a_predicts_as_arx_does():
+    @dataclass(frozen=True, eq=False)
+    class Arx(Armax):
+        def polynomial_form(self):
+            return self.a, self.b, self.c, np.array([1.0]), np.array([1.0])
+
+    rng = np.random.default_rng(5)
+    u, y = rng.standard_normal(5000), rng.standard_normal(5000)
+    a = np.array([1.0, -1.01])                      # a pole just outside the unit circle: 1.01^5000 overflows
+    model = Arx(a, np.array([0.0, 0.5]), np.array([1.0]))
+    expected = 0.5 * np.r_[0.0, u[:-1]] + 1.01 * np.r_[0.0, y[:-1]]      # B u + (1 - A) y
+    np.testing.assert_allclose(predict(model, IdData(y, u, 0.1), 1), expected, atol=1e-12)
