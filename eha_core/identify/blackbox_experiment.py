@@ -118,7 +118,8 @@ class BlackBoxExperiment:
 
     def record(self, params: ActuatorParams | None = None, seed: int | None = None, name: str = "") -> IdData:
         """One experiment on the nonlinear actuator ``params`` (default the paper's): input and
-        position in the units shown (mm, V), drawn from ``seed`` (default the experiment's)."""
+        position in the units shown (mm, V), drawn from ``seed`` (default the experiment's), called
+        ``name`` (default "experiment, seed S")."""
         import warnings
 
         from ..excitation import idinput
@@ -160,7 +161,8 @@ class BlackBoxExperiment:
         return IdData(x[:n] * 1e3, u_shown[:n], self.ts, name=name or f"experiment, seed {seed}")
 
     def records(self, params: ActuatorParams | None = None) -> tuple[IdData, IdData]:
-        """``(estimation, validation)`` data as :attr:`validation` says."""
+        """``(estimation, validation)`` data of the actuator ``params`` (default the paper's), as
+        :attr:`validation` says."""
         if self.validation == "split":
             whole = self.record(params, name="the record")
             return whole.split(self.estimation_fraction)
