@@ -43,8 +43,9 @@ TF_ALIASES = {"u": ("r",), "y": ("x",)}
 def add_parser(sub) -> None:
     from eha_core.signals import SIGNAL_GRAMMAR
 
-    idf = sub.add_parser("identify", help="identification: least squares (lse), transfer function (tf) or grey-box "
-                                          "(greybox)")
+    idf = sub.add_parser("identify", help="identification: least squares (lse), transfer function (tf), grey-box "
+                                          "(greybox) or black-box (arx, armax, oe, bj, ss, process; select for "
+                                          "the structure)")
     idsub = idf.add_subparsers(dest="method", metavar="METHOD", parser_class=Parser)
     idf.set_defaults(handler=_missing_method)
     le = idsub.add_parser("lse", help="least squares for M, B, Af, d0, beta_e (eqs. 15-18)",
@@ -112,6 +113,9 @@ def add_parser(sub) -> None:
     from .greybox import add_parser as add_greybox
 
     add_greybox(idsub)
+    from .blackbox import add_parser as add_blackbox
+
+    add_blackbox(idsub)
     # what the paper experiment's closed-loop simulation, or a fit, may fail on, the likeliest first
     tf.set_defaults(handler=run_tf, inputs=("--kp", "--param", "--ts", "--model", "--data", "--columns"))
 

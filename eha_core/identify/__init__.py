@@ -1,6 +1,6 @@
 """
 =================================================================================
-Identification: least squares, transfer-function estimation, grey box (identify)
+Identification: least squares, transfer functions, grey box, black-box models
 =================================================================================
 
 Three routes from measured (or simulated) data to the actuator: the paper's
@@ -48,6 +48,28 @@ Grey box (the nonlinear model)
    greybox.identify_greybox      -- any physical parameters by output error on the nonlinear model
    greybox.greybox_data          -- a simulated record for it, open or closed loop, with noise
    greybox_study.run_greybox_study -- the estimate over noise seeds against the Cramer-Rao bound
+
+Black-box models (the identification course)
+============================================
+
+.. autosummary::
+
+   blackbox.IdData               -- sampled data of one or several experiments: split, merge, detrend
+   blackbox.merge                -- several experiments as one estimation data set (MATLAB merge)
+   blackbox.compare              -- any black-box model on data: simulation or k-step prediction, and its fit
+   blackbox.criteria             -- loss, AIC, BIC and FPE of one-step prediction errors
+   blackbox_experiment.BlackBoxExperiment -- the actuator recorded for it, closed or open loop
+   polynomial.arx                -- ARX by least squares (MATLAB arx)
+   polynomial.pem                -- ARX, ARMAX, OE, BJ by the prediction-error method (MATLAB pem)
+   polynomial.PolynomialModel    -- such an estimate: A, B, C, D, F, covariance, fit
+   subspace.n4sid                -- a state-space model by subspace identification (CVA or MOESP)
+   subspace.ss_order_svd         -- the subspace singular values that show the number of states
+   subspace.StateSpaceModel      -- such an estimate: A, B, C, D, K
+   process.procest               -- process models: 1 or 2 poles, delay, integrator (MATLAB procest)
+   process.ProcessModel          -- such an estimate, continuous-time values and its exact ZOH form
+   selection.select_structure    -- orders and structures in a table: loss, AIC, BIC, validation fit
+   selection.arx_grid            -- every ARX structure of a grid from one QR (MATLAB arxstruc)
+   selection.residual_tests      -- a model's one-step residuals: white, independent of the input
 
 Internals
 =========

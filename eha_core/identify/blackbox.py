@@ -288,9 +288,11 @@ class EstimateFields:
         return f"<{self.name}: {self.fit.label}{state}>"
 
 
-def _filter_free_basis(den: np.ndarray, n: int) -> np.ndarray:
-    """Free responses of ``1 / den(q^-1)`` over n samples, one column per initial state."""
-    order = len(den) - 1
+def _filter_free_basis(num: np.ndarray, den: np.ndarray, n: int) -> np.ndarray:
+    """Free responses of the filter ``num / den`` (in ``q^-1``) over n samples, one column per state of
+    its realisation (``max(len(num), len(den)) - 1`` states: an FIR filter's state is the past inputs
+    it has not seen)."""
+    order = max(len(num), len(den)) - 1
     if order == 0:
         return np.zeros((n, 0))
     cols = np.empty((n, order))
@@ -298,7 +300,7 @@ def _filter_free_basis(den: np.ndarray, n: int) -> np.ndarray:
     for i in range(order):
         zi = np.zeros(order)
         zi[i] = 1.0
-        cols[:, i], _ = scipy.signal.lfilter([1.0], den, z, zi=zi)
+        cols[:, i], _ = scipy.signal.lfilter(num, den, z, zi=zi)
     return cols
 
 
@@ -331,7 +333,7 @@ def _segment_output(model: LinearModel, y: np.ndarray, u: np.ndarray, horizon, i
     if horizon is None:
         yhat = scipy.signal.lfilter(gb, ga, u)
         if initial == "estimate":
-            basis = _filter_free_basis(np.asarray(ga, float), y.size)
+            basis = _filter_free_basis(np.asarray(gb, float), np.asarray(ga, float), y.size)
             if basis.shape[1]:
                 coef, *_ = np.linalg.lstsq(basis, y - yhat, rcond=None)
                 yhat = yhat + basis @ coef
@@ -351,7 +353,7 @@ def _segment_output(model: LinearModel, y: np.ndarray, u: np.ndarray, horizon, i
     yhat = scipy.signal.lfilter(num_u, den_u, u) + scipy.signal.lfilter(one_minus, pc, y)
     if initial == "estimate":
         # the predictor's transients: free responses of its two filters, fitted by least squares
-        basis = np.hstack([_filter_free_basis(den_u, y.size), _filter_free_basis(np.asarray(pc, float), y.size)])
+        basis = np.hstack([_filter_free_basis(num_u, den_u, y.size), _filter_free_basis(one_minus, pc, y.size)])
         if basis.shape[1]:
             coef, *_ = np.linalg.lstsq(basis, y - yhat, rcond=None)
             yhat = yhat + basis @ coef

@@ -79,6 +79,18 @@ CASES = [
      "--columns = v=velocity"),
     (["identify", "greybox", "--data", "{odd}"], "--data = '{odd}'"),
     (["identify", "greybox", "--t-end", "0.5", "--u", "sine:1e308:2"], "--u = sine:1e308:2"),
+    # identify: the black-box structures (orders the record cannot support, a delay past the record, a
+    # merged experiment with another sample time)
+    (["identify", "arx", "--na", "-1"], "--na = -1"),
+    (["identify", "armax", "--nc", "x"], "--nc = x"),
+    (["identify", "oe", "--nf", "99"], "--nf = 99"),
+    (["identify", "bj", "--nk", "-1"], "--nk = -1"),
+    (["identify", "arx", "--samples", "100", "--na", "40", "--nb", "40"], "--na = 40"),
+    (["identify", "arx", "--samples", "100", "--nk", "500"], "--nk = 500"),
+    (["identify", "ss", "--n", "0"], "--n = 0"),
+    (["identify", "process", "--kind", "P3"], "--kind = P3"),
+    (["identify", "select", "--structure", "fir"], "--structure = fir"),
+    (["identify", "arx", "--data", "{bin}"], "--data = '{bin}'"),
     # study
     (["study", "lse", "--seeds", "0"], "--seeds = 0"),
     (["study", "lse", "--seeds", "x"], "--seeds = x"),
