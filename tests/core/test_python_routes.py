@@ -27,6 +27,7 @@ ROUTES = {
     "Back-out": ("backout(", "b", "BackoutResult"),
     "Grey box": ("identify_greybox(", "gb", "GreyBoxResult"),
     "A study over seeds": ("run_study(", "study", "StudyResult"),
+    "Black-box models": ("select_structure(", "table", "SelectionTable"),
 }
 
 
