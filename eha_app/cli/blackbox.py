@@ -13,6 +13,8 @@ cannot support or a delay longer than the record are refused at once.
 
 from __future__ import annotations
 
+import argparse
+
 import math
 import sys
 
@@ -98,8 +100,9 @@ def add_parser(idsub) -> None:
         p.set_defaults(handler=run_model, structure=structure, fields=FIELDS, inputs=_INPUTS)
     s = idsub.add_parser("select", help="structure and order selection: a table of candidates and the one picked "
                                         "(like MATLAB arxstruc/selstruc)",
-                         description="Estimate every candidate on the estimation data and pick one by BIC "
-                                     "(default), AIC or the fit on validation data. Orders are ranges: 1:4, 1,3 "
+                         description="Estimate every candidate on the estimation data and pick one by the fit "
+                                     "on validation data (default: the fewest parameters whose validation loss "
+                                     "the data cannot tell from the best's), BIC or AIC. Orders are ranges: 1:4, 1,3 "
                                      "or 2. " + _DATA_WORDS)
     s.add_argument("--structure", default="arx", help="arx (default), armax, oe, bj, ss or process")
     for name in ("na", "nb", "nc", "nd", "nf", "nk", "n"):
@@ -107,9 +110,9 @@ def add_parser(idsub) -> None:
                        help=f"{_ORDER_HELP[name]}: FROM:TO, a list 1,2,4, or one value")
     s.add_argument("--kind", metavar="KINDS", help="process: the type codes tried, e.g. P1D,P2D (default "
                                                    "P1D,P2D,P1DI,P2DI)")
-    s.add_argument("--criterion", default="bic",
-                   help="how the model is picked: bic (default; the least BIC on the estimation data), aic, or "
-                        "fit (the best fit on the validation data)")
+    s.add_argument("--criterion", default="fit",
+                   help="how the model is picked: fit (default; the best fit on the validation data, as those "
+                        "data can tell it), bic or aic (the least BIC or AIC on the estimation data)")
     _add_common(s)
     s.set_defaults(handler=run_select, fields=FIELDS, inputs=_INPUTS)
 
@@ -139,7 +142,9 @@ def _add_common(p) -> None:
     p.add_argument("--validation", default=None,
                    help="'second experiment' (default when simulated) or split (the record's last half; the "
                         "default with --data and no --val-data)")
-    p.add_argument("--detrend", action="store_true", help="remove each experiment's means first")
+    p.add_argument("--detrend", action=argparse.BooleanOptionalAction, default=True,
+                   help="remove each experiment's means first (default; --no-detrend keeps them: a linear model "
+                        "then has to explain the offsets too)")
     p.add_argument("--horizon", default="inf",
                    help="the fits' horizon: inf (simulation, default) or k (k-step prediction)")
     p.add_argument("--initial", default="zero",
@@ -611,7 +616,8 @@ def select_lines(table) -> list[str]:
                         align="llrrrrrl")
     if table.singular_values is not None:
         lines.append("singular values: " + " ".join(f"{v:.4g}" for v in table.singular_values))
-    criterion = {"bic": "the least BIC", "aic": "the least AIC", "validation fit": "the best validation fit"}
+    criterion = {"bic": "the least BIC", "aic": "the least AIC",
+                 "validation fit": "the best validation fit (the fewest parameters within the data's uncertainty)"}
     lines.append(f"picked by {criterion[table.criterion]}: " + (table.best.name if table.best else "none succeeded"))
     return lines
 
