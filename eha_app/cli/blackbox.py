@@ -137,6 +137,9 @@ def _add_common(p) -> None:
     p.add_argument("--ts", type=float, default=None, help="simulated record: sample time [s] (default 0.02)")
     p.add_argument("--noise", default="x=0.01mm", metavar="x=SIGMA[UNIT]",
                    help=f"simulated record: the position sensor's noise, {NOISE_GRAMMAR} (x only; default x=0.01mm)")
+    p.add_argument("--experiments", type=int, default=1,
+                   help="simulated record: experiments merged for the estimation (1 to 5, default 1; seeds "
+                        "seed, seed + 1, ...), validated on one more")
     p.add_argument("--seed", type=int, default=0, help="simulated record: seed (the validation experiment's is "
                                                        "seed + 1; default 0)")
     p.add_argument("--validation", default=None,
@@ -284,6 +287,11 @@ def _check_common(args) -> dict:
             raise refused("--samples", args.samples, f"use a whole number from {MIN_SAMPLES} to {MAX_SAMPLES}")
         if args.ts is not None and not (math.isfinite(args.ts) and 1e-4 <= args.ts <= 1.0):
             raise refused("--ts", args.ts, "use a sample time from 0.0001 to 1 s")
+        if not 1 <= args.experiments <= 5:
+            raise refused("--experiments", args.experiments, "use a whole number from 1 to 5")
+        if args.experiments > 1 and validation == "split":
+            raise refused("--validation", args.validation, "merged experiments are validated on a second "
+                                                           "experiment, not split", context="with --experiments")
     noise = parse_noise(args.noise, "--noise", signals=("x",), bare="x")
     if noise.get("x", 0.0) > 0.01:
         raise refused("--noise", args.noise, "σ of x at most 0.01 m (10 mm)")
@@ -337,10 +345,12 @@ def _records(args, checked: dict):
         from eha_core.identify.blackbox_experiment import BlackBoxExperiment
 
         exp = BlackBoxExperiment(loop=args.loop, n_samples=args.samples, ts=checked["ts"],
-                                 noise_x=checked["noise_x"], seed=args.seed, validation=checked["validation"])
+                                 noise_x=checked["noise_x"], seed=args.seed, validation=checked["validation"],
+                                 n_experiments=args.experiments)
         est, val = exp.records()
-        source = (f"simulated {args.loop} loop, {exp.input_name} to {exp.output_name}, {args.samples} samples at "
-                  f"{checked['ts']:g} s, seed {args.seed}")
+        merged = "" if args.experiments == 1 else f" x {args.experiments} experiments merged"
+        source = (f"simulated {args.loop} loop, {exp.input_name} to {exp.output_name}, {args.samples} samples"
+                  f"{merged} at {checked['ts']:g} s, seed {args.seed}")
     if args.detrend:
         est, val = est.detrended(), val.detrended()
     return est, val, source

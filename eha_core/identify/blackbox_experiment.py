@@ -25,7 +25,7 @@ import numpy as np
 
 from .._checks import not_allowed
 from ..params import ActuatorParams
-from .blackbox import IdData
+from .blackbox import IdData, merge
 
 __all__ = ["BlackBoxExperiment", "LOOPS", "VALIDATIONS"]
 
@@ -65,6 +65,10 @@ class BlackBoxExperiment:
         Validate on a fresh experiment, or on the last ``1 - estimation_fraction`` of the record.
     estimation_fraction : float
         The share of the record used for estimation when split.
+    n_experiments : int
+        Experiments merged into the estimation data (MATLAB ``merge``), drawn from seeds ``seed``,
+        ``seed + 1``, ...; the validation experiment then uses ``seed + n_experiments``. Merged data are
+        validated on a second experiment, not split.
 
     Examples
     --------
@@ -85,6 +89,7 @@ class BlackBoxExperiment:
     seed: int = 0
     validation: str = "second experiment"
     estimation_fraction: float = 0.5
+    n_experiments: int = 1
 
     def __post_init__(self):
         if self.loop not in LOOPS:
@@ -107,6 +112,12 @@ class BlackBoxExperiment:
         f = self.estimation_fraction
         if not (isinstance(f, (int, float)) and 0.1 <= f <= 0.9):
             raise not_allowed("estimation fraction", f, "a fraction from 0.1 to 0.9")
+        k = self.n_experiments
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= 5:
+            raise not_allowed("experiments", k, "a whole number from 1 to 5")
+        if k > 1 and self.validation == "split":
+            raise not_allowed("experiments", k, "merged experiments are validated on a second experiment, not "
+                                                "split: choose validation on a second experiment")
 
     @property
     def input_name(self) -> str:
@@ -166,5 +177,10 @@ class BlackBoxExperiment:
         if self.validation == "split":
             whole = self.record(params, name="the record")
             return whole.split(self.estimation_fraction)
-        return (self.record(params, name=f"estimation experiment (seed {self.seed})"),
-                self.record(params, self.seed + 1, name=f"validation experiment (seed {self.seed + 1})"))
+        k = self.n_experiments
+        if k == 1:
+            est = self.record(params, name=f"estimation experiment (seed {self.seed})")
+        else:
+            est = merge(*(self.record(params, self.seed + i, name=f"seed {self.seed + i}") for i in range(k)),
+                        name=f"{k} estimation experiments merged (seeds {self.seed}-{self.seed + k - 1})")
+        return est, self.record(params, self.seed + k, name=f"validation experiment (seed {self.seed + k})")

@@ -181,6 +181,9 @@ def test_the_experiment_is_reproducible_and_validates_on_fresh_data():
     assert max(np.corrcoef(est.u[:-lag], est.y[lag:])[0, 1] for lag in range(1, 100, 5)) > 0.5
     split = BlackBoxExperiment(n_samples=300, validation="split", estimation_fraction=0.6).records()
     assert (split[0].n_samples, split[1].n_samples) == (180, 120)
+    merged, val3 = BlackBoxExperiment(n_samples=300, n_experiments=3).records()
+    assert merged.starts == (0, 300, 600) and "seeds 0-2" in merged.name and val3.name.endswith("(seed 3)")
+    np.testing.assert_array_equal(merged.experiments()[0].y, est.y)          # the first is seed 0's record
     opened = BlackBoxExperiment(n_samples=300, loop="open").record()
     assert np.max(np.abs(opened.u)) == pytest.approx(1.0)        # volts
 
@@ -189,6 +192,7 @@ def test_the_experiment_is_reproducible_and_validates_on_fresh_data():
     ({"loop": "half"}, "loop"), ({"signal_type": "chirp"}, "excitation"), ({"n_samples": 10}, "samples"),
     ({"ts": 0.0}, "ts"), ({"noise_x": -1.0}, "noise_x"), ({"validation": "none"}, "validation"),
     ({"estimation_fraction": 0.99}, "estimation fraction"), ({"kp": float("nan")}, "kp"),
+    ({"n_experiments": 0}, "experiments"), ({"n_experiments": 2, "validation": "split"}, "experiments"),
 ])
 def test_a_bad_experiment_is_refused_naming_the_field(kwargs, field):
     with pytest.raises(FieldError) as err:
