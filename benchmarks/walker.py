@@ -46,6 +46,8 @@ are known here for the sections the app has now:
 - ``freq-*`` (data, fit, bode, validation, residuals, summary): tab 1's parameters and Kp and the
   frequency form; ``freq-excitation`` only the form's excitation fields (a preview, re-run by itself);
 - ``freq-record``: the student's record, its range and trend, and the form's model settings;
+- ``bb`` (black-box models): tab 1's parameters (not Kp: the form has its own) and the black-box form's shown
+  fields;
 - ``board-record``: tab 1's parameters and Kp and the board's form (re-run by itself; its step height only
   once the board's step view was opened on the page: the board computes steps from then on).
 
@@ -97,7 +99,7 @@ ROOT = Path(__file__).resolve().parents[1]
 MAIN_TABS, IDENT_TABS = "eha-main-tabs", "eha-ident-tabs"
 FREQ_FIGURES, BOARD_VIEWS = "eha-freq-figures", "eha-board-views"
 PARAM_FORM, SIM_FORM, LSE_FORM, FREQ_FORM = "eha-param-form", "eha-sim-form", "eha-lse-form", "eha-freq-form"
-BOARD_FORM, STUDY_FORM, GB_FORM = "eha-board-form", "eha-study-form", "eha-gb-form"
+BOARD_FORM, STUDY_FORM, GB_FORM, BB_FORM = "eha-board-form", "eha-study-form", "eha-gb-form", "eha-bb-form"
 LSE_WINDOW, RECORD_WINDOW = "eha-lse-window", "eha-freq-record-window"
 STATUS_CLASSES = {"eha-empty": "empty", "eha-current": "current", "eha-updating": "updating",
                   "eha-out-of-date": "stale"}
@@ -106,6 +108,7 @@ SIM_BUTTONS = ("Case 1", "Case 2", "Case 3", "Case 4", "All four cases", "Run no
 LSE_RUN, TABLE4_RUN, HANDIN = "Run least squares", "Run all four scenarios (Table 4)", "Hand in these estimates"
 FREQ_RUN, RECORD_RUN = "Run experiment and estimate", "Estimate from your record"
 GB_RUN, GB_CANCEL = "Run grey-box estimation", "Cancel the estimation"
+BB_RUN = "Run black-box estimation"
 STUDY_RUN, STUDY_CANCEL = "Run the study", "Cancel"
 RESET, REPORT, BACK_TO_SIMULATED, USE_COLUMNS = ("Reset to paper defaults", "Report of this session",
                                                   "Back to simulated data", "Use these columns")
@@ -118,9 +121,10 @@ FREQ_VIEWS = ("freq-data", "freq-fit", "freq-bode", "freq-validation", "freq-res
 #: views that re-run by themselves (the others wait for their button)
 AUTO_VIEWS = ("simulation", "freq-excitation", "board-record")
 #: Views whose inputs are tab 1's (with Kp or not) and one form's.
-_FORM_VIEWS = {"simulation": (SIM_FORM, False), "gb": (GB_FORM, False), "board-record": (BOARD_FORM, True)}
+_FORM_VIEWS = {"simulation": (SIM_FORM, False), "gb": (GB_FORM, False), "bb": (BB_FORM, False),
+               "board-record": (BOARD_FORM, True)}
 #: the run button (label) whose press computes each manual view
-VIEW_BUTTON = {"lse": LSE_RUN, "table4": TABLE4_RUN, "freq-record": RECORD_RUN, "gb": GB_RUN,
+VIEW_BUTTON = {"lse": LSE_RUN, "table4": TABLE4_RUN, "freq-record": RECORD_RUN, "gb": GB_RUN, "bb": BB_RUN,
                **{v: FREQ_RUN for v in FREQ_VIEWS}}
 
 _LOG_LINE = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) (DEBUG|INFO|WARNING|ERROR|CRITICAL) (.*)$")

@@ -23,6 +23,9 @@ def side_by_side(*objects, css_classes=()) -> pn.FlexBox:
 #: Tab headers that wrap onto a second line instead of running past a narrow window's edge (at 800 px
 #: the frequency panel's sixth figure tab, "Residuals", sat at x = 794, out of sight).
 WRAP_TAB_HEADERS = (":host .bk-header { flex-wrap: wrap; } :host .bk-header .bk-tab { white-space: nowrap; }"
+                    # Bokeh 3 puts the tabs in a wrapper row of their own: it must wrap too, or the last
+                    # tab runs off a narrow window (six sub-tabs of tab 3 need 811 px)
+                    " :host .bk-header .bk-headers-wrapper { flex-wrap: wrap; }"
                     # where the keyboard is: Bokeh's own ring is a thin line the active tab's border hides
                     " :host .bk-header .bk-tab:focus-visible { outline: 2px solid #1a56c4; outline-offset: -3px; }")
 

@@ -8,6 +8,7 @@ settings files, in the page's address, in the session report, in the guide (its
 """
 
 from ..session import SECTIONS
+from .blackbox import BlackBoxPanel
 from .board import ModelBoard
 from .frequency import FrequencyPanel
 from .greybox import GreyBoxPanel
@@ -25,5 +26,6 @@ SECTIONS.register(LeastSquaresPanel, tab="3. Identification", subtab="Time domai
 SECTIONS.register(FrequencyPanel, tab="3. Identification", subtab="Frequency domain: transfer function")
 SECTIONS.register(RecordPanel, within="frequency")
 SECTIONS.register(GreyBoxPanel, tab="3. Identification", subtab="Grey-box (nonlinear)")
+SECTIONS.register(BlackBoxPanel, tab="3. Identification", subtab="Black-box models")
 SECTIONS.register(ModelBoard, tab="3. Identification", subtab="Model board")
 SECTIONS.register(StudyPanel, tab="3. Identification", subtab="Study over seeds")

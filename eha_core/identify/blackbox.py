@@ -187,6 +187,10 @@ class LinearModel:
 
     ts: float
 
+    #: A constant input offset ``c`` in input units (MATLAB's ``InputOffset``): the model is
+    #: ``y = G (u + c)``, the offset applied from each experiment's start; None: no offset.
+    input_offset = None
+
     def g_poly(self) -> tuple[np.ndarray, np.ndarray]:           # pragma: no cover - abstract
         """``(gb, ga)``: ``G(q) = gb(q^-1) / ga(q^-1)``, ``ga[0] == 1``."""
         raise NotImplementedError
@@ -273,6 +277,7 @@ class EstimateFields:
             "H": {"num": np.asarray(hc, float).tolist(), "den": np.asarray(hd, float).tolist(), "variable": "q^-1"},
             "criteria": {"loss": crit.loss, "aic": crit.aic, "bic": crit.bic, "fpe": crit.fpe},
             "fit": {"percent": self.fit.fit_percent, "label": self.fit.label},
+            "input_offset": None if self.input_offset is None else float(self.input_offset),
             "initial": self.initial, "n_samples": int(self.n_samples),
             "success": bool(self.success), "message": self.message,
         }
@@ -330,6 +335,9 @@ def _polymul(a, b):
 
 def _segment_output(model: LinearModel, y: np.ndarray, u: np.ndarray, horizon, initial: str) -> np.ndarray:
     gb, ga = model.g_poly()
+    offset = getattr(model, "input_offset", None)
+    if offset is not None:
+        u = u + float(offset)          # y = G (u + c): the offset's step response rides along with u's
     if horizon is None:
         yhat = scipy.signal.lfilter(gb, ga, u)
         if initial == "estimate":
@@ -440,11 +448,15 @@ class Comparison:
     initial: str
     data_name: str = ""
     t: np.ndarray = field(default=None, repr=False)
+    input_offset: float | None = None
 
     @property
     def label(self) -> str:
-        """``"fit 93.2 % (simulation, zero initial conditions)"``: the same words everywhere."""
-        return f"fit {self.fit_percent:.1f} % ({horizon_words(self.horizon)}, {initial_words(self.initial)})"
+        """``"fit 93.2 % (simulation, zero initial conditions)"``: the same words everywhere (``", input
+        offset estimated"`` added when the model carries one)."""
+        offset = "" if self.input_offset is None else ", input offset estimated"
+        return (f"fit {self.fit_percent:.1f} % ({horizon_words(self.horizon)}, {initial_words(self.initial)}"
+                f"{offset})")
 
     def __repr__(self) -> str:
         return f"Comparison({self.label} on {self.data_name or 'data'})"
@@ -466,7 +478,8 @@ def compare(model: LinearModel, data: IdData, horizon=None, initial: str = "zero
     """
     yhat = predict(model, data, horizon, initial)
     return Comparison(data.y, yhat, fit_percent(data.y, yhat), _check_horizon(horizon), initial, data.name,
-                      np.arange(data.n_samples) * data.ts)
+                      np.arange(data.n_samples) * data.ts,
+                      None if getattr(model, "input_offset", None) is None else float(model.input_offset))
 
 
 @dataclass(frozen=True)

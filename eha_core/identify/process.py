@@ -41,6 +41,24 @@ when it ends where the delay stands in for a time constant. The covariance is
 respect to the reported parameters, by central differences (one-sided at
 ``Td = 0``), ``sigma^2`` the residuals' sum of squares over ``N - p``.
 
+Input offset
+------------
+With ``input_offset="estimate"`` (MATLAB's ``InputOffset``) the model is
+``y = G(s) (u + c)``, ``c`` a constant in input units applied from each
+experiment's start, as :mod:`eha_core.identify.validate` defines it for
+``tfest``. A single-rod cylinder needs it: the valve's flow, and so the rod's
+velocity, is larger one way than the other (eqs. 1-4), and under a zero-mean
+binary input ``±a`` that asymmetry is exactly an offset, ``v = K (u + c)``;
+without it an integrating model sees the drift as a gain error and its fit
+falls below zero. ``c`` enters the output as ``K c`` times the step response,
+linear given the poles, so it is projected out with ``K`` and the initial
+states and the search still sees only the time constants and the delay. One
+``c`` is shared by every experiment of merged data: it belongs to the process
+(its asymmetry at this input amplitude), not to a record, and only a shared
+value carries over to validation data. The estimate keeps it as
+``input_offset`` (the last parameter, ``"input_offset"``, with its standard
+error) and :func:`eha_core.identify.blackbox.compare` applies it.
+
 Only numpy and scipy are imported here (python-control lazily).
 """
 
@@ -55,13 +73,16 @@ import scipy.optimize
 import scipy.signal
 
 from .._checks import not_allowed
-from ._ctmodels import expm_pade13, split_delay, state_numerators
+from ._ctmodels import expm_pade13, fit_linear_terms, split_delay, state_numerators
 from .blackbox import INITIAL_CONDITIONS, Comparison, Criteria, EstimateFields, IdData, LinearModel, compare, criteria
 
-__all__ = ["ProcessModel", "procest", "process_tf", "zoh_poly", "KINDS"]
+__all__ = ["ProcessModel", "procest", "process_tf", "zoh_poly", "KINDS", "INPUT_OFFSETS"]
 
 #: The type codes :func:`procest` accepts (``D``: a delay, ``I``: an integrator, ``U``: underdamped).
 KINDS = ("P1", "P1D", "P1I", "P1DI", "P2", "P2D", "P2I", "P2DI", "P2U", "P2DU", "P2IU", "P2DIU")
+
+#: How :func:`procest` treats a constant input offset: none, or estimated (one for all experiments).
+INPUT_OFFSETS = ("zero", "estimate")
 
 _KIND_PATTERN = re.compile(r"^P([12])([DIU]*)$")
 
@@ -147,6 +168,9 @@ class ProcessModel(EstimateFields, LinearModel):
         As every estimate (:class:`~eha_core.identify.blackbox.EstimateFields`); ``params`` are the estimated
         values in the order of ``param_names``; ``fit`` is the simulation (``H = 1``: it is also the one-step
         prediction).
+    input_offset : float or None
+        The estimated constant input offset ``c`` (input units; the model is ``y = G (u + c)``), also the
+        last of ``params``; None when not estimated. :func:`~eha_core.identify.blackbox.compare` applies it.
     """
 
     structure: str
@@ -168,6 +192,7 @@ class ProcessModel(EstimateFields, LinearModel):
     success: bool
     message: str
     nfev: int = 0
+    input_offset: float | None = None
 
     def g_poly(self) -> tuple[np.ndarray, np.ndarray]:
         """``(gb, ga)``: the exact ZOH discretisation at ``ts`` with the delay, ascending powers of ``q^-1``."""
@@ -272,59 +297,91 @@ def zoh_poly(kind, values: dict, ts: float) -> tuple[np.ndarray, np.ndarray]:
     return _discrete(k, values, float(ts))
 
 
-def _free_basis(den: np.ndarray, n: int) -> np.ndarray:
-    """Free responses of ``1 / den(q^-1)`` over n samples, one column per initial state."""
-    order = len(den) - 1
-    cols = np.empty((n, order))
-    zeros = np.zeros(n)
-    for i in range(order):
-        zi = np.zeros(order)
-        zi[i] = 1.0
-        cols[:, i], _ = scipy.signal.lfilter([1.0], den, zeros, zi=zi)
-    return cols
+@dataclass(frozen=True, eq=False)
+class _Responses:
+    """The model's responses on every experiment (concatenated) that the output is linear in."""
+
+    forced: np.ndarray               # to u, unit gain
+    step: np.ndarray | None          # to a unit input offset from each experiment's start, unit gain
+    states: np.ndarray | None        # free responses, one column per state of each experiment
 
 
-def _forced_and_free(gb, ga, segments, initial: str):
-    """Each experiment's forced response to ``u`` and (``initial="estimate"``) its free-response columns."""
-    forced, free = [], []
-    for _y, u in segments:
-        forced.append(scipy.signal.lfilter(gb, ga, u))
-        if initial == "estimate":
-            free.append(_free_basis(ga, u.size))
-    return forced, free
+def _responses(gb, ga, segments, initial: str, offset: bool = False) -> _Responses:
+    """Each experiment's forced response to ``u``, (``offset``) its step response and (``initial="estimate"``)
+    its free responses, each experiment from rest.
 
-
-def _fitted(y_segments, forced, free, gain=None):
-    """The output fitted linearly: ``K`` (unless ``gain`` is given) and each experiment's initial state.
-
-    Returns ``(y_hat, K)``. The gain and the initial states enter the output linearly, so they are solved
-    for exactly at every step of the search (variable projection, Golub & Pereyra 1973): the search
-    sees only the time constants and the delay."""
-    if not free:
-        y1 = np.concatenate(forced)
-        if gain is None:
-            den = float(y1 @ y1)
-            gain = float(y1 @ np.concatenate(y_segments)) / den if den > 0 else 0.0
-        return gain * y1, gain
-    n_seg = len(forced)
-    order = free[0].shape[1]
-    sizes = [f.size for f in forced]
-    total = sum(sizes)
-    cols = np.zeros((total, int(gain is None) + n_seg * order))
-    target = np.concatenate(y_segments)
-    known = np.zeros(total)
+    The free response of ``G = gb / ga`` from the i-th state of :func:`scipy.signal.lfilter`'s realisation
+    (transposed direct form II; with the input at zero its states never see ``gb``) is ``1 / ga``'s impulse
+    response delayed by i samples, so one filtering gives every free column."""
+    sizes = [u.size for _y, u in segments]
+    total, longest = sum(sizes), max(sizes)
+    # every experiment's step and impulse responses are the start of the longest one's
+    step_1 = scipy.signal.lfilter(gb, ga, np.ones(longest)) if offset else None
+    order = len(ga) - 1
+    states = np.zeros((total, len(segments) * order)) if initial == "estimate" else None
+    impulse = scipy.signal.lfilter([1.0], ga, np.eye(1, longest)[0]) if states is not None else None
+    forced = np.empty(total)
+    step = np.empty(total) if offset else None
     at = 0
-    for s, (f, basis) in enumerate(zip(forced, free, strict=True)):
-        rows = slice(at, at + f.size)
-        if gain is None:
-            cols[rows, 0] = f
-        else:
-            known[rows] = gain * f
-        cols[rows, int(gain is None) + s * order:int(gain is None) + (s + 1) * order] = basis
-        at += f.size
-    coef, *_ = np.linalg.lstsq(cols, target - known, rcond=None)
-    y_hat = known + cols @ coef
-    return y_hat, (float(coef[0]) if gain is None else gain)
+    for s, (_y, u) in enumerate(segments):
+        n = u.size
+        forced[at:at + n] = scipy.signal.lfilter(gb, ga, u)
+        if offset:
+            step[at:at + n] = step_1[:n]
+        if states is not None:
+            for i in range(min(order, n)):
+                states[at + i:at + n, s * order + i] = impulse[:n - i]
+        at += n
+    return _Responses(forced, step, states)
+
+
+#: Above this condition number of the normalised normal equations, :func:`_least_squares` solves by SVD.
+_GRAM_COND_MAX = 1e8
+
+
+def _least_squares(cols: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Least-squares coefficients of the few ``cols`` for ``target``.
+
+    The normal equations of the normalised columns (an integrator's step response, a ramp, dwarfs the free
+    responses) cost one pass over the N rows, a third to a seventh of an SVD's time at N = 10,000 and two
+    to six columns (the search solves them at every step); they square the columns' condition number, so
+    above :data:`_GRAM_COND_MAX` (relative error ``1e-16 * cond`` of the coefficients, 1e-8 there) the SVD
+    solves instead (:func:`~eha_core.identify._ctmodels.fit_linear_terms`, NaN for non-finite columns)."""
+    gram = cols.T @ cols
+    scale = np.sqrt(np.diag(gram))
+    if np.all(np.isfinite(gram)) and np.all(scale > 0):
+        normal = gram / np.outer(scale, scale)
+        eig = np.linalg.eigvalsh(normal)
+        if eig[0] > eig[-1] / _GRAM_COND_MAX:
+            return np.linalg.solve(normal, (cols.T @ target) / scale) / scale
+    return fit_linear_terms(cols, target)
+
+
+def _fitted(target: np.ndarray, resp: _Responses, gain=None, offset=0.0):
+    """The output fitted linearly: ``K`` and ``c`` (unless ``gain`` and ``offset`` are given) and each
+    experiment's initial state.
+
+    Returns ``(y_hat, K, c)`` (``c`` 0 without an offset). The gain, the product ``K c`` (its column the
+    step responses of every experiment: one offset for all) and the initial states enter the output
+    linearly, so they are solved for exactly at every step of the search (variable projection, Golub &
+    Pereyra 1973): the search sees only the time constants and the delay."""
+    y1, step, states = resp.forced, resp.step, resp.states
+    if gain is not None:
+        known = gain * (y1 + offset * step) if step is not None else gain * y1
+        if states is None or states.shape[1] == 0:
+            return known, gain, offset
+        return known + states @ _least_squares(states, target - known), gain, offset
+    if step is None and states is None:
+        den = float(y1 @ y1)
+        gain = float(y1 @ target) / den if den > 0 else 0.0
+        return gain * y1, gain, 0.0
+    blocks = [y1[:, None]] + ([step[:, None]] if step is not None else []) + ([states] if states is not None else [])
+    cols = np.hstack(blocks)
+    coef = _least_squares(cols, target)
+    gain = float(coef[0])
+    if step is None:
+        return cols @ coef, gain, 0.0
+    return cols @ coef, gain, (float(coef[1]) / gain if gain != 0.0 else 0.0)
 
 
 def _shape_values(kind: _Kind, inner) -> dict:
@@ -345,12 +402,13 @@ def _shape_values(kind: _Kind, inner) -> dict:
 class _Problem:
     """The estimation problem: the values searched, their bounds, the simulated output."""
 
-    def __init__(self, kind: _Kind, data: IdData, initial: str, fixed_td: float | None, td_max: float):
-        self.kind, self.data, self.initial = kind, data, initial
+    def __init__(self, kind: _Kind, data: IdData, initial: str, fixed_td: float | None, td_max: float,
+                 offset: bool = False):
+        self.kind, self.data, self.initial, self.offset = kind, data, initial, offset
         self.segments = data.segments()
-        self.y_segments = [y for y, _u in self.segments]
         self.free_td = fixed_td is None
-        self.names = ("K",) + kind.shape_names + (("Td",) if self.free_td else ())
+        self.names = (("K",) + kind.shape_names + (("Td",) if self.free_td else ())
+                      + (("input_offset",) if offset else ()))
         self.fixed_td = 0.0 if fixed_td is None else fixed_td
         self.tp_min = _TP_MIN_SAMPLES * data.ts
         self.t_max = 100.0 * data.n_samples * data.ts
@@ -385,17 +443,18 @@ class _Problem:
         return out
 
     def projected(self, inner):
-        """``(y_hat, K)`` of the search's values, ``K`` and the initial states fitted."""
+        """``(y_hat, K, c)`` of the search's values, ``K``, the offset ``c`` and the initial states fitted."""
         self.nfev += 1
         gb, ga = _discrete(self.kind, self.inner_values(inner), self.data.ts)
-        forced, free = _forced_and_free(gb, ga, self.segments, self.initial)
-        return _fitted(self.y_segments, forced, free)
+        return _fitted(self.data.y, _responses(gb, ga, self.segments, self.initial, self.offset))
 
     def residual(self, inner) -> np.ndarray:
         return self.data.y - self.projected(inner)[0]
 
     def values(self, theta) -> dict:
+        """The model's values (``K``, time constants, ``Td``) of the reported ``theta``, the offset left out."""
         out = dict(zip(self.names, (float(v) for v in theta), strict=True))
+        out.pop("input_offset", None)
         out.setdefault("Td", self.fixed_td)
         return out
 
@@ -404,15 +463,17 @@ class _Problem:
         self.nfev += 1
         values = self.values(theta)
         gb, ga = _discrete(self.kind, {**values, "K": 1.0}, self.data.ts)   # the gain is applied by _fitted
-        forced, free = _forced_and_free(gb, ga, self.segments, self.initial)
-        return _fitted(self.y_segments, forced, free, gain=values["K"])[0]
+        offset = float(theta[-1]) if self.offset else 0.0
+        resp = _responses(gb, ga, self.segments, self.initial, self.offset)
+        return _fitted(self.data.y, resp, gain=values["K"], offset=offset)[0]
 
     def jacobian(self, theta) -> np.ndarray:
         """``d y_hat / d theta`` of the reported values by central differences, one-sided at Td = 0."""
         theta = np.asarray(theta, float)
         jac = np.empty((self.data.n_samples, theta.size))
+        u_rms = float(np.sqrt(np.mean(self.data.u ** 2))) or 1.0
         for j, name in enumerate(self.names):
-            typical = 1.0 if name in ("K", "Zeta") else self.data.ts
+            typical = 1.0 if name in ("K", "Zeta") else (u_rms if name == "input_offset" else self.data.ts)
             h = 1e-6 * max(abs(theta[j]), typical)
             up, down = theta.copy(), theta.copy()
             if name == "Td" and theta[j] - h < 0.0:
@@ -428,11 +489,13 @@ class _Problem:
 # ---------------------------------------------------------------------------
 # starting values
 # ---------------------------------------------------------------------------
-def _arx_scan(kind: _Kind, data: IdData, delays):
+def _arx_scan(kind: _Kind, data: IdData, delays, offset: bool = False):
     """ARX fits with ``kind.poles`` poles at each whole-sample delay of ``delays``: ``(losses, fits)``.
 
     An integrating kind is fitted to the integrated input (``ts cumsum(u)``): the integrator moved to the
-    input leaves the output's noise as it is, where differencing the output would amplify it."""
+    input leaves the output's noise as it is, where differencing the output would amplify it. With an
+    input offset ``c`` the regression gains a constant (``B(1) c``) and, for an integrating kind, a ramp
+    (the integrated offset ``c ts (k + 1)``), so that the drift does not bend the poles."""
     na, nb = kind.poles, 2
     segments = [(y, np.cumsum(u) * data.ts if kind.integrator else u) for y, u in data.segments()]
     losses, fits = [], []
@@ -444,14 +507,20 @@ def _arx_scan(kind: _Kind, data: IdData, delays):
                 continue
             cols = [-y[first - k:y.size - k] for k in range(1, na + 1)]
             cols += [u[first - d - k:u.size - d - k] for k in range(1, nb + 1)]
+            if offset:
+                cols.append(np.ones(y.size - first))
+                if kind.integrator:
+                    cols.append(np.arange(first, y.size) * data.ts)
             rows_x.append(np.column_stack(cols))
             rows_y.append(y[first:])
         if not rows_x:
             continue
         x, target = np.vstack(rows_x), np.concatenate(rows_y)
-        coef, *_ = np.linalg.lstsq(x, target, rcond=None)
+        coef = _least_squares(x, target)
+        if not np.all(np.isfinite(coef)):
+            continue
         losses.append(float(np.mean((target - x @ coef) ** 2)))
-        fits.append((int(d), np.concatenate([[1.0], coef[:na]]), coef[na:]))
+        fits.append((int(d), np.concatenate([[1.0], coef[:na]]), coef[na:na + nb]))
     return losses, fits
 
 
@@ -472,7 +541,7 @@ def _shape_from_arx(a: np.ndarray, ts: float):
     return shape
 
 
-def _start_values(kind: _Kind, data: IdData, fixed_td: float | None, td_max: float) -> list:
+def _start_values(kind: _Kind, data: IdData, fixed_td: float | None, td_max: float, offset: bool = False) -> list:
     """Starting values (dicts) for procest to screen: shapes times delays.
 
     The shapes: the best ARX fit's poles, and time constants of 2, 10 and 50 samples (an ARX fit is
@@ -488,7 +557,7 @@ def _start_values(kind: _Kind, data: IdData, fixed_td: float | None, td_max: flo
         delays = np.unique(np.round(np.linspace(0, max_delay, min(max_delay + 1, 40))).astype(int))
     else:
         delays = [int(math.floor((fixed_td or 0.0) / ts + 1e-9))]
-    losses, fits = _arx_scan(kind, data, delays)
+    losses, fits = _arx_scan(kind, data, delays, offset)
     order = list(np.argsort(losses)) if losses else []
     shapes = []
     if order:
@@ -537,7 +606,8 @@ def _check_fixed_delay(delay, kind: _Kind, data: IdData):
     return td
 
 
-def procest(data: IdData, kind: str, *, initial: str = "zero", delay=True) -> ProcessModel:
+def procest(data: IdData, kind: str, *, initial: str = "zero", delay=True,
+            input_offset: str = "zero") -> ProcessModel:
     """A continuous-time process model by output error on held-input data (MATLAB ``procest``).
 
     Parameters
@@ -553,6 +623,12 @@ def procest(data: IdData, kind: str, *, initial: str = "zero", delay=True) -> Pr
     delay : bool or float
         True (default): ``Td`` estimated when the kind has ``D``; False: ``Td = 0``; a number: ``Td`` fixed
         at that many seconds (below the shortest experiment's length).
+    input_offset : {"zero", "estimate"}
+        ``"estimate"``: the model is ``y = G(s) (u + c)`` with a constant input offset ``c`` (input units,
+        MATLAB's ``InputOffset``), one for all experiments, fitted linearly with ``K``; it is the last
+        parameter (``"input_offset"``) and the model's :attr:`ProcessModel.input_offset`, which
+        :func:`~eha_core.identify.blackbox.compare` applies. An integrating process driven by a valve that
+        flows more one way than the other needs it. ``"zero"`` (default): no offset.
 
     Returns
     -------
@@ -571,30 +647,42 @@ def procest(data: IdData, kind: str, *, initial: str = "zero", delay=True) -> Pr
     ('P1D (K, Tp1, Td)', True)
     >>> {k: round(v, 6) for k, v in model.values.items()}
     {'K': 2.0, 'Tp1': 0.5, 'Td': 0.23}
+
+    An integrating process that runs faster one way: an input offset of 0.1
+
+    >>> gb, ga = zoh_poly("P1DI", {"K": 2.0, "Tp1": 0.5, "Td": 0.23}, 0.1)
+    >>> y = scipy.signal.lfilter(gb, ga, u + 0.1)
+    >>> model = procest(IdData(y, u, 0.1), "P1DI", input_offset="estimate")
+    >>> model.param_names, round(model.input_offset, 6), round(model.values["K"], 6)
+    (('K', 'Tp1', 'Td', 'input_offset'), 0.1, 2.0)
     """
     if not isinstance(data, IdData):
         raise not_allowed("data", data, "an IdData (eha_core.identify.blackbox.IdData)")
     k = _parse_kind(kind)
     if initial not in INITIAL_CONDITIONS:
         raise not_allowed("initial", initial, "zero or estimate")
+    if not (isinstance(input_offset, str) and input_offset in INPUT_OFFSETS):
+        raise not_allowed("input_offset", input_offset, "zero (no offset) or estimate (y = G (u + c), c fitted)")
     fixed_td = _check_fixed_delay(delay, k, data)
     shortest = min(y.size for y, _u in data.segments())
     td_max = (shortest - 2) * data.ts
-    problem = _Problem(k, data, initial, fixed_td, max(td_max, 0.0))
+    offset = input_offset == "estimate"
+    problem = _Problem(k, data, initial, fixed_td, max(td_max, 0.0), offset)
     n_free = len(problem.names)
     if data.n_samples <= n_free + 2:
         raise not_allowed("data", f"{data.n_samples} samples", f"a {k.code} model needs more than {n_free + 2}")
 
     with np.errstate(all="ignore"):
-        inner, best_gain, problems = _search(problem)
+        inner, best_gain, best_offset, problems = _search(problem)
     values = problem.inner_values(inner, best_gain)
 
     gb, ga = _discrete(k, values, data.ts)
-    theta = np.array([values[n] for n in problem.names])
+    theta = np.array([values[n] for n in problem.names if n != "input_offset"] + ([best_offset] if offset else []))
     base = dict(structure="process", name=f"{k.code} ({', '.join(problem.names)})",
                 orders={"poles": k.poles + int(k.integrator), "integrator": k.integrator, "delay": k.delay},
                 ts=data.ts, kind=k.code, values=values, discrete_num=gb, discrete_den=ga,
-                params=theta, param_names=problem.names, initial=initial, n_samples=data.n_samples)
+                params=theta, param_names=problem.names, initial=initial, n_samples=data.n_samples,
+                input_offset=float(best_offset) if offset else None)
     shell = ProcessModel(**base, covariance=np.zeros((n_free, n_free)), noise_variance=math.nan, criteria=None,
                          fit=None, success=False, message="", nfev=problem.nfev)
     with np.errstate(all="ignore"):
@@ -624,7 +712,8 @@ def procest(data: IdData, kind: str, *, initial: str = "zero", delay=True) -> Pr
 
 
 def _search(problem: _Problem):
-    """``(inner, K, problems)``: the searched values at the least error, their gain, and what went wrong.
+    """``(inner, K, c, problems)``: the searched values at the least error, their gain and input offset
+    (0 when not estimated), and what went wrong.
 
     The starting points are screened by their error (one simulation each); the search runs from the best
     and from the best one whose delay is more than 1.5 samples away from where the first search ended,
@@ -633,7 +722,8 @@ def _search(problem: _Problem):
     data, n_inner = problem.data, problem.inner_lower.size
     fixed_td = None if problem.free_td else problem.fixed_td
     best, errors = None, []
-    starts = [problem.inner_start(start) for start in _start_values(problem.kind, data, fixed_td, problem.td_max)]
+    starts = [problem.inner_start(start)
+              for start in _start_values(problem.kind, data, fixed_td, problem.td_max, problem.offset)]
     costs = [float(np.sum(problem.residual(x0) ** 2)) for x0 in starts]
     ranking = np.argsort(np.nan_to_num(costs, nan=np.inf))
     searched = []
@@ -662,8 +752,9 @@ def _search(problem: _Problem):
     if best is None or best.status <= 0:
         why = best.message if best is not None else "; ".join(errors) or "no starting point gave a finite error"
         inner = best.x if best is not None else starts[0]
-        return inner, 1.0, [f"the search failed ({why}): try another kind or a fixed delay"]
-    return best.x, problem.projected(best.x)[1], []
+        return inner, 1.0, 0.0, [f"the search failed ({why}): try another kind or a fixed delay"]
+    _y_hat, gain, offset = problem.projected(best.x)
+    return best.x, gain, offset, []
 
 
 def _valley_search(problem: _Problem, inner: np.ndarray, n_inner: int):

@@ -188,11 +188,11 @@ def test_the_servers_limits_price_its_run(tally, monkeypatch):
 def test_the_random_walk_types_into_it_runs_it_reaches_it_and_loads_it_in_settings(tally):
     (found,) = [p for p in walker.page_sections() if p.key == "tally"]
     assert (found.form_css, found.run_buttons, found.tab, found.subtab) == ("eha-tally-form", ("Count the tally",),
-                                                                           2, 5)
+                                                                           2, 6)
     walk = walker.Walker("http://127.0.0.1:1/eha", 1)
-    assert walk.WHERE["type-tally"] == walk.WHERE["run-tally"] == (2, 5)
+    assert walk.WHERE["type-tally"] == walk.WHERE["run-tally"] == (2, 6)
     assert walk.WEIGHTS["type-tally"] > 0 and walk.WEIGHTS["run-tally"] > 0 and "run-tally" in walk.RUNS
-    assert walk.subtab_ready[(2, 5)] == ("eha-tally-form", "A tally")
+    assert walk.subtab_ready[(2, 6)] == ("eha-tally-form", "A tally")
     settings = {"format": "eha-settings/1", "tally": {"tally_n": "2"}}
     assert walk._settings_file(json.dumps(settings).encode()) == settings
     # the app refuses a file whose section is not a table of texts: the walk expects it to
