@@ -17,10 +17,21 @@ polynomials and fixes the rest to 1:
 
 ARMAX, OE and BJ minimise the sum of squared one-step prediction errors
 ``e = D/C (A y - B/F u)`` by Levenberg-Marquardt (damped Gauss-Newton) with the
-analytic Jacobian, the regressors filtered as in Ljung (1999, sec. 10.3), started
-from a linear estimate (Hannan-Rissanen for ARMAX and BJ's noise model,
-Steiglitz-McBride for ``B/F``) and keeping ``C``, ``D`` and ``F`` stable (roots
-outside the unit circle are reflected into it, at the start and after any step).
+analytic Jacobian, the regressors filtered as in Ljung (1999, sec. 10.3), keeping
+``C``, ``D`` and ``F`` stable (roots outside the unit circle are reflected into it, at
+the start and after any step). The criterion has local minima (a pole cancelling a
+zero near z = 1 on closed-loop records; Söderström's with a coloured input), so, as
+MATLAB's ``pem`` does, the search starts from several linear estimates:
+Steiglitz-McBride for ``B/F``; the poles of a long ARX model reduced by balanced
+truncation (or of ``n4sid``) with ``B`` by least squares; Hannan-Rissanen and ARX for
+ARMAX; Hannan-Rissanen on the output error for BJ's noise model. The starts are ranked
+(BJ's by the output error they leave, whitened by a long AR model), the best three
+get five iterations each, two of those (in different basins) 40 more, and the lower
+is continued to convergence; an estimate whose ``C``, ``D`` or ``F`` is held at the
+unit circle gives way to one inside it unless the data demand the edge (Akaike's
+margin), and the message says what the other fits. On a record longer than 4000
+samples the search runs on its first 2000 and the estimate is then polished on the
+whole record.
 The parameter covariance is ``sigma^2 (J^T J)^-1`` at the optimum, ``sigma^2 =
 SSE / (N - d)`` (less the initial conditions fitted). Several experiments
 (:func:`~eha_core.identify.blackbox.merge`) are each filtered on their own: from rest
@@ -73,6 +84,22 @@ _POLYS = ("na", "nb", "nc", "nd", "nf")
 _SINGULAR_CONDITION = 1e10
 # roots are kept this far inside the unit circle, so that a filter is never marginally stable
 _MAX_ROOT = 1.0 - 1e-7
+# the search: every start's loss is evaluated, the best few get a few Levenberg-Marquardt iterations
+# (enough to fall into their basin), and the lowest of those is continued
+_PROBED_STARTS = 3
+_PROBE_ITERATIONS = 5
+_CONTINUED_PROBES = 2
+_COMPARE_ITERATIONS = 40
+# Levenberg-Marquardt stops when this many steps in a row each lower the loss V by less than
+# _STALLED_CHANGE V / N, that is N log V (twice the negative log-likelihood) by less than 1e-4
+_STALLED_STEPS = 3
+_STALLED_CHANGE = 1e-4
+# the search runs on the first 2000 samples of a longer record (at least 200 of each experiment):
+# that is enough to tell the basins apart, and the whole record only polishes the best one
+_SEARCH_SAMPLES = 2000
+_SEARCH_SAMPLES_MIN = 200
+# the long ARX model whose balanced truncation gives a start for F (or A)
+_LONG_ARX_ORDER = 20
 _lfilter = scipy.signal.lfilter
 
 
@@ -268,9 +295,26 @@ def _checked_iterations(max_iterations) -> int:
 # ---------------------------------------------------------------------------
 # linear algebra shared by the estimators
 # ---------------------------------------------------------------------------
+def _inside(poly: np.ndarray, radius: float) -> bool:
+    """Whether every root of a monic polynomial in ``q^-1`` lies strictly inside ``|z| < radius``.
+
+    The Schur-Cohn step-down recursion (the reflection coefficients of the polynomial scaled to
+    ``|z| < 1`` are all below 1 in magnitude): a few multiplications where ``numpy.roots`` needs an
+    eigenvalue problem, which cost a fifth of an estimate's time when every trial step needed it."""
+    a = poly[1:] / radius ** np.arange(1, poly.size)
+    while a.size:
+        k = a[-1]
+        if not abs(k) < 1.0:
+            return False
+        a = (a[:-1] - k * a[-2::-1]) / (1.0 - k * k)
+    return True
+
+
 def _stable(poly: np.ndarray) -> np.ndarray:
     """A monic polynomial in ``q^-1`` with its roots (in ``z``) outside the unit circle reflected into it."""
     if poly.size < 2 or not np.all(np.isfinite(poly)):
+        return poly
+    if _inside(poly, _MAX_ROOT):
         return poly
     roots = np.roots(poly)
     mag = np.abs(roots)
@@ -514,17 +558,22 @@ def _errors(spec: _Spec, theta: np.ndarray, segments, with_jacobian: bool = True
     return e, (np.vstack(jacobians) if with_jacobian else None)
 
 
-def _levenberg_marquardt(spec: _Spec, theta0: np.ndarray, segments, max_iterations: int):
+def _levenberg_marquardt(spec: _Spec, theta0: np.ndarray, segments, max_iterations: int, lam: float = 1e-3):
     """Levenberg-Marquardt on the prediction errors, every iterate's ``C, D, F`` kept stable.
 
-    Returns ``(theta, e, J, nfev, converged, why)``. A step solves the damped Gauss-Newton
+    Returns ``(theta, e, J, nfev, converged, why, iterations, lam)`` (``lam`` the damping reached,
+    to continue from). A step solves the damped Gauss-Newton
     equations (Marquardt's scaling by the diagonal of ``J^T J``); the damping follows the ratio
     of the actual to the predicted decrease of the loss (Nielsen's update), so that a step that
     overshoots (the zig-zag of Gauss-Newton when the residuals are large) is shortened, and a
     step that does not lower the loss is retried with more damping. The iteration stops when
     the undamped Gauss-Newton step's predicted decrease ``g^T (J^T J)^-1 g`` falls below
     ``TOL`` of the loss (an error of ``sqrt(TOL N)`` standard deviations at most), when a step
-    lowers the loss by less than 1e-13 relative, or when no damping finds a lower loss."""
+    lowers the loss by less than 1e-13 relative (or, when the step was pulled back inside the unit
+    circle, by less than the statistical scale ``TOL``: the minimum lies on the stability limit and
+    the projected steps only creep along it), when :data:`_STALLED_STEPS` steps in a row each lower
+    ``N log V`` by less than :data:`_STALLED_CHANGE` (a root creeping towards the circle, the loss
+    flat to far below its noise), or when no damping finds a lower loss."""
     # written here rather than scipy.optimize.least_squares: its steps cannot be projected back to
     # stable C, D, F, and a trial step with an unstable 1/C or 1/F overflows over a long record
     theta = spec.stabilized(theta0)
@@ -532,21 +581,22 @@ def _levenberg_marquardt(spec: _Spec, theta0: np.ndarray, segments, max_iteratio
     nfev = 1
     cost = float(e @ e)
     if not math.isfinite(cost):
-        return theta, e, jac, nfev, False, "the prediction errors of the initial estimate are not finite"
+        return theta, e, jac, nfev, False, "the prediction errors of the initial estimate are not finite", 0, lam
     # the statistical scale of the loss: stopping at g^T H^-1 g < 1e-6 cost / N leaves the estimate
     # within 1e-3 of its standard deviation of the minimum
     tolerance = 1e-6 / e.size
-    lam, growth = 1e-3, 2.0
-    for _iteration in range(max_iterations):
+    growth, stalled = 2.0, 0
+    for iteration in range(max_iterations):
         grad = jac.T @ e
         hess = jac.T @ jac
         if not np.all(np.isfinite(hess)):
-            return theta, e, jac, nfev, False, "the Jacobian is not finite"
+            return theta, e, jac, nfev, False, "the Jacobian is not finite", iteration, lam
         scale = np.diag(hess).copy()
         scale[scale <= 0] = 1.0
         gauss_newton, *_ = np.linalg.lstsq(hess, -grad, rcond=None)
         if -float(grad @ gauss_newton) <= tolerance * cost:
-            return theta, e, jac, nfev, True, "the Gauss-Newton step would change the loss by less than its noise"
+            return (theta, e, jac, nfev, True, "the Gauss-Newton step would change the loss by less than its noise",
+                    iteration, lam)
         for _attempt in range(30):
             try:
                 step = np.linalg.solve(hess + lam * np.diag(scale), -grad)
@@ -562,21 +612,181 @@ def _levenberg_marquardt(spec: _Spec, theta0: np.ndarray, segments, max_iteratio
                 break
             lam, growth = lam * growth, 2 * growth
         else:
-            return theta, e, jac, nfev, True, "no step lowers the loss: a minimum"
+            return theta, e, jac, nfev, True, "no step lowers the loss: a minimum", iteration, lam
         predicted = -float(2 * grad @ step + step @ hess @ step)
         ratio = (cost - cost_new) / predicted if predicted > 0 else 0.0
         lam, growth = lam * max(1 / 3, 1 - (2 * ratio - 1) ** 3), 2.0
         lam = max(lam, 1e-12)
         decrease = (cost - cost_new) / cost
+        projected = not np.allclose(candidate, theta + step, rtol=0.0, atol=1e-12)
         theta, e, jac, cost = candidate, e_new, jac_new, cost_new
         if decrease < 1e-13:
-            return theta, e, jac, nfev, True, "the loss stopped decreasing"
-    return theta, e, jac, nfev, False, f"no convergence in {max_iterations} iterations"
+            return theta, e, jac, nfev, True, "the loss stopped decreasing", iteration + 1, lam
+        if projected and decrease < tolerance:
+            return (theta, e, jac, nfev, True, "the loss stopped decreasing at the stability limit", iteration + 1,
+                    lam)
+        # creeping towards the unit circle, a root approaches it step by step without reaching it
+        stalled = stalled + 1 if decrease < _STALLED_CHANGE / e.size else 0
+        if stalled >= _STALLED_STEPS:
+            return (theta, e, jac, nfev, True, f"the loss stalled ({_STALLED_STEPS} steps in a row each lowered "
+                    "it by less than its noise)", iteration + 1, lam)
+    return theta, e, jac, nfev, False, f"no convergence in {max_iterations} iterations", max_iterations, lam
 
 
-def _pem(spec: _Spec, data: IdData, theta0: np.ndarray, initial: str, max_iterations: int) -> PolynomialModel:
+def _held(spec: _Spec, theta: np.ndarray) -> bool:
+    """Whether a root of ``C``, ``D`` or ``F`` is held at the unit circle by :func:`_stable`."""
+    _A, _B, C, D, F = spec.polys(theta)
+    return any(_at_limit(poly) for poly in (C, D, F))
+
+
+def _whitened_output_error(spec: _Spec, theta: np.ndarray, segments) -> float:
+    """BJ's loss were its noise model free: the innovations variance of a long AR model of the output
+    error ``y - B/F u``. It ranks the starts of ``B/F`` by what they allow, not by how good the
+    rough noise model started with them happens to be (on closed-loop data the true ``B/F`` started
+    with a poor noise model had a 40 times larger loss than a local minimum's)."""
+    _A, B, C, D, F = spec.polys(theta)
+    with np.errstate(all="ignore"):
+        noises = [y - _lfilter(B, F, u) for y, u in segments]
+        if not all(np.all(np.isfinite(v)) for v in noises):
+            return math.inf
+        pairs = [(v, np.zeros_like(v)) for v in noises]
+        order = _long_order(spec, pairs, _LONG_ARX_ORDER)
+        residuals = np.concatenate(_innovations(pairs, order, spec.nk, with_input=False))
+    cost = float(residuals @ residuals)
+    return cost if math.isfinite(cost) else math.inf
+
+
+def _loss(run) -> float:
+    cost = float(run[1] @ run[1])
+    return cost if math.isfinite(cost) else math.inf
+
+
+def _ranked_starts(spec: _Spec, starts, segments, score) -> tuple[list, int]:
+    """The starts (made stable) from the lowest score to the highest, and the evaluations spent."""
+    nfev = 0
+    scored = []
+    for theta in starts:
+        theta = spec.stabilized(np.asarray(theta, float))
+        if not np.all(np.isfinite(theta)):
+            continue
+        if score is None:
+            with np.errstate(all="ignore"):
+                e, _ = _errors(spec, theta, segments, with_jacobian=False)
+            nfev += 1
+            value = float(e @ e)
+        else:
+            value = score(spec, theta, segments)
+        if math.isfinite(value):
+            scored.append((value, len(scored), theta))
+    if not scored:
+        # every start is useless: the first one still gives an answer that says why
+        return [spec.stabilized(np.asarray(starts[0], float))], nfev
+    scored.sort(key=lambda item: item[:2])
+    return [theta for _value, _index, theta in scored], nfev
+
+
+def _picked_probes(spec: _Spec, probes, segments, score) -> list[int]:
+    """Which probes to continue: the best by ``score`` (if given), then the lowest losses in other
+    places, :data:`_CONTINUED_PROBES` in all.
+
+    A basin's floor can lie far below where a few iterations leave it (along the unit circle they
+    creep), so the lowest probe alone is not enough; two probes within 1 % of each other are in
+    one basin, and continuing both would waste the time of one."""
+    picked = []
+    if score is not None:
+        picked.append(min(range(len(probes)), key=lambda k: score(spec, probes[k][0], segments)))
+    for k in sorted(range(len(probes)), key=lambda k: _loss(probes[k])):
+        theta = probes[k][0]
+        if len(picked) < _CONTINUED_PROBES and all(
+                np.linalg.norm(theta - probes[j][0]) > 1e-2 * np.linalg.norm(probes[j][0]) for j in picked):
+            picked.append(k)
+    return picked
+
+
+def _multistart(spec: _Spec, starts, segments, max_iterations: int, score=None):
+    """Levenberg-Marquardt from the best of several starts: the global minimum, not the nearest one.
+
+    The starts are ranked by ``score(spec, theta, segments)`` (default the loss, one evaluation
+    each); the best :data:`_PROBED_STARTS` are each given :data:`_PROBE_ITERATIONS` iterations,
+    which take each into its basin. The probe of the lowest score (if ``score`` is given) and those
+    of the lowest loss, :data:`_CONTINUED_PROBES` in all and in different places, get
+    :data:`_COMPARE_ITERATIONS` more, and the lowest loss is continued to convergence, except
+    that an estimate with a root of ``C``, ``D`` or ``F`` held at the unit circle gives way to one
+    inside it whose loss it does not beat by Akaike's margin (``N log(V_inside / V_held) <= 2 d``:
+    the data do not demand the root on the circle); the note returned says what the other fits.
+    On a record much longer than :data:`_SEARCH_SAMPLES`, all this runs on its first part
+    (:func:`_shortened`) and the chosen estimate is then polished on the whole record. Returns
+    ``(theta, e, J, nfev, converged, why, note)``, ``nfev`` counting every evaluation."""
+    full_segments, segments = segments, _shortened(segments, _SEARCH_SAMPLES)
+    ranked, nfev = _ranked_starts(spec, starts, segments, score)
+    probe_iterations = min(_PROBE_ITERATIONS, max_iterations) if len(ranked) > 1 else max_iterations
+    probes = []
+    for theta in ranked[:_PROBED_STARTS]:
+        run = _levenberg_marquardt(spec, theta, segments, probe_iterations)
+        nfev += run[3]
+        probes.append(run)
+    # the picked probes run a few more iterations side by side; only the best runs on to convergence
+    compared = []
+    for k in _picked_probes(spec, probes, segments, score):
+        run, more = _continued(spec, probes[k], segments, _COMPARE_ITERATIONS, max_iterations)
+        nfev += more
+        compared.append(run)
+    best = min(compared, key=_loss)
+    note = ""
+    if _held(spec, best[0]):
+        # a root held at the unit circle is the edge of the model set, not a minimum, and its intervals
+        # do not hold there: an estimate inside is taken unless the data demand the edge (Akaike's
+        # margin: N log(V_inside / V_held) > 2 d), and the user is told what the other one fits
+        inside = [run for run in compared if not _held(spec, run[0]) and math.isfinite(_loss(run))]
+        if inside and _loss(best) > 0:
+            candidate = min(inside, key=_loss)
+            n_errors = best[1].size
+            held_loss, inside_loss = _loss(best) / n_errors, _loss(candidate) / n_errors
+            if n_errors * math.log(max(inside_loss, 1e-300) / held_loss) <= 2 * spec.n_params:
+                best = candidate
+                note = (f"; note: with a root held at the unit circle the loss is a little lower ({held_loss:.4g} "
+                        f"against {inside_loss:.4g})")
+            else:
+                note = (f"; with every root inside the unit circle the loss is higher ({inside_loss:.4g} against "
+                        f"{held_loss:.4g})")
+    best, more = _continued(spec, best, segments, max_iterations, max_iterations)
+    nfev += more
+    theta, e, jac, _nfev, converged, why, _iterations, lam = best
+    if segments is not full_segments:
+        # the basin is chosen on a part of the record; the whole record polishes the minimum in it
+        theta, e, jac, more, converged, why, _iterations, _lam = _levenberg_marquardt(
+            spec, theta, full_segments, max_iterations, lam)
+        nfev += more
+    return theta, e, jac, nfev, converged, why, note
+
+
+def _continued(spec: _Spec, run, segments, budget: int, max_iterations: int):
+    """``run`` (a :func:`_levenberg_marquardt` result) given up to ``budget`` more iterations, never
+    more than ``max_iterations`` in all; returns the new result and the evaluations spent."""
+    theta, _e, _jac, _nfev, converged, _why, iterations, lam = run
+    budget = min(budget, max_iterations - iterations)
+    if converged or budget <= 0 or not math.isfinite(_loss(run)):
+        return run, 0
+    more = _levenberg_marquardt(spec, theta, segments, budget, lam)
+    done = iterations + more[6]
+    why = more[5] if more[4] else f"no convergence in {done} iterations"
+    return more[:5] + (why, done, more[7]), more[3]
+
+
+def _shortened(segments, samples: int):
+    """The first part of every experiment, ``samples`` in all (the same share of each), or the
+    experiments themselves when they are not much longer: where the search chooses its basin."""
+    total = sum(y.size for y, _u in segments)
+    if total <= 2 * samples:
+        return segments
+    share = samples / total
+    kept = [min(y.size, max(int(share * y.size), _SEARCH_SAMPLES_MIN)) for y, _u in segments]
+    return [(y[:k], u[:k]) for (y, u), k in zip(segments, kept, strict=True)]
+
+
+def _pem(spec: _Spec, data: IdData, starts, initial: str, max_iterations: int, score=None) -> PolynomialModel:
     segments = data.segments()
-    theta, e, jac, nfev, converged, why = _levenberg_marquardt(spec, theta0, segments, max_iterations)
+    theta, e, jac, nfev, converged, why, note = _multistart(spec, starts, segments, max_iterations, score)
     n, d = e.size, spec.n_params
     sse = float(e @ e)
     # the initial conditions fitted for each experiment use degrees of freedom too
@@ -604,7 +814,7 @@ def _pem(spec: _Spec, data: IdData, theta0: np.ndarray, initial: str, max_iterat
         cov = np.full((d, d), np.nan)
     success = not problems
     message = f"converged: {why} after {nfev} evaluations" if success else "; ".join(problems)
-    message += _unstable_a_note(A)
+    message += note + _unstable_a_note(A)
     return _finish(spec, data, theta, cov, sigma2, e, initial, success, message, nfev)
 
 
@@ -668,6 +878,18 @@ def _armax_start(spec: _Spec, segments) -> np.ndarray:
     return _lstsq(phi, target)
 
 
+def _armax_starts(spec: _Spec, data: IdData, segments) -> list[np.ndarray]:
+    """Starts of ARMAX: Hannan-Rissanen, ARX with ``C = 1``, and ``A`` from a long ARX model reduced
+    by balanced truncation (``B`` by least squares, ``C = 1``)."""
+    starts = [_armax_start(spec, segments)]
+    arx_theta, *_ = _arx_theta(segments, spec.na, spec.nb, spec.nk)
+    starts.append(np.concatenate([arx_theta, np.zeros(spec.nc)]))
+    A = _reduced_arx_poles(spec, segments, spec.na) if spec.na else None
+    if A is not None:
+        starts.append(np.concatenate([A[1:], _b_given_f(spec, segments, A), np.zeros(spec.nc)]))
+    return [start for start in starts if np.all(np.isfinite(start))] or starts[:1]
+
+
 def _oe_start(spec: _Spec, segments, iterations: int = 6) -> np.ndarray:
     """Steiglitz-McBride: ARX on the data filtered by ``1/F`` of the previous step, ``F`` kept stable."""
     theta, *_ = _arx_theta(segments, spec.nf, spec.nb, spec.nk)
@@ -680,6 +902,108 @@ def _oe_start(spec: _Spec, segments, iterations: int = 6) -> np.ndarray:
         theta = new
     f, b = theta[:spec.nf], theta[spec.nf:]
     return np.concatenate([b, _stable(np.concatenate([[1.0], f]))[1:]])
+
+
+def _balanced_poles(num: np.ndarray, den: np.ndarray, order: int) -> np.ndarray | None:
+    """The monic denominator (in ``q^-1``) of ``order`` of the balanced truncation of ``num / den``, or None.
+
+    Balanced truncation keeps the states that are both well excited and well seen (the largest
+    Hankel singular values); its poles are those of the dominant dynamics, whatever the noise
+    did to the long model's other poles. ``den`` is first made stable by reflection."""
+    den = _stable(np.asarray(den, float))
+    size = max(den.size, num.size)
+    num, den = np.pad(num, (0, size - num.size)), np.pad(den, (0, size - den.size))
+    n = size - 1
+    if order < 1 or n <= order:
+        return den if n == order else None
+    # controllable companion form of the strictly proper part: G = num[0] + c (zI - A)^-1 b
+    a_mat = np.zeros((n, n))
+    a_mat[0] = -den[1:]
+    a_mat[1:, :-1] = np.eye(n - 1)
+    b_vec = np.zeros((n, 1))
+    b_vec[0] = 1.0
+    c_vec = (num[1:] - num[0] * den[1:])[None, :]
+    try:
+        gram_c = scipy.linalg.solve_discrete_lyapunov(a_mat, b_vec @ b_vec.T)
+        gram_o = scipy.linalg.solve_discrete_lyapunov(a_mat.T, c_vec.T @ c_vec)
+        roots = []
+        for gram in (gram_c, gram_o):
+            w, v = np.linalg.eigh((gram + gram.T) / 2)
+            roots.append(v * np.sqrt(np.maximum(w, 0.0)))
+        u_mat, hankel, vt_mat = np.linalg.svd(roots[1].T @ roots[0])
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    if not np.all(np.isfinite(hankel)) or hankel[order - 1] <= 1e-12 * hankel[0]:
+        return None
+    scale = np.sqrt(hankel[:order])
+    right = roots[0] @ vt_mat[:order].T / scale
+    left = (u_mat[:, :order] / scale).T @ roots[1].T
+    poles = np.linalg.eigvals(left @ a_mat @ right)
+    poly = np.real(np.poly(poles))
+    return poly if np.all(np.isfinite(poly)) else None
+
+
+def _reduced_arx_poles(spec: _Spec, segments, order: int) -> np.ndarray | None:
+    """The poles of a long ARX model's ``B/A`` reduced to ``order`` by balanced truncation (or None).
+
+    The long model is fitted to the data less their means: an offset would otherwise take a pole
+    near z = 1, which the truncation keeps as dominant."""
+    long = _long_order(spec, segments, max(_LONG_ARX_ORDER, 3 * order))
+    if long <= order:
+        return None
+    centred = [(y - np.mean(y), u - np.mean(u)) for y, u in segments]
+    theta, *_ = _arx_theta(centred, long, long, spec.nk, _rough_lstsq)
+    if not np.all(np.isfinite(theta)):
+        return None
+    return _balanced_poles(np.concatenate([np.zeros(spec.nk), theta[long:]]),
+                           np.concatenate([[1.0], theta[:long]]), order)
+
+
+def _subspace_poles(data: IdData, spec: _Spec, order: int) -> np.ndarray | None:
+    """The poles of an ``n4sid`` model of ``order`` (None if the subspace module is absent or fails).
+
+    Only for a delay of at most one sample: the state-space model's states would otherwise spend
+    themselves on the delay."""
+    if spec.nk > 1 or order < 1:
+        return None
+    try:
+        from .subspace import n4sid
+    except ImportError:
+        return None
+    try:
+        with np.errstate(all="ignore"):
+            model = n4sid(data, order)
+        poles = np.asarray(model.poles(), complex)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+        return None
+    if not model.success or poles.size != order or not np.all(np.isfinite(poles)):
+        return None
+    return np.real(np.poly(poles))
+
+
+def _b_given_f(spec: _Spec, segments, F: np.ndarray) -> np.ndarray:
+    """``B`` by least squares for a given ``F``: ``y = B (u / F) + e`` is linear in ``B``."""
+    signals = [{"target": y, "w": _lfilter([1.0], F, u)} for y, u in segments]
+    phi, target = _regression(signals, [("w", range(spec.nk, spec.nk + spec.nb), 1.0)], spec.nk + spec.nb - 1)
+    return _lstsq(phi, target)
+
+
+def _g_starts(spec: _Spec, data: IdData, segments) -> list[np.ndarray]:
+    """Starts ``[b, f]`` of ``B/F``: Steiglitz-McBride, and ``F`` from the poles of a long ARX model
+    reduced by balanced truncation (or, if that fails, of ``n4sid``), ``B`` by least squares.
+
+    Steiglitz-McBride can settle where a pole cancels a zero (on closed-loop data it did, near
+    z = 1); the reduced models' poles are those of the dominant dynamics."""
+    starts = [_oe_start(spec, segments)]
+    if spec.nf:
+        # n4sid only where the balanced truncation fails: on the actuator's records the two gave the
+        # same poles, and n4sid cost more than the rest of the search at 400 samples
+        F = _reduced_arx_poles(spec, segments, spec.nf)
+        F = _subspace_poles(data, spec, spec.nf) if F is None else F
+        if F is not None:
+            F = _stable(F)
+            starts.append(np.concatenate([_b_given_f(spec, segments, F), F[1:]]))
+    return [start for start in starts if np.all(np.isfinite(start))] or starts[:1]
 
 
 def _arma_start(spec: _Spec, noises) -> tuple[np.ndarray, np.ndarray]:
@@ -704,8 +1028,10 @@ def armax(data: IdData, na: int, nb: int, nc: int, nk: int, *, initial: str = "z
     """ARMAX model ``A(q) y(t) = B(q) u(t) + C(q) e(t)`` by the prediction-error method (MATLAB ``armax``).
 
     Starts from Hannan-Rissanen (a long ARX model estimates ``e``, then ``A, B, C`` by least
-    squares) and minimises the one-step prediction errors ``e = (A y - B u) / C`` by
-    Levenberg-Marquardt with the analytic Jacobian, ``C`` kept stable.
+    squares), from ARX with ``C = 1`` and from ``A`` of a long ARX model reduced by balanced
+    truncation, and minimises the one-step prediction errors ``e = (A y - B u) / C`` by
+    Levenberg-Marquardt with the analytic Jacobian from the best of them (see the module's
+    description), ``C`` kept stable.
 
     Parameters
     ----------
@@ -724,7 +1050,8 @@ def armax(data: IdData, na: int, nb: int, nc: int, nk: int, *, initial: str = "z
         experiment's initial conditions (the predictor's free response) are fitted by least
         squares at every step (variable projection), for records that do not start at rest.
     max_iterations : int
-        Most Levenberg-Marquardt iterations.
+        Most Levenberg-Marquardt iterations of the estimate that is kept (its short first run
+        included; the polish on a long record's whole has as many again).
 
     Returns
     -------
@@ -743,15 +1070,19 @@ def armax(data: IdData, na: int, nb: int, nc: int, nk: int, *, initial: str = "z
     """
     initial, iterations = _checked_initial(initial), _checked_iterations(max_iterations)
     spec = _checked_spec(data, "armax", {"na": na, "nb": nb, "nc": nc, "nk": nk}, initial)
-    return _pem(spec, data, _armax_start(spec, data.segments()), initial, iterations)
+    # the starts need no more than the part of a long record the search runs on
+    return _pem(spec, data, _armax_starts(spec, data, _shortened(data.segments(), _SEARCH_SAMPLES)), initial,
+                iterations)
 
 
 def oe(data: IdData, nb: int, nf: int, nk: int, *, initial: str = "zero", max_iterations: int = 100) -> PolynomialModel:
     """Output-error model ``y(t) = B(q)/F(q) u(t) + e(t)`` by the prediction-error method (MATLAB ``oe``).
 
-    Starts from Steiglitz-McBride (ARX refitted on data filtered by ``1/F``) and minimises the
-    output error ``e = y - B/F u`` by Levenberg-Marquardt with the analytic Jacobian, ``F``
-    kept stable. The fit is the simulation (OE's predictor is its simulation).
+    Starts from Steiglitz-McBride (ARX refitted on data filtered by ``1/F``) and from the poles
+    of a long ARX model reduced by balanced truncation (``B`` by least squares), and minimises
+    the output error ``e = y - B/F u`` by Levenberg-Marquardt with the analytic Jacobian from
+    the best of them (see the module's description), ``F`` kept stable. The fit is the
+    simulation (OE's predictor is its simulation).
 
     Parameters
     ----------
@@ -768,7 +1099,8 @@ def oe(data: IdData, nb: int, nf: int, nk: int, *, initial: str = "zero", max_it
         experiment's initial conditions (the predictor's free response) are fitted by least
         squares at every step (variable projection), for records that do not start at rest.
     max_iterations : int
-        Most Levenberg-Marquardt iterations.
+        Most Levenberg-Marquardt iterations of the estimate that is kept (its short first run
+        included; the polish on a long record's whole has as many again).
 
     Returns
     -------
@@ -787,16 +1119,20 @@ def oe(data: IdData, nb: int, nf: int, nk: int, *, initial: str = "zero", max_it
     """
     initial, iterations = _checked_initial(initial), _checked_iterations(max_iterations)
     spec = _checked_spec(data, "oe", {"nb": nb, "nf": nf, "nk": nk}, initial)
-    return _pem(spec, data, _oe_start(spec, data.segments()), initial, iterations)
+    # the starts need no more than the part of a long record the search runs on
+    return _pem(spec, data, _g_starts(spec, data, _shortened(data.segments(), _SEARCH_SAMPLES)), initial,
+                iterations)
 
 
 def bj(data: IdData, nb: int, nc: int, nd: int, nf: int, nk: int, *, initial: str = "zero",
        max_iterations: int = 100) -> PolynomialModel:
     """Box-Jenkins model ``y(t) = B(q)/F(q) u(t) + C(q)/D(q) e(t)`` by the prediction-error method (MATLAB ``bj``).
 
-    Starts ``B/F`` from Steiglitz-McBride and ``C/D`` from Hannan-Rissanen on the output
-    error, then minimises ``e = D/C (y - B/F u)`` by Levenberg-Marquardt with the analytic
-    Jacobian, ``C``, ``D`` and ``F`` kept stable.
+    Starts ``B/F`` as :func:`oe` does and ``C/D`` from Hannan-Rissanen on each start's output
+    error, ranks the starts by that output error whitened by a long AR model (what ``B/F``
+    allows, whatever the rough noise model), then minimises ``e = D/C (y - B/F u)`` by
+    Levenberg-Marquardt with the analytic Jacobian from the best of them (see the module's
+    description), ``C``, ``D`` and ``F`` kept stable.
 
     Parameters
     ----------
@@ -817,7 +1153,8 @@ def bj(data: IdData, nb: int, nc: int, nd: int, nf: int, nk: int, *, initial: st
         experiment's initial conditions (the predictor's free response) are fitted by least
         squares at every step (variable projection), for records that do not start at rest.
     max_iterations : int
-        Most Levenberg-Marquardt iterations.
+        Most Levenberg-Marquardt iterations of the estimate that is kept (its short first run
+        included; the polish on a long record's whole has as many again).
 
     Returns
     -------
@@ -836,12 +1173,17 @@ def bj(data: IdData, nb: int, nc: int, nd: int, nf: int, nk: int, *, initial: st
     """
     initial, iterations = _checked_initial(initial), _checked_iterations(max_iterations)
     spec = _checked_spec(data, "bj", {"nb": nb, "nc": nc, "nd": nd, "nf": nf, "nk": nk}, initial)
-    segments = data.segments()
-    g_theta = _oe_start(spec, segments)
-    b, f = g_theta[:spec.nb], g_theta[spec.nb:]
-    gb, gf = np.concatenate([np.zeros(spec.nk), b]), np.concatenate([[1.0], f])
-    c, d = _arma_start(spec, [y - _lfilter(gb, gf, u) for y, u in segments])
-    return _pem(spec, data, np.concatenate([b, c, d, f]), initial, iterations)
+    # the starts need no more than the part of a long record the search runs on
+    segments = _shortened(data.segments(), _SEARCH_SAMPLES)
+    starts = []
+    for g_theta in _g_starts(spec, data, segments):
+        b, f = g_theta[:spec.nb], g_theta[spec.nb:]
+        gb, gf = np.concatenate([np.zeros(spec.nk), b]), np.concatenate([[1.0], f])
+        c, d = _arma_start(spec, [y - _lfilter(gb, gf, u) for y, u in segments])
+        starts.append(np.concatenate([b, c, d, f]))
+    # with a noise model, the starts are ranked by the output error they leave, whitened
+    score = _whitened_output_error if spec.nc or spec.nd else None
+    return _pem(spec, data, starts, initial, iterations, score)
 
 
 def pem(data: IdData, structure: str, orders, *, initial: str = "zero", max_iterations: int = 100) -> PolynomialModel:
