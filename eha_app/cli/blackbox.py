@@ -93,6 +93,10 @@ def add_parser(idsub) -> None:
                                     "open loop's u to x), P2DU ... (default P2D)")
                 p.add_argument("--delay", default="estimate", metavar="SECONDS|estimate",
                                help="Td: estimate (default, for a kind with D) or fixed, in seconds (0: none)")
+                p.add_argument("--input-offset", default="zero", metavar="zero|estimate",
+                               help="a constant input offset c, y = G (u + c): zero (default) or estimate (the "
+                                    "single-rod cylinder's velocity differs with the valve's sign: in open loop "
+                                    "that is an offset)")
             else:
                 p.add_argument(f"--{name}", type=int, default=default,
                                help=f"{_ORDER_HELP[name]} (default {default})")
@@ -145,8 +149,9 @@ def _add_common(p) -> None:
     p.add_argument("--validation", default=None,
                    help="'second experiment' (default when simulated) or split (the record's last half; the "
                         "default with --data and no --val-data)")
-    p.add_argument("--detrend", action=argparse.BooleanOptionalAction, default=True,
-                   help="remove each experiment's means first (default; --no-detrend keeps them: a linear model "
+    p.add_argument("--detrend", action=argparse.BooleanOptionalAction, default=None,
+                   help="remove each experiment's means first (default, but for the simulated open loop, whose "
+                        "position integrates: its mean is no operating point; --no-detrend keeps them: a linear model "
                         "then has to explain the offsets too)")
     p.add_argument("--horizon", default="inf",
                    help="the fits' horizon: inf (simulation, default) or k (k-step prediction)")
@@ -351,8 +356,10 @@ def _records(args, checked: dict):
         merged = "" if args.experiments == 1 else f" x {args.experiments} experiments merged"
         source = (f"simulated {args.loop} loop, {exp.input_name} to {exp.output_name}, {args.samples} samples"
                   f"{merged} at {checked['ts']:g} s, seed {args.seed}")
-    if args.detrend:
+    detrend = args.detrend if args.detrend is not None else bool(checked["data"]) or args.loop != "open"
+    if detrend:
         est, val = est.detrended(), val.detrended()
+        source += ", means removed"
     return est, val, source
 
 
@@ -364,9 +371,8 @@ def _shortest(est) -> tuple[int, str]:
 # ---------------------------------------------------------------------------
 # one model
 # ---------------------------------------------------------------------------
-def _estimate(structure: str, est, orders: dict, delay, initial: str):
-    # n4sid and procest estimate the initial state when asked; ARX takes its first samples as initial
-    # conditions, ARMAX, OE and BJ start from rest (their estimators take nothing else)
+def _estimate(structure: str, est, orders: dict, delay, initial: str, input_offset: str = "zero"):
+    # ARX takes its first samples as initial conditions; the others start from rest or estimate them
     if structure == "ss":
         from eha_core.identify.subspace import n4sid
 
@@ -374,10 +380,12 @@ def _estimate(structure: str, est, orders: dict, delay, initial: str):
     if structure == "process":
         from eha_core.identify.process import procest
 
-        return procest(est, orders["kind"], delay=delay, initial=initial)
+        return procest(est, orders["kind"], delay=delay, initial=initial, input_offset=input_offset)
     from eha_core.identify import polynomial
 
-    return getattr(polynomial, structure)(est, **orders)
+    if structure == "arx":
+        return polynomial.arx(est, **orders)
+    return getattr(polynomial, structure)(est, **orders, initial=initial)
 
 
 def run_model(args) -> int:
@@ -387,6 +395,8 @@ def run_model(args) -> int:
     checked = _check_common(args)
     record_s = None if checked["shortest"] is None else (checked["shortest"] - 1) * checked["ts"]
     delay = _delay(args, record_s) if structure == "process" else None
+    offset = getattr(args, "input_offset", "zero")
+    _choice("--input-offset", offset, ("zero", "estimate"))
     if structure == "process":
         orders["kind"] = _check_kind("--kind", args.kind)
     if checked["shortest"] is not None:
@@ -397,7 +407,7 @@ def run_model(args) -> int:
     _check_fits(orders, shortest, where, args.typed)
     if structure == "process" and delay is not True:
         _delay(args, (shortest - 1) * est.ts)
-    model = _estimate(structure, est, orders, delay, args.initial)
+    model = _estimate(structure, est, orders, delay, args.initial, offset)
     report = _report(model, est, val, checked["horizon"], args.initial, args.max_lag)
     return _output(args, model, report, source)
 

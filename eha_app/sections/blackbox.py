@@ -72,9 +72,12 @@ BB_FORM = (Group("Experiment", (
     Field("bb_experiments", "experiments merged", "integer", lo=1, hi=5, short="experiments",
           tip="estimation experiments merged into one data set (MATLAB merge), each from its own seed; the "
               "estimators restart at each, and the validation experiment is one more"),
-    Field("bb_detrend", "means", "select", options=(("remove", "removed (MATLAB detrend)"), ("keep", "kept")),
+    Field("bb_detrend", "means", "select", options=(("auto", "removed in closed loop, kept in open loop"),
+                                                   ("remove", "removed (MATLAB detrend)"), ("keep", "kept")),
           short="means", tip="each experiment's means of input and output removed before estimation: a linear "
-                             "model then need not explain the offsets the valve's asymmetry makes"),
+                             "model then need not explain the offsets the valve's asymmetry makes. In open loop "
+                             "the position integrates: its mean is no operating point (estimate an input offset "
+                             "with a process model instead)"),
 )), Group("Validation", (
     Field("bb_validation", "validation data", "select", options=(("second experiment", "a second experiment"),
                                                                   ("split", "the record's last part")),
@@ -100,6 +103,10 @@ BB_FORM = (Group("Experiment", (
                                                         ("P1DI", "P1DI: P1D with an integrator"),
                                                         ("P2DI", "P2DI: P2D with an integrator")),
           short="process kind"),
+    Field("bb_offset", "input offset", "select", options=(("zero", "none"), ("estimate", "estimated")),
+          short="input offset", tip="process models: y = G (u + c) with a constant c estimated (MATLAB's "
+                                    "InputOffset): in open loop the cylinder's velocity differs with the valve's "
+                                    "sign, which a zero-mean input turns into such an offset"),
     Field("bb_max_order", "highest order", "integer", lo=1, hi=4, short="highest order",
           tip="ARMAX, OE, BJ: the candidates have every polynomial of order 1, 2, … up to this (nk as given)"),
     Field("bb_criterion", "pick by", "select", options=(("validation fit", "validation fit"), ("bic", "BIC"),
@@ -116,7 +123,7 @@ BB_DEFAULTS = {"bb_loop": "closed", "bb_signal": "prbs", "bb_samples": "2000", "
                "bb_noise": "0.01", "bb_seed": "0", "bb_validation": "second experiment", "bb_fraction": "0.5",
                "bb_structure": "arx", "bb_choose": "fixed", "bb_na": "2", "bb_nb": "2", "bb_nc": "1", "bb_nd": "1",
                "bb_nf": "2", "bb_nk": "1", "bb_n": "2", "bb_kind": "P1D", "bb_max_order": "3",
-               "bb_criterion": "validation fit", "bb_experiments": "1", "bb_detrend": "remove",
+               "bb_criterion": "validation fit", "bb_experiments": "1", "bb_detrend": "auto", "bb_offset": "zero",
                "bb_initial": "zero", "bb_horizon": "simulation", "bb_k": "1"}
 _FIELDS = {f.name: f for g in BB_FORM for f in g.fields}
 
@@ -137,6 +144,8 @@ def bb_hidden(texts: dict) -> list[str]:
     hidden = [f for f in (*_ALL_ORDERS, "bb_max_order", "bb_criterion") if f not in shown]
     if texts.get("bb_loop") == "open":
         hidden.append("bb_kp")
+    if structure != "process":
+        hidden.append("bb_offset")
     if texts.get("bb_validation") != "split":
         hidden.append("bb_fraction")
     else:
@@ -159,15 +168,26 @@ class BlackBoxRequest:
     initial: str = "zero"
     horizon: int | None = None          # None: simulation
     detrend: bool = True                # each experiment's means removed first (MATLAB detrend)
+    input_offset: str = "zero"          # process models: "estimate" fits y = G (u + c)
 
     def candidates(self):
         """The selection's candidates: the core's defaults (ARX's 32, n = 1..6, the four process kinds), or
-        for ARMAX, OE and BJ every polynomial of order 1..``max_order`` with the delay given."""
+        for ARMAX, OE and BJ every polynomial of order 1..``max_order`` with the delay given; the process
+        kinds each with the input offset asked for."""
+        if self.structure == "process" and self.input_offset == "estimate":
+            from eha_core.identify.selection import PROCESS_KINDS
+
+            return [{"kind": k, "input_offset": "estimate"} for k in PROCESS_KINDS]
         if self.structure not in ("armax", "oe", "bj"):
             return None
         nk = dict(self.orders).get("nk", 1)
         names = {"armax": ("na", "nb", "nc"), "oe": ("nb", "nf"), "bj": ("nb", "nc", "nd", "nf")}[self.structure]
         return [{**{n: k for n in names}, "nk": nk} for k in range(1, self.max_order + 1)]
+
+
+def _detrends(choice: str, loop: str) -> bool:
+    """Are the means removed: as chosen, or (auto) in closed loop only."""
+    return choice == "remove" or (choice == "auto" and loop == "closed")
 
 
 def parse_blackbox(texts: dict) -> tuple[BlackBoxRequest | None, dict]:
@@ -219,7 +239,8 @@ def parse_blackbox(texts: dict) -> tuple[BlackBoxRequest | None, dict]:
     horizon = values["bb_k"] if values["bb_horizon"] == "k" else None
     return BlackBoxRequest(experiment, structure, orders, select, int(values.get("bb_max_order", 3)),
                            values.get("bb_criterion", "validation fit"), values["bb_initial"], horizon,
-                           values.get("bb_detrend", "remove") == "remove"), {}
+                           _detrends(values.get("bb_detrend", "auto"), experiment.loop),
+                           values.get("bb_offset", "zero")), {}
 
 
 # ---------------------------------------------------------------------------
@@ -258,7 +279,7 @@ def _estimate(req: BlackBoxRequest, est):
         return polynomial.bj(est, o["nb"], o["nc"], o["nd"], o["nf"], o["nk"], initial=req.initial)
     if req.structure == "ss":
         return subspace.n4sid(est, o["n"], initial=req.initial)
-    return process.procest(est, o["kind"], initial=req.initial)
+    return process.procest(est, o["kind"], initial=req.initial, input_offset=req.input_offset)
 
 
 def _quietly(fn, *args, **kwargs):

@@ -69,10 +69,10 @@ STRUCTURES = {
 }
 #: What a candidate may give besides its orders (passed on to the estimator).
 _EXTRAS = {"armax": ("initial",), "oe": ("initial",), "bj": ("initial",), "ss": ("initial",),
-           "process": ("initial", "delay")}
+           "process": ("initial", "delay", "input_offset")}
 #: How the picked row is chosen.
 CRITERIA = ("bic", "aic", "validation fit")
-#: BIC: see the module docstring (the validation fit picks too large a structure too often).
+#: The validation fit, as the validation data can tell it: see the module docstring.
 DEFAULT_CRITERION = "validation fit"
 #: The default ARX grid, MATLAB's ``struc(1:4, 1:4, 1:2)`` (32 structures).
 ARX_GRID = {"na": range(1, 5), "nb": range(1, 5), "nk": range(1, 3)}

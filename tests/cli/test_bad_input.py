@@ -91,6 +91,7 @@ CASES = [
     (["identify", "oe", "--experiments", "9"], "--experiments = 9"),
     (["identify", "oe", "--experiments", "2", "--validation", "split"], "--validation = split"),
     (["identify", "process", "--kind", "P3"], "--kind = P3"),
+    (["identify", "process", "--input-offset", "guess"], "--input-offset = guess"),
     (["identify", "select", "--structure", "fir"], "--structure = fir"),
     (["identify", "arx", "--data", "{bin}"], "--data = '{bin}'"),
     # study

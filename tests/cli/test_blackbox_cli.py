@@ -106,7 +106,7 @@ def test_json_parses_and_the_export_rebuilds_the_model_of_merged_experiments(fil
     assert printed["name"] == "OE(nb=1, nf=1, nk=1)" and printed["validation"]["label"].endswith(
         "(simulation, zero initial conditions)")
     # two experiments of 300 samples, estimated together
-    assert printed["n_samples"] == 600 and printed["source"] == f"data: {files['est']} + {files['est2']}"
+    assert printed["n_samples"] == 600 and printed["source"] == f"data: {files['est']} + {files['est2']}, means removed"
     assert set(printed["residual_tests"]) >= {"whiteness", "independence", "passed"}
     exported = json.loads(out_file.read_text())
     assert exported["params"] == printed["params"]
