@@ -700,14 +700,17 @@ class LseView:
     resim_t: np.ndarray | None = None
     resim_x_mm: np.ndarray | None = None
     resim_p1_mpa: np.ndarray | None = None
+    resim_label: str = "re-simulated with the estimates"
 
 
-def lse_view(measured, resimulated) -> LseView:
+def lse_view(measured, resimulated, label: str = "re-simulated with the estimates") -> LseView:
+    """What :class:`LseFitFigure` draws: the record ``measured`` and the model's run ``resimulated``
+    (None: none), named ``label`` in the legend (the validation's plot: "simulated on the validation record")."""
     t, x, p1 = decimate(measured.t, measured.x * 1e3, measured.p1 * 1e-6)
     if resimulated is None:
-        return LseView(t=t, x_mm=x, p1_mpa=p1)
+        return LseView(t=t, x_mm=x, p1_mpa=p1, resim_label=label)
     tr, xr, p1r = decimate(resimulated.t, resimulated.x * 1e3, resimulated.p1 * 1e-6)
-    return LseView(t=t, x_mm=x, p1_mpa=p1, resim_t=tr, resim_x_mm=xr, resim_p1_mpa=p1r)
+    return LseView(t=t, x_mm=x, p1_mpa=p1, resim_t=tr, resim_x_mm=xr, resim_p1_mpa=p1r, resim_label=label)
 
 
 class LseFitFigure(Described):
@@ -745,7 +748,7 @@ class LseFitFigure(Described):
             self.resim_item.visible = False
         else:
             self.resim.data = {"t": _f32(view.resim_t), "x": _f32(view.resim_x_mm), "p1": _f32(view.resim_p1_mpa)}
-            _set_legend_label(self.resim_item, "re-simulated with the estimates")
+            _set_legend_label(self.resim_item, view.resim_label)
             self.resim_item.visible = True
 
 

@@ -4,7 +4,7 @@ from the signals a rig measures; the three routes side by side; the hand-in."""
 from __future__ import annotations
 
 import html
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
@@ -15,6 +15,14 @@ from eha_core.errors import ComputationError, FieldError, not_allowed
 from eha_core.experiments import LSE_INPUT, LSE_INPUT_RICH, LSE_INPUT_RICH_T_END, LSE_SCENARIOS
 from eha_core.grading import greybox_model_error
 from eha_core.identify.greybox import GREYBOX_PARAMS, GREYBOX_SIGNALS
+from eha_core.identify.holdout import (
+    VALIDATION_WORDS,
+    model_state_at,
+    second_greybox_record,
+    split_record,
+    validate_params,
+    validation_seed,
+)
 from eha_core.param_table import FIELD_INFO
 from eha_core.params import ActuatorParams, ParameterError
 from eha_core.signals import SignalSpecError, parse_signal
@@ -47,7 +55,7 @@ from ..session.form import Field, Form, Group, parse_fields, raised_to_bounds, r
 from ..session.freshness import ResultView
 from ..session.state import FIELD_LABELS
 from .handin import HandInBox
-from .least_squares import EXCITATIONS
+from .least_squares import EXCITATIONS, validation_html
 from .uploads import (
     ColumnMapping,
     FileUpload,
@@ -103,6 +111,9 @@ GB_FORM = (Group("Grey-box estimation", (
     Field("gb_t_end", "record length", "number", unit="s", lo=1.0, hi=60.0, short="record length"),
     Field("gb_scenario", "disturbance", "select", options=tuple(SCENARIOS.items()), short="disturbance",
           tip="a load force on the plant, known to the model (an input of the record)"),
+    Field("gb_validation", "validation", "select", options=tuple(VALIDATION_WORDS.items()), short="validation",
+          tip="the estimated model simulated on data it was not fitted to: a second experiment (another "
+              "excitation, a new noise draw), or the record's last third, held out of the estimation"),
     Field("gb_custom", "custom d(t)", "text", short="custom d(t)",
           tip="none, sine:AMP[:FREQ_HZ], white:SIGMA, or any signal of the simulation, e.g. sine:500:2+noise:100:1"),
     Field("gb_seed", "noise seed", "integer", lo=0, hi=10**6, short="noise seed"),
@@ -124,6 +135,7 @@ GB_FORM = (Group("Grey-box estimation", (
 GB_DEFAULTS = {"gb_params": "M, B, Af, βe", "gb_measured": "x, p1, p2", "gb_excitation": "paper",
                "gb_u": "sine:6:2", "gb_t_end": "5",
                "gb_scenario": "none", "gb_custom": "sine:1000:3", "gb_seed": "0", "gb_shooting": "auto",
+               "gb_validation": "second",
                "gb_noise_x": "0.01",
                "gb_noise_v": "0", "gb_noise_p": "0.05",
                **{f"gb_guess_{n}": _display(n, getattr(_PAPER, n)) for n in GUESS_PARAMS}}
@@ -147,6 +159,7 @@ class GreyBoxRequest:
     u_text: str = "sine:6:2"
     t_end: float = 5.0
     shooting: str = "auto"
+    validation: str = "second"
 
     def measurement_noise(self) -> dict[str, float]:
         sx, sv, sp = self.noise
@@ -219,7 +232,7 @@ def parse_greybox(texts: dict, fields: dict | None = None, *, measurable=GREYBOX
                          custom=texts.get("gb_custom", ""), seed=values.get("gb_seed", 0),
                          noise=tuple(float(values.get(k, 0.0)) for k in _NOISE_FIELDS), guess=guess,
                          u_text=texts.get("gb_u", ""), t_end=float(values.get("gb_t_end", 5.0)),
-                         shooting=values.get("gb_shooting", "auto"))
+                         shooting=values.get("gb_shooting", "auto"), validation=values.get("gb_validation", "second"))
     if "gb_custom" not in hidden and not errors.get("gb_custom"):
         try:
             parse_signal(req.disturbance_spec(), name="custom d(t)", seed=req.seed, hold_s=1e-3)
@@ -289,7 +302,14 @@ class GreyBoxPanel(Section):
         self.plot = pn.Column(sizing_mode="stretch_width", css_classes=["eha-gb-plot"])
         self.figure: GreyBoxFigure | None = None
         self.details = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-gb-details"])
-        self.area = pn.Column(self.table, self.plot, self.details, sizing_mode="stretch_width")
+        # the fit on data the estimate did not see: its words, and the record against the model's simulation
+        self.validation = None
+        self.validation_note = ""
+        self.validation_pane = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-gb-validation"])
+        self.validation_figure: GreyBoxFigure | None = None
+        self.validation_plot = pn.Column(sizing_mode="stretch_width", css_classes=["eha-gb-validation-plot"])
+        self.area = pn.Column(self.table, self.plot, self.validation_pane, self.validation_plot, self.details,
+                              sizing_mode="stretch_width")
         self.view = ResultView("gb", self.area, run_hint="Press “Run grey-box estimation” to update it.")
         self.routes = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-routes-pane"])
         self.alert = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width",
@@ -463,6 +483,16 @@ class GreyBoxPanel(Section):
             self.figure = GreyBoxFigure(data.t, data.signals, res.simulated)
             self.plot.objects = [pn.pane.Bokeh(self.figure.layout, sizing_mode="stretch_width")]
 
+    def _draw_validation(self, val) -> None:
+        """The validation's words and, when the model was simulated, its record against the model's run."""
+        self.validation_pane.object = self.validation_note
+        if val is None or val.simulated is None:
+            self.validation_plot.objects, self.validation_figure = [], None
+            return
+        if self.validation_figure is None or not self.validation_figure.update(val.t, val.measured, val.simulated):
+            self.validation_figure = GreyBoxFigure(val.t, val.measured, val.simulated)
+            self.validation_plot.objects = [pn.pane.Bokeh(self.validation_figure.layout, sizing_mode="stretch_width")]
+
     def run(self):
         from eha_core.identify.greybox import GreyBoxData, greybox_data, identify_greybox
 
@@ -514,8 +544,11 @@ class GreyBoxPanel(Section):
                 d = parse_signal(d_text, name="custom d(t)", seed=req.seed, hold_s=1e-3)
                 noise = {s: v for s, v in req.measurement_noise().items() if s in req.measured}
                 data = greybox_data(params, u, t_end=t_end, d=d, noise=noise, seed=req.seed, measured=req.measured)
+            # with the split, the estimate sees the record's first part only
+            whole, (data, held) = data, (split_record(data) if req.validation == "split" else (data, None))
             res = identify_greybox(data, req.names, measured=req.measured, guess=guess, shooting=req.shooting,
                                    cancel=token, progress=stage)
+            validation = _validation(req, res, params, whole, held, u, t_end, d_text, own is not None, token)
             model = None
             if res.success:
                 # a nonlinear model of the actuator: the board closes its loop, simulates it on its
@@ -528,11 +561,13 @@ class GreyBoxPanel(Section):
                                         params=params if own is None else None)
                 except (ParameterError, ValueError, ComputationError):
                     model = None
-            return res, data, model
+            return res, data, model, validation
 
         def show(out, job):
-            res, data, model = out
+            res, data, model, (validation, why_not) = out
             self.result = res
+            self.validation = validation
+            self.validation_note = validation_html(validation, req.validation, why_not)
             self.last_data = data
             self.last_settings, self.last_conditions = run_settings, run_conditions
             # what the hand-in's grading needs of the experiment: on a variant of the paper's actuator, the
@@ -545,6 +580,7 @@ class GreyBoxPanel(Section):
             note = _run_note(job, data, res, own is not None) + paper_note
             self.table.object = self._table_html() + note + assumed_model_html("greybox")
             self._draw(data, res)
+            self._draw_validation(validation)
             self.details.object = self._details_html()
             for d in self.downloads:
                 d.disabled = False
@@ -793,20 +829,21 @@ class GreyBoxPanel(Section):
         c = self.result_context
         return SectionSnapshot(self.key, self.title, self.settings(), stale=self.is_stale(),
                                content=(self.result, self.last_data, c.get("params"), c.get("scenario"),
-                                        bool(c.get("own_record")), (params, lse, backout, gb)))
+                                        bool(c.get("own_record")), (params, lse, backout, gb), self.validation,
+                                        self.validation_note))
 
     @classmethod
     def report(cls, snapshot: SectionSnapshot, hidden=()) -> ReportPart | None:
         if not snapshot.content:
             return None
-        result, data, params, scenario, own, (tab1, lse, backout, gb) = snapshot.content
+        result, data, params, scenario, own, (tab1, lse, backout, gb), _validation, validation_note = snapshot.content
         if result is None and lse is None and backout is None:
             return None
         body, figures = stale_note(snapshot), {}
         if result is not None:
             figures["greybox"] = GreyBoxFigure(data.t, data.signals, result.simulated).layout
             body += (greybox_table_html(result, params, hidden=hidden, scenario=scenario, own_record=own)
-                     + "{{greybox}}" + _details(result))
+                     + "{{greybox}}" + validation_note + _details(result))
         body += "<h3>The three routes side by side</h3>" + routes_html(tab1, lse, backout, gb, hidden=hidden)
         return ReportPart("Grey-box identification (the nonlinear model)", body, figures)
 
@@ -834,6 +871,33 @@ class _OwnRecord:
     u: np.ndarray
     signals: dict
     source: str
+
+
+def _validation(req, res, params, whole, held, u, t_end, d_text, own_record: bool, token):
+    """The grey-box estimate's validation the request asks for: (HoldoutValidation or None, why there is none).
+
+    A held-out part starts where the model's own simulation of the estimation part leaves the states the
+    record does not measure; a second experiment is the same plant under another excitation, its random
+    load and sensor noise drawn anew (the plant, in an exercise the hidden actuator, only simulates it)."""
+    if req.validation == "none":
+        return None, ""
+    try:
+        if req.validation == "split":
+            read = res.extras.get("intersample", {}).get("used")
+            rec = replace(held, intersample=read) if read in ("foh", "zoh") else held
+            whole_read = replace(whole, intersample=read) if read in ("foh", "zoh") else whole
+            carried = model_state_at(res.params, whole_read, float(held.t[0]), cancel=token)
+            return validate_params(res.params, rec, kind="split", signals=req.measured, carried_state=carried,
+                                   cancel=token), ""
+        if own_record:
+            return None, ("a second experiment needs the simulated actuator; on your file, choose the record's "
+                          "last third")
+        d2 = parse_signal(d_text, name="custom d(t)", seed=validation_seed(req.seed), hold_s=1e-3)
+        noise = {s: v for s, v in req.measurement_noise().items() if s in req.measured}
+        rec = second_greybox_record(params, u, t_end=t_end, d=d2, noise=noise, seed=req.seed, measured=req.measured)
+        return validate_params(res.params, rec, kind="second", signals=req.measured, cancel=token), ""
+    except (ComputationError, ValueError) as exc:
+        return None, str(exc)
 
 
 def _details(res) -> str:

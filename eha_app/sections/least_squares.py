@@ -28,6 +28,15 @@ from eha_core.experiments import (
 )
 from eha_core.grading import lse_model_error
 from eha_core.identify.disturbance import MAX_FREQ_HZ
+from eha_core.identify.holdout import (
+    VALIDATION_WORDS,
+    lse_model_params,
+    second_lse_record,
+    split_record,
+    validate_params,
+    validation_input,
+    validation_seed,
+)
 from eha_core.identify.lse import identify_lse
 from eha_core.identify.lse_reading import disturbance_leak
 from eha_core.params import ParameterError
@@ -101,6 +110,9 @@ LSE_FORM = (Group("Least squares", (
               "variables take their regressors from a noise-free simulation of the model (as SRIVC) and are not"),
     Field("lse_seed", "noise seed", "integer", lo=0, hi=10**6, short="noise seed"),
     Field("lse_excitation", "excitation", "select", options=tuple(EXCITATIONS.items()), short="excitation"),
+    Field("lse_validation", "validation", "select", options=tuple(VALIDATION_WORDS.items()), short="validation",
+          tip="the identified model simulated on data it was not fitted to: a second experiment (another "
+              "excitation, a new noise draw), or the record's last third, held out of the estimation"),
 )), Group("Sensor noise (simulated measurements)", (
     Field("lse_noise_x", "σ of x", "number", unit="mm", lo=0.0, hi=10.0, short="σ x",
           tip="white Gaussian noise added to the position sensor, drawn from the noise seed"),
@@ -111,8 +123,8 @@ LSE_FORM = (Group("Least squares", (
 ), collapsible=True, collapsed=True),)
 LSE_DEFAULTS = {"lse_scenario": "none", "lse_custom": "sine:1000:3", "lse_model": "constant", "lse_freq": "",
                 "lse_estimator": "ls",
-                "lse_seed": "0", "lse_excitation": "paper", "lse_noise_x": "0", "lse_noise_v": "0",
-                "lse_noise_p": "0"}
+                "lse_seed": "0", "lse_excitation": "paper", "lse_validation": "second", "lse_noise_x": "0",
+                "lse_noise_v": "0", "lse_noise_p": "0"}
 _LSE_FIELDS = {f.name: f for g in LSE_FORM for f in g.fields}
 
 
@@ -128,6 +140,7 @@ class LseRequest:
     excitation: str = "paper"
     noise: tuple[float, float, float] = (0.0, 0.0, 0.0)     # σ of x [mm], v [mm/s], p1 and p2 [MPa]
     estimator: str = "ls"
+    validation: str = "second"
 
     def measurement_noise(self) -> dict[str, float] | None:
         """The sensors' noise in SI, for :func:`eha_core.experiments.lse_data` (None: noise-free)."""
@@ -179,7 +192,7 @@ def parse_lse(texts: dict, fields: dict | None = None) -> tuple[LseRequest, dict
     req = LseRequest(scenario=values.get("lse_scenario", "none"), custom=texts.get("lse_custom", ""),
                      model=values.get("lse_model", "constant"), frequency_hz=freq,
                      seed=values.get("lse_seed", 0), excitation=values.get("lse_excitation", "paper"),
-                     estimator=values.get("lse_estimator", "ls"),
+                     estimator=values.get("lse_estimator", "ls"), validation=values.get("lse_validation", "second"),
                      noise=tuple(float(values.get(k, 0.0)) for k in ("lse_noise_x", "lse_noise_v", "lse_noise_p")))
     if "lse_custom" not in hidden and not errors.get("lse_custom"):
         try:
@@ -211,13 +224,56 @@ def velocity_from_position(data):
     return dataclasses.replace(data, v=np.gradient(data.x, data.t), source=data.source + ", v from dx/dt")
 
 
+def validation_html(val, choice: str = "none", why_not: str = "") -> str:
+    """The validation's fits in the words of every fit ("fit 97.3 % (simulation, initial conditions
+    estimated)"), the record they are on and how its initial state was taken; or why there is none."""
+    if val is None:
+        if choice == "none":
+            return ("<p class='eha-note eha-validation'>Validation: none chosen; the fit above is on the "
+                    "estimation data only.</p>")
+        return f"<p class='eha-note eha-validation'>No validation: {html.escape(why_not)}</p>" if why_not else ""
+    head = (f"<h4 class='eha-validation-head'>Validation on {html.escape(VALIDATION_WORDS.get(val.kind, val.kind))}"
+            "</h4>")
+    if not val.success:
+        return head + f"<p class='eha-warn eha-validation'>{html.escape(val.message)}</p>"
+    fits = "".join(f"<li><b>{html.escape(s)}</b>: {html.escape(label)}</li>" for s, label in val.labels.items())
+    how = val.initial_how[:1].upper() + val.initial_how[1:]
+    return (head + f"<ul class='eha-validation'>{fits}</ul><p class='eha-note'>Record: {html.escape(val.record)}, "
+            f"which the model was not fitted to. {html.escape(how)}.</p>")
+
+
+def lse_validation(req, res, params, held, u, t_end, disturbance, measured, token):
+    """The least squares' validation the request asks for (a HoldoutValidation, or None) and why there is none."""
+    if req.validation == "none":
+        return None, ""
+    try:
+        model, d_model = lse_model_params(res, params)
+    except ParameterError as exc:
+        return None, f"the estimate is not physical ({exc})"
+    signals = tuple(measured)
+    if req.validation == "split":
+        return validate_params(model, held, kind="split", signals=signals, u=u, d=d_model, cancel=token), ""
+    # the second experiment's random disturbance is drawn anew, as its sensors' noise
+    d2 = disturbance(dataclasses.replace(req, seed=validation_seed(req.seed)))
+    rec = second_lse_record(params, u, t_end=t_end, disturbance=d2, seed=req.seed,
+                            measurement_noise=req.measurement_noise(), cancel=token)
+    if "v" not in measured:
+        rec = velocity_from_position(rec)
+    return validate_params(model, rec, kind="second", signals=signals, u=validation_input(u, t_end), d=d_model,
+                           cancel=token), ""
+
+
 def _simulated_run(params, req, disturbance, u, t_end, measured, board_model, token):
     """The least squares on a simulated experiment: the record (as the sensors measure it), the estimate,
-    its re-simulation, the board's model and the harmonic model beside (see ``LeastSquaresPanel.run``)."""
+    its re-simulation, the board's model, the harmonic model beside and the validation (see
+    ``LeastSquaresPanel.run``). With the split, the estimator and its re-simulation see the first part only."""
     data = lse_data(params, disturbance(req), u=u, t_end=t_end, seed=req.seed,
                     measurement_noise=req.measurement_noise(), cancel=token)
     if "v" not in measured:
         data = velocity_from_position(data)
+    held = None
+    if req.validation == "split":
+        data, held = split_record(data)
     res = identify_lse(data, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
                        estimator=req.estimator, cancel=token)
     try:
@@ -225,8 +281,9 @@ def _simulated_run(params, req, disturbance, u, t_end, measured, board_model, to
         resim_error = ""
     except ParameterError as exc:
         resim, resim_error = None, f"No re-simulation: the estimate is not physical ({exc})."
+    validation = lse_validation(req, res, params, held, u, t_end, disturbance, measured, token)
     return (res, plots.lse_view(data, resim), resim_error, data, resim, board_model(res),
-            _beside(req.model, res, data, params, token))
+            _beside(req.model, res, data, params, token), validation)
 
 
 def _beside(model: str, res, data, params, token):
@@ -240,6 +297,36 @@ def _beside(model: str, res, data, params, token):
         return None, None
     leak = disturbance_leak(res, alt, data, params)
     return (alt, leak) if leak is not None else (None, None)
+
+
+def validation_view(val):
+    """The validation record and the model's simulation on it, as :class:`~eha_app.render.plots.LseFitFigure` draws."""
+    from types import SimpleNamespace
+
+    measured = SimpleNamespace(t=val.t, x=val.measured.get("x", val.simulated[:, 0]),
+                               p1=val.measured.get("p1", val.simulated[:, 2]))
+    model = SimpleNamespace(t=val.t, x=val.simulated[:, 0], p1=val.simulated[:, 2])
+    return plots.lse_view(measured, model, label="simulated with the estimates (not fitted to this record)")
+
+
+def _own_run(own, params, req, board_model, token):
+    """The least squares on the student's record: as :func:`_simulated_run` gives it, without re-simulation
+    (the input is known only at its samples) and without a second experiment (there is no plant to run)."""
+    rec, held = split_record(own) if req.validation == "split" else (own, None)
+    res = identify_lse(rec, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
+                       estimator=req.estimator, cancel=token)
+    if held is not None:
+        try:
+            model_params, d_model = lse_model_params(res, params)
+            validation = (validate_params(model_params, held, kind="split", d=d_model, cancel=token), "")
+        except ParameterError as exc:
+            validation = (None, f"the estimate is not physical ({exc})")
+    else:
+        validation = (None, "" if req.validation == "none" else
+                      "a second experiment needs the simulated actuator; on your file, choose the record's last third")
+    return (res, plots.lse_view(rec, None), (f"Your data ({html.escape(own.source)}, {own.t.size} samples): the "
+                                             "model is not re-simulated (the input is known only at its samples)."),
+            rec, None, board_model(res), _beside(req.model, res, rec, params, token), validation)
 
 
 class LeastSquaresPanel(Section):
@@ -280,7 +367,14 @@ class LeastSquaresPanel(Section):
         # anyone and makes Bokeh complain that it cannot range it
         self.figure: plots.LseFitFigure | None = None
         self.plot = pn.Column(sizing_mode="stretch_width", css_classes=["eha-lse-plot"])
-        self.area = pn.Column(self.table, self.plot, sizing_mode="stretch_width")
+        # the fit on data the estimate did not see: its words, and the record against the model's simulation
+        self.validation = None
+        self.validation_note = ""
+        self.validation_pane = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-lse-validation"])
+        self.validation_figure: plots.LseFitFigure | None = None
+        self.validation_plot = pn.Column(sizing_mode="stretch_width", css_classes=["eha-lse-validation-plot"])
+        self.area = pn.Column(self.table, self.plot, self.validation_pane, self.validation_plot,
+                              sizing_mode="stretch_width")
         self.table4 = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["eha-table4-pane"])
         self.table4_area = pn.Column(self.table4, sizing_mode="stretch_width")
         self.view = ResultView("lse", self.area, run_hint="Press “Run least squares” to update it.")
@@ -648,12 +742,7 @@ class LeastSquaresPanel(Section):
 
         def compute(token):
             if own is not None:     # the student's measurements: nothing to simulate
-                res = identify_lse(own, params, disturbance_model=req.model, disturbance_freq_hz=req.frequency_hz,
-                                   estimator=req.estimator, cancel=token)
-                return (res, plots.lse_view(own, None), (f"Your data ({html.escape(own.source)}, {own.t.size} "
-                                                         "samples): the model is not re-simulated (the input is "
-                                                         "known only at its samples)."),
-                        own, None, board_model(res), _beside(req.model, res, own, params, token))
+                return _own_run(own, params, req, board_model, token)
             return shared_results.get(shared_key, simulated, token)
 
         # a simulated run is a function of these alone: students with the same inputs share it
@@ -661,8 +750,10 @@ class LeastSquaresPanel(Section):
         shared_key = ("least squares", params, req, tuple(measured), self._disturbance_text(req), kp, what)
 
         def show(out, job):
-            res, view, resim_error, data, resim, model, (alt, leak) = out
+            res, view, resim_error, data, resim, model, (alt, leak), (validation, why_not) = out
             self.result = res
+            self.validation = validation
+            self.validation_note = validation_html(validation, req.validation, why_not)
             self.last_settings, self.last_conditions = run_settings, run_conditions
             # what the hand-in's grading needs of the experiment (the route's own error on it, at the truth)
             self.last_reference = None if own is not None else dict(
@@ -689,6 +780,7 @@ class LeastSquaresPanel(Section):
                 self.plot.objects = [pn.pane.Bokeh(self.figure.layout, sizing_mode="stretch_width")]
             else:
                 self.figure.update(view)
+            self._draw_validation(validation)
             self.view.shown(key)
             self._inputs_changed()          # typed while it computed
             if model is not None:
@@ -696,6 +788,21 @@ class LeastSquaresPanel(Section):
                 apply_locked(partial(self.session.post, "board", model))
 
         return self.runner.run("least squares", compute, show, fail=self._fail, busy=[self.area], note=self._note)
+
+    def _draw_validation(self, val) -> None:
+        """The validation's words and, when the model was simulated, its record against the model."""
+        self.validation_pane.object = self.validation_note
+        if val is None or val.simulated is None:
+            self.validation_plot.objects = []
+            self.validation_figure = None
+            return
+        view = validation_view(val)
+        if self.validation_figure is None:
+            self.validation_figure = plots.LseFitFigure()
+            self.validation_figure.update(view)
+            self.validation_plot.objects = [pn.pane.Bokeh(self.validation_figure.layout, sizing_mode="stretch_width")]
+        else:
+            self.validation_figure.update(view)
 
     def run_all(self):
         req, errors = self.request()
@@ -768,7 +875,11 @@ class LeastSquaresPanel(Section):
             return None
         _, t_end = req.input_signal()
         cost = lse_cost(t_end, resimulation=True, estimator=req.estimator)
-        return RunCost("least-squares excitation", f"{t_end:g} s", cost.steps, cost.peak_bytes, t_end,
+        steps = cost.steps
+        if req.validation == "second":
+            # the second experiment: the plant's record and the model's run on it, each a re-simulation's cost
+            steps += 2 * (lse_cost(t_end, resimulation=True).steps - lse_cost(t_end).steps)
+        return RunCost("least-squares excitation", f"{t_end:g} s", steps, cost.peak_bytes, t_end,
                        "use a shorter excitation")
 
     def kept_work(self) -> KeptWork | None:
@@ -805,11 +916,13 @@ class LeastSquaresPanel(Section):
         scenario = req.scenario if req.excitation == "paper" and req.scenario != "custom" else None
         return SectionSnapshot(self.key, self.title, self.settings(), stale=self.is_stale(),
                                content=(self.result, self.last_data, self.last_resim, scenario, self.all_results,
-                                        dict(self.result_context), dict(self.all_context)))
+                                        dict(self.result_context), dict(self.all_context), self.validation,
+                                        self.validation_note))
 
     @classmethod
     def report(cls, snapshot: SectionSnapshot, hidden=()) -> ReportPart | None:
-        result, data, resim, scenario, all_results, context, all_context = snapshot.content or (None,) * 5 + ({}, {})
+        result, data, resim, scenario, all_results, context, all_context, _validation, validation_note = (
+            snapshot.content or (None,) * 5 + ({}, {}, None, ""))
         if result is None and all_results is None:
             return None
         body, figures = stale_note(snapshot), {}
@@ -817,7 +930,8 @@ class LeastSquaresPanel(Section):
             fig = plots.LseFitFigure()
             fig.update(plots.lse_view(data, resim))
             figures["lse"] = fig.layout
-            body += lse_table_html(result, scenario, hidden=hidden, **context) + "{{lse}}"
+            # the validation's fits in words (its plot stays on the page: the report's figures are the runs')
+            body += lse_table_html(result, scenario, hidden=hidden, **context) + "{{lse}}" + validation_note
         if all_results is not None:
             body += ("<h3>Table 4: four scenarios, both disturbance models</h3>"
                      + table4_html(all_results, **all_context))

@@ -48,6 +48,8 @@ Grey box (the nonlinear model)
    greybox.identify_greybox      -- any physical parameters by output error on the nonlinear model
    greybox.greybox_data          -- a simulated record for it, open or closed loop, with noise
    greybox_study.run_greybox_study -- the estimate over noise seeds against the Cramer-Rao bound
+   holdout.validate_params       -- physical parameters judged on data they were not fitted to
+   holdout.split_record          -- a record's last part held out of the estimation
 
 Black-box models (the identification course)
 ============================================

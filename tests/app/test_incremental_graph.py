@@ -70,7 +70,9 @@ frozen(lambda: s.section("least_squares").run()); check(doc, "least squares")
 for k, run in ((1, "frequency"), (2, "greybox")):
     frozen(lambda k=k: sub.build(sub.names[k])); check(doc, f"sub-tab {k}")
     frozen(lambda run=run: s.section(run).run()); check(doc, run)
-frozen(lambda: sub.build(sub.names[3])); check(doc, "board")
+frozen(lambda: sub.build(sub.names[3])); check(doc, "sub-tab 3, the black-box models")
+frozen(lambda: s.section("blackbox").run()); check(doc, "blackbox")
+frozen(lambda: sub.build(sub.names[4])); check(doc, "board")
 board = s.section("board")
 for view in ("bode", "step", "pz", "fit"):
     frozen(lambda view=view: board.show_view(view)); check(doc, f"board {view}")
