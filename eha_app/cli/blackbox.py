@@ -14,7 +14,6 @@ cannot support or a delay longer than the record are refused at once.
 from __future__ import annotations
 
 import argparse
-
 import math
 import sys
 
@@ -253,28 +252,9 @@ def _delay(args, record_s: float | None):
     return value
 
 
-def _check_common(args) -> dict:
-    """The data options, checked: what the record will be, without reading or simulating it."""
-    if args.seed < 0:
-        raise refused("--seed", args.seed, "use a whole number >= 0")
-    _choice("--loop", args.loop, LOOPS)
-    _choice("--initial", args.initial, ("zero", "estimate"))
-    horizon = _horizon(args.horizon)
-    if not 1 <= args.max_lag <= 1000:
-        raise refused("--max-lag", args.max_lag, "use a whole number from 1 to 1000")
-    validation = args.validation
-    if validation is not None:
-        validation = " ".join(validation.replace("-", " ").split())
-        _choice("--validation", validation, VALIDATIONS)
-    data = list(args.data or [])
-    for path in data:
-        check_input_file("--data", path)
-    check_input_file("--val-data", args.val_data)
-    check_output_file("--out", args.out)
-    if args.val_data and not data:
-        raise refused_file("--val-data", args.val_data, "it validates a model of measured data: give --data too")
-    if args.val_data and validation == "split":
-        raise refused("--validation", args.validation, "--val-data is the validation data", context="with --val-data")
+def _check_sources(args, data: list, validation) -> None:
+    """The record's options: files (their sample time is theirs; merged ones are validated on another) or a
+    simulation (its length, sample time and experiments)."""
     if data:
         if args.ts is not None:
             raise refused("--ts", args.ts, "the sample time is read from the file's t", context="with --data")
@@ -297,6 +277,31 @@ def _check_common(args) -> dict:
         if args.experiments > 1 and validation == "split":
             raise refused("--validation", args.validation, "merged experiments are validated on a second "
                                                            "experiment, not split", context="with --experiments")
+
+
+def _check_common(args) -> dict:
+    """The data options, checked: what the record will be, without reading or simulating it."""
+    if args.seed < 0:
+        raise refused("--seed", args.seed, "use a whole number >= 0")
+    _choice("--loop", args.loop, LOOPS)
+    _choice("--initial", args.initial, ("zero", "estimate"))
+    horizon = _horizon(args.horizon)
+    if not 1 <= args.max_lag <= 1000:
+        raise refused("--max-lag", args.max_lag, "use a whole number from 1 to 1000")
+    validation = args.validation
+    if validation is not None:
+        validation = " ".join(validation.replace("-", " ").split())
+        _choice("--validation", validation, VALIDATIONS)
+    data = list(args.data or [])
+    for path in data:
+        check_input_file("--data", path)
+    check_input_file("--val-data", args.val_data)
+    check_output_file("--out", args.out)
+    if args.val_data and not data:
+        raise refused_file("--val-data", args.val_data, "it validates a model of measured data: give --data too")
+    if args.val_data and validation == "split":
+        raise refused("--validation", args.validation, "--val-data is the validation data", context="with --val-data")
+    _check_sources(args, data, validation)
     noise = parse_noise(args.noise, "--noise", signals=("x",), bare="x")
     if noise.get("x", 0.0) > 0.01:
         raise refused("--noise", args.noise, "σ of x at most 0.01 m (10 mm)")

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import html
 import time
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -293,92 +292,18 @@ def _quietly(fn, *args, **kwargs):
 
 
 def board_model(model, kp: float, params, description: str) -> BoardModel:
-    """A closed-loop black-box model (r [mm] -> x [mm]) as the board's continuous-time H(s) of r -> x.
+    """A closed-loop black-box model (r [mm] -> x [mm]) as the board's continuous-time H(s) of r -> x:
+    the core's :func:`~eha_core.identify.blackbox.continuous_equivalent` (its exact zero-order-hold
+    equivalent, or the Tustin one where there is none, the description saying so). :class:`ValueError`
+    for a model with no continuous-time equivalent."""
+    from eha_core.identify.blackbox import continuous_equivalent
 
-    The board compares continuous-time models (:class:`~eha_core.board.BoardModel`). A process model gives
-    its own G(s) and delay; a discrete model ``G(q)`` is taken to the continuous-time system whose
-    zero-order-hold discretisation it is (the matrix logarithm of its sampled state-space form, with
-    ``nk - 1`` whole samples as the input delay); where there is none (a pole on the negative real axis
-    of z), the bilinear (Tustin) equivalent, the description saying so. :class:`ValueError` for a model
-    with no continuous-time equivalent at all (a pole at z = -1, a G that is zero or not finite).
-    """
-    import scipy.signal
-
-    ts = float(model.ts)
+    c = continuous_equivalent(model)
     prefix = BOARD_PREFIX.get(model.structure, "BB")
-    if hasattr(model, "continuous"):
-        g, td = model.continuous()
-        num, den = np.asarray(g.num[0][0], float), np.asarray(g.den[0][0], float)
-        return BoardModel(name=prefix, kind="blackbox", description=description, num=num / den[0], den=den / den[0],
-                          input_delay=float(td), ts=ts, kp=float(kp), params=params)
-    gb, ga = (np.asarray(p, float) for p in model.g_poly())
-    gb, ga = np.trim_zeros(gb, "b"), np.trim_zeros(ga, "b")
-    if not gb.size or not np.all(np.isfinite(gb)) or not np.all(np.isfinite(ga)):
-        raise ValueError("the model's G(q) is zero or not finite")
-    lead = int(np.argmax(gb != 0))
-    delay = max(lead - 1, 0)            # whole samples beyond the hold's own one
-    gb = gb[delay:]
-    n = max(gb.size, ga.size)
-    num_z, den_z = np.pad(gb, (0, n - gb.size)), np.pad(ga, (0, n - ga.size)) / ga[0]
-    num_z = num_z / ga[0]
-    if n == 1:
-        return BoardModel(name=prefix, kind="blackbox", description=description, num=num_z, den=np.ones(1),
-                          input_delay=delay * ts, ts=ts, kp=float(kp), params=params)
-    with warnings.catch_warnings():
-        # a numerator that begins with zeros (the hold's delay) is what is meant, not a badly conditioned one
-        warnings.simplefilter("ignore", scipy.signal.BadCoefficients)
-        num_s, den_s, how = _zoh_inverse(num_z, den_z, ts)
-    num_s = np.asarray(num_s, float)
-    num_s[np.abs(num_s) < 1e-12 * max(1.0, float(np.max(np.abs(num_s))))] = 0.0
-    num_s = np.trim_zeros(num_s, "f") if np.any(num_s) else np.zeros(1)
-    den_s = np.asarray(den_s, float)
-    if how:
-        description = f"{description}; {how}"
-    return BoardModel(name=prefix, kind="blackbox", description=description, num=num_s / den_s[0],
-                      den=den_s / den_s[0], input_delay=delay * ts, ts=ts, kp=float(kp), params=params)
-
-
-def _zoh_inverse(num_z: np.ndarray, den_z: np.ndarray, ts: float) -> tuple[np.ndarray, np.ndarray, str]:
-    """``(num_s, den_s, note)``: the continuous-time system whose zero-order-hold discretisation is
-    ``num_z / den_z`` (descending powers of z, one length); where there is none (a pole on the negative
-    real axis of z, or at 0), the bilinear (Tustin) equivalent, ``note`` saying so."""
-    import scipy.linalg
-    import scipy.signal
-
-    a, b, c, d = scipy.signal.tf2ss(num_z, den_z)
-    order = a.shape[0]
-    if not any(abs(p) < 1e-9 or (abs(p.imag) <= 1e-9 * max(1.0, abs(p)) and p.real < 0)
-               for p in np.linalg.eigvals(a)):
-        m = np.zeros((order + 1, order + 1))
-        m[:order, :order], m[:order, order:], m[order, order] = a, b, 1.0
-        log = scipy.linalg.logm(m) / ts
-        if np.all(np.isfinite(log)) and np.max(np.abs(np.imag(log))) <= 1e-6 * max(
-                1.0, float(np.max(np.abs(np.real(log))))):
-            log = np.real(log)
-            num_s, den_s = scipy.signal.ss2tf(log[:order, :order], log[:order, order:], c, d)
-            return np.asarray(num_s[0], float), np.asarray(den_s, float), ""
-    # z = (1 + s ts/2) / (1 - s ts/2): z^k -> (1 + s ts/2)^k (1 - s ts/2)^(n - k), times (1 - s ts/2)^n
-    if np.any(np.abs(np.polyval(den_z, -1.0)) < 1e-12):
-        raise ValueError("G has a pole at z = -1 (the Nyquist frequency): it has no continuous-time equivalent; "
-                         "try lower orders")
-    n = num_z.size - 1
-    plus, minus = np.array([ts / 2, 1.0]), np.array([-ts / 2, 1.0])
-
-    def mapped(poly):
-        out = np.zeros(n + 1)
-        for i, coef in enumerate(poly):          # coef of z^(n - i)
-            k = n - i
-            term = np.array([coef])
-            for _ in range(k):
-                term = np.polymul(term, plus)
-            for _ in range(n - k):
-                term = np.polymul(term, minus)
-            out = np.polyadd(out, term)[-(n + 1):]
-        return out
-
-    return (mapped(num_z), mapped(den_z),
-            "a pole on z's negative real axis has no zero-order-hold equivalent: on the board by the bilinear "
-            "(Tustin) mapping")
+    if c.how:
+        description = f"{description}; on the board by {c.how}"
+    return BoardModel(name=prefix, kind="blackbox", description=description, num=c.num, den=c.den,
+                      input_delay=c.input_delay, ts=float(model.ts), kp=float(kp), params=params)
 
 
 def compute_blackbox(req: BlackBoxRequest, params, cancel=None) -> BlackBoxOutcome:

@@ -36,8 +36,9 @@ import scipy.signal
 
 from .._checks import not_allowed
 
-__all__ = ["IdData", "merge", "LinearModel", "EstimateFields", "Comparison", "compare", "simulate", "predict", "fit_percent",
-           "criteria", "Criteria", "horizon_words", "initial_words", "INITIAL_CONDITIONS"]
+__all__ = ["IdData", "merge", "LinearModel", "EstimateFields", "ContinuousEquivalent", "continuous_equivalent",
+           "Comparison", "compare", "simulate", "predict", "fit_percent", "criteria", "Criteria", "horizon_words",
+           "initial_words", "INITIAL_CONDITIONS"]
 
 INITIAL_CONDITIONS = ("zero", "estimate")
 
@@ -90,7 +91,8 @@ class IdData:
         if not (math.isfinite(ts) and ts > 0):
             raise not_allowed("ts", self.ts, "the sample time must be a finite number of seconds > 0")
         starts = tuple(int(s) for s in self.starts)
-        if not starts or starts[0] != 0 or any(b <= a for a, b in zip(starts, starts[1:])) or starts[-1] >= y.size:
+        increasing = all(b > a for a, b in zip(starts, starts[1:], strict=False))
+        if not starts or starts[0] != 0 or not increasing or starts[-1] >= y.size:
             raise not_allowed("starts", list(starts), f"increasing indices from 0, each below {y.size}")
         for name, arr in (("y", y), ("u", u)):
             arr.setflags(write=False)
@@ -112,12 +114,12 @@ class IdData:
         if len(bounds) == 2:
             return [self]
         return [IdData(self.y[a:b], self.u[a:b], self.ts, name=f"{self.name} ({i + 1})")
-                for i, (a, b) in enumerate(zip(bounds, bounds[1:]))]
+                for i, (a, b) in enumerate(zip(bounds, bounds[1:], strict=False))]
 
     def segments(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """``(y, u)`` of each experiment (views, no copy)."""
         bounds = list(self.starts) + [self.n_samples]
-        return [(self.y[a:b], self.u[a:b]) for a, b in zip(bounds, bounds[1:])]
+        return [(self.y[a:b], self.u[a:b]) for a, b in zip(bounds, bounds[1:], strict=False)]
 
     def split(self, fraction: float = 0.5) -> tuple[IdData, IdData]:
         """The first ``fraction`` of the samples for estimation, the rest for validation.
@@ -291,6 +293,120 @@ class EstimateFields:
     def __repr__(self) -> str:
         state = "" if self.success else ", FAILED"
         return f"<{self.name}: {self.fit.label}{state}>"
+
+
+@dataclass(frozen=True)
+class ContinuousEquivalent:
+    """A black-box model of a sampled system as a continuous-time ``G(s) = num / den`` (descending
+    powers of s) with an input delay, and how it was obtained (``how``: empty for the exact
+    zero-order-hold equivalent, else what was done instead)."""
+
+    num: np.ndarray
+    den: np.ndarray
+    input_delay: float
+    how: str = ""
+
+
+def continuous_equivalent(model: LinearModel) -> ContinuousEquivalent:
+    """``G`` of ``model`` as a continuous-time system (python-control's ``d2c`` with ``"zoh"``).
+
+    A model with its own continuous-time form (a process model's ``continuous()``) gives it with its delay;
+    a discrete model ``G(q)`` is taken to the continuous-time system whose zero-order-hold discretisation
+    it is (the matrix logarithm of its sampled state-space form, with ``nk - 1`` whole samples as the
+    input delay); where there is none (a pole on the negative real axis of z), the bilinear (Tustin)
+    equivalent, ``how`` saying so. :class:`ValueError` for a model with no continuous-time equivalent at
+    all (a pole at z = -1, a G that is zero or not finite).
+
+    Parameters
+    ----------
+    model : LinearModel
+        Any black-box model.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eha_core.identify.process import zoh_poly
+    >>> class Lag(LinearModel):
+    ...     ts = 0.1
+    ...     def g_poly(self):
+    ...         return np.array([0.0, 1 - np.exp(-0.2)]), np.array([1.0, -np.exp(-0.2)])
+    >>> c = continuous_equivalent(Lag())                  # the ZOH form of 1 / (0.5 s + 1)
+    >>> np.round(c.num / c.den[-1], 6), np.round(c.den / c.den[-1], 6), c.input_delay, c.how
+    (array([1.]), array([0.5, 1. ]), 0.0, '')
+    """
+    import warnings
+
+    import scipy.signal
+
+    ts = float(model.ts)
+    if hasattr(model, "continuous"):
+        g, td = model.continuous()
+        num, den = np.asarray(g.num[0][0], float), np.asarray(g.den[0][0], float)
+        return ContinuousEquivalent(num / den[0], den / den[0], float(td))
+    gb, ga = (np.asarray(p, float) for p in model.g_poly())
+    gb, ga = np.trim_zeros(gb, "b"), np.trim_zeros(ga, "b")
+    if not gb.size or not np.all(np.isfinite(gb)) or not np.all(np.isfinite(ga)):
+        raise ValueError("the model's G(q) is zero or not finite")
+    lead = int(np.argmax(gb != 0))
+    delay = max(lead - 1, 0)            # whole samples beyond the hold's own one
+    gb = gb[delay:]
+    n = max(gb.size, ga.size)
+    num_z, den_z = np.pad(gb, (0, n - gb.size)), np.pad(ga, (0, n - ga.size)) / ga[0]
+    num_z = num_z / ga[0]
+    if n == 1:
+        return ContinuousEquivalent(num_z, np.ones(1), delay * ts)
+    with warnings.catch_warnings():
+        # a numerator that begins with zeros (the hold's delay) is what is meant, not a badly conditioned one
+        warnings.simplefilter("ignore", scipy.signal.BadCoefficients)
+        num_s, den_s, how = _zoh_inverse(num_z, den_z, ts)
+    num_s = np.asarray(num_s, float)
+    num_s[np.abs(num_s) < 1e-12 * max(1.0, float(np.max(np.abs(num_s))))] = 0.0
+    num_s = np.trim_zeros(num_s, "f") if np.any(num_s) else np.zeros(1)
+    den_s = np.asarray(den_s, float)
+    return ContinuousEquivalent(num_s / den_s[0], den_s / den_s[0], delay * ts, how)
+
+
+def _zoh_inverse(num_z: np.ndarray, den_z: np.ndarray, ts: float) -> tuple[np.ndarray, np.ndarray, str]:
+    """``(num_s, den_s, note)``: the continuous-time system whose zero-order-hold discretisation is
+    ``num_z / den_z`` (descending powers of z, one length); where there is none (a pole on the negative
+    real axis of z, or at 0), the bilinear (Tustin) equivalent, ``note`` saying so."""
+    import scipy.linalg
+    import scipy.signal
+
+    a, b, c, d = scipy.signal.tf2ss(num_z, den_z)
+    order = a.shape[0]
+    if not any(abs(p) < 1e-9 or (abs(p.imag) <= 1e-9 * max(1.0, abs(p)) and p.real < 0)
+               for p in np.linalg.eigvals(a)):
+        m = np.zeros((order + 1, order + 1))
+        m[:order, :order], m[:order, order:], m[order, order] = a, b, 1.0
+        log = scipy.linalg.logm(m) / ts
+        if np.all(np.isfinite(log)) and np.max(np.abs(np.imag(log))) <= 1e-6 * max(
+                1.0, float(np.max(np.abs(np.real(log))))):
+            log = np.real(log)
+            num_s, den_s = scipy.signal.ss2tf(log[:order, :order], log[:order, order:], c, d)
+            return np.asarray(num_s[0], float), np.asarray(den_s, float), ""
+    # z = (1 + s ts/2) / (1 - s ts/2): z^k -> (1 + s ts/2)^k (1 - s ts/2)^(n - k), times (1 - s ts/2)^n
+    if np.any(np.abs(np.polyval(den_z, -1.0)) < 1e-12):
+        raise ValueError("G has a pole at z = -1 (the Nyquist frequency): it has no continuous-time equivalent; "
+                         "try lower orders")
+    n = num_z.size - 1
+    plus, minus = np.array([ts / 2, 1.0]), np.array([-ts / 2, 1.0])
+
+    def mapped(poly):
+        out = np.zeros(n + 1)
+        for i, coef in enumerate(poly):          # coef of z^(n - i)
+            k = n - i
+            term = np.array([coef])
+            for _ in range(k):
+                term = np.polymul(term, plus)
+            for _ in range(n - k):
+                term = np.polymul(term, minus)
+            out = np.polyadd(out, term)[-(n + 1):]
+        return out
+
+    return (mapped(num_z), mapped(den_z),
+            "the bilinear (Tustin) mapping: a pole on z's negative real axis has no zero-order-hold "
+            "equivalent")
 
 
 def _filter_free_basis(num: np.ndarray, den: np.ndarray, n: int) -> np.ndarray:
