@@ -53,6 +53,9 @@ MAX_ORDER = 30
 MAX_CANDIDATES = 200
 #: Simulated records: samples at most and at least (BlackBoxExperiment's range).
 MIN_SAMPLES, MAX_SAMPLES = 50, 200_000
+#: The simulated record's defaults, BlackBoxExperiment's (written here: the arguments are checked before
+#: the core, which loads scipy, is imported; tests/cli/test_blackbox_cli.py holds them equal).
+DEFAULT_SAMPLES, DEFAULT_TS = 1500, 0.1
 #: Columns read of --data, and the other names u and y go by (a closed loop's r and x).
 COLUMNS = ("t", "u", "y")
 ALIASES = {"u": ("r",), "y": ("x",)}
@@ -135,9 +138,11 @@ def _add_common(p) -> None:
     p.add_argument("--val-data", metavar="FILE", help="validation data, a file like --data (with --data)")
     add_columns_option(p, "t, u, y (u may be a closed loop's reference r, y its position x)")
     p.add_argument("--loop", default="closed", help="simulated record: closed (r to x, default) or open (u to x)")
-    p.add_argument("--samples", type=int, default=2000,
-                   help=f"simulated record: samples of each experiment ({MIN_SAMPLES} to {MAX_SAMPLES}, default 2000)")
-    p.add_argument("--ts", type=float, default=None, help="simulated record: sample time [s] (default 0.02)")
+    p.add_argument("--samples", type=int, default=DEFAULT_SAMPLES,
+                   help=f"simulated record: samples of each experiment ({MIN_SAMPLES} to {MAX_SAMPLES}, default "
+                        f"{DEFAULT_SAMPLES})")
+    p.add_argument("--ts", type=float, default=None,
+                   help=f"simulated record: sample time [s] (default {DEFAULT_TS:g})")
     p.add_argument("--noise", default="x=0.01mm", metavar="x=SIGMA[UNIT]",
                    help=f"simulated record: the position sensor's noise, {NOISE_GRAMMAR} (x only; default x=0.01mm)")
     p.add_argument("--experiments", type=int, default=1,
@@ -311,7 +316,7 @@ def _check_common(args) -> dict:
     shortest = None if data else (args.samples if not split else int(round(0.5 * args.samples)))
     return {"horizon": horizon, "validation": validation or ("split" if split else "second experiment"),
             "data": data, "noise_x": noise.get("x", 0.0), "columns": columns, "shortest": shortest,
-            "ts": args.ts or 0.02}
+            "ts": args.ts or DEFAULT_TS}
 
 
 # ---------------------------------------------------------------------------

@@ -62,8 +62,8 @@ BB_FORM = (Group("Experiment", (
           tip="samples of the estimation record (and of the validation experiment)"),
     Field("bb_ts", "sample time Ts", "number", unit="s", lo=0.001, hi=0.5, short="Ts"),
     Field("bb_kp", "controller gain Kp", "number", unit="V/m", lo=1.0, hi=1000.0, short="Kp",
-          tip="closed loop: 100 V/m puts the loop's slow pole near 1 s, which a 40 s record shows well (tab 1's "
-              "Kp is the board's; a model of another loop is marked there)"),
+          tip="closed loop: the paper's 10 V/m is the loop the model board compares models on (its slow pole is "
+              "near 10 s: 150 s at 0.1 s show it); a model of another loop is marked there"),
     Field("bb_noise", "position noise σ", "number", unit="mm", lo=0.0, hi=10.0, short="σ x",
           tip="white noise of the position sensor"),
     Field("bb_seed", "seed", "integer", lo=0, hi=10**6, short="seed",
@@ -118,7 +118,7 @@ BB_FORM = (Group("Experiment", (
                                                            ("k", "k-step prediction")), short="horizon"),
     Field("bb_k", "k (steps ahead)", "integer", lo=1, hi=1000, short="k"),
 )))
-BB_DEFAULTS = {"bb_loop": "closed", "bb_signal": "prbs", "bb_samples": "2000", "bb_ts": "0.02", "bb_kp": "100",
+BB_DEFAULTS = {"bb_loop": "closed", "bb_signal": "prbs", "bb_samples": "1500", "bb_ts": "0.1", "bb_kp": "10",
                "bb_noise": "0.01", "bb_seed": "0", "bb_validation": "second experiment", "bb_fraction": "0.5",
                "bb_structure": "arx", "bb_choose": "fixed", "bb_na": "2", "bb_nb": "2", "bb_nc": "1", "bb_nd": "1",
                "bb_nf": "2", "bb_nk": "1", "bb_n": "2", "bb_kind": "P1D", "bb_max_order": "3",
@@ -211,7 +211,7 @@ def parse_blackbox(texts: dict) -> tuple[BlackBoxRequest | None, dict]:
     try:
         experiment = BlackBoxExperiment(
             loop=values["bb_loop"], signal_type=values["bb_signal"], n_samples=values["bb_samples"],
-            ts=float(values["bb_ts"]), kp=float(values.get("bb_kp", 100.0)), noise_x=float(values["bb_noise"]) * 1e-3,
+            ts=float(values["bb_ts"]), kp=float(values.get("bb_kp", 10.0)), noise_x=float(values["bb_noise"]) * 1e-3,
             seed=values["bb_seed"], validation=values["bb_validation"],
             estimation_fraction=float(values.get("bb_fraction", 0.5)),
             n_experiments=int(values.get("bb_experiments", 1)))

@@ -189,3 +189,10 @@ def test_the_process_kinds_are_the_cores():
     from eha_core.identify import process
 
     assert KINDS == process.KINDS
+
+
+def test_the_simulated_records_defaults_are_the_experiments():
+    from eha_app.cli.blackbox import DEFAULT_SAMPLES, DEFAULT_TS
+    from eha_core.identify.blackbox_experiment import BlackBoxExperiment
+
+    assert (DEFAULT_SAMPLES, DEFAULT_TS) == (BlackBoxExperiment().n_samples, BlackBoxExperiment().ts)

@@ -342,7 +342,7 @@ GLOBAL_MINIMUM = {
 def actuator_records():
     from eha_core.identify.blackbox_experiment import BlackBoxExperiment
 
-    est, val = BlackBoxExperiment(n_samples=2000).records()
+    est, val = BlackBoxExperiment(n_samples=2000, ts=0.02, band=0.1, kp=100.0).records()
     return est.detrended(), val.detrended(), est
 
 

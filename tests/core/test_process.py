@@ -214,7 +214,8 @@ def test_input_offset_intervals_cover_the_truth_at_their_level(kind):
 def open_loop_records():
     from eha_core.identify.blackbox_experiment import BlackBoxExperiment
 
-    return BlackBoxExperiment(loop="open").records()
+    # (the sampling of this project's first default: 40 s at 0.02 s)
+    return BlackBoxExperiment(loop="open", n_samples=2000, ts=0.02, band=0.1).records()
 
 
 def test_the_actuators_open_loop_record_needs_the_input_offset(open_loop_records):

@@ -79,8 +79,9 @@ def test_the_blackbox_subtab_runs_selects_and_puts_its_model_on_the_board(browse
             page.locator(".bk-tab", has_text="Model board").first.click()
             page.locator(".eha-board-fits", has_text="ARX1").wait_for(state="visible", timeout=60_000)
             board = text_of(page, ".eha-board-fit-table")
-            assert re.search(r"ARX1\s+-?[\d.]+ %", board), board
-            assert "Built for Kp = 100 V/m" in board
+            fit = re.search(r"ARX1\s+(-?[\d.]+) %", board)
+            # a model of the board's own loop (Kp = 10 V/m) on its validation record, as the routes fit it
+            assert fit and float(fit[1]) > 70 and "Built for Kp" not in board, board
             page.get_by_text(f"black-box {picked}").first.wait_for(state="visible", timeout=10_000)
         assert not problems, problems
     finally:
