@@ -205,7 +205,10 @@ def selection_html(table) -> str:
     rows = selection_rows(table)
     # the fits' horizon and initial conditions, in the words of every fit's label
     words = f"({horizon_words(table.horizon)}, {initial_words(table.initial)})"
-    criterion = {"bic": "BIC", "aic": "AIC"}.get(table.criterion, table.criterion)
+    criterion = {"bic": "BIC", "aic": "AIC",
+                 "validation fit": "validation fit (the fewest parameters whose validation loss these data "
+                                   "cannot tell from the best's: within two standard errors)"}.get(table.criterion,
+                                                                                                 table.criterion)
     body = "".join(
         f"<tr class='{'eha-bb-picked' if r['picked'] else ''}'><td>{'▶ ' if r['picked'] else ''}"
         f"{html.escape(r['name'])}{'' if r['success'] else ' <span class=eha-warn>(failed)</span>'}</td>"

@@ -44,7 +44,7 @@ def test_the_blackbox_subtab_runs_selects_and_puts_its_model_on_the_board(browse
         fits = text_of(page, ".eha-bb-fits-pane")
         assert "validation data" in fits, fits
         fit = float(FIT.search(fits).group(1))
-        assert fit > 60, fits
+        assert fit > 85, fits            # 93.7 % measured (ARX(2, 2, 1), means removed)
         page.locator(".eha-bb-plot canvas").first.wait_for(state="visible", timeout=60_000)
         assert "Residual tests on the validation data" in text_of(page, ".eha-bb-residuals")
         scroll = page.evaluate("document.documentElement.scrollWidth")
@@ -58,7 +58,7 @@ def test_the_blackbox_subtab_runs_selects_and_puts_its_model_on_the_board(browse
         page.get_by_role("button", name="Run black-box estimation").click()
         page.locator(".eha-bb-selection").first.wait_for(state="visible", timeout=120_000)
         table = text_of(page, ".eha-bb-selection-pane")
-        assert "Selection of the orders" in table and "Picked by BIC" in table
+        assert "Selection of the orders" in table and "Picked by validation fit" in table
         assert table.count("▶") == 2, table            # the picked row, and the note that names it
         picked = re.search(r"▶ (ARX\(na=\d, nb=\d, nk=\d\))", table).group(1)
         assert picked in _status(page)
