@@ -19,7 +19,8 @@ import math
 
 import numpy as np
 
-__all__ = ["FieldError", "ComputationError", "not_allowed", "shown", "positive_number", "positive_integer"]
+__all__ = ["FieldError", "ComputationError", "not_allowed", "shown", "positive_number", "positive_integer",
+           "whole_number"]
 
 
 def shown(value) -> str:
@@ -157,12 +158,20 @@ def positive_number(name: str, value, allowed: str = "must be a finite number > 
 
 def positive_integer(name: str, value, allowed: str = "must be a whole number > 0") -> int:
     """``value`` as an int if it is a whole number > 0 (5.0 is accepted), else ValueError."""
+    return whole_number(name, value, 1, allowed)
+
+
+def whole_number(name: str, value, minimum: int, allowed: str | None = None) -> int:
+    """``value`` as an int if it is a whole number >= ``minimum`` (5.0 and numpy integers are accepted),
+    else ValueError naming ``name``; ``allowed`` says what is allowed (default "must be a whole number >=
+    MINIMUM")."""
+    allowed = allowed or f"must be a whole number >= {minimum}"
     if isinstance(value, bool):
         raise not_allowed(name, value, allowed)
     try:
         out = float(value)
     except (TypeError, ValueError):
         raise not_allowed(name, value, allowed) from None
-    if not math.isfinite(out) or out <= 0 or out != int(out):
+    if not math.isfinite(out) or out < minimum or out != int(out):
         raise not_allowed(name, value, allowed)
     return int(out)

@@ -66,7 +66,7 @@ import scipy.linalg
 import scipy.linalg.lapack
 import scipy.signal
 
-from .._checks import not_allowed
+from .._checks import not_allowed, whole_number
 from .blackbox import INITIAL_CONDITIONS, Comparison, Criteria, EstimateFields, IdData, LinearModel, compare, criteria
 
 __all__ = ["PolynomialModel", "STRUCTURES", "arx", "armax", "oe", "bj", "pem"]
@@ -244,23 +244,10 @@ class _Spec:
         return self.theta(A, B, _stable(C), _stable(D), _stable(F))
 
 
-def _whole(name: str, value, minimum: int) -> int:
-    allowed = f"must be a whole number >= {minimum}"
-    if isinstance(value, bool):
-        raise not_allowed(name, value, allowed)
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise not_allowed(name, value, allowed) from None
-    if not math.isfinite(number) or number != int(number) or number < minimum:
-        raise not_allowed(name, value, allowed)
-    return int(number)
-
-
 def _checked_spec(data: IdData, structure: str, orders: dict, initial: str = "zero") -> _Spec:
     if not isinstance(data, IdData):
         raise not_allowed("data", type(data).__name__, "an IdData (eha_core.identify.blackbox.IdData)")
-    values = {name: _whole(name, orders[name], 1 if name == "nb" else 0) for name in STRUCTURES[structure]}
+    values = {name: whole_number(name, orders[name], 1 if name == "nb" else 0) for name in STRUCTURES[structure]}
     spec = _Spec(structure, **values, estimate_initial=initial == "estimate")
     shortest = min(y.size for y, _u in data.segments())
     where = "the record" if data.n_experiments == 1 else "the shortest experiment"
@@ -289,7 +276,7 @@ def _checked_initial(initial: str) -> str:
 
 
 def _checked_iterations(max_iterations) -> int:
-    return _whole("max_iterations", max_iterations, 1)
+    return whole_number("max_iterations", max_iterations, 1)
 
 
 # ---------------------------------------------------------------------------

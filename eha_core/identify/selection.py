@@ -52,7 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from .._checks import not_allowed
+from .._checks import not_allowed, whole_number
 from .blackbox import IdData, LinearModel, compare, horizon_words, initial_words, predict
 
 __all__ = ["SelectionRow", "SelectionTable", "ResidualTests", "select_structure", "arx_grid", "residual_tests",
@@ -251,19 +251,6 @@ class ResidualTests:
 # ---------------------------------------------------------------------------
 # checks
 # ---------------------------------------------------------------------------
-def _whole(name: str, value, minimum: int) -> int:
-    allowed = f"must be a whole number >= {minimum}"
-    if isinstance(value, bool):
-        raise not_allowed(name, value, allowed)
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise not_allowed(name, value, allowed) from None
-    if not math.isfinite(number) or number != int(number) or number < minimum:
-        raise not_allowed(name, value, allowed)
-    return int(number)
-
-
 def _check_data(est, val) -> None:
     if not isinstance(est, IdData):
         raise not_allowed("estimation data", type(est).__name__, "an IdData (eha_core.identify.blackbox.IdData)")
@@ -313,7 +300,7 @@ def _checked_candidate(structure: str, candidate, est: IdData) -> dict:
         orders["kind"] = kind
     else:
         for n in names:
-            orders[n] = _whole(n, candidate[n], 1 if n in ("nb", "n") else 0)
+            orders[n] = whole_number(n, candidate[n], 1 if n in ("nb", "n") else 0)
     shortest = min(y.size for y, _u in est.segments())
     where = "the record" if est.n_experiments == 1 else "the shortest experiment"
     if orders.get("nk", 0) >= shortest:

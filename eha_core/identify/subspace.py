@@ -53,7 +53,7 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 
-from .._checks import not_allowed
+from .._checks import not_allowed, whole_number
 from ._ctmodels import state_numerators
 from .blackbox import INITIAL_CONDITIONS, Comparison, Criteria, EstimateFields, IdData, LinearModel, compare, criteria
 
@@ -160,18 +160,6 @@ def _check_initial(initial) -> str:
     return initial
 
 
-def _whole(name: str, value, minimum: int) -> int:
-    if isinstance(value, bool):
-        raise not_allowed(name, value, f"a whole number >= {minimum}")
-    try:
-        out = int(value)
-    except (TypeError, ValueError):
-        raise not_allowed(name, value, f"a whole number >= {minimum}") from None
-    if out != value or out < minimum:
-        raise not_allowed(name, value, f"a whole number >= {minimum}")
-    return out
-
-
 def _checked_horizon(data: IdData, n: int, horizon, n_name: str) -> int:
     """The horizon (default ``max(2 n, 10)``, shortened to what the record holds), checked against ``n``."""
     longest = max(y.size for y, _u in data.segments())
@@ -181,7 +169,7 @@ def _checked_horizon(data: IdData, n: int, horizon, n_name: str) -> int:
         while horizon > n + 1 and _n_columns(data, horizon) < 8 * horizon:
             horizon -= 1
     else:
-        horizon = _whole("horizon", horizon, 2)
+        horizon = whole_number("horizon", horizon, 2)
     if n >= horizon:
         raise not_allowed(n_name, n, f"the order must be below the horizon ({horizon} block rows): "
                                      f"give a longer horizon or a lower order")
@@ -396,7 +384,7 @@ def ss_order_svd(data: IdData, max_order: int, horizon=None) -> np.ndarray:
     True
     """
     data = _check_data(data)
-    max_order = _whole("max_order", max_order, 1)
+    max_order = whole_number("max_order", max_order, 1)
     i = _checked_horizon(data, max_order, horizon, "max_order")
     r, _blocks = _hankel_r(data, i)
     _gamma, sv, _problem, _used = _observability(r, i, 1, "moesp")
@@ -447,7 +435,7 @@ def n4sid(data: IdData, n: int, *, horizon=None, weighting: str = "auto", feedth
     array([0.75-0.37j, 0.75+0.37j])
     """
     data = _check_data(data)
-    n = _whole("n", n, 1)
+    n = whole_number("n", n, 1)
     if weighting not in WEIGHTINGS:
         raise not_allowed("weighting", weighting, "auto, cva or moesp")
     if not isinstance(feedthrough, (bool, np.bool_)):
