@@ -592,6 +592,15 @@ class StudentSession:
 
 # -- a student of this app ------------------------------------------------------------------------
 
+
+def _subtabs(keys: tuple) -> tuple:
+    """The sub-tab index of each section ``keys`` on tab 3, from the app's registry."""
+    from eha_app.sections import SECTIONS
+
+    on_tab = [p.key for p in SECTIONS.on_tab("3. Identification")]
+    return tuple(on_tab.index(k) for k in keys)
+
+
 class Student(StudentSession):
     """A student of this app: its tabs, fields and buttons by name, one method per user action.
 
@@ -604,8 +613,9 @@ class Student(StudentSession):
     MAIN_TABS = "eha-main-tabs"
     IDENT_TABS = "eha-ident-tabs"
     FORM = "eha-param-form"
-    #: Tab 3's sub-tabs, in their order on the page.
-    LSE_SUBTAB, FREQ_SUBTAB, GB_SUBTAB, BOARD_SUBTAB, STUDY_SUBTAB = range(5)
+    #: Tab 3's sub-tabs, where the app's registry puts them (a sub-tab added later moves the ones after it).
+    LSE_SUBTAB, FREQ_SUBTAB, GB_SUBTAB, BOARD_SUBTAB, STUDY_SUBTAB = _subtabs(
+        ("least_squares", "frequency", "greybox", "board", "study"))
 
     def __init__(self, url: str, *, code: str | None = None, param_name: str = "M", **kwargs):
         super().__init__(url, **kwargs)
@@ -805,7 +815,7 @@ class Student(StudentSession):
         """Tab 3's study: ``seeds`` seeds of the default experiment (or ``kind``: lse, tf, greybox),
         "Run the study" pressed."""
         await self.show_tab(2, self.IDENT_TABS, timeout)
-        await self.show_subtab(self.IDENT_TABS, 4, "eha-study-form", timeout)
+        await self.show_subtab(self.IDENT_TABS, self.STUDY_SUBTAB, "eha-study-form", timeout)
         form = self.form("eha-study-form")
         values = dict(form.attributes.get("values") or {})
         await self.set_property(form, "values", {**values, "study_seeds": str(seeds),
