@@ -614,8 +614,8 @@ class Student(StudentSession):
     IDENT_TABS = "eha-ident-tabs"
     FORM = "eha-param-form"
     #: Tab 3's sub-tabs, where the app's registry puts them (a sub-tab added later moves the ones after it).
-    LSE_SUBTAB, FREQ_SUBTAB, GB_SUBTAB, BOARD_SUBTAB, STUDY_SUBTAB = _subtabs(
-        ("least_squares", "frequency", "greybox", "board", "study"))
+    LSE_SUBTAB, FREQ_SUBTAB, GB_SUBTAB, BB_SUBTAB, BOARD_SUBTAB, STUDY_SUBTAB = _subtabs(
+        ("least_squares", "frequency", "greybox", "blackbox", "board", "study"))
 
     def __init__(self, url: str, *, code: str | None = None, param_name: str = "M", **kwargs):
         super().__init__(url, **kwargs)
@@ -789,7 +789,7 @@ class Student(StudentSession):
         """Tab 3's inner tab "Frequency domain: transfer function"."""
         t0 = time.perf_counter()
         await self.show_tab(2, self.IDENT_TABS, timeout)
-        await self.show_subtab(self.IDENT_TABS, 1, "eha-freq-summary", timeout)
+        await self.show_subtab(self.IDENT_TABS, self.FREQ_SUBTAB, "eha-freq-summary", timeout)
         return time.perf_counter() - t0
 
     async def compare_both(self, timeout: float | None = None) -> float:

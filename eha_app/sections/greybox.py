@@ -135,7 +135,7 @@ GB_FORM = (Group("Grey-box estimation", (
 GB_DEFAULTS = {"gb_params": "M, B, Af, βe", "gb_measured": "x, p1, p2", "gb_excitation": "paper",
                "gb_u": "sine:6:2", "gb_t_end": "5",
                "gb_scenario": "none", "gb_custom": "sine:1000:3", "gb_seed": "0", "gb_shooting": "auto",
-               "gb_validation": "second",
+               "gb_validation": "none",
                "gb_noise_x": "0.01",
                "gb_noise_v": "0", "gb_noise_p": "0.05",
                **{f"gb_guess_{n}": _display(n, getattr(_PAPER, n)) for n in GUESS_PARAMS}}
@@ -232,7 +232,7 @@ def parse_greybox(texts: dict, fields: dict | None = None, *, measurable=GREYBOX
                          custom=texts.get("gb_custom", ""), seed=values.get("gb_seed", 0),
                          noise=tuple(float(values.get(k, 0.0)) for k in _NOISE_FIELDS), guess=guess,
                          u_text=texts.get("gb_u", ""), t_end=float(values.get("gb_t_end", 5.0)),
-                         shooting=values.get("gb_shooting", "auto"), validation=values.get("gb_validation", "second"))
+                         shooting=values.get("gb_shooting", "auto"), validation=values.get("gb_validation", "none"))
     if "gb_custom" not in hidden and not errors.get("gb_custom"):
         try:
             parse_signal(req.disturbance_spec(), name="custom d(t)", seed=req.seed, hold_s=1e-3)

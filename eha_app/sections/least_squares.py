@@ -123,7 +123,7 @@ LSE_FORM = (Group("Least squares", (
 ), collapsible=True, collapsed=True),)
 LSE_DEFAULTS = {"lse_scenario": "none", "lse_custom": "sine:1000:3", "lse_model": "constant", "lse_freq": "",
                 "lse_estimator": "ls",
-                "lse_seed": "0", "lse_excitation": "paper", "lse_validation": "second", "lse_noise_x": "0",
+                "lse_seed": "0", "lse_excitation": "paper", "lse_validation": "none", "lse_noise_x": "0",
                 "lse_noise_v": "0", "lse_noise_p": "0"}
 _LSE_FIELDS = {f.name: f for g in LSE_FORM for f in g.fields}
 
@@ -192,7 +192,7 @@ def parse_lse(texts: dict, fields: dict | None = None) -> tuple[LseRequest, dict
     req = LseRequest(scenario=values.get("lse_scenario", "none"), custom=texts.get("lse_custom", ""),
                      model=values.get("lse_model", "constant"), frequency_hz=freq,
                      seed=values.get("lse_seed", 0), excitation=values.get("lse_excitation", "paper"),
-                     estimator=values.get("lse_estimator", "ls"), validation=values.get("lse_validation", "second"),
+                     estimator=values.get("lse_estimator", "ls"), validation=values.get("lse_validation", "none"),
                      noise=tuple(float(values.get(k, 0.0)) for k in ("lse_noise_x", "lse_noise_v", "lse_noise_p")))
     if "lse_custom" not in hidden and not errors.get("lse_custom"):
         try:

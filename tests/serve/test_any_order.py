@@ -24,9 +24,10 @@ def test_typing_on_tab_1_after_every_tab_was_shown_updates_its_derived_values(se
         await s.show_simulation()
         await s.show_identification()
         await s.show_frequency()
-        await s.show_subtab(s.IDENT_TABS, 2, "eha-gb-form")
-        await s.show_subtab(s.IDENT_TABS, 3, "eha-board-form")
-        await s.show_subtab(s.IDENT_TABS, 4, "eha-study-form")
+        await s.show_subtab(s.IDENT_TABS, s.GB_SUBTAB, "eha-gb-form")
+        await s.show_subtab(s.IDENT_TABS, s.BB_SUBTAB, "eha-bb-form")
+        await s.show_subtab(s.IDENT_TABS, s.BOARD_SUBTAB, "eha-board-form")
+        await s.show_subtab(s.IDENT_TABS, s.STUDY_SUBTAB, "eha-study-form")
         await s.show_tab(0, s.FORM)
         seconds = []
         for name, text in (("M", "7000"), ("Dc", "125"), ("kp", "12"), ("M", "4000")):
