@@ -11,13 +11,13 @@ import math
 
 import numpy as np
 from bokeh.layouts import column, row
-from bokeh.models import BoxAnnotation, ColumnDataSource, Div, Range1d, Span
+from bokeh.models import ColumnDataSource, Div, Range1d, Span
 
 from eha_core.identify.blackbox import horizon_words, initial_words
 
 from .figure_text import Described
 from .formatting import num_html
-from .plots import CASE_COLORS, FIGURE_WIDTH, _f32, _figure, _lean, _legend_above, decimate
+from .plots import CASE_COLORS, FIGURE_WIDTH, _f32, _figure, _lean, _legend_above, correlation_stems, decimate
 
 __all__ = ["STRUCTURE_NAMES", "qpoly_html", "model_html", "fits_html", "verdicts_html", "selection_rows",
            "selection_html", "failed_html", "BlackBoxFitFigure", "CorrelationFigure", "ZPlaneFigure",
@@ -260,17 +260,11 @@ class CorrelationFigure(Described):
         self.sources, self.bands, self.figs = [], [], []
         for title, color in (("Residual autocorrelation", CASE_COLORS[0]),
                              ("Cross-correlation input → residual", CASE_COLORS[3])):
-            src = ColumnDataSource(data={"lag": _f32([0.0]), "c": _f32([0.0]), "zero": _f32([0.0])})
             # fixed-size figures: the page sets them in a wrapping row (two across on a wide page, one on
             # a narrow one), the report in a row
-            fig = _figure(sizing_mode="fixed", title=title, x_axis_label="lag [samples]",
-                          y_axis_label="correlation", y_range=Range1d(-1.05, 1.05))
+            fig, src, band = correlation_stems(title, color, sizing_mode="fixed")
+            src.data = {"lag": _f32([0.0]), "c": _f32([0.0]), "zero": _f32([0.0])}
             fig.width, fig.height = width, height
-            band = BoxAnnotation(bottom=0, top=0, fill_color="#cccccc", fill_alpha=0.35, line_alpha=0)
-            fig.add_layout(band)
-            fig.add_layout(Span(location=0, dimension="width", line_color="#999999", line_width=1))
-            fig.segment("lag", "zero", "lag", "c", source=src, color=color, line_width=2, name="correlation")
-            fig.scatter("lag", "c", source=src, color=color, size=4, name="correlation")
             self.sources.append(src)
             self.bands.append(band)
             self.figs.append(fig)

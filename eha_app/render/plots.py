@@ -647,6 +647,21 @@ class ValidationFigure(Described):
         self.fig.title.text = view.validation_title
 
 
+def correlation_stems(title: str, color: str, **figure_kwargs):
+    """A correlation against its lags as stems, with its band (a :class:`BoxAnnotation` set by the caller)
+    and the zero line: ``(figure, source with lag, c, zero; band)``. Shared by the board's residual tests
+    and the black-box sub-tab's."""
+    src = ColumnDataSource(data={"lag": _f32([]), "c": _f32([]), "zero": _f32([])})
+    fig = _figure(title=title, x_axis_label="lag [samples]", y_axis_label="correlation",
+                  y_range=Range1d(-1.05, 1.05), **figure_kwargs)
+    band = BoxAnnotation(bottom=0, top=0, fill_color="#cccccc", fill_alpha=0.35, line_alpha=0)
+    fig.add_layout(band)
+    fig.add_layout(Span(location=0, dimension="width", line_color="#999999", line_width=1))
+    fig.segment("lag", "zero", "lag", "c", source=src, color=color, line_width=2, name="correlation")
+    fig.scatter("lag", "c", source=src, color=color, size=4, name="correlation")
+    return fig, src, band
+
+
 class ResidualFigure(Described):
     """Residual autocorrelation and input cross-correlation with their 99 % bands."""
 
@@ -656,14 +671,7 @@ class ResidualFigure(Described):
         self.figs = []
         for title, color in (("Residual autocorrelation", CASE_COLORS[0]),
                              ("Cross-correlation r → residual", CASE_COLORS[3])):
-            src = ColumnDataSource(data={"lag": _f32([]), "c": _f32([]), "zero": _f32([])})
-            fig = _figure(width=width // 2, height=height, title=title, x_axis_label="lag [samples]",
-                          y_axis_label="correlation", y_range=Range1d(-1.05, 1.05))
-            band = BoxAnnotation(bottom=0, top=0, fill_color="#cccccc", fill_alpha=0.35, line_alpha=0)
-            fig.add_layout(band)
-            fig.add_layout(Span(location=0, dimension="width", line_color="#999999", line_width=1))
-            fig.segment("lag", "zero", "lag", "c", source=src, color=color, line_width=2, name="correlation")
-            fig.scatter("lag", "c", source=src, color=color, size=4, name="correlation")
+            fig, src, band = correlation_stems(title, color, width=width // 2, height=height)
             self.sources.append(src)
             self.bands.append(band)
             self.figs.append(fig)
