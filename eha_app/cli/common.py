@@ -420,3 +420,25 @@ def parse_noise(text: str, option: str = "--noise", *, signals=_NOISE_SIGNALS, b
         for sig in names:
             out[sig] = sigma
     return out
+
+
+def add_store_option(parser) -> None:
+    """``--store URL``: where the lab's state is (the SQLite file beside the exercise by default; a
+    PostgreSQL database shared by several servers). ``EHA_STORE`` gives it too (a URL with a password
+    on the command line is visible to every user of the machine in ``ps``)."""
+    parser.add_argument("--store", default=os.environ.get("EHA_STORE") or None, metavar="URL",
+                        help="the lab's database: postgresql://USER@HOST:PORT/DATABASE (the password from "
+                             "~/.pgpass or PGPASSWORD), or sqlite:///PATH; default: the SQLite file beside the "
+                             "exercise (EHA_STORE sets it too)")
+
+
+def open_store(exercise_path, store: str | None = None, option: str = "--store"):
+    """The exercise's lab state, checked (made or brought to this version's schema): a database that
+    cannot be used is one line naming it (a URL without its password) and exit code 2."""
+    from eha_app.runtime.handins import HandIns, StoreError
+
+    option = option if store else "exercise"
+    try:
+        return HandIns(exercise_path, store=store).check()
+    except StoreError as exc:
+        raise UsageError(f"{option}: {exc}") from None

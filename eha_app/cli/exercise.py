@@ -14,9 +14,11 @@ from .common import (
     NOISE_GRAMMAR,
     Parser,
     UsageError,
+    add_store_option,
     as_option,
     check_input_file,
     check_output_file,
+    open_store,
     parse_noise,
     refused,
     refused_file,
@@ -101,10 +103,12 @@ def add_parser(sub) -> None:
     new.set_defaults(handler=run_new)
     codes = cmds.add_parser("codes", help="the students' join codes, one line each (hand them out)")
     codes.add_argument("exercise", help="the exercise file")
+    add_store_option(codes)
     codes.add_argument("--csv", metavar="FILE", help="also write id, name, code as CSV (for a mail merge)")
     codes.set_defaults(handler=run_codes)
     res = cmds.add_parser("results", help="the class's table: joined, hand-ins, values, errors, verdicts, score")
     res.add_argument("exercise", help="the exercise file")
+    add_store_option(res)
     res.add_argument("--csv", metavar="FILE", help="also write the table as CSV")
     res.add_argument("--format", choices=("csv", "moodle", "canvas"), default=None,
                      help="with --out: csv (the table, as --csv writes it), moodle (Moodle's Grades > Import > CSV "
@@ -122,6 +126,7 @@ def add_parser(sub) -> None:
     res.set_defaults(handler=run_results)
     rev = cmds.add_parser("reveal", help="one student's true actuator (after the deadline)")
     rev.add_argument("exercise", help="the exercise file")
+    add_store_option(rev)
     rev.add_argument("--student", required=True, help="the student's id (as in the roster, or as they typed it)")
     rev.set_defaults(handler=run_reveal)
     ext = cmds.add_parser("extend", help="a later deadline for one student (or --clear it)",
@@ -129,6 +134,7 @@ def add_parser(sub) -> None:
                                       "hand-ins are taken until then, and their page says so. Kept in the class's "
                                       "database (every server of the exercise sees it at once).")
     ext.add_argument("exercise", help="the exercise file")
+    add_store_option(ext)
     ext.add_argument("--student", required=True, help="the student's id (as in the roster, or as they typed it)")
     until = ext.add_mutually_exclusive_group(required=True)
     until.add_argument("--until", metavar="DATE", help="their deadline, ISO-8601 (e.g. 2026-12-08T17:00; no zone: "
@@ -141,6 +147,7 @@ def add_parser(sub) -> None:
                                       "with it, stop working within seconds on every server of the exercise. "
                                       "No student's actuator or code changes.")
     tok.add_argument("exercise", help="the exercise file")
+    add_store_option(tok)
     tok.add_argument("--rotate", action="store_true", help="make a new link now (the old one stops working)")
     tok.add_argument("--days", default=None, metavar="DAYS",
                      help="how long a new link lasts, in days (default 30; with --rotate or when the link expired)")
@@ -148,11 +155,19 @@ def add_parser(sub) -> None:
                      help="the server's address as the teacher's browser reaches it (default http://localhost:5006)")
     tok.set_defaults(handler=run_token)
     ex.set_defaults(handler=_missing_action)
+    cp = cmds.add_parser("copy-store", help="copy a lab's state (hand-ins, attempts, kept work, switches) from "
+                         "one database to another: a lab outgrowing one machine, or a backup")
+    cp.add_argument("exercise", help="the exercise file")
+    cp.add_argument("--from", dest="source", default=None, metavar="URL",
+                    help="the database to copy (default: the SQLite file beside the exercise)")
+    cp.add_argument("--to", dest="target", required=True, metavar="URL",
+                    help="an empty database: postgresql://USER@HOST:PORT/DATABASE, or sqlite:///PATH")
+    cp.set_defaults(handler=run_copy_store)
 
 
 def _missing_action(args) -> int:
-    raise UsageError("exercise needs an ACTION: new, codes, results, reveal, extend or token (eha exercise --help "
-                     "tells more)")
+    raise UsageError("exercise needs an ACTION: new, codes, results, reveal, extend, token or copy-store (eha "
+                     "exercise --help tells more)")
 
 
 def _fraction(option: str, text: str) -> float:
@@ -363,14 +378,10 @@ def _write_private(path: str, text: str) -> None:
         f.write(text)
 
 
-def _store(path: str):
-    """The exercise's hand-ins, checked: a damaged database is one line and exit code 2."""
-    from eha_app.runtime.handins import HandIns, StoreError
-
-    try:
-        return HandIns(path).check()
-    except StoreError as exc:
-        raise refused_file("exercise", path, f"{exc}") from None
+def _store(path: str, store: str | None = None):
+    """The exercise's lab state (SQLite beside ``path``, or the database ``store`` names), checked: a
+    damaged, unreachable or newer database is one line and exit code 2."""
+    return open_store(path, store)
 
 
 def _gradebook_file(args, ex, rows) -> str:
@@ -409,7 +420,7 @@ def run_results(args) -> int:
     if args.csv:
         check_output_file("--csv", args.csv)
     _check_gradebook(args, ex)
-    rows = class_rows(ex, _store(args.exercise))
+    rows = class_rows(ex, _store(args.exercise, args.store))
     header = results_header(ex)
     # what students typed reaches the teacher's terminal and spreadsheet: neither may act on it
     shown = [[terminal_text(c) for c in results_cells(ex, row)] for row in rows]
@@ -440,7 +451,7 @@ def run_extend(args) -> int:
     from eha_app.runtime.handins import StoreError
 
     ex = _load(args.exercise)
-    store = _store(args.exercise)
+    store = _store(args.exercise, args.store)
     options = {STUDENT_FIELD: "--student", UNTIL_FIELD: "--until"}
     try:
         class_deadline = store.control().get("deadline", "")
@@ -481,7 +492,7 @@ def run_token(args) -> int:
     url = str(args.url).strip().rstrip("/")
     if not url.startswith(("http://", "https://")) or any(c.isspace() for c in url):
         raise refused("--url", args.url, "an address such as http://192.168.1.20:5006 (http:// or https://)")
-    store = _store(args.exercise)
+    store = _store(args.exercise, args.store)
     from eha_app.runtime.handins import StoreError
 
     try:
@@ -510,7 +521,7 @@ def run_reveal(args) -> int:
     if ex.has_roster:
         if ex.entry(student) is None:
             raise refused("--student", args.student, "no student with this id in the exercise's roster")
-    elif student not in _store(args.exercise).presence() and not _store(args.exercise).of(student):
+    elif student not in (store := _store(args.exercise, args.store)).presence() and not store.of(student):
         raise refused("--student", args.student, "no student with this id has joined the exercise (ids are those "
                                                  "typed on the exercise's first page)")
     p = ex.student_params(student)
@@ -525,4 +536,22 @@ def run_reveal(args) -> int:
 
         name = ex.variant_of(student)
         print(f"  variant: {name} ({VARIANTS[name].description})")
+    return 0
+
+
+def run_copy_store(args) -> int:
+    """Copy the lab's state into an empty database (the teacher's move to PostgreSQL, or a backup)."""
+    from eha_app.runtime.store_backend import StoreError, copy_lab, shown_url
+
+    load_exercise("exercise", args.exercise)
+    source = open_store(args.exercise, args.source, "--from")
+    target = open_store(args.exercise, args.target, "--to")
+    try:
+        counts = copy_lab(source.backend, target.backend)
+    except StoreError as exc:
+        raise UsageError(f"--to: {exc}") from None
+    rows = ", ".join(f"{n} {table}" for table, n in counts.items() if n)
+    print(f"Copied {source.shown if args.source is None else shown_url(args.source)} to {shown_url(args.target)}: "
+          f"{rows or 'nothing (the lab was empty)'}. Serve from it with: eha serve --exercise {args.exercise} "
+          f"--store {shown_url(args.target)}", flush=True)
     return 0

@@ -14,7 +14,7 @@ import urllib.request
 
 from eha_app.runtime.serving import lan_address
 
-from .common import UsageError, refused, refused_file, require_app, terminal_text
+from .common import UsageError, add_store_option, open_store, refused, refused_file, require_app, terminal_text
 
 
 def add_parser(sub) -> None:
@@ -40,6 +40,7 @@ def add_parser(sub) -> None:
     sv.add_argument("--exercise", metavar="FILE", help="run a class exercise (made by `eha exercise new`): each "
                     "student types the join code of their slip (`eha exercise codes`; an exercise without a roster "
                     "takes any id) and gets an actuator of their own, with the exercise's parameters hidden")
+    add_store_option(sv)
     for flag, what in _OAUTH.items():
         sv.add_argument(flag, default=None, metavar="VALUE", help=what)
     sv.add_argument("--show", action="store_true", help="open the app in a browser")
@@ -128,19 +129,16 @@ def _announce_when_ready(url: str) -> None:
 
 def _check_exercise(args) -> None:
     """Refuse an exercise file, or its hand-in database, that cannot be used, before anything starts."""
-    from eha_app.runtime.handins import HandIns, StoreError
-
     from .exercise import load_exercise
 
     exercise = load_exercise("--exercise", args.exercise)   # refused now, with its message, if it is not one
-    try:
-        HandIns(args.exercise).check()
-    except StoreError as exc:
-        raise refused_file("--exercise", args.exercise, f"{exc}") from None
+    store = open_store(args.exercise, args.store)           # unreachable, wrong password, newer: refused now
     os.environ["EHA_EXERCISE"] = os.path.abspath(args.exercise)
+    if args.store:
+        os.environ["EHA_STORE"] = args.store                # the server processes' (never on a command line)
     if not args.share_port:
         print(f"Exercise {terminal_text(repr(exercise.title))}: hides {', '.join(exercise.hide)}; hand-ins go to "
-              f"{args.exercise.rsplit('.', 1)[0]}.handins.sqlite", flush=True)
+              f"{store.shown if args.store else args.exercise.rsplit('.', 1)[0] + '.handins.sqlite'}", flush=True)
 
 
 def _announce_dashboard(host: str, port: int) -> None:
@@ -155,7 +153,8 @@ def _announce_dashboard(host: str, port: int) -> None:
         # the link issued before, while it lasts (a restart keeps the teacher's link); else a new one
         issued, made = ensure_token(exercise, store)
     except StoreError as exc:
-        raise refused_file("--exercise", os.environ["EHA_EXERCISE"], f"{exc}") from None
+        raise UsageError(f"--store: {exc}" if os.environ.get("EHA_STORE") else
+                         str(refused_file("--exercise", os.environ["EHA_EXERCISE"], f"{exc}"))) from None
     print(f"Teacher's dashboard (for you only, do not show it to the class): http://{host}:{port}/teacher?token="
           f"{issued.token}", flush=True)
     print(f"  {'a new link, ' if made else ''}valid until {issued.expires_text()}; a new one at any time (the old "

@@ -278,7 +278,7 @@ class BackgroundProcess:
                     return
                 if time.monotonic() - self._last_used >= self._idle_s:
                     pool, self._pool, self.pid = self._pool, None, None
-                    pool.shutdown(wait=True)
+                    _shut(pool, wait=True)
                     log.info("the process for long computations stopped after %.0f s unused", self._idle_s)
                     return
             finally:
@@ -412,14 +412,24 @@ class BackgroundProcess:
             except OSError:             # gone already
                 pass
         if pool is not None:
-            pool.shutdown(wait=False, cancel_futures=True)
+            _shut(pool, wait=False)
 
     def shutdown(self) -> None:
         """Stop the child (tests; a server's end stops it anyway)."""
         with self._lock:
             pool, self._pool, self.pid = self._pool, None, None
         if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
+            _shut(pool, wait=True)
+
+
+def _shut(pool: ProcessPoolExecutor, wait: bool) -> None:
+    """Shut ``pool`` down. Python 3.11's executor can raise from its wake-up pipe when its manager thread
+    closed it a moment before (a child that died or was killed: OSError "handle is closed"), as one
+    test session's end did: the child is gone then, and there is nothing left to stop."""
+    try:
+        pool.shutdown(wait=wait, cancel_futures=True)
+    except (OSError, ValueError) as exc:
+        log.info("the process for long computations was gone at its shutdown (%s)", type(exc).__name__)
 
 
 _default: BackgroundProcess | None = None

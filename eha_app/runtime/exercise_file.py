@@ -1,5 +1,6 @@
-"""The exercise this server runs (``eha serve --exercise FILE`` sets EHA_EXERCISE): read by the server
-only, once per change of the file, with its secret registered to be kept out of every log line."""
+"""The exercise this server runs (``eha serve --exercise FILE`` sets EHA_EXERCISE, and ``--store URL``
+EHA_STORE, where its lab's state is): read by the server only, once per change of the file, with its
+secret registered to be kept out of every log line."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ __all__ = ["current_exercise"]
 
 
 @lru_cache(maxsize=4)
-def _exercise_at(path: str, mtime: float):
+def _exercise_at(path: str, mtime: float, store: str):
     from eha_core.exercise import Exercise
 
     from .handins import HandIns
@@ -18,7 +19,7 @@ def _exercise_at(path: str, mtime: float):
 
     exercise = Exercise.load(path)
     keep_out_of_logs(exercise.secret)
-    return exercise, HandIns(path)
+    return exercise, HandIns(path, store=store or None)
 
 
 def current_exercise():
@@ -28,4 +29,4 @@ def current_exercise():
     path = os.environ.get("EHA_EXERCISE", "").strip()
     if not path:
         return None
-    return _exercise_at(path, os.path.getmtime(path))
+    return _exercise_at(path, os.path.getmtime(path), os.environ.get("EHA_STORE", "").strip())

@@ -1,11 +1,14 @@
-"""The students' hand-ins of an exercise, in SQLite next to the exercise file.
+"""The students' hand-ins of an exercise, and the rest of the lab's state, in its database: SQLite next
+to the exercise file by default, or a PostgreSQL database every server of a course shares
+(``eha serve --store postgresql://...``; :mod:`eha_app.runtime.store_backend`).
 
 One row per hand-in: when, who (the normalised id), the estimates, the
-verdicts, the score and where the data came from (the student's own actuator's
-experiment, or an uploaded file with its name and digest). Every hand-in is its
-own transaction on its own connection (the server hands in from worker
-threads): SQLite serialises the writers. The database outlives the server; WAL
-mode lets the teacher read the results while students hand in.
+verdicts, the score, where the data came from (the student's own actuator's
+experiment, or an uploaded file with its name and digest) and the key its page
+gave it (a hand-in sent again is stored once). Every hand-in is its own
+transaction, serialised by the backend (the server hands in from worker
+threads, several servers at once). The database outlives the server; the
+teacher reads the results while students hand in.
 
 Nothing here runs on the server's event loop (the callers use worker threads or
 :mod:`eha_app.runtime.store_calls`), and nothing waits long on a lock: each
@@ -13,20 +16,20 @@ attempt gives up after :data:`BUSY_TIMEOUT_S` and is tried again, with a short
 pause, until the call's patience is spent (:data:`WRITE_PATIENCE_S` for a
 hand-in, which must land; less for a presence). A lock held by another program
 (the teacher's ``sqlite3`` session, a backup, a large save) then delays only
-the calls that need it, each on its own thread.
+the calls that need it, each on its own thread. A database that cannot be
+reached raises :class:`StoreUnavailable` (a hand-in then waits to be saved:
+:mod:`eha_app.runtime.outbox`).
 
-The file is the teacher's, like the exercise file: it is created readable by
-its owner only (SQLite gives its journal files the same permissions). A file
-that is not a usable database raises :class:`StoreError`, whose message says
-what to do. One that disappears while the server runs is not made again
-behind the teacher's back (every student's attempts would start from 0): the
-calls fail, saying so, and the server's log says so, until the teacher puts a
-copy back or starts the server again.
+A database that is not usable raises :class:`StoreError`, whose message says
+what to do (and names a PostgreSQL database by its URL without the password).
 
 >>> import tempfile, pathlib
 >>> store = HandIns(pathlib.Path(tempfile.mkdtemp()) / "class.json").check()
 >>> store.add("ada", {"M": 4100.0}, {"M": True})
 1
+>>> store.add("ada", {"M": 4100.0}, {"M": True}, key="page-1-handin-1"), store.add("ada", {"M": 1.0}, {"M": False},
+...                                                                            key="page-1-handin-1")
+(2, 2)
 >>> [(r.student, r.score, r.source) for r in store.latest()]
 [('ada', 1.0, {'kind': 'simulated'})]
 """
@@ -35,69 +38,21 @@ from __future__ import annotations
 
 import json
 import logging
-import os
-import sqlite3
-import threading
 import time
-from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["HandIns", "HandIn", "StoreError", "Refused", "handins_path", "CONTROL_KEYS", "BUSY_TIMEOUT_S",
-           "WRITE_PATIENCE_S"]
+from .store_backend import BUSY_TIMEOUT_S, StoreError, StoreUnavailable, open_backend
+
+__all__ = ["HandIns", "HandIn", "StoreError", "StoreUnavailable", "Refused", "handins_path", "CONTROL_KEYS",
+           "BUSY_TIMEOUT_S", "WRITE_PATIENCE_S"]
 
 log = logging.getLogger("eha_app")
 
-#: How long one attempt waits for another connection's lock before it is tried again [s].
-BUSY_TIMEOUT_S = 0.25
 #: How long a write keeps trying before it fails, saying the database is busy [s].
 WRITE_PATIENCE_S = 30.0
 #: The teacher's switches kept in the database (every server process and command sees the same).
 CONTROL_KEYS = ("open", "deadline", "revealed", "token_nonce", "token_expires")
-
-
-class StoreError(RuntimeError):
-    """The hand-in database cannot be used: what is wrong and what to do."""
-
-
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS handins (
-    id INTEGER PRIMARY KEY AUTOINCREMENT,
-    time TEXT NOT NULL,
-    student TEXT NOT NULL,
-    estimates TEXT NOT NULL,
-    verdicts TEXT NOT NULL,
-    score REAL NOT NULL
-);
-CREATE INDEX IF NOT EXISTS handins_student ON handins (student, id);
-CREATE TABLE IF NOT EXISTS control (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-CREATE TABLE IF NOT EXISTS presence (student TEXT PRIMARY KEY, joined TEXT NOT NULL, last_seen TEXT NOT NULL);
-CREATE TABLE IF NOT EXISTS clients (address TEXT NOT NULL, student TEXT NOT NULL, first REAL NOT NULL,
-                                    PRIMARY KEY (address, student));
-CREATE TABLE IF NOT EXISTS work (student TEXT PRIMARY KEY, time TEXT NOT NULL, settings TEXT NOT NULL,
-                                 runs TEXT NOT NULL);
-CREATE TABLE IF NOT EXISTS work_files (student TEXT NOT NULL, slot TEXT NOT NULL, name TEXT NOT NULL,
-                                       mapping TEXT NOT NULL, digest TEXT NOT NULL, data BLOB NOT NULL,
-                                       PRIMARY KEY (student, slot));
-CREATE TABLE IF NOT EXISTS refusals (id INTEGER PRIMARY KEY AUTOINCREMENT, time TEXT NOT NULL, student TEXT NOT NULL,
-                                     method TEXT NOT NULL, why TEXT NOT NULL);
-CREATE TABLE IF NOT EXISTS extensions (student TEXT PRIMARY KEY, deadline TEXT NOT NULL, time TEXT NOT NULL);
-"""
-#: What a complete database holds (tables and indexes by name).
-_NAMES = {"handins", "handins_student", "control", "presence", "clients", "work", "work_files", "work_files_size",
-          "refusals", "extensions"}
-#: Columns added since the first version, per table (a database made by an older version gets them at the
-#: next start).
-_ADDED = {
-    "handins": (("method", "TEXT NOT NULL DEFAULT 'lse'"), ("settings", "TEXT NOT NULL DEFAULT '{}'"),
-                ("conditions", "TEXT NOT NULL DEFAULT '{}'"), ("errors", "TEXT NOT NULL DEFAULT '{}'"),
-                ("source", "TEXT NOT NULL DEFAULT '{}'")),
-    # page: the live page's token (one code, one live page); pages: pages opened in all; overlaps: pages
-    # opened while another of the same id was live (the teacher sees a code used twice)
-    "presence": (("page", "TEXT NOT NULL DEFAULT ''"), ("pages", "INTEGER NOT NULL DEFAULT 0"),
-                 ("overlaps", "INTEGER NOT NULL DEFAULT 0")),
-    "work_files": (("size", "INTEGER NOT NULL DEFAULT -1"),),
-}
 
 
 def handins_path(exercise_path: str | Path) -> Path:
@@ -164,163 +119,44 @@ def _now() -> str:
     return time.strftime("%Y-%m-%d %H:%M:%S")
 
 
-def _busy(exc: sqlite3.Error) -> bool:
-    text = str(exc).lower()
-    return isinstance(exc, sqlite3.OperationalError) and ("locked" in text or "busy" in text)
-
-
 class HandIns:
     """The hand-ins of the exercise at ``exercise_path``, the teacher's switches (``control``: open or
     closed, an extended deadline, revealed, the dashboard token's nonce and expiry), the deadlines the
     teacher extended for single students (``extensions``), who has joined
     and when they were last seen, and the students' kept work (:mod:`eha_app.runtime.work_store`)."""
 
-    def __init__(self, exercise_path: str | Path):
-        self.path = handins_path(exercise_path)
-        # the database existed when this process first looked: if it disappears later, it was deleted
-        self._known = self.path.exists()
-        self._missing_said = 0.0
-        self._lock = threading.Lock()
-        self._ready = False                 # the tables were checked by this instance
+    def __init__(self, exercise_path: str | Path, store: str | None = None):
+        self.backend = open_backend(exercise_path, store)
+        #: the SQLite file (None on PostgreSQL)
+        self.path = getattr(self.backend, "path", None)
+        #: what messages call the database: its path, or its URL without the password
+        self.shown = self.backend.shown
 
     def check(self) -> HandIns:
-        """Open the database (made if missing) and check it: :class:`StoreError` if it is not usable.
-        The server and the teacher's commands call it before anything else."""
-        if self.path.parent.exists() and not os.access(self.path.parent, os.W_OK):
-            raise StoreError(f"the folder {str(self.path.parent)!r} of the hand-in database is read-only; the "
-                             "server could not store a single hand-in: serve from a folder you can write to")
-        self._known = False                 # made here if missing: the teacher asked for it
-        self._ready = False
-        try:
-            with closing(self._connect()) as db:
-                db.execute("PRAGMA journal_mode=WAL")
-                self._schema(db)
-                problem = db.execute("PRAGMA quick_check").fetchone()[0]
-        except sqlite3.Error as exc:
-            raise self._unusable(exc) from None
-        if problem != "ok":
-            raise self._unusable(problem)
+        """Open the database (made if missing, brought to this version's schema) and check it:
+        :class:`StoreError` if it is not usable. The server and the teacher's commands call it before
+        anything else."""
+        self.backend.check()
         return self
 
-    @staticmethod
-    def _schema(db) -> None:
-        """The tables, made if missing, and the columns added since (a database of an older version).
-        Only reads when everything is there (no write lock is asked for)."""
-        names = {r[0] for r in db.execute("SELECT name FROM sqlite_master")}
-        if not _NAMES <= names:
-            db.executescript(_SCHEMA)
-        for table, added in _ADDED.items():
-            have = {r[1] for r in db.execute(f"PRAGMA table_info({table})")}
-            for name, decl in added:
-                if name not in have:
-                    try:
-                        db.execute(f"ALTER TABLE {table} ADD COLUMN {name} {decl}")
-                    except sqlite3.OperationalError:
-                        pass                # another process added it meanwhile
-        # the uploads' sizes, for the class's quota (kept before the column existed: measured once); summed
-        # from an index, without reading a single upload's bytes
-        if db.execute("SELECT 1 FROM work_files WHERE size < 0 LIMIT 1").fetchone() is not None:
-            db.execute("UPDATE work_files SET size = length(data) WHERE size < 0")
-        if "work_files_size" not in names:
-            db.execute("CREATE INDEX IF NOT EXISTS work_files_size ON work_files (student, slot, size)")
-
     def _unusable(self, what) -> StoreError:
-        return StoreError(f"the hand-in database {str(self.path)!r} cannot be used ({what}); move it away to start "
-                          "an empty one, or put back a copy")
-
-    def _connect(self) -> sqlite3.Connection:
-        """A connection to the database, made (readable by its owner only, with its tables) if it is
-        missing and was never there; StoreError if it was there and has gone."""
-        if self._ready and self.path.exists():
-            return sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
-        if not self.path.exists():
-            if self._known:
-                now = time.monotonic()
-                if now - self._missing_said > 60:       # said once a minute, not at every page's poll
-                    self._missing_said = now
-                    log.error("the hand-in database %s is missing (deleted while the server ran): hand-ins and "
-                              "saves are refused until a copy is put back or the server is started again",
-                              self.path.name)
-                raise StoreError(f"the hand-in database {str(self.path)!r} is missing: it was deleted while the "
-                                 "server ran; put a copy back, or start the server again to begin an empty one")
-            with self._lock:
-                try:
-                    os.close(os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
-                    made = True
-                except FileExistsError:
-                    made = False            # another thread or process made it meanwhile
-                except OSError as exc:
-                    raise StoreError(f"the hand-in database {str(self.path)!r} cannot be made ({exc.strerror})") \
-                        from None
-                db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
-                if made:
-                    db.execute("PRAGMA journal_mode=WAL")
-        else:
-            db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
-        # this instance's first connection: the tables are made (or completed) before anything uses them,
-        # one thread at a time (two threads of a new store once raced: "table handins has no column method")
-        with self._lock:
-            if not self._ready:
-                try:
-                    self._schema(db)
-                except BaseException:
-                    db.close()
-                    raise
-                self._ready = True
-        self._known = True
-        return db
-
-    def _attempts(self, fn, patience: float):
-        """``fn()`` again while the database is locked by another connection, until ``patience`` is spent."""
-        deadline = time.monotonic() + patience
-        pause = 0.02
-        while True:
-            try:
-                return fn()
-            except sqlite3.Error as exc:
-                if not _busy(exc) or time.monotonic() + pause > deadline:
-                    if _busy(exc):
-                        raise StoreError(f"the hand-in database {self.path.name!r} is busy: another program has "
-                                         f"held its lock for {patience:.0f} s; try again in a moment") from None
-                    raise self._unusable(exc) from None
-            time.sleep(pause)
-            pause = min(2 * pause, 0.5)
+        return self.backend.unusable(what)
 
     def _write(self, fn, patience: float = WRITE_PATIENCE_S):
-        """Run ``fn(db)`` in one immediate transaction; :class:`StoreError` if the database cannot take it."""
-        def attempt():
-            db = self._connect()
-            try:
-                db.execute("BEGIN IMMEDIATE")
-                out = fn(db)
-                db.execute("COMMIT")
-                return out
-            finally:
-                try:
-                    if db.in_transaction:
-                        db.execute("ROLLBACK")
-                except sqlite3.Error:
-                    pass
-                db.close()
-        return self._attempts(attempt, patience)
+        """Run ``fn(db)`` in one serialised write transaction; :class:`StoreError` if the database cannot
+        take it (:class:`StoreUnavailable` if it cannot be reached now)."""
+        return self.backend.write(fn, patience)
 
     def _snapshot(self, fn, patience: float = 5.0):
         """Run ``fn(db)`` in one read transaction (a consistent view; no write lock is taken or waited for)."""
-        def attempt():
-            with closing(self._connect()) as db:
-                db.execute("BEGIN")
-                try:
-                    return fn(db)
-                finally:
-                    db.execute("COMMIT")
-        return self._attempts(attempt, patience)
+        return self.backend.snapshot(fn, patience)
 
     def _read(self, sql: str, args=(), patience: float = 5.0) -> list:
         return self._snapshot(lambda db: db.execute(sql, args).fetchall(), patience)
 
     def add(self, student: str, estimates: dict, verdicts: dict, *, method: str = "lse", settings: dict | None = None,
             conditions: dict | None = None, errors: dict | None = None, source: dict | None = None,
-            refusal=None) -> int:
+            refusal=None, key: str = "") -> int:
         """Store a hand-in; returns its row id. :class:`StoreError` if the database cannot take it.
 
         ``refusal(count, control)``, if given, is asked inside the transaction with the student's number
@@ -329,10 +165,17 @@ class HandIns:
         handing in at once cannot both take the last attempt; a reveal or an extension a moment ago
         holds): a message it returns is raised as :class:`Refused` and nothing is stored. ``source``:
         where the data came from (``{"kind": "simulated"}``, the default, or ``{"kind": "file", "name": ...,
-        "sha256": ...}``)."""
+        "sha256": ...}``). ``key``: the hand-in's own key, given by the page that made it; a hand-in
+        whose key the student's hand-ins already have was stored before (sent again after a lost
+        connection, or by a server that took over): its row id is returned and nothing is stored or
+        counted again."""
         score = sum(bool(v) for v in verdicts.values()) / max(len(verdicts), 1)
 
         def insert(db):
+            if key:
+                row = db.execute("SELECT id FROM handins WHERE student = ? AND key = ?", (student, key)).fetchone()
+                if row is not None:
+                    return int(row[0])
             if refusal is not None:
                 count = db.execute("SELECT COUNT(*) FROM handins WHERE student = ?", (student,)).fetchone()[0]
                 why = refusal(count, _control_for(db, student))
@@ -341,12 +184,12 @@ class HandIns:
                     db.execute("INSERT INTO refusals (time, student, method, why) VALUES (?, ?, ?, ?)",
                                (_now(), student, method, str(why)))
                     return Refused(why)
-            cur = db.execute("INSERT INTO handins (time, student, estimates, verdicts, score, method, settings, "
-                             "conditions, errors, source) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            row = db.execute("INSERT INTO handins (time, student, estimates, verdicts, score, method, settings, "
+                             "conditions, errors, source, key) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) RETURNING id",
                              (_now(), student, json.dumps(estimates), json.dumps(verdicts), score, method,
                               json.dumps(settings or {}), json.dumps(conditions or {}), json.dumps(errors or {}),
-                              json.dumps(source or {"kind": "simulated"})))
-            return int(cur.lastrowid)
+                              json.dumps(source or {"kind": "simulated"}), str(key or ""))).fetchone()
+            return int(row[0])
         out = self._write(insert)
         if isinstance(out, Refused):
             raise out
@@ -434,10 +277,10 @@ class HandIns:
             row = db.execute("SELECT page FROM presence WHERE student = ?", (student,)).fetchone()
             before = row[0] if row else ""
             other = bool(page and before and before != page)
-            db.execute("INSERT INTO presence (student, joined, last_seen, page, pages, overlaps) "
+            db.execute("INSERT INTO presence (student, joined, last_seen, page, pages, \"overlaps\") "
                        "VALUES (?, ?, ?, ?, ?, 0) ON CONFLICT(student) DO UPDATE SET last_seen = excluded.last_seen, "
                        "page = CASE WHEN ? != '' THEN excluded.page ELSE presence.page END, "
-                       "pages = presence.pages + ?, overlaps = presence.overlaps + ?",
+                       "pages = presence.pages + ?, \"overlaps\" = presence.\"overlaps\" + ?",
                        (student, now, now, page, 1 if page else 0, page, 1 if page else 0, 1 if other else 0))
             return before if other else ""
         return self._write(write, patience)
@@ -465,7 +308,7 @@ class HandIns:
     def presences(self) -> dict[str, Presence]:
         """student -> :class:`Presence` (pages and overlaps with it)."""
         return {r[0]: Presence(r[1], r[2], r[3], int(r[4]), int(r[5])) for r in
-                self._read("SELECT student, joined, last_seen, page, pages, overlaps FROM presence")}
+                self._read("SELECT student, joined, last_seen, page, pages, \"overlaps\" FROM presence")}
 
     def new_id_from(self, address: str, student: str, *, limit: int, window_s: float = 3600.0,
                     patience: float = 10.0) -> str | None:
@@ -485,19 +328,21 @@ class HandIns:
                     return (f"this computer has started {n} new ids in this exercise in the last hour, the most "
                             "allowed; type the id you used before, or ask your teacher (several students behind "
                             "one network address need a higher limit: eha exercise new --ids-per-client)")
-            db.execute("INSERT OR IGNORE INTO clients (address, student, first) VALUES (?, ?, ?)",
+            db.execute("INSERT INTO clients (address, student, first) VALUES (?, ?, ?) ON CONFLICT DO NOTHING",
                        (address, student, now))
             return None
         return self._write(write, patience=patience)
 
     def version(self) -> tuple:
         """Changes whenever a hand-in, a switch or a presence changes (what a live page polls)."""
+        switches, pages, extended = (self.backend.concat(e) for e in ("key || '=' || value", "page",
+                                                                       "student || '=' || deadline"))
         rows = self._read("SELECT (SELECT COUNT(*) FROM handins), (SELECT MAX(id) FROM handins), "
-                          "(SELECT group_concat(key || '=' || value) FROM control), "
+                          f"(SELECT {switches} FROM control), "
                           "(SELECT COUNT(*) FROM presence), (SELECT MAX(last_seen) FROM presence), "
-                          "(SELECT SUM(pages) FROM presence), (SELECT group_concat(page) FROM presence), "
+                          f"(SELECT SUM(pages) FROM presence), (SELECT {pages} FROM presence), "
                           "(SELECT COUNT(*) FROM refusals), "
-                          "(SELECT group_concat(student || '=' || deadline) FROM extensions)")
+                          f"(SELECT {extended} FROM extensions)")
         return tuple(rows[0])
 
 

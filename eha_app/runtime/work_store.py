@@ -126,8 +126,10 @@ class WorkStore:
                         db.execute("DELETE FROM work_files WHERE student = ? AND slot = ?", (work.student, slot))
                         refused.append(f.name)
                         continue
-                db.execute("INSERT OR REPLACE INTO work_files (student, slot, name, mapping, digest, data, size) "
-                           "VALUES (?, ?, ?, ?, ?, ?, ?)", (work.student, slot, *row, f.data, len(f.data)))
+                db.execute("INSERT INTO work_files (student, slot, name, mapping, digest, data, size) VALUES (?, ?, ?, "
+                           "?, ?, ?, ?) ON CONFLICT (student, slot) DO UPDATE SET name = excluded.name, mapping = "
+                           "excluded.mapping, digest = excluded.digest, data = excluded.data, size = excluded.size",
+                           (work.student, slot, *row, f.data, len(f.data)))
         self._transaction(write)
         return list(refused)
 

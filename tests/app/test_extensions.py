@@ -26,6 +26,9 @@ def test_an_older_database_gets_the_extensions_table(tmp_path):
     store.add("ada", {"M": 1.0}, {"M": True})
     with sqlite3.connect(store.path) as db:                   # a database made before extensions existed
         db.execute("DROP TABLE extensions")
+        db.execute("DROP TABLE eha_schema")                   # (and before the schema's versions were kept)
+        db.execute("DROP INDEX handins_key")
+        db.execute("ALTER TABLE handins DROP COLUMN key")
     store = HandIns(path).check()
     assert store.extensions() == {} and len(store.all()) == 1
     store.set_extension("ada", LATER)
