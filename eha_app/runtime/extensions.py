@@ -2,7 +2,7 @@
 
 The teacher grants a student a deadline of their own (kept in the class's database,
 :meth:`~eha_app.runtime.handins.HandIns.set_extension`); the hand-in takes it when it is later than
-the class's (:func:`eha_app.sections.handin.own_deadline`). An extension is refused, naming the field
+the class's (:func:`own_deadline`). An extension is refused, naming the field
 and the value as typed, for an id the roster does not hold, a date that is not ISO-8601, one that is
 not later than the class's deadline or has passed (it would change nothing), one after the exercise
 releases the true values (hand-ins close then, whatever the deadline), and in an exercise without a
@@ -25,7 +25,7 @@ import time
 from eha_core.errors import not_allowed
 from eha_core.exercise import normalize_id, parse_deadline
 
-__all__ = ["check_extension", "STUDENT_FIELD", "UNTIL_FIELD"]
+__all__ = ["check_extension", "own_deadline", "lab_rules", "STUDENT_FIELD", "UNTIL_FIELD", "HANDIN_PATIENCE_S"]
 
 #: The names a refusal gives the two fields (the command line's options replace them).
 STUDENT_FIELD = "student id"
@@ -76,3 +76,37 @@ def check_extension(exercise, student: str, until: str, *, class_deadline: str =
         raise not_allowed(UNTIL_FIELD, typed, f"it is after the true values are released ({exercise.release_at}): "
                                               "no hand-in is taken from then on; give one at or before it")
     return sid, text
+
+
+#: How long a hand-in waits for the database before it waits to be saved (the database is down) [s].
+HANDIN_PATIENCE_S = 8.0
+
+
+def lab_rules(exercise, rules: dict, seen: dict | None = None):
+    """The lab's rules for a hand-in as its own transaction judges them: ``refusal(count, control)`` with the
+    teacher's switches as the transaction reads them (a close, a moved deadline or a reveal a moment ago
+    holds), the hand-in's ``rules["method"]`` and ``rules["source"]``, and the time the student handed in
+    (``rules["at"]``: a hand-in that waited for the database is not late for it). ``seen`` receives the
+    switches read."""
+    def refusal(count, control):
+        if seen is not None:
+            seen.update(control)
+        return exercise.refusal(count, now=rules.get("at"), open_=control.get("open", "1") == "1",
+                                deadline=own_deadline(exercise, control), method=rules.get("method"),
+                                revealed=control.get("revealed") == "1", source=rules.get("source"))
+    return refusal
+
+
+def own_deadline(exercise, control: dict) -> str | None:
+    """The student's deadline under the teacher's switches ``control`` (:meth:`HandIns.control_for`): their
+    own extension when it is later than the class's deadline (the teacher's moved one, else the exercise
+    file's), else the class's; None when the class has none (an extension extends nothing then)."""
+    class_deadline = control.get("deadline") or exercise.deadline
+    extension = control.get("extension") or ""
+    if not class_deadline:
+        return None
+    try:
+        later = bool(extension) and exercise.deadline_at(extension) > exercise.deadline_at(class_deadline)
+    except ValueError:
+        later = False                       # a stored date no one can read (edited by hand): the class's holds
+    return extension if later else class_deadline

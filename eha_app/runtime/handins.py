@@ -127,6 +127,7 @@ class HandIns:
 
     def __init__(self, exercise_path: str | Path, store: str | None = None):
         self.backend = open_backend(exercise_path, store)
+        self.exercise_path = str(Path(exercise_path).absolute())
         #: the SQLite file (None on PostgreSQL)
         self.path = getattr(self.backend, "path", None)
         #: what messages call the database: its path, or its URL without the password
@@ -156,7 +157,7 @@ class HandIns:
 
     def add(self, student: str, estimates: dict, verdicts: dict, *, method: str = "lse", settings: dict | None = None,
             conditions: dict | None = None, errors: dict | None = None, source: dict | None = None,
-            refusal=None, key: str = "") -> int:
+            refusal=None, key: str = "", patience: float = WRITE_PATIENCE_S) -> int:
         """Store a hand-in; returns its row id. :class:`StoreError` if the database cannot take it.
 
         ``refusal(count, control)``, if given, is asked inside the transaction with the student's number
@@ -190,7 +191,7 @@ class HandIns:
                               json.dumps(settings or {}), json.dumps(conditions or {}), json.dumps(errors or {}),
                               json.dumps(source or {"kind": "simulated"}), str(key or ""))).fetchone()
             return int(row[0])
-        out = self._write(insert)
+        out = self._write(insert, patience)
         if isinstance(out, Refused):
             raise out
         return out

@@ -53,6 +53,8 @@ log = logging.getLogger("eha_app")
 #: The most bytes of uploaded records kept per student (all of their uploads together): the
 #: largest file the page takes.
 MAX_WORK_FILE_BYTES = MAX_DATA_BYTES
+#: How long the saves rest when the database cannot be reached, before they are tried again [s].
+RETRY_UNAVAILABLE_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -185,15 +187,28 @@ class _Writer:
                     self._cond.notify_all()
                     self._cond.wait()
                 self._busy = True
-                fn = self._pending.pop(next(iter(self._pending)))
-            self._run(fn)
+                key = next(iter(self._pending))
+                fn = self._pending.pop(key)
+            if not self._run(fn):
+                # the database cannot be reached (PostgreSQL restarting): the save waits, unless a newer
+                # one of the same student came meanwhile, and the line rests a moment before it goes on
+                with self._cond:
+                    self._pending.setdefault(key, fn)
+                    self._cond.wait(timeout=RETRY_UNAVAILABLE_S)
 
     @staticmethod
-    def _run(fn) -> None:
+    def _run(fn) -> bool:
+        """Run ``fn()``; False when the database could not be reached (worth trying again)."""
+        from .handins import StoreUnavailable
+
         try:
             fn()
+        except StoreUnavailable as exc:
+            log.warning("a save of a student's work waits: %s", exc)
+            return False
         except Exception:  # noqa: BLE001 - one student's save must not stop the others'
             log.exception("a save of a student's work failed")
+        return True
 
     def drain(self, timeout: float = 10.0) -> None:
         """Wait until what was submitted has run (the server stopping; tests)."""

@@ -12,6 +12,8 @@ teacher reveals it (:meth:`eha_app.app.Page` shows it then).
 from __future__ import annotations
 
 import html
+import secrets
+import time
 from collections.abc import Callable
 
 import panel as pn
@@ -22,7 +24,9 @@ from eha_core.exercise import FEEDBACK, METHODS
 from ..render.formatting import display_unit, num_html
 from ..render.layout import BUTTON_CONTRAST
 from ..render.tables import SYMBOLS_HTML
-from ..runtime.tasks import on_click
+from ..runtime.extensions import HANDIN_PATIENCE_S, lab_rules, own_deadline
+from ..runtime.outbox import RETRY_S
+from ..runtime.tasks import apply_locked, on_click, served_document
 
 __all__ = ["HandInBox", "handin_status", "result_for_student", "lab_rules_html", "lab_refusal", "impossible_estimates",
            "verdict_words", "own_deadline"]
@@ -47,21 +51,6 @@ def impossible_estimates(estimates: dict) -> list[str]:
         out.append(f"{SYMBOLS_HTML.get(name, html.escape(name))} = {float(value) / info.display_scale:.4g} "
                    f"{html.escape(info.display_unit)}: must be {'> 0' if info.bound == '>' else '≥ 0'}")
     return out
-
-
-def own_deadline(exercise, control: dict) -> str | None:
-    """The student's deadline under the teacher's switches ``control`` (:meth:`HandIns.control_for`): their
-    own extension when it is later than the class's deadline (the teacher's moved one, else the exercise
-    file's), else the class's; None when the class has none (an extension extends nothing then)."""
-    class_deadline = control.get("deadline") or exercise.deadline
-    extension = control.get("extension") or ""
-    if not class_deadline:
-        return None
-    try:
-        later = bool(extension) and exercise.deadline_at(extension) > exercise.deadline_at(class_deadline)
-    except ValueError:
-        later = False                       # a stored date no one can read (edited by hand): the class's holds
-    return extension if later else class_deadline
 
 
 def route_model_errors(reference, estimates: dict, token) -> dict:
@@ -285,64 +274,55 @@ class HandInBox:
                       else {**exercise.conditions.to_dict(), **settings.pop("_conditions", {})})
         settings.pop("_conditions", None)
 
+        # the hand-in's own key: sent again (a lost connection, a database that was down), it is stored once
+        key = secrets.token_hex(12)
+        rules = {"method": method, "source": source.get("kind"), "at": time.time()}
+
         def compute(_token):
-            from ..runtime.handins import Refused
+            from ..runtime.handins import Refused, StoreUnavailable
+            from ..runtime.outbox import outbox
 
             model_errors = route_model_errors(reference, estimates, _token)
             settings["model_errors"] = model_errors
             judged = exercise.judge(student, estimates, std_errors, model_errors)
             verdicts = {n: j.ok for n, j in judged.items()}
             seen = {}
-
-            def refusal(count, control):
-                # the teacher's switches as the hand-in's own transaction reads them: a close, a
-                # moved deadline or a reveal a moment ago holds
-                seen.update(control)
-                return exercise.refusal(count, open_=control.get("open", "1") == "1",
-                                        deadline=own_deadline(exercise, control), method=method,
-                                        revealed=control.get("revealed") == "1", source=source.get("kind"))
+            refusal = lab_rules(exercise, rules, seen)
+            handin = dict(student=student, estimates=estimates, verdicts=verdicts, method=method, settings=settings,
+                          conditions=conditions, errors=exercise.errors(student, estimates), source=source,
+                          refusal=refusal, key=key)
             try:
-                store.add(student, estimates, verdicts, method=method, settings=settings, conditions=conditions,
-                          errors=exercise.errors(student, estimates), source=source, refusal=refusal)
+                store.add(**handin, patience=HANDIN_PATIENCE_S)
             except Refused as exc:
                 return None, str(exc), 0, False
+            except StoreUnavailable as exc:
+                # the database is down: this server keeps the hand-in and saves it when it answers
+                outbox().put(store, handin, on_done=lambda row, why: saved_later(judged, row, why, seen),
+                             refusal_spec=rules)
+                return judged, "", -1, str(exc)
             count = len(store.of(student))
             shows = exercise.shows_verdicts(deadline=own_deadline(exercise, seen), revealed=seen.get("revealed") == "1")
             return judged, "", count, shows
 
+        def saved_later(judged, row, why, seen):
+            def show_saved():
+                if why:
+                    show((None, why, 0, False), None)
+                    return
+                try:
+                    count = len(store.of(student))
+                except Exception:  # noqa: BLE001 - read again at the page's next look
+                    count = 0
+                shows = exercise.shows_verdicts(deadline=own_deadline(exercise, seen),
+                                                revealed=seen.get("revealed") == "1")
+                show((judged, "", count, shows), None)
+            apply_locked(show_saved, doc)
+
         session = self.section.session
+        doc = served_document()
 
         def show(out, _job):
-            judged, refused, count, shows = out
-            self._refusal_shown = False         # the verdict pane says this hand-in's outcome now
-            for fn in list(session.after_handin):
-                fn()                            # the page reads the lab's rules again (attempts left)
-            if refused:
-                self.verdict.object = (f"<div class='eha-verdict-box eha-handin-refused'><span class='eha-warn'>"
-                                       f"Not handed in: {html.escape(refused)}.</span></div>")
-                self.verdict.visible = True
-                return
-            limit = f" of {exercise.attempts} allowed" if exercise.attempts else ""
-            origin = f" on your file {html.escape(source.get('name', ''))}" if from_file else ""
-            head = (f"<b>Handed in</b> (hand-in {count}{limit}, from the "
-                    f"{html.escape(METHODS[method].split(' (')[0])}{origin})")
-            values = "".join(f"<li>{SYMBOLS_HTML.get(n, html.escape(n))} = {shown_value(n, v)}"
-                             for n, v in estimates.items())
-            if shows:
-                score = sum(j.ok for j in judged.values())
-                items = "".join(
-                    f"<li>{SYMBOLS_HTML.get(n, html.escape(n))} "
-                    + ("not handed in from this route ✗" if n not in estimates else
-                       f"= {shown_value(n, estimates[n])}: " + verdict_words(exercise, n, j))
-                    + "</li>" for n, j in judged.items())
-                body = f"{head}: {score} of {len(judged)} accepted.<ul>{items}</ul>"
-            elif exercise.feedback == "after-deadline":
-                body = (f"{head}.<ul>{values}</ul>The verdicts are shown after the deadline"
-                        + (f" ({html.escape(exercise.deadline)})" if exercise.deadline else "") + ".")
-            else:
-                body = f"{head}.<ul>{values}</ul>Your teacher will tell you the result."
-            self.verdict.object = f"<div class='eha-verdict-box'>{body}</div>"
-            self.verdict.visible = True
+            self._show_outcome(out, exercise, method, estimates, source, session)
 
         def fail(message):
             # nothing was stored (the class's database is damaged or gone): say so, not "identification failed"
@@ -352,6 +332,49 @@ class HandInBox:
             self.verdict.visible = True
 
         return self.section.runner.run("hand-in", compute, show, fail=fail, note=self.section._note)
+
+    def _show_outcome(self, out, exercise, method: str, estimates: dict, source: dict, session) -> None:
+        """What became of a hand-in: stored (with what the feedback rule allows), refused, or waiting to be
+        saved (``count`` -1: the database was down)."""
+        judged, refused, count, shows = out
+        self._refusal_shown = False         # the verdict pane says this hand-in's outcome now
+        if count == -1:
+            self.verdict.object = (
+                "<div class='eha-verdict-box eha-handin-waiting' role='status'><b>Your hand-in is waiting to be "
+                "saved.</b> The class's database cannot be reached just now; this server keeps your hand-in and "
+                f"tries again every {RETRY_S:.0f} s, and it is saved as soon as the database answers (it counts "
+                "once, however often it is tried, and the deadline is the time you handed in). Keep working; no "
+                "need to hand in again.</div>")
+            self.verdict.visible = True
+            return
+        for fn in list(session.after_handin):
+            fn()                            # the page reads the lab's rules again (attempts left)
+        if refused:
+            self.verdict.object = (f"<div class='eha-verdict-box eha-handin-refused'><span class='eha-warn'>"
+                                   f"Not handed in: {html.escape(refused)}.</span></div>")
+            self.verdict.visible = True
+            return
+        limit = f" of {exercise.attempts} allowed" if exercise.attempts else ""
+        origin = f" on your file {html.escape(source.get('name', ''))}" if source.get('kind') == 'file' else ""
+        head = (f"<b>Handed in</b> (hand-in {count}{limit}, from the "
+                f"{html.escape(METHODS[method].split(' (')[0])}{origin})")
+        values = "".join(f"<li>{SYMBOLS_HTML.get(n, html.escape(n))} = {shown_value(n, v)}"
+                         for n, v in estimates.items())
+        if shows:
+            score = sum(j.ok for j in judged.values())
+            items = "".join(
+                f"<li>{SYMBOLS_HTML.get(n, html.escape(n))} "
+                + ("not handed in from this route ✗" if n not in estimates else
+                   f"= {shown_value(n, estimates[n])}: " + verdict_words(exercise, n, j))
+                + "</li>" for n, j in judged.items())
+            body = f"{head}: {score} of {len(judged)} accepted.<ul>{items}</ul>"
+        elif exercise.feedback == "after-deadline":
+            body = (f"{head}.<ul>{values}</ul>The verdicts are shown after the deadline"
+                    + (f" ({html.escape(exercise.deadline)})" if exercise.deadline else "") + ".")
+        else:
+            body = f"{head}.<ul>{values}</ul>Your teacher will tell you the result."
+        self.verdict.object = f"<div class='eha-verdict-box'>{body}</div>"
+        self.verdict.visible = True
 
 
 def result_for_student(exercise, student: str, store, control: dict | None = None) -> str:
