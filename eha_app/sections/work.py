@@ -25,15 +25,16 @@ import dataclasses
 import html
 import json
 import logging
+import threading
 from collections.abc import Callable
 from functools import partial
 
 import panel as pn
 
-from ..runtime.handins import StoreError
+from ..runtime.handins import StoreError, StoreUnavailable
 from ..runtime.jobs import JobState
 from ..runtime.tasks import apply_locked, served_document
-from ..runtime.work_store import MAX_WORK_FILE_BYTES, Work, WorkStore, submit
+from ..runtime.work_store import MAX_WORK_FILE_BYTES, RETRY_UNAVAILABLE_S, Work, WorkStore, submit
 from ..session import KeptWork, SettingsError
 from ..session.form import Form
 
@@ -80,6 +81,7 @@ class WorkKeeper:
         self._stopped = False           # the page gave way to another of the same id: nothing more is saved
         self._last = None               # what was last saved, to skip a save of the same
         self._told = False
+        self._waited: set[str] = set()  # what waits for the database ("restore", "save"), told once
         self._watched: set[int] = set()
         self._changed_sections: list[str] | None = None     # set when kept work was put back
         self._planned: list[str] = []                       # the results being computed again
@@ -88,7 +90,10 @@ class WorkKeeper:
     def _off_page(self, key, fn: Callable[[], None]) -> None:
         """``fn()`` on the store's thread (at once without a server)."""
         if self.doc is None:
-            fn()
+            try:
+                fn()
+            except StoreUnavailable:
+                pass                    # (without a server there is no store thread to try it again)
         else:
             submit(key, fn)
 
@@ -97,7 +102,7 @@ class WorkKeeper:
 
     @property
     def _key(self):
-        return "work", str(self.store.handins.path), self.student
+        return "work", self.store.handins.shown, self.student
 
     # -- restoring ----------------------------------------------------------------------------------
     def restore(self) -> None:
@@ -107,6 +112,18 @@ class WorkKeeper:
         def read():
             try:
                 work, error = store.load(student), None
+            except StoreUnavailable as exc:
+                # the database is down (PostgreSQL restarting): the page waits for the work rather than start
+                # afresh, which its first save would then write over the kept work
+                if not self._stopped and not self._closed:
+                    self._on_page(partial(self._tell_once, "restore", (
+                        f"Your earlier work is on its way: the class's database cannot be reached just now "
+                        f"({exc}). This page tries again every {RETRY_UNAVAILABLE_S:.0f} s and puts it back as soon "
+                        "as it answers; nothing you do meanwhile replaces it.")))
+                    timer = threading.Timer(RETRY_UNAVAILABLE_S, self._off_page, args=(("read", id(self)), read))
+                    timer.daemon = True
+                    timer.start()
+                return
             except StoreError as exc:
                 work, error = None, exc
             self._on_page(lambda: self._put_back(work, error))
@@ -318,16 +335,30 @@ class WorkKeeper:
         def write():
             try:
                 refused = store.save(work)
+            except StoreUnavailable as exc:
+                # the store's thread keeps this save (the latest of the student's) and tries it again
+                self._on_page(partial(self._tell_once, "save", (
+                    f"Your work waits to be kept: the class's database cannot be reached just now ({exc}). This "
+                    "server tries again and keeps it as soon as it answers; go on working.")))
+                raise
             except StoreError as exc:
                 log.warning("a student's work could not be saved: %s", exc)
                 self._on_page(partial(self._not_saved, exc))
                 return
+            if "save" in self._waited:
+                self._waited.discard("save")
+                self._on_page(partial(self._tell, "Your work is kept again: the class's database answers."))
             if refused:
                 log.warning("the class's kept uploads are at their limit (%s MB): a student's upload is not kept",
                             store.quota_bytes // 10**6 if store.quota_bytes is not None else "?")
                 self._on_page(partial(self._not_kept, refused))
 
         self._off_page(self._key, write)
+
+    def _tell_once(self, what: str, text: str) -> None:
+        if what not in self._waited:
+            self._waited.add(what)
+            self._tell(text)
 
     def _not_kept(self, names: list[str]) -> None:
         new = [n for n in names if n not in self._quota_told]

@@ -101,3 +101,32 @@ def test_a_server_stopped_while_a_hand_in_waited_saves_it_at_its_next_start(lab,
     assert outbox_module.outbox().wait_empty(30.0)
     assert [(h.student, h.estimates) for h in store.all()] == [("s2", {"M": 4000.0})]
     assert not spool.exists()
+
+
+def _join(ex, student):
+    page = create_app(AppState())
+    page.gate.student_id.value = ex.join_code(student)
+    page.gate.start()
+    return page
+
+
+def test_a_page_opened_while_the_database_is_down_waits_for_the_work_and_keeps_it(lab, own_postgres, monkeypatch):
+    ex, path, url, spool = lab
+    monkeypatch.setattr("eha_app.sections.work.RETRY_UNAVAILABLE_S", 0.3)
+    page = _join(ex, "s1")
+    page.session.state.set_text("kp", "12")
+    page.session.state.set_text("Dc", "125")
+    page.work.save()
+    from eha_app.runtime.work_store import WorkStore
+
+    assert WorkStore(HandIns(path, store=url)).load("s1") is not None
+    own_postgres.kill()
+    again = _join(ex, "s1")                                # a reload (or another server) while it is down
+    assert again.work.restoring and "Your earlier work is on its way" in again.settings_note.object
+    again.session.state.set_text("Dc", "999")              # typed meanwhile: not saved over the kept work
+    again.work.changed()
+    own_postgres.restart()
+    assert _wait(lambda: not again.work.restoring, 30.0)
+    assert again.session.state.texts["kp"] == "12"
+    kept = WorkStore(HandIns(path, store=url)).load("s1")
+    assert kept is not None and json.loads(kept.settings)["parameters"]["kp"] == "12"
