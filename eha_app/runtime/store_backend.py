@@ -669,5 +669,6 @@ def open_backend(exercise_path: str | Path, store: str | None = None) -> Backend
     m = re.match(r"sqlite:(?://)?(.+)$", text, re.IGNORECASE)
     if m:
         return SQLiteBackend(m.group(1))
-    raise StoreError(f"--store {shown_url(text)!r} is not a database URL: give postgresql://USER:PASSWORD@HOST:"
-                     "PORT/DATABASE, or sqlite:///PATH (the default is a SQLite file beside the exercise)")
+    raise StoreError(f"{shown_url(text)!r} is not a database URL: give postgresql://USER@HOST:PORT/DATABASE "
+                     "(the password from ~/.pgpass or PGPASSWORD), or sqlite:///PATH (the default is a SQLite file "
+                     "beside the exercise)")

@@ -236,7 +236,7 @@ def test_an_address_another_machine_has_names_the_address_not_the_port():
 @pytest.mark.parametrize("argv, says", [
     (["identify"], "identify needs a METHOD: lse, tf or greybox"),
     (["study"], "study needs a METHOD: lse, tf, greybox or grading"),
-    (["exercise"], "exercise needs an ACTION: new, codes, results, reveal, extend or token"),
+    (["exercise"], "exercise needs an ACTION: new, codes, results, reveal, extend, token or copy-store"),
     (["frobnicate"], "argument COMMAND: invalid choice: 'frobnicate'"),
 ])
 def test_a_missing_or_unknown_subcommand_is_one_line(capsys, argv, says):

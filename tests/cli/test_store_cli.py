@@ -72,3 +72,12 @@ def test_serve_refuses_a_store_it_cannot_use_before_it_starts(tmp_path, postgres
     assert run.stderr.count("\n") == 1 and "guessed" not in run.stderr
     assert "refused the user name or password" in run.stderr and f"postgresql://eha@127.0.0.1:{postgres.port}" \
         in run.stderr
+
+
+def test_a_store_that_is_no_database_url_is_one_line(tmp_path, capsys):
+    path = _lab(tmp_path)
+    assert main(["exercise", "results", str(path), "--store", "mysql://root:pw@db/lab"]) == 2
+    err = capsys.readouterr().err
+    assert err == ("eha: error: --store: 'mysql://root@db/lab' is not a database URL: give postgresql://USER@HOST:"
+                   "PORT/DATABASE (the password from ~/.pgpass or PGPASSWORD), or sqlite:///PATH (the default is a "
+                   "SQLite file beside the exercise)\n")
