@@ -320,9 +320,15 @@ def _print_nginx_config(args) -> int:
     backends = [f"127.0.0.1:{args.port + k}" for k in range(1, n + 1)]
     print(nginx_config(backends, listen=str(args.port)))
     origin = f"{lan_address() or 'localhost'}:{args.port}"
+    lab = f" --exercise {args.exercise}" if args.exercise else ""
     print("# Start the app processes (each on its own port, all on this machine):")
+    if args.exercise and args.store:
+        from eha_app.runtime.store_backend import shown_url
+
+        # the URL goes into the environment, not onto a command line every user of the machine sees in ps
+        print(f"#   export EHA_STORE='{shown_url(args.store)}'   (its password in ~/.pgpass or PGPASSWORD)")
     for k in range(1, n + 1):
-        print(f"#   eha serve --port {args.port + k} --behind-proxy --workers {max(1, _cores() // n)} "
+        print(f"#   eha serve --port {args.port + k}{lab} --behind-proxy --workers {max(1, _cores() // n)} "
               f"--allow-websocket-origin {origin} &")
     print(f"# then put this file in /etc/nginx/conf.d/ and reload nginx; students open http://{origin}/eha")
     return 0
