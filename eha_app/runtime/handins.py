@@ -143,10 +143,11 @@ class HandIns:
     def _unusable(self, what) -> StoreError:
         return self.backend.unusable(what)
 
-    def _write(self, fn, patience: float = WRITE_PATIENCE_S):
-        """Run ``fn(db)`` in one serialised write transaction; :class:`StoreError` if the database cannot
-        take it (:class:`StoreUnavailable` if it cannot be reached now)."""
-        return self.backend.write(fn, patience)
+    def _write(self, fn, patience: float = WRITE_PATIENCE_S, lock: str | None = None):
+        """Run ``fn(db)`` in one serialised write transaction (with every write, or with those of the same
+        ``lock``: one student's); :class:`StoreError` if the database cannot take it
+        (:class:`StoreUnavailable` if it cannot be reached now)."""
+        return self.backend.write(fn, patience, lock)
 
     def _snapshot(self, fn, patience: float = 5.0):
         """Run ``fn(db)`` in one read transaction (a consistent view; no write lock is taken or waited for)."""
@@ -191,7 +192,7 @@ class HandIns:
                               json.dumps(settings or {}), json.dumps(conditions or {}), json.dumps(errors or {}),
                               json.dumps(source or {"kind": "simulated"}), str(key or ""))).fetchone()
             return int(row[0])
-        out = self._write(insert, patience)
+        out = self._write(insert, patience, lock=f"student:{student}")
         if isinstance(out, Refused):
             raise out
         return out
@@ -238,7 +239,7 @@ class HandIns:
                            (student, str(deadline), _now()))
             else:
                 db.execute("DELETE FROM extensions WHERE student = ?", (student,))
-        self._write(write)
+        self._write(write, lock=f"student:{student}")
 
     def extensions(self) -> dict[str, tuple[str, str]]:
         """student -> (their own deadline, ISO-8601; when it was set), by id."""
@@ -284,18 +285,18 @@ class HandIns:
                        "pages = presence.pages + ?, \"overlaps\" = presence.\"overlaps\" + ?",
                        (student, now, now, page, 1 if page else 0, page, 1 if page else 0, 1 if other else 0))
             return before if other else ""
-        return self._write(write, patience)
+        return self._write(write, patience, lock=f"student:{student}")
 
     def touch(self, student: str, page: str, *, patience: float = 2.0) -> None:
         """The student's live page ``page`` is still open: their "last seen" is now (the teacher's
         dashboard shows who is here)."""
         self._write(lambda db: db.execute("UPDATE presence SET last_seen = ? WHERE student = ? AND page = ?",
-                                          (_now(), student, page)), patience)
+                                          (_now(), student, page)), patience, lock=f"student:{student}")
 
     def left(self, student: str, page: str, *, patience: float = 10.0) -> None:
         """The page ``page`` of ``student`` was closed: no page of theirs is live, unless another took over."""
         self._write(lambda db: db.execute("UPDATE presence SET page = '', last_seen = ? WHERE student = ? AND "
-                                          "page = ?", (_now(), student, page)), patience)
+                                          "page = ?", (_now(), student, page)), patience, lock=f"student:{student}")
 
     def live_page(self, student: str) -> str:
         """The token of the student's live page ("" if none)."""
@@ -332,7 +333,7 @@ class HandIns:
             db.execute("INSERT INTO clients (address, student, first) VALUES (?, ?, ?) ON CONFLICT DO NOTHING",
                        (address, student, now))
             return None
-        return self._write(write, patience=patience)
+        return self._write(write, patience=patience, lock=f"address:{address}")
 
     def version(self) -> tuple:
         """Changes whenever a hand-in, a switch or a presence changes (what a live page polls)."""

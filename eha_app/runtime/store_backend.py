@@ -8,8 +8,10 @@ first start (:data:`MIGRATIONS`, one transaction, one server at a time); one of 
 refused, saying which version made it.
 
 Every write is one transaction that the backend serialises, as SQLite's ``BEGIN IMMEDIATE`` does on
-one machine: on PostgreSQL a transaction-level advisory lock, so that a student's two pages handing
-in on two servers at once cannot both take the last attempt. Reads see one consistent snapshot.
+one machine: on PostgreSQL a transaction-level advisory lock, the class's for the teacher's switches
+and the student's for the writes of one student (their hand-ins, presence and kept work), so that a
+student's two pages handing in on two servers at once cannot both take the last attempt, while
+other students' writes go on beside. Reads see one consistent snapshot.
 
 The URL is shown without its password in every message and log line (:func:`shown_url`).
 
@@ -38,7 +40,7 @@ from pathlib import Path
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
 __all__ = ["StoreError", "StoreUnavailable", "SCHEMA_VERSION", "MIGRATIONS", "Backend", "SQLiteBackend",
-           "PostgresBackend", "open_backend", "copy_lab", "LAB_TABLES", "shown_url", "is_postgres_url",
+           "PostgresBackend", "open_backend", "copy_lab", "take_lock", "LAB_TABLES", "shown_url", "is_postgres_url",
            "BUSY_TIMEOUT_S"]
 
 log = logging.getLogger("eha_app")
@@ -187,7 +189,10 @@ class Backend:
     def check(self) -> None:
         raise NotImplementedError
 
-    def write(self, fn, patience: float):
+    def write(self, fn, patience: float, lock: str | None = None):
+        """``fn(db)`` in one write transaction, serialised with every other write (``lock`` None) or with
+        those of the same ``lock`` (one student's rows: PostgreSQL then runs other students' writes
+        beside it; SQLite serialises every write anyway)."""
         raise NotImplementedError
 
     def snapshot(self, fn, patience: float):
@@ -370,7 +375,7 @@ class SQLiteBackend(Backend):
             time.sleep(pause)
             pause = min(2 * pause, 0.5)
 
-    def write(self, fn, patience: float):
+    def write(self, fn, patience: float, lock: str | None = None):
         def attempt():
             db = self._connect()
             try:
@@ -551,7 +556,7 @@ class PostgresBackend(Backend):
         self._give(conn)
 
     # transactions -----------------------------------------------------------------------------
-    def _run(self, fn, patience: float, write: bool):
+    def _run(self, fn, patience: float, write: bool, lock: str | None = None):
         psycopg = self._psycopg()
         deadline = time.monotonic() + patience
         pause = 0.2
@@ -561,7 +566,10 @@ class PostgresBackend(Backend):
                 try:
                     if write:
                         with conn.transaction():
-                            conn.execute("SELECT pg_advisory_xact_lock(%s)", (_WRITE_LOCK,))
+                            if lock is None:
+                                conn.execute("SELECT pg_advisory_xact_lock(%s)", (_WRITE_LOCK,))
+                            else:
+                                conn.execute("SELECT pg_advisory_xact_lock(hashtext(%s))", (lock,))
                             out = fn(_PgConnection(conn))
                     else:
                         conn.execute("BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY")
@@ -588,8 +596,8 @@ class PostgresBackend(Backend):
             time.sleep(pause)
             pause = min(2 * pause, 2.0)
 
-    def write(self, fn, patience: float):
-        return self._run(fn, patience, write=True)
+    def write(self, fn, patience: float, lock: str | None = None):
+        return self._run(fn, patience, write=True, lock=lock)
 
     def snapshot(self, fn, patience: float):
         return self._run(fn, patience, write=False)
@@ -645,6 +653,13 @@ def copy_lab(source: Backend, target: Backend, batch: int = 200) -> dict[str, in
                           f"1), MAX(id) IS NOT NULL) FROM {table}")
         return counts
     return target.write(into, 60.0)
+
+
+def take_lock(db, key: str) -> None:
+    """Inside a write whose ``lock`` was one student's: serialise the rest of it with the writes of ``key``
+    too (the class's quota of kept uploads; a no-op on SQLite, whose writes are all serialised)."""
+    if isinstance(db, _PgConnection):
+        db.conn.execute("SELECT pg_advisory_xact_lock(hashtext(%s))", (key,))
 
 
 _PG_BACKENDS: dict[str, PostgresBackend] = {}

@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 from eha_core.data import MAX_DATA_BYTES
 
 from .handins import HandIns
+from .store_backend import take_lock
 
 __all__ = ["Work", "StoredFile", "WorkStore", "submit", "drain", "MAX_WORK_FILE_BYTES"]
 
@@ -94,9 +95,10 @@ class WorkStore:
         self.handins = handins
         self.quota_bytes = quota_bytes
 
-    def _transaction(self, fn):
-        """``fn(db)`` in one transaction (the tables are the hand-in store's); StoreError if it fails."""
-        return self.handins._write(fn)
+    def _transaction(self, fn, student: str):
+        """``fn(db)`` in one transaction with the other writes of ``student`` (the tables are the hand-in
+        store's); StoreError if it fails."""
+        return self.handins._write(fn, lock=f"student:{student}")
 
     def save(self, work: Work) -> list[str]:
         """Keep ``work`` as the student's (replacing what was kept); an upload is written only when
@@ -122,6 +124,7 @@ class WorkStore:
                 if kept.get(slot) == row:
                     continue
                 if quota is not None:
+                    take_lock(db, "kept uploads")       # the class's quota: one upload's check at a time
                     used = db.execute("SELECT COALESCE(SUM(size), 0) FROM work_files WHERE NOT (student = ? AND "
                                       "slot = ?)", (work.student, slot)).fetchone()[0]
                     if used + len(f.data) > quota:
@@ -132,7 +135,7 @@ class WorkStore:
                            "?, ?, ?, ?) ON CONFLICT (student, slot) DO UPDATE SET name = excluded.name, mapping = "
                            "excluded.mapping, digest = excluded.digest, data = excluded.data, size = excluded.size",
                            (work.student, slot, *row, f.data, len(f.data)))
-        self._transaction(write)
+        self._transaction(write, work.student)
         return list(refused)
 
     def load(self, student: str) -> Work | None:
@@ -158,7 +161,7 @@ class WorkStore:
         def delete(db):
             db.execute("DELETE FROM work WHERE student = ?", (student,))
             db.execute("DELETE FROM work_files WHERE student = ?", (student,))
-        self._transaction(delete)
+        self._transaction(delete, student)
 
 
 class _Writer:
