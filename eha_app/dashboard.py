@@ -226,6 +226,7 @@ class Dashboard(pn.viewable.Viewer):
                                                css_classes=["eha-dash-reveal"])
         self.reveal_message = pn.pane.HTML("", css_classes=["eha-dash-reveal-message"], width=420,
                                            styles={"font-size": "12px"})
+        self._read_failed = False
         self.note = pn.pane.HTML("", css_classes=["eha-dash-note"], styles={"font-size": "12px"},
                                  sizing_mode="stretch_width")
         self.csv = pn.widgets.FileDownload(callback=lambda: io.BytesIO(self.csv_bytes()), filename="results.csv",
@@ -279,7 +280,9 @@ class Dashboard(pn.viewable.Viewer):
         """Read the database now and draw what changed (True: something did). The page's periodic
         callback does the same off the event loop (:meth:`tick`)."""
         try:
-            if self._key is not None and self._key_now() == self._key:
+            key = self._key_now()
+            self._answers_again()
+            if self._key is not None and key == self._key:
                 return False
             self._show(self._read())
         except StoreError as exc:
@@ -293,6 +296,7 @@ class Dashboard(pn.viewable.Viewer):
         self._busy = True
         try:
             key = await asyncio.to_thread(self._key_now)
+            self._answers_again()
             if key != self._key:
                 self._show(await asyncio.to_thread(self._read))
         except StoreError as exc:
@@ -300,8 +304,16 @@ class Dashboard(pn.viewable.Viewer):
         finally:
             self._busy = False
 
+    def _answers_again(self) -> None:
+        if self._read_failed:
+            # the database answers again (PostgreSQL was restarting): its error is no longer news
+            self._read_failed = False
+            self.note.object = (f"<span class='small'>The class's database answers again "
+                                f"({time.strftime('%H:%M:%S')}).</span>")
+
     def _failed(self, exc: Exception) -> None:
         self.note.object = f"<span style='color:#b00020'>{_esc(exc)}</span>"
+        self._read_failed = True
 
     def refresh(self) -> None:
         """Read again now (after a switch): off the event loop when served."""

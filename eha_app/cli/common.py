@@ -428,8 +428,8 @@ def add_store_option(parser) -> None:
     on the command line is visible to every user of the machine in ``ps``)."""
     parser.add_argument("--store", default=os.environ.get("EHA_STORE") or None, metavar="URL",
                         help="the lab's database: postgresql://USER@HOST:PORT/DATABASE (the password from "
-                             "~/.pgpass or PGPASSWORD), or sqlite:///PATH; default: the SQLite file beside the "
-                             "exercise (EHA_STORE sets it too)")
+                             "~/.pgpass or PGPASSWORD), or sqlite:///PATH (sqlite:////PATH: absolute); default: "
+                             "the SQLite file beside the exercise (EHA_STORE sets it too)")
 
 
 def open_store(exercise_path, store: str | None = None, option: str = "--store"):

@@ -161,7 +161,8 @@ def add_parser(sub) -> None:
     cp.add_argument("--from", dest="source", default=None, metavar="URL",
                     help="the database to copy (default: the SQLite file beside the exercise)")
     cp.add_argument("--to", dest="target", required=True, metavar="URL",
-                    help="an empty database: postgresql://USER@HOST:PORT/DATABASE, or sqlite:///PATH")
+                    help="an empty database: postgresql://USER@HOST:PORT/DATABASE, or sqlite:///PATH (relative to "
+                         "here; sqlite:////PATH absolute)")
     cp.set_defaults(handler=run_copy_store)
 
 

@@ -10,9 +10,10 @@ hand-in's own transaction, as for any hand-in; the deadline is the one the stude
 so that a database down at the deadline does not make a hand-in late.
 
 Each waiting hand-in is also written to a spool file (``EHA_SPOOL``, by default
-``eha-waiting-handins.jsonl`` in the server's working directory, readable by its owner only), so
-that a server stopped or killed while the database is down saves them at its next start
-(:func:`replay`).
+``eha-waiting-handins.jsonl`` in the server's working directory, readable by its owner only; the
+processes of one ``eha serve --num-procs N`` share it under a lock), so that a server stopped or
+killed while the database is down saves them at its next start (:func:`replay`; a hand-in another
+live process also tries is stored once, under its key).
 
 >>> import tempfile, pathlib
 >>> from eha_app.runtime.handins import HandIns
@@ -28,6 +29,7 @@ that a server stopped or killed while the database is down saves them at its nex
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -36,6 +38,11 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+
+try:
+    import fcntl
+except ImportError:             # Windows
+    fcntl = None
 
 __all__ = ["Outbox", "outbox", "replay", "RETRY_S"]
 
@@ -152,7 +159,7 @@ class Outbox:
             except FileNotFoundError:
                 pass
             return
-        tmp = self.spool.with_name(self.spool.name + ".tmp")
+        tmp = self.spool.with_name(f"{self.spool.name}.{os.getpid()}.tmp")
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
         with os.fdopen(fd, "w", encoding="utf-8") as f:
             for line in lines:
@@ -161,17 +168,31 @@ class Outbox:
             os.fsync(f.fileno())
         os.replace(tmp, self.spool)
 
+    @contextlib.contextmanager
+    def _spool_locked(self):
+        """The spool file to itself: the processes of one ``eha serve --num-procs N`` share it (a lock file
+        beside it; where there is no fcntl, as on Windows, one process per working directory)."""
+        if fcntl is None:
+            yield
+            return
+        fd = os.open(self.spool.with_name(self.spool.name + ".lock"), os.O_WRONLY | os.O_CREAT, 0o600)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            yield
+        finally:
+            os.close(fd)
+
     def _write_spool(self, store, kwargs: dict, refusal_spec: dict | None) -> None:
         if self.spool is None:
             return
+        key = (kwargs["student"], kwargs["key"])
+        # (the store's URL is not written: it may hold a password; the next run's own store is used)
+        line = {"exercise": getattr(store, "exercise_path", None),
+                "kwargs": {k: v for k, v in kwargs.items() if k != "refusal"},
+                "rules": refusal_spec or {}, "since": time.time()}
         try:
-            lines = [line for line in self._spool_lines()
-                     if (line["kwargs"]["student"], line["kwargs"].get("key")) != (kwargs["student"], kwargs["key"])]
-            # (the store's URL is not written: it may hold a password; the next run's own store is used)
-            lines.append({"exercise": getattr(store, "exercise_path", None),
-                          "kwargs": {k: v for k, v in kwargs.items() if k != "refusal"},
-                          "rules": refusal_spec or {}, "since": time.time()})
-            self._rewrite_spool(lines)
+            with self._spool_locked():
+                self._rewrite_spool([*self._other_lines(key), line])
         except OSError as exc:
             log.error("a waiting hand-in could not be written to %s (%s): it waits in memory only", self.spool, exc)
 
@@ -179,10 +200,14 @@ class Outbox:
         if self.spool is None:
             return
         try:
-            self._rewrite_spool([line for line in self._spool_lines()
-                                 if (line["kwargs"]["student"], line["kwargs"].get("key")) != key])
+            with self._spool_locked():
+                self._rewrite_spool(self._other_lines(key))
         except OSError as exc:
             log.error("the waiting hand-ins' file %s could not be rewritten (%s)", self.spool, exc)
+
+    def _other_lines(self, key: tuple[str, str]) -> list[dict]:
+        return [line for line in self._spool_lines()
+                if (line["kwargs"]["student"], line["kwargs"].get("key")) != tuple(key)]
 
 
 def _default_spool() -> Path:

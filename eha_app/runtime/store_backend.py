@@ -72,6 +72,8 @@ def shown_url(url: str) -> str:
         parts = urlsplit(str(url))
     except ValueError:
         return "(a database URL that cannot be read)"
+    if "@" not in parts.netloc and "password" not in parts.query.lower():
+        return str(url)                     # nothing to hide: as typed (sqlite:///x stays sqlite:///x)
     netloc = parts.netloc
     if "@" in netloc:
         user, host = netloc.rsplit("@", 1)
@@ -668,7 +670,8 @@ _PG_LOCK = threading.Lock()
 
 def open_backend(exercise_path: str | Path, store: str | None = None) -> Backend:
     """The backend ``store`` names: None or "" -> SQLite beside ``exercise_path``
-    (``class.json`` -> ``class.handins.sqlite``); ``sqlite:///path`` -> that file;
+    (``class.json`` -> ``class.handins.sqlite``); ``sqlite:///relative/path`` or ``sqlite:////absolute/path``
+    -> that file;
     ``postgresql://user:password@host:port/database`` -> PostgreSQL (one backend, and one pool of
     connections, per URL in a process)."""
     if not store:
@@ -681,9 +684,11 @@ def open_backend(exercise_path: str | Path, store: str | None = None) -> Backend
             if backend is None:
                 backend = _PG_BACKENDS[text] = PostgresBackend(text)
             return backend
-    m = re.match(r"sqlite:(?://)?(.+)$", text, re.IGNORECASE)
+    # as SQLAlchemy writes it: sqlite:///class.sqlite is relative to the working directory,
+    # sqlite:////var/backups/class.sqlite absolute
+    m = re.match(r"sqlite:(?:///)?(.+)$", text, re.IGNORECASE)
     if m:
         return SQLiteBackend(m.group(1))
     raise StoreError(f"{shown_url(text)!r} is not a database URL: give postgresql://USER@HOST:PORT/DATABASE "
-                     "(the password from ~/.pgpass or PGPASSWORD), or sqlite:///PATH (the default is a SQLite file "
-                     "beside the exercise)")
+                     "(the password from ~/.pgpass or PGPASSWORD), or sqlite:///PATH (relative; sqlite:////PATH "
+                     "absolute; the default is a SQLite file beside the exercise)")

@@ -79,5 +79,5 @@ def test_a_store_that_is_no_database_url_is_one_line(tmp_path, capsys):
     assert main(["exercise", "results", str(path), "--store", "mysql://root:pw@db/lab"]) == 2
     err = capsys.readouterr().err
     assert err == ("eha: error: --store: 'mysql://root@db/lab' is not a database URL: give postgresql://USER@HOST:"
-                   "PORT/DATABASE (the password from ~/.pgpass or PGPASSWORD), or sqlite:///PATH (the default is a "
-                   "SQLite file beside the exercise)\n")
+                   "PORT/DATABASE (the password from ~/.pgpass or PGPASSWORD), or sqlite:///PATH (relative; "
+                   "sqlite:////PATH absolute; the default is a SQLite file beside the exercise)\n")
