@@ -432,13 +432,15 @@ def add_store_option(parser) -> None:
                              "the SQLite file beside the exercise (EHA_STORE sets it too)")
 
 
-def open_store(exercise_path, store: str | None = None, option: str = "--store"):
+def open_store(exercise_path, store: str | None = None, option: str = "--store", exercise_option: str = "exercise"):
     """The exercise's lab state, checked (made or brought to this version's schema): a database that
-    cannot be used is one line naming it (a URL without its password) and exit code 2."""
+    cannot be used is one line naming it (a URL without its password) and exit code 2, under ``option``
+    (a database URL) or ``exercise_option`` (the SQLite file beside the exercise)."""
     from eha_app.runtime.handins import HandIns, StoreError
 
-    option = option if store else "exercise"
     try:
         return HandIns(exercise_path, store=store).check()
     except StoreError as exc:
-        raise UsageError(f"{option}: {exc}") from None
+        if store:
+            raise UsageError(f"{option}: {exc}") from None
+        raise refused_file(exercise_option, str(exercise_path), f"{exc}") from None

@@ -132,7 +132,7 @@ def _check_exercise(args) -> None:
     from .exercise import load_exercise
 
     exercise = load_exercise("--exercise", args.exercise)   # refused now, with its message, if it is not one
-    store = open_store(args.exercise, args.store)           # unreachable, wrong password, newer: refused now
+    store = open_store(args.exercise, args.store, exercise_option="--exercise")   # unreachable, newer: refused now
     os.environ["EHA_EXERCISE"] = os.path.abspath(args.exercise)
     if args.store:
         os.environ["EHA_STORE"] = args.store                # the server processes' (never on a command line)
