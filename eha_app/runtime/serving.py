@@ -485,7 +485,9 @@ def nginx_config(backends, *, listen: str = "80", server_name: str = "_", prefix
         from eha_core.errors import not_allowed
 
         raise not_allowed("backends", [], "give at least one host:port of an eha serve process")
-    servers = "\n".join(f"    server {b} max_fails=0;" for b in backends)
+    # a machine that is down (no answer at all, not even a refusal) is left after 3 s and then for 10 s:
+    # its students' requests go to the others at once, not after nginx's 60 s per request
+    servers = "\n".join(f"    server {b} max_fails=1 fail_timeout=10s;" for b in backends)
     proxy = """        proxy_pass http://eha_app;
         proxy_http_version 1.1;
         proxy_set_header Upgrade $http_upgrade;
@@ -495,6 +497,7 @@ def nginx_config(backends, *, listen: str = "80", server_name: str = "_", prefix
         proxy_set_header X-Forwarded-For $proxy_add_x_forwarded_for;
         proxy_set_header X-Forwarded-Proto $scheme;
         proxy_buffering off;
+        proxy_connect_timeout 3s;
         proxy_read_timeout 3600s;
         proxy_send_timeout 3600s;
         add_header Set-Cookie "eha_affinity=$eha_affinity; Path=/; HttpOnly; SameSite=Lax" always;

@@ -94,11 +94,28 @@ def issue(exercise, store, days: float = TOKEN_DAYS) -> Issued:
 
 
 def ensure_token(exercise, store, days: float = TOKEN_DAYS) -> tuple[Issued, bool]:
-    """The current token if it is still valid, else a new one: ``(token, made now)``."""
+    """The current token if it is still valid, else a new one: ``(token, made now)``. Looked at and
+    issued in one transaction: servers started together on one database print one link."""
     now = issued(exercise, store)
     if now is not None and not now.expired:
         return now, False
-    return issue(exercise, store, days), True
+    nonce, expires = secrets.token_hex(16), f"{time.time() + days * 86400.0:.0f}"
+
+    def write(db):
+        control = dict(db.execute("SELECT key, value FROM control WHERE key IN ('token_nonce', 'token_expires')")
+                       .fetchall())
+        try:
+            valid = bool(control.get("token_nonce")) and float(control.get("token_expires", "0")) > time.time()
+        except ValueError:
+            valid = False
+        if valid:                       # another server issued it a moment ago
+            return control["token_nonce"], control["token_expires"], False
+        for key, value in (("token_nonce", nonce), ("token_expires", expires)):
+            db.execute("INSERT INTO control (key, value) VALUES (?, ?) ON CONFLICT(key) DO UPDATE SET value = "
+                       "excluded.value", (key, value))
+        return nonce, expires, True
+    got, when, made = store._write(write)
+    return Issued(exercise.teacher_token(got), float(when)), made
 
 
 def cookie_value(token: str) -> str:

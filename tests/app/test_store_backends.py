@@ -237,3 +237,23 @@ def test_a_lab_copied_from_sqlite_to_postgresql_is_the_same_lab(tmp_path, pg_url
     copy_lab(target.backend, backup.backend)
     assert _lab(backup) == _lab(target)
     assert json.loads(json.dumps(_lab(backup)["control"])) == {"open": "1", "deadline": "2030-01-01T00:00"}
+
+
+def test_servers_started_together_issue_one_dashboard_link(tmp_path, store_url):
+    from eha_app.runtime.teacher_access import ensure_token
+    from eha_core.exercise import Exercise
+
+    ex = Exercise.new(hide=("M",), secret="4d" * 32)
+    _store(tmp_path, store_url)
+    barrier, got = threading.Barrier(4), []
+
+    def server():
+        store = HandIns(tmp_path / "class.json", store=store_url)     # each its own, as each process has
+        barrier.wait()
+        got.append(ensure_token(ex, store))
+    threads = [threading.Thread(target=server) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len({issued.token for issued, _ in got}) == 1 and sum(made for _, made in got) == 1

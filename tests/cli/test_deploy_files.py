@@ -179,7 +179,7 @@ def test_the_environment_file_gives_the_store_without_a_password(monkeypatch):
 
 # -- nginx -------------------------------------------------------------------------------------------
 def _site_backends(text: str) -> list[str]:
-    return re.findall(r"^\s*server\s+(\S+)\s+max_fails=0;", text, flags=re.M)
+    return re.findall(r"^\s*server\s+(\S+)\s+max_fails=1 fail_timeout=10s;", text, flags=re.M)
 
 
 def _config_lines(text: str) -> list[str]:
