@@ -25,7 +25,7 @@ from ..render.formatting import display_unit, num_html
 from ..render.layout import BUTTON_CONTRAST
 from ..render.tables import SYMBOLS_HTML
 from ..runtime.extensions import HANDIN_PATIENCE_S, lab_rules, own_deadline
-from ..runtime.outbox import RETRY_S
+from ..runtime.outbox import RETRY_S, outbox
 from ..runtime.tasks import apply_locked, on_click, served_document
 
 __all__ = ["HandInBox", "handin_status", "result_for_student", "lab_rules_html", "lab_refusal", "impossible_estimates",
@@ -250,6 +250,12 @@ class HandInBox:
         if why and s.hidden:
             self.show_refusal(why)
             return None
+        if s.hidden and outbox().waiting(s.student):
+            # one waits to be saved (the database is down): a second would take another attempt unseen
+            self.verdict.object = ("<div class='eha-verdict-box eha-handin-waiting' role='status'>Your last hand-in "
+                                   "is still waiting to be saved; hand in again once it is (this box says so).</div>")
+            self.verdict.visible = True
+            return None
         got = self.estimates()
         if got is None or not s.hidden:
             return None
@@ -279,8 +285,7 @@ class HandInBox:
         rules = {"method": method, "source": source.get("kind"), "at": time.time()}
 
         def compute(_token):
-            from ..runtime.handins import Refused, StoreUnavailable
-            from ..runtime.outbox import outbox
+            from ..runtime.handins import WRITE_PATIENCE_S, Refused, StoreUnavailable
 
             model_errors = route_model_errors(reference, estimates, _token)
             settings["model_errors"] = model_errors
@@ -291,8 +296,11 @@ class HandInBox:
             handin = dict(student=student, estimates=estimates, verdicts=verdicts, method=method, settings=settings,
                           conditions=conditions, errors=exercise.errors(student, estimates), source=source,
                           refusal=refusal, key=key)
+            # a database that is down is waited for a few seconds before the hand-in waits in the outbox; a
+            # SQLite file locked by another program keeps the whole patience of a write
+            patience = HANDIN_PATIENCE_S if store.backend.kind == "postgresql" else WRITE_PATIENCE_S
             try:
-                store.add(**handin, patience=HANDIN_PATIENCE_S)
+                store.add(**handin, patience=patience)
             except Refused as exc:
                 return None, str(exc), 0, False
             except StoreUnavailable as exc:

@@ -70,6 +70,8 @@ def test_a_hand_in_while_the_database_is_down_waits_and_is_saved_once(lab, own_p
     box = lse.verdict.object
     assert "Your hand-in is waiting to be saved" in box and "Not handed in" not in box
     assert outbox_module.outbox().waiting("s1") == 1
+    lse.hand_in()                                         # clicked again meanwhile: not a second attempt
+    assert "still waiting to be saved" in lse.verdict.object and outbox_module.outbox().waiting("s1") == 1
     kept = [json.loads(line) for line in spool.read_text().splitlines()]
     assert [k["kwargs"]["student"] for k in kept] == ["s1"] and "s3cret-pw" not in spool.read_text()
     assert oct(spool.stat().st_mode & 0o777) == "0o600"
