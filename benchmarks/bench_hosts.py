@@ -1,8 +1,9 @@
 """A class on two "hosts": two ``eha serve`` behind nginx, the lab's state in PostgreSQL, measured against one server.
 
-Each host is a process group of its own (``start_new_session``) in a working directory of its own (a copy of
-the exercise file) on a port of its own, running ``eha serve --exercise class.json --store postgresql://...
---behind-proxy --workers 1``; nginx (:func:`eha_app.runtime.serving.nginx_standalone_config`: an affinity
+Each host (:class:`benchmarks.hosts.Host`) is a process group of its own (``start_new_session``) in a
+working directory of its own (a copy of the exercise file) on a port of its own, running ``eha serve
+--exercise class.json --store postgresql://... --behind-proxy --workers 1``; nginx
+(:class:`benchmarks.hosts.Nginx`: :func:`eha_app.runtime.serving.nginx_standalone_config`, an affinity
 cookie hashed consistently over the hosts) in front, a throwaway PostgreSQL (tests/postgres.py) behind. On
 one machine the "hosts" share its cores: this measures what the second server, nginx and PostgreSQL cost and
 bring, not a second machine's cores.
@@ -43,10 +44,7 @@ import asyncio
 import json
 import math
 import os
-import re
 import shutil
-import signal
-import subprocess
 import sys
 import tempfile
 import time
@@ -58,7 +56,6 @@ from benchmarks.bench_classroom import (  # noqa: E402 - after the path is set
     ProcTree,
     Server,
     client_cpu,
-    eha_command,
     fmt,
     free_port,
     make_exercise,
@@ -72,88 +69,14 @@ from benchmarks.classroom_client import (  # noqa: E402
     run_class,
     wait_served,
 )
+from benchmarks.hosts import NGINX, Host, Nginx  # noqa: E402
 
 STEPS = ("open", "param", "tab3", "lse", "freqtab", "freq", "handin")
-NGINX = shutil.which("nginx") or ("/usr/sbin/nginx" if os.path.exists("/usr/sbin/nginx") else None)
 
 
 def texts(i: int) -> tuple[str, str]:
     """What student i (from 0) types into L0 [mm]: values of their own (up to 300 students)."""
     return f"{305 + 0.1 * i:.1f}", f"{275 - 0.1 * i:.1f}"
-
-
-class Host:
-    """``eha serve`` as a machine of its own: a process group, a working directory, a port."""
-
-    def __init__(self, folder: Path, exercise: Path, store: str, origin: str):
-        folder.mkdir()
-        shutil.copy(exercise, folder / "class.json")
-        self.port = free_port()
-        self.address = f"127.0.0.1:{self.port}"
-        self.log_path = folder / "serve.log"
-        self.log = open(self.log_path, "w")
-        self.proc = subprocess.Popen(
-            [*eha_command(), "serve", "--exercise", "class.json", "--store", store, "--port", str(self.port),
-             "--address", "127.0.0.1", "--behind-proxy", "--workers", "1", "--allow-websocket-origin", origin],
-            cwd=folder, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
-        self.tree = ProcTree(self.proc.pid)
-
-    def log_text(self) -> str:
-        self.log.flush()
-        return self.log_path.read_text(errors="replace")
-
-    def wait_printed(self, what: str, timeout: float = 180) -> None:
-        deadline = time.monotonic() + timeout
-        while what not in self.log_text():
-            if self.proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"eha serve on {self.address} did not say {what!r}:\n{self.log_text()[-2000:]}")
-            time.sleep(0.2)
-
-    def wait(self) -> None:
-        wait_served(self.proc, f"http://{self.address}/eha", 180, self.log_text)
-
-    def problems(self) -> list[str]:
-        lines = self.log_text().splitlines()
-        return [ln for ln in lines if ln.startswith("Traceback") or re.search(r"\b(ERROR|CRITICAL)\b", ln)]
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            try:
-                os.killpg(self.proc.pid, signal.SIGTERM)
-                self.proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait()
-            except ProcessLookupError:
-                pass
-        self.log.close()
-
-
-class Nginx:
-    def __init__(self, folder: Path, listen: int, backends: list[str]):
-        from eha_app.runtime.serving import nginx_standalone_config
-
-        folder.mkdir()
-        self.folder = folder
-        conf = folder / "nginx.conf"
-        conf.write_text(nginx_standalone_config(backends, listen=f"127.0.0.1:{listen}", workdir=str(folder)))
-        self.proc = subprocess.Popen([NGINX, "-c", str(conf), "-p", str(folder)], stdout=subprocess.DEVNULL,
-                                     stderr=subprocess.STDOUT, start_new_session=True)
-        self.tree = ProcTree(self.proc.pid)
-        self.url = f"http://127.0.0.1:{listen}/eha"
-
-    def errors(self) -> list[str]:
-        path = self.folder / "error.log"
-        return [ln for ln in path.read_text(errors="replace").splitlines() if "[error]" in ln] if path.exists() else []
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait()
 
 
 def _confirmed(result) -> int:
@@ -222,7 +145,7 @@ def two_hosts(n: int, args) -> tuple[dict, object]:
         origin = f"127.0.0.1:{listen}"
         # host 2 once host 1 has issued the dashboard's link (two at once on an empty database would each issue one)
         hosts.append(Host(folder / "host1", path, url, origin))
-        hosts[0].wait_printed("Teacher's dashboard")
+        hosts[0].wait_for_link(timeout=180)
         hosts.append(Host(folder / "host2", path, url, origin))
         for h in hosts:
             h.wait()

@@ -1,14 +1,15 @@
 """Past one machine: two "hosts" behind one nginx, the lab's state in PostgreSQL, one host lost mid-lab.
 
-A host is a process group of its own (``start_new_session=True``) with a working directory of its own
-(a copy of the exercise file in each) and a port of its own, running ``eha serve --exercise class.json
---store postgresql://... --behind-proxy --workers 1``. nginx (the configuration of
-:func:`eha_app.runtime.serving.nginx_standalone_config`) sends each browser, by its affinity cookie, to one
-of them. Twenty students of a roster (3 hand-ins each) type a value of L0 of their own, run least squares
-and hand in; while they hand in a second time, host 1's whole process group is SIGKILLed. Its students
-reload (the same cookie jar): nginx sends them to host 2, they join with their code again and find their
-work there (their own L0 back in the field, the least squares run again), and hand in again until the
-third hand-in, counted over both hosts, is the last one taken.
+A host (:class:`benchmarks.hosts.Host`) is a process group of its own (``start_new_session=True``) with a
+working directory of its own (a copy of the exercise file in each) and a port of its own, running ``eha serve
+--exercise class.json --store postgresql://... --behind-proxy --workers 1``. nginx
+(:class:`benchmarks.hosts.Nginx`, the configuration of
+:func:`eha_app.runtime.serving.nginx_standalone_config`) sends each browser, by its affinity cookie, to one of
+them. Twenty students of a roster (3 hand-ins each) type a value of L0 of their own, run least squares and
+hand in; while they hand in a second time, host 1's whole process group is SIGKILLed. Its students reload (the
+same cookie jar): nginx sends them to host 2, they join with their code again and find their work there (their
+own L0 back in the field, the least squares run again), and hand in again until the third hand-in, counted
+over both hosts, is the last one taken.
 
 Checked: every hand-in a student saw confirmed ("Handed in (hand-in k of 3 allowed ...") is in the database
 once, the k shown is the database's count, nothing is stored twice (one row per page key); a fourth is
@@ -23,17 +24,13 @@ import asyncio
 import os
 import random
 import re
-import shutil
-import signal
-import subprocess
 import time
-from pathlib import Path
 
 import pytest
 
 from benchmarks.classroom_client import Student, StudentSession, wait_served
-from tests.serve.conftest import EHA, free_port
-from tests.serve.test_nginx import NGINX
+from benchmarks.hosts import NGINX, Host, Nginx
+from tests.serve.conftest import free_port
 
 pytestmark = pytest.mark.skipif(NGINX is None, reason="nginx not found: apt-get install -y nginx "
                                                        "(the README's test command installs it)")
@@ -50,100 +47,6 @@ _CELL = re.compile(r"<td[^>]*>(.*?)</td>", re.S)
 def own_value(i: int) -> str:
     """What student i (from 0) types into L0 [mm]: a value of their own, recognisable in their kept work."""
     return f"{311 + 0.3 * i:.1f}"
-
-
-# -- the hosts and nginx --------------------------------------------------------------------------------
-
-class Host:
-    """``eha serve`` in a process group and a working directory of its own (a "machine")."""
-
-    def __init__(self, folder: Path, exercise: Path, store: str, listen: int):
-        folder.mkdir()
-        shutil.copy(exercise, folder / "class.json")
-        self.folder = folder
-        self.port = free_port()
-        self.address = f"127.0.0.1:{self.port}"
-        self.log_path = folder / "serve.log"
-        self.log = open(self.log_path, "w")
-        # the pages come through nginx; the dashboard is opened on the host itself too (its own address)
-        self.proc = subprocess.Popen(
-            [str(EHA), "serve", "--exercise", "class.json", "--store", store, "--port", str(self.port),
-             "--address", "127.0.0.1", "--behind-proxy", "--workers", "1",
-             "--allow-websocket-origin", f"127.0.0.1:{listen}", "--allow-websocket-origin", self.address],
-            cwd=folder, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
-
-    def wait(self) -> None:
-        try:
-            wait_served(self.proc, f"http://{self.address}/eha", 180, self.log_text)
-        except RuntimeError as exc:
-            pytest.fail(f"{exc}\n{self.log_text()[-3000:]}")
-
-    def wait_for_link(self, timeout: float = 120) -> str:
-        """The dashboard's token this host printed (it issues one, or takes the database's, before it serves)."""
-        deadline = time.monotonic() + timeout
-        while not (found := re.findall(r"/teacher\?token=([0-9a-f]+)", self.log_text())):
-            if self.proc.poll() is not None or time.monotonic() > deadline:
-                pytest.fail(f"no dashboard link from {self.address}:\n{self.log_text()[-3000:]}")
-            time.sleep(0.1)
-        return found[0]
-
-    def log_text(self) -> str:
-        self.log.flush()
-        return self.log_path.read_text(errors="replace")
-
-    def alive(self) -> bool:
-        return self.proc.poll() is None
-
-    def kill(self) -> None:
-        """SIGKILL the whole process group: the machine is gone, nothing of it runs a line more."""
-        try:
-            os.killpg(self.proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        self.proc.wait(timeout=30)
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            try:
-                os.killpg(self.proc.pid, signal.SIGTERM)
-                self.proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                self.kill()
-            except ProcessLookupError:
-                pass
-        try:                # a child left in the group (none expected): by the group's id
-            os.killpg(self.proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
-        self.log.close()
-
-
-class Nginx:
-    def __init__(self, folder: Path, listen: int, backends: list[str]):
-        from eha_app.runtime.serving import nginx_standalone_config
-
-        folder.mkdir()
-        self.folder = folder
-        conf = folder / "nginx.conf"
-        conf.write_text(nginx_standalone_config(backends, listen=f"127.0.0.1:{listen}", workdir=str(folder)))
-        test = subprocess.run([NGINX, "-t", "-c", str(conf), "-p", str(folder)], capture_output=True, text=True)
-        assert test.returncode == 0, test.stderr
-        self.proc = subprocess.Popen([NGINX, "-c", str(conf), "-p", str(folder)], stdout=subprocess.DEVNULL,
-                                     stderr=subprocess.STDOUT, start_new_session=True)
-        self.url = f"http://127.0.0.1:{listen}/eha"
-
-    def error_log(self) -> str:
-        path = self.folder / "error.log"
-        return path.read_text(errors="replace") if path.exists() else ""
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()           # the master stops its worker
-            try:
-                self.proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait()
 
 
 # -- the students and the teacher, at the protocol level ------------------------------------------------
@@ -259,9 +162,11 @@ def test_two_hosts_share_the_lab_and_one_dies_mid_lab(pg_url, tmp_path):
     try:
         # host 2 starts once host 1 has issued the dashboard's link (two hosts started at the same moment on
         # an empty database each issue one: see test_hosts_started_together_print_one_dashboard_link)
-        hosts.append(Host(tmp_path / "host1", exercise, pg_url, listen))
+        # the pages come through nginx; the dashboard is opened on each host itself too (its own address)
+        origin = f"127.0.0.1:{listen}"
+        hosts.append(Host(tmp_path / "host1", exercise, pg_url, origin, own_origin=True))
         hosts[0].wait_for_link()
-        hosts.append(Host(tmp_path / "host2", exercise, pg_url, listen))
+        hosts.append(Host(tmp_path / "host2", exercise, pg_url, origin, own_origin=True))
         for h in hosts:
             h.wait()
         h1, h2 = hosts
@@ -272,15 +177,14 @@ def test_two_hosts_share_the_lab_and_one_dies_mid_lab(pg_url, tmp_path):
         token = now.token
         # the link each host printed is the one in the database
         for h in hosts:
-            printed = re.findall(r"/teacher\?token=([0-9a-f]+)", h.log_text())
-            assert printed == [token], (h.address, printed, token)
+            assert h.links() == [token], (h.address, h.links(), token)
 
         report = asyncio.run(_lab(front.url, h1, h2, ids, codes, token, store, POLL_MS / 1000))
         print("\n" + "\n".join(report))
 
         # the hosts' logs: host 2 took the class without a fault; nginx only found host 1 gone
         assert "Traceback" not in h2.log_text(), h2.log_text()[-4000:]
-        errors = [ln for ln in front.error_log().splitlines() if "[error]" in ln]
+        errors = front.errors()
         assert all(h1.address in ln and "Connection refused" in ln for ln in errors), errors[:5]
     finally:
         if front is not None:
@@ -469,7 +373,8 @@ def test_hosts_started_together_print_one_dashboard_link(pg_url, tmp_path):
     ex.save(exercise)
     hosts = []
     try:
-        hosts = [Host(tmp_path / f"host{k}", exercise, pg_url, free_port()) for k in (1, 2)]
+        hosts = [Host(tmp_path / f"host{k}", exercise, pg_url, f"127.0.0.1:{free_port()}", own_origin=True)
+                 for k in (1, 2)]
         printed = [h.wait_for_link() for h in hosts]
         token = issued(ex, HandIns(exercise, store=pg_url)).token
         assert printed == [token, token], (printed, token)
