@@ -379,12 +379,6 @@ def _write_private(path: str, text: str) -> None:
         f.write(text)
 
 
-def _store(path: str, store: str | None = None):
-    """The exercise's lab state (SQLite beside ``path``, or the database ``store`` names), checked: a
-    damaged, unreachable or newer database is one line and exit code 2."""
-    return open_store(path, store)
-
-
 def _gradebook_file(args, ex, rows) -> str:
     """The text ``--format`` writes to ``--out``: the table as CSV, or a gradebook's import file."""
     from eha_app.runtime.classbook import results_csv
@@ -421,7 +415,7 @@ def run_results(args) -> int:
     if args.csv:
         check_output_file("--csv", args.csv)
     _check_gradebook(args, ex)
-    rows = class_rows(ex, _store(args.exercise, args.store))
+    rows = class_rows(ex, open_store(args.exercise, args.store))
     header = results_header(ex)
     # what students typed reaches the teacher's terminal and spreadsheet: neither may act on it
     shown = [[terminal_text(c) for c in results_cells(ex, row)] for row in rows]
@@ -452,7 +446,7 @@ def run_extend(args) -> int:
     from eha_app.runtime.handins import StoreError
 
     ex = _load(args.exercise)
-    store = _store(args.exercise, args.store)
+    store = open_store(args.exercise, args.store)
     options = {STUDENT_FIELD: "--student", UNTIL_FIELD: "--until"}
     try:
         class_deadline = store.control().get("deadline", "")
@@ -493,7 +487,7 @@ def run_token(args) -> int:
     url = str(args.url).strip().rstrip("/")
     if not url.startswith(("http://", "https://")) or any(c.isspace() for c in url):
         raise refused("--url", args.url, "an address such as http://192.168.1.20:5006 (http:// or https://)")
-    store = _store(args.exercise, args.store)
+    store = open_store(args.exercise, args.store)
     from eha_app.runtime.handins import StoreError
 
     try:
@@ -522,7 +516,7 @@ def run_reveal(args) -> int:
     if ex.has_roster:
         if ex.entry(student) is None:
             raise refused("--student", args.student, "no student with this id in the exercise's roster")
-    elif student not in (store := _store(args.exercise, args.store)).presence() and not store.of(student):
+    elif student not in (store := open_store(args.exercise, args.store)).presence() and not store.of(student):
         raise refused("--student", args.student, "no student with this id has joined the exercise (ids are those "
                                                  "typed on the exercise's first page)")
     p = ex.student_params(student)

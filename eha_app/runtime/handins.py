@@ -257,17 +257,25 @@ class HandIns:
         self._write(lambda db: db.execute("INSERT INTO control (key, value) VALUES (?, ?) ON CONFLICT(key) DO "
                                           "UPDATE SET value = excluded.value", (key, str(value))))
 
-    def set_controls(self, values: dict[str, str]) -> None:
-        """Set several switches in one transaction (a reader sees all of them changed, or none)."""
+    def set_controls(self, values: dict[str, str], keep=None):
+        """Set several switches in one transaction (a reader sees all of them changed, or none).
+        ``keep(control)``, if given, is asked first in the same transaction with the switches as they are:
+        what it returns, if anything, is returned and nothing is written (e.g. a token another server
+        issued a moment ago)."""
         unknown = set(values) - set(CONTROL_KEYS)
         if unknown:
             raise ValueError(f"unknown switch {sorted(unknown)[0]!r}")
 
         def write(db):
+            if keep is not None:
+                kept = keep(dict(db.execute("SELECT key, value FROM control").fetchall()))
+                if kept:
+                    return kept
             for key, value in values.items():
                 db.execute("INSERT INTO control (key, value) VALUES (?, ?) ON CONFLICT(key) DO UPDATE SET value = "
                            "excluded.value", (key, str(value)))
-        self._write(write)
+            return None
+        return self._write(write)
 
     def seen(self, student: str, page: str = "", *, patience: float = 10.0) -> str:
         """The student is here now (joined the first time), on the page whose token is ``page``.

@@ -467,12 +467,8 @@ class PostgresBackend(Backend):
         return self.unusable(text)
 
     def _connect(self):
-        psycopg = self._psycopg()
-        try:
-            conn = psycopg.connect(self.url, connect_timeout=CONNECT_TIMEOUT_S, autocommit=True,
-                                   application_name="eha")
-        except psycopg.Error as exc:
-            raise self._failure(exc) from None
+        """A new connection, the schema brought up to date by this instance's first one."""
+        conn = self._connect_plain()
         if not self._ready:
             with self._lock:
                 if not self._ready:

@@ -101,21 +101,16 @@ def ensure_token(exercise, store, days: float = TOKEN_DAYS) -> tuple[Issued, boo
         return now, False
     nonce, expires = secrets.token_hex(16), f"{time.time() + days * 86400.0:.0f}"
 
-    def write(db):
-        control = dict(db.execute("SELECT key, value FROM control WHERE key IN ('token_nonce', 'token_expires')")
-                       .fetchall())
+    def valid(control):
         try:
-            valid = bool(control.get("token_nonce")) and float(control.get("token_expires", "0")) > time.time()
+            if control.get("token_nonce") and float(control.get("token_expires", "0")) > time.time():
+                return control["token_nonce"], control["token_expires"]    # another server issued it a moment ago
         except ValueError:
-            valid = False
-        if valid:                       # another server issued it a moment ago
-            return control["token_nonce"], control["token_expires"], False
-        for key, value in (("token_nonce", nonce), ("token_expires", expires)):
-            db.execute("INSERT INTO control (key, value) VALUES (?, ?) ON CONFLICT(key) DO UPDATE SET value = "
-                       "excluded.value", (key, value))
-        return nonce, expires, True
-    got, when, made = store._write(write)
-    return Issued(exercise.teacher_token(got), float(when)), made
+            pass
+        return None
+    kept = store.set_controls({"token_nonce": nonce, "token_expires": expires}, keep=valid)
+    got, when = kept or (nonce, expires)
+    return Issued(exercise.teacher_token(got), float(when)), kept is None
 
 
 def cookie_value(token: str) -> str:

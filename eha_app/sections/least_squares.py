@@ -774,12 +774,7 @@ class LeastSquaresPanel(Section):
             self.table.object = (warn + lse_table_html(res, scenario if scenario != "custom" else None,
                                                        hidden=self.state.hidden, **self.result_context) + note
                                  + assumed_model_html("lse"))
-            if self.figure is None:
-                self.figure = plots.LseFitFigure()
-                self.figure.update(view)
-                self.plot.objects = [pn.pane.Bokeh(self.figure.layout, sizing_mode="stretch_width")]
-            else:
-                self.figure.update(view)
+            self.figure = _fit_figure(self.figure, self.plot, view)
             self._draw_validation(validation)
             self.view.shown(key)
             self._inputs_changed()          # typed while it computed
@@ -796,13 +791,7 @@ class LeastSquaresPanel(Section):
             self.validation_plot.objects = []
             self.validation_figure = None
             return
-        view = validation_view(val)
-        if self.validation_figure is None:
-            self.validation_figure = plots.LseFitFigure()
-            self.validation_figure.update(view)
-            self.validation_plot.objects = [pn.pane.Bokeh(self.validation_figure.layout, sizing_mode="stretch_width")]
-        else:
-            self.validation_figure.update(view)
+        self.validation_figure = _fit_figure(self.validation_figure, self.validation_plot, validation_view(val))
 
     def run_all(self):
         req, errors = self.request()
@@ -953,3 +942,15 @@ class LeastSquaresPanel(Section):
         results = pn.Column(explain, self.alert, self.view.banner, self.area, self.table4_view.banner,
                             self.table4_area, sizing_mode="stretch_width", min_width=440)
         return side_by_side(controls, results)
+
+
+def _fit_figure(figure, area, view):
+    """``figure`` (an :class:`~eha_app.render.plots.LseFitFigure`, made and put in ``area`` when None)
+    showing ``view``: the same Bokeh models for every run, new data only."""
+    if figure is None:
+        figure = plots.LseFitFigure()
+        figure.update(view)
+        area.objects = [pn.pane.Bokeh(figure.layout, sizing_mode="stretch_width")]
+    else:
+        figure.update(view)
+    return figure
